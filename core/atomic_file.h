@@ -1,0 +1,40 @@
+// A file that appears under its final name only when complete.
+//
+// Data goes to "<dir>/.<name>.tmp-<pid>-<n>"; commit() flushes, fsyncs and renames it over the
+// target. Destroying an uncommitted AtomicFile removes the temporary file. The names of all open
+// temporaries are also kept in a process-wide list so that remove_pending_temporaries() (called
+// from the CLI's SIGINT/SIGTERM handler; async-signal-safe) can delete them on Ctrl-C.
+#pragma once
+
+#include <cstdio>
+#include <filesystem>
+
+namespace isotile {
+
+class AtomicFile {
+ public:
+  // Throws IoError when the temporary cannot be created (e.g. the directory does not exist).
+  explicit AtomicFile(const std::filesystem::path& target);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+
+  std::FILE* stream() { return file_; }
+  // Writes n bytes; throws IoError on a short write (e.g. disk full).
+  void write(const void* data, std::size_t n);
+  // Flush, fsync, close and rename over the target; throws IoError on any failure (and then the
+  // temporary is removed).
+  void commit();
+
+ private:
+  void discard() noexcept;
+  std::filesystem::path target_;
+  std::filesystem::path temp_;
+  std::FILE* file_ = nullptr;
+  int slot_ = -1;
+};
+
+// Async-signal-safe: unlinks every temporary of a live AtomicFile.
+void remove_pending_temporaries() noexcept;
+
+}  // namespace isotile

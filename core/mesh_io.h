@@ -1,0 +1,37 @@
+// Mesh files: writers for PLY (binary little-endian by default, ASCII on request), OBJ, binary
+// STL and OFF, and a reader for the same formats (used by `isotile quality` and the tests).
+//
+// Writes are atomic: the mesh goes to a temporary file beside the target, which is renamed over
+// the target only once complete and flushed. Any failure (bad directory, full disk, exception)
+// removes the temporary file and throws IoError; the target is then untouched.
+//
+// The reader keeps faces exactly as stored (no welding, no repair), except STL, which stores
+// unshared corners: its vertices are welded by exact position so topology can be measured.
+// Polygons with more than three corners are kept as quads (4) or fanned into triangles (>4).
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "core/mesh.h"
+
+namespace isotile {
+
+enum class MeshFormat { Ply, Obj, Stl, Off };
+
+// From the extension (.ply, .obj, .stl, .off; case-insensitive); InputError otherwise.
+MeshFormat mesh_format_from_path(const std::filesystem::path& path);
+
+struct MeshWriteOptions {
+  std::optional<MeshFormat> format;  // default: from the extension
+  bool ascii = false;                // PLY only: ASCII instead of binary little-endian
+  bool write_normals = true;         // when the mesh has normals (PLY, OBJ)
+};
+
+void write_mesh(const Mesh& mesh, const std::filesystem::path& path,
+                const MeshWriteOptions& options = {});
+
+Mesh read_mesh(const std::filesystem::path& path);
+
+}  // namespace isotile

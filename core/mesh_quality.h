@@ -1,0 +1,28 @@
+// Triangle quality: the radius ratio q = 2 r_in / R_circ = (b+c-a)(c+a-b)(a+b-c) / (a b c), 1 for
+// an equilateral triangle and 0 for a degenerate one (the 0..1 form of the paper's Table I; VTK's
+// "radius ratio" is the inverse R/r).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "core/mesh.h"
+
+namespace isotile {
+
+// Radius ratio of one triangle, computed in double; 0 when any edge has zero length.
+double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c);
+
+struct QualityStats {
+  std::uint64_t triangles = 0;   // quads count as their two triangles (better diagonal)
+  std::uint64_t degenerate = 0;  // q < 1e-6 (zero area or collinear)
+  double min = 0, mean = 0, max = 0;
+  double q001 = 0, q01 = 0;      // 0.1% and 1% quantiles (lower tail)
+  double median = 0;
+  std::array<std::uint64_t, 20> histogram{};  // 20 bins of width 0.05 over [0, 1]
+};
+
+// Deterministic for any thread count (per-chunk partial sums are combined in a fixed order).
+QualityStats triangle_quality(const Mesh& mesh);
+
+}  // namespace isotile
