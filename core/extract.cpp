@@ -1,1 +1,96 @@
-// placeholder while being written
+#include "core/extract.h"
+
+#include <algorithm>
+#include <array>
+#include <string>
+
+#include "core/errors.h"
+#include "core/marching_cubes.h"
+
+namespace isotile {
+
+namespace {
+
+using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
+
+Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
+  return marching_cubes(view, {.iso = o.iso, .normals = o.normals});
+}
+
+struct BackendEntry {
+  Backend backend;
+  std::string_view name;
+  // Indexed by Method; nullptr where the backend does not implement the method.
+  std::array<ExtractFn, kMethodCount> run;
+  // Empty when the backend is compiled in; otherwise why it is not.
+  std::string_view missing;
+};
+
+// Macet and Dual Contouring, and the GL backends, are not part of this build yet: their entries
+// say so, and selecting them is a clear error rather than a silent fallback.
+const std::array<BackendEntry, kBackendCount - 1> kBackends = {{
+    {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, nullptr}, ""},
+    {Backend::GeometryShader, "gs", {nullptr, nullptr, nullptr},
+     "the OpenGL geometry-shader backend is not built into this version"},
+    {Backend::HistoPyramid, "hp", {nullptr, nullptr, nullptr},
+     "the OpenGL HistoPyramid backend is not built into this version"},
+}};
+static_assert(kBackends.size() == kBackendCount - 1, "one table entry per concrete backend");
+
+constexpr std::array<std::string_view, kMethodCount> kMethodNames = {"mc", "macet", "dc"};
+
+const BackendEntry& entry(Backend b) {
+  for (const auto& e : kBackends)
+    if (e.backend == b) return e;
+  throw InputError("unknown backend");
+}
+
+// Auto prefers a GPU path when one is available; the CPU comes last as the fallback.
+constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::GeometryShader,
+                                               Backend::Cpu};
+
+}  // namespace
+
+std::string_view method_name(Method m) { return kMethodNames[static_cast<int>(m)]; }
+
+std::string_view backend_name(Backend b) {
+  if (b == Backend::Auto) return "auto";
+  return entry(b).name;
+}
+
+std::vector<BackendCaps> capabilities() {
+  std::vector<BackendCaps> caps;
+  for (const auto& e : kBackends) {
+    BackendCaps c{e.backend, e.missing.empty(), {}, std::string(e.missing)};
+    for (int m = 0; m < kMethodCount; ++m)
+      if (e.run[m]) c.methods.push_back(static_cast<Method>(m));
+    caps.push_back(std::move(c));
+  }
+  return caps;
+}
+
+Backend resolve_backend(const ExtractOptions& options) {
+  const int m = static_cast<int>(options.method);
+  if (options.backend == Backend::Auto) {
+    for (Backend b : kAutoOrder) {
+      const auto& e = entry(b);
+      if (e.missing.empty() && e.run[m]) return b;
+    }
+    throw InputError("method '" + std::string(method_name(options.method)) +
+                     "' is not implemented by any backend of this build");
+  }
+  const auto& e = entry(options.backend);
+  if (!e.missing.empty()) throw InputError("backend '" + std::string(e.name) + "': " +
+                                           std::string(e.missing));
+  if (!e.run[m])
+    throw InputError("backend '" + std::string(e.name) + "' does not implement method '" +
+                     std::string(method_name(options.method)) + "'");
+  return options.backend;
+}
+
+Mesh extract(const VolumeView& view, const ExtractOptions& options) {
+  const Backend b = resolve_backend(options);
+  return entry(b).run[static_cast<int>(options.method)](view, options);
+}
+
+}  // namespace isotile

@@ -1,0 +1,49 @@
+// The one entry point: extract(view, options) runs the chosen method on the chosen backend.
+//
+// Backends are described by one table (extract.cpp) indexed by Backend, checked against the
+// enum's size at compile time; capabilities() reports what this build and machine can run.
+// Backend::Auto resolves to the fastest available backend that supports the method; the CPU is the
+// reference and the fallback.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/mesh.h"
+#include "core/volume.h"
+
+namespace isotile {
+
+enum class Method { MarchingCubes, Macet, DualContouring };
+inline constexpr int kMethodCount = 3;
+enum class Backend { Cpu, GeometryShader, HistoPyramid, Auto };
+inline constexpr int kBackendCount = 4;
+
+std::string_view method_name(Method m);    // "mc", "macet", "dc"
+std::string_view backend_name(Backend b);  // "cpu", "gs", "hp", "auto"
+
+struct ExtractOptions {
+  Method method = Method::MarchingCubes;
+  Backend backend = Backend::Auto;
+  double iso = 0.0;
+  bool normals = false;
+};
+
+struct BackendCaps {
+  Backend backend;
+  bool available = false;
+  std::vector<Method> methods;  // methods this backend implements
+  std::string why_unavailable;  // empty when available
+};
+
+// One entry per concrete backend (Auto excluded), in enum order.
+std::vector<BackendCaps> capabilities();
+
+// The concrete backend `options` would run on; throws InputError (naming what is missing) when the
+// requested backend or method is not available.
+Backend resolve_backend(const ExtractOptions& options);
+
+Mesh extract(const VolumeView& view, const ExtractOptions& options);
+
+}  // namespace isotile
