@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Installs what isotile needs from Debian 12's packages, then configures and builds it.
+#
+#   ./setup.sh                 install, configure and build into build/ (Release)
+#   ./setup.sh --bench         also the benchmarks and their VTK peer (a large download)
+#   ./setup.sh --sanitize      ASan + UBSan build into build-asan/
+#   ./setup.sh --tsan          ThreadSanitizer build into build-tsan/
+#   ./setup.sh --no-install    skip the package step (packages already present)
+#
+# Safe to run again: installed packages are skipped and the build is incremental.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+bench=0 install=1 build_dir=build extra=()
+for arg in "$@"; do
+  case "$arg" in
+    --bench) bench=1 ;;
+    --sanitize) build_dir=build-asan; extra+=(-DISOTILE_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
+    --tsan) build_dir=build-tsan; extra+=(-DISOTILE_TSAN=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
+    --no-install) install=0 ;;
+    *) echo "setup.sh: unknown option '$arg'" >&2; exit 2 ;;
+  esac
+done
+
+packages=(
+  cmake ninja-build g++ pkg-config python3
+  libtbb-dev libeigen3-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
+  libteem-dev libopenvdb-dev libboost-iostreams-dev
+  libgtest-dev
+)
+if [ "$bench" = 1 ]; then
+  packages+=(libbenchmark-dev libvtk9-dev)
+  extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
+fi
+
+if [ "$install" = 1 ]; then
+  missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    echo "setup.sh: installing ${missing[*]}" >&2
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  fi
+fi
+
+cmake -S . -B "$build_dir" -G Ninja "${extra[@]}" >/dev/null
+cmake --build "$build_dir" -j "$(nproc)"
