@@ -1,1 +1,215 @@
+// The isotile command line as scripts use it: exit codes, one-line errors, stats JSON keys, and
+// that a failure never leaves a partial or clobbered output behind.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "core/mesh_io.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("isotile-cli-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  Result run(const std::string& args) {
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    const std::string cmd = std::string("cd '") + dir_.string() + "' && '" + ISOTILE_CLI + "' " +
+                            args + " >'" + out.string() + "' 2>'" + err.string() + "'";
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    fs::remove(out);
+    fs::remove(err);
+    return r;
+  }
+
+  // Files in the work directory other than `keep` (to catch leftover temporaries).
+  std::vector<std::string> stray_files(std::initializer_list<std::string> keep = {}) {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      const std::string n = e.path().filename().string();
+      if (std::find(keep.begin(), keep.end(), n) == keep.end()) names.push_back(n);
+    }
+    return names;
+  }
+
+  fs::path dir_;
+};
+
+int line_count(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+
+TEST_F(Cli, HelpForEverySubcommand) {
+  for (const char* sub : {"", "extract ", "info ", "quality ", "demo "}) {
+    const Result r = run(std::string(sub) + "--help");
+    EXPECT_EQ(r.code, 0) << sub;
+    EXPECT_NE(r.out.find("Usage"), std::string::npos) << sub;
+  }
+  EXPECT_NE(run("extract --help").out.find("--iso"), std::string::npos);
+}
+
+TEST_F(Cli, ExtractWritesMeshAndStatsWithTheDocumentedKeys) {
+  const Result r = run("extract field:sphere:40 -o s.ply --stats s.json --quiet");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(r.err.empty()) << "--quiet printed: " << r.err;
+  const auto j = nlohmann::json::parse(slurp(dir_ / "s.json"));
+  for (const char* key :
+       {"triangles", "vertices", "radius_ratio_min", "radius_ratio_mean", "radius_ratio_q001",
+        "radius_ratio_q01", "boundary_edges", "nonmanifold_edges", "euler", "watertight", "bricks",
+        "seconds", "peak_rss_mb", "distance_mean", "distance_max"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  for (const char* key : {"read", "extract", "write", "total"})
+    EXPECT_TRUE(j["seconds"].contains(key)) << key;
+  EXPECT_EQ(j["euler"], 2);
+  EXPECT_EQ(j["watertight"], true);
+  EXPECT_EQ(j["boundary_edges"], 0);
+  EXPECT_LT(j["distance_max"].get<double>(), 0.1);
+  EXPECT_GT(j["radius_ratio_mean"].get<double>(), 0.5);
+  const isotile::Mesh m = isotile::read_mesh(dir_ / "s.ply");
+  EXPECT_EQ(m.triangles.size(), j["triangles"].get<std::size_t>());
+  EXPECT_EQ(m.positions.size(), j["vertices"].get<std::size_t>());
+}
+
+TEST_F(Cli, ProgressGoesToStderrAndStatsToStdout) {
+  const Result r = run("extract field:torus:24 -o t.obj --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("extracted"), std::string::npos);
+  EXPECT_EQ(nlohmann::json::parse(r.out)["euler"], 0);
+}
+
+TEST_F(Cli, SameOutputBytesForAnyThreadCount) {
+  ASSERT_EQ(run("--threads 1 extract field:gyroid:90 -o a.ply --normals -q").code, 0);
+  ASSERT_EQ(run("--threads 2 extract field:gyroid:90 -o b.ply --normals -q").code, 0);
+  ASSERT_EQ(run("--threads 8 extract field:gyroid:90 -o c.ply --normals -q").code, 0);
+  const std::string a = slurp(dir_ / "a.ply");
+  EXPECT_GT(a.size(), 100000u);
+  EXPECT_EQ(a, slurp(dir_ / "b.ply"));
+  EXPECT_EQ(a, slurp(dir_ / "c.ply"));
+}
+
+TEST_F(Cli, EveryFormatIsWritten) {
+  for (const char* name : {"m.ply", "m.obj", "m.stl", "m.off"}) {
+    ASSERT_EQ(run(std::string("extract field:csg-box:20 -q -o ") + name).code, 0) << name;
+    EXPECT_GT(isotile::read_mesh(dir_ / name).triangles.size(), 100u) << name;
+  }
+}
+
+TEST_F(Cli, ErrorsAreOneLineAndLeaveNoFiles) {
+  struct Bad {
+    std::string args;
+    std::string says;
+  };
+  {
+    std::ofstream raw(dir_ / "short_4x4x4_uint8.raw", std::ios::binary);
+    raw << "only a few bytes";
+    std::ofstream gz(dir_ / "bad_4x4x4_uint8.raw.gz", std::ios::binary);
+    gz << "this is not gzip data at all, it is plain text";
+  }
+  const Bad cases[] = {
+      {"extract missing_8x8x8_uint8.raw --iso 1 -o out.ply", "missing_8x8x8_uint8.raw"},
+      {"extract short_4x4x4_uint8.raw --iso 1 -o out.ply", "short"},
+      {"extract bad_4x4x4_uint8.raw.gz --iso 1 -o out.ply", "bad_4x4x4_uint8.raw.gz"},
+      {"extract field:sphere:16 -o out.xyz", ".xyz"},
+      {"extract field:sphere:16 -o no_such_dir/out.ply", "no_such_dir"},
+      {"extract field:blob:16 -o out.ply", "blob"},
+      {"extract field:sphere:1 -o out.ply", "field"},
+      {"extract short_4x4x4_uint8.raw -o out.ply", "--iso"},
+      {"extract short.raw --iso 1 -o out.ply", "--dims"},
+      {"extract short.raw --iso 1 --dims 4,4 --type uint8 -o out.ply", "--dims"},
+      {"extract short.raw --iso 1 --dims 4,4,4 --type uint9 -o out.ply", "uint9"},
+      {"extract field:sphere:16 --method macet -o out.ply", "macet"},
+      {"extract field:sphere:16 --backend gs -o out.ply", "gs"},
+      {"quality missing.ply", "missing.ply"},
+      {"info missing.nrrd", "missing.nrrd"},
+  };
+  for (const Bad& b : cases) {
+    const Result r = run(b.args);
+    EXPECT_EQ(r.code, 1) << b.args << "\n" << r.err;
+    EXPECT_EQ(line_count(r.err), 1) << b.args << "\n" << r.err;
+    EXPECT_NE(r.err.find("error"), std::string::npos) << b.args << "\n" << r.err;
+    EXPECT_NE(r.err.find(b.says), std::string::npos) << b.args << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << b.args;
+    EXPECT_EQ(stray_files({"short_4x4x4_uint8.raw", "bad_4x4x4_uint8.raw.gz"}),
+              std::vector<std::string>{})
+        << b.args;
+  }
+}
+
+TEST_F(Cli, UsageErrorsExitWithTwo) {
+  EXPECT_EQ(run("").code, 2);
+  EXPECT_EQ(run("frobnicate").code, 2);
+  EXPECT_EQ(run("extract field:sphere:16").code, 2);  // no -o
+  EXPECT_EQ(run("extract field:sphere:16 -o a.ply --method nope").code, 2);
+}
+
+TEST_F(Cli, AFailedRunKeepsThePreviousOutput) {
+  { std::ofstream(dir_ / "out.ply") << "previous"; }
+  EXPECT_EQ(run("extract missing_8x8x8_uint8.raw --iso 1 -o out.ply").code, 1);
+  EXPECT_EQ(slurp(dir_ / "out.ply"), "previous");
+  EXPECT_EQ(stray_files({"out.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(Cli, InfoDescribesTheVolume) {
+  const Result r = run("info field:marschner-lobb:21 --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["dims"], nlohmann::json::array({21, 21, 21}));
+  EXPECT_EQ(j["type"], "float32");
+  EXPECT_EQ(j["default_iso"], 0.5);
+  std::uint64_t total = 0;
+  for (const auto& bin : j["histogram"]) total += bin["count"].get<std::uint64_t>();
+  EXPECT_EQ(total, 21u * 21u * 21u);
+  EXPECT_LT(j["min"].get<double>(), 0.5);
+  EXPECT_GT(j["max"].get<double>(), 0.5);
+}
+
+TEST_F(Cli, QualityMeasuresAWrittenMesh) {
+  ASSERT_EQ(run("extract field:torus:32 -q -o t.ply").code, 0);
+  const Result r = run("quality t.ply --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["euler"], 0);
+  EXPECT_EQ(j["closed"], true);
+  EXPECT_EQ(j["components"], 1);
+  EXPECT_GT(j["radius_ratio_min"].get<double>(), 0.0);
+}
+
+TEST_F(Cli, DemoRunsWithoutArguments) {
+  const Result r = run("demo");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir_ / "isotile-demo.ply"));
+  EXPECT_GT(nlohmann::json::parse(r.out)["triangles"].get<int>(), 10000);
+  EXPECT_NE(r.err.find("isotile-demo.ply"), std::string::npos);
+}
+
+}  // namespace

@@ -460,7 +460,8 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every usage error exits 2, whatever CLI11's own code is.
+    return app.exit(e) == 0 ? 0 : 2;
   }
 
   std::optional<tbb::global_control> limit;
