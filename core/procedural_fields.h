@@ -15,8 +15,12 @@
 //
 // distance_voxels() is exact (closed form, to rounding) for sphere, torus and csg-box. The gyroid
 // and Marschner-Lobb surfaces have no closed-form distance; for them it projects the point onto
-// the surface by Newton steps along the gradient, which is exact to second order for points near
-// the surface (the case for extracted vertices) and is documented as such.
+// the surface by Newton steps along the gradient, then slides the foot point along the surface
+// until p - foot is normal to it, and keeps the best of restarts from 26 directions (the
+// Marschner-Lobb ripples are tight enough that the nearest point may lie on the next ripple).
+// Every candidate is a true surface point, so the result never underestimates; for points within
+// a couple of voxels of the surface (extracted vertices) it matched brute force in the tests.
+// Cost: ~25-45 us a call for these two fields, well under 1 us for the others.
 #pragma once
 
 #include <optional>
