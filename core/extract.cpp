@@ -30,9 +30,13 @@ struct BackendEntry {
 // say so, and selecting them is a clear error rather than a silent fallback.
 const std::array<BackendEntry, kBackendCount - 1> kBackends = {{
     {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, nullptr}, ""},
-    {Backend::GeometryShader, "gs", {nullptr, nullptr, nullptr},
+    {Backend::GeometryShader,
+     "gs",
+     {nullptr, nullptr, nullptr},
      "the OpenGL geometry-shader backend is not built into this version"},
-    {Backend::HistoPyramid, "hp", {nullptr, nullptr, nullptr},
+    {Backend::HistoPyramid,
+     "hp",
+     {nullptr, nullptr, nullptr},
      "the OpenGL HistoPyramid backend is not built into this version"},
 }};
 static_assert(kBackends.size() == kBackendCount - 1, "one table entry per concrete backend");
@@ -51,7 +55,9 @@ constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::G
 
 }  // namespace
 
-std::string_view method_name(Method m) { return kMethodNames[static_cast<int>(m)]; }
+std::string_view method_name(Method m) {
+  return kMethodNames[static_cast<int>(m)];
+}
 
 std::string_view backend_name(Backend b) {
   if (b == Backend::Auto) return "auto";
@@ -80,8 +86,8 @@ Backend resolve_backend(const ExtractOptions& options) {
                      "' is not implemented by any backend of this build");
   }
   const auto& e = entry(options.backend);
-  if (!e.missing.empty()) throw InputError("backend '" + std::string(e.name) + "': " +
-                                           std::string(e.missing));
+  if (!e.missing.empty())
+    throw InputError("backend '" + std::string(e.name) + "': " + std::string(e.missing));
   if (!e.run[m])
     throw InputError("backend '" + std::string(e.name) + "' does not implement method '" +
                      std::string(method_name(options.method)) + "'");

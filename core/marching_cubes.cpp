@@ -9,6 +9,10 @@
 #include <string>
 #include <vector>
 
+#if defined(__SSE4_1__)
+#include <immintrin.h>
+#endif
+
 #include "core/errors.h"
 #include "core/marching_cubes_tables.h"
 
@@ -32,34 +36,86 @@ struct BitGrid {
   const uint64_t* row(int64_t j, int64_t k) const { return bits.data() + (k * ny + j) * words; }
 };
 
-// Samples compare as `value >= iso`. For integer types the threshold becomes the smallest inside
-// integer, which gives exactly the same answer as comparing in double without the conversion.
+// Bits [0, n) set for word w of a row holding n meaningful bits.
+inline uint64_t valid_bits(int64_t w, int64_t n) {
+  const int64_t left = n - w * 64;
+  if (left >= 64) return ~uint64_t{0};
+  if (left <= 0) return 0;
+  return (uint64_t{1} << left) - 1;
+}
+
+// Samples compare as `value >= iso`. Each type compares against an equivalent threshold of its
+// own type (integers: the smallest inside integer; float: iso rounded up to the next float), which
+// gives exactly the answer of comparing in double without converting every sample, and lets 16
+// samples be classified per SIMD instruction.
 template <class T>
 struct InsideTest {
   explicit InsideTest(double iso) {
     if constexpr (std::is_integral_v<T>) {
       const double t = std::ceil(iso);
       if (t <= static_cast<double>(std::numeric_limits<T>::min())) {
-        threshold = std::numeric_limits<int64_t>::min();
+        all = true;
       } else if (t > static_cast<double>(std::numeric_limits<T>::max())) {
-        threshold = std::numeric_limits<int64_t>::max();
+        none = true;
       } else {
-        threshold = static_cast<int64_t>(t);
+        threshold = static_cast<T>(t);
       }
+    } else if constexpr (std::is_same_v<T, float>) {
+      float f = static_cast<float>(iso);
+      if (static_cast<double>(f) < iso)
+        f = std::nextafter(f, std::numeric_limits<float>::infinity());
+      threshold = f;
     } else {
-      threshold_f = iso;
+      threshold = iso;
     }
   }
-  bool operator()(T v) const {
-    if constexpr (std::is_integral_v<T>) {
-      return static_cast<int64_t>(v) >= threshold;
-    } else {
-      return static_cast<double>(v) >= threshold_f;
-    }
-  }
-  int64_t threshold = 0;
-  double threshold_f = 0;
+  bool operator()(T v) const { return all || (!none && v >= threshold); }
+
+  T threshold{};
+  bool all = false, none = false;
 };
+
+// Inside bits of 64 contiguous samples.
+template <class T>
+uint64_t pack64(const T* src, const InsideTest<T>& inside) {
+#if defined(__SSE4_1__)
+  if constexpr (sizeof(T) == 1) {
+    // Unsigned x >= t is max(x, t) == x; signed compares flip the sign bit first.
+    const __m128i bias = _mm_set1_epi8(std::is_signed_v<T> ? 0 : static_cast<char>(0x80));
+    const __m128i t = _mm_xor_si128(_mm_set1_epi8(static_cast<char>(inside.threshold)), bias);
+    uint64_t m = 0;
+    for (int b = 0; b < 64; b += 16) {
+      const __m128i x =
+          _mm_xor_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src + b)), bias);
+      const __m128i lt = _mm_cmpgt_epi8(t, x);  // t > x  <=>  x < t
+      m |= static_cast<uint64_t>(~_mm_movemask_epi8(lt) & 0xffff) << b;
+    }
+    return m;
+  } else if constexpr (sizeof(T) == 2) {
+    const __m128i bias = _mm_set1_epi16(std::is_signed_v<T> ? 0 : static_cast<short>(0x8000));
+    const __m128i t = _mm_xor_si128(_mm_set1_epi16(static_cast<short>(inside.threshold)), bias);
+    uint64_t m = 0;
+    for (int b = 0; b < 64; b += 16) {
+      const __m128i x0 =
+          _mm_xor_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src + b)), bias);
+      const __m128i x1 =
+          _mm_xor_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src + b + 8)), bias);
+      const __m128i lt = _mm_packs_epi16(_mm_cmpgt_epi16(t, x0), _mm_cmpgt_epi16(t, x1));
+      m |= static_cast<uint64_t>(~_mm_movemask_epi8(lt) & 0xffff) << b;
+    }
+    return m;
+  } else if constexpr (std::is_same_v<T, float>) {
+    const __m128 t = _mm_set1_ps(inside.threshold);
+    uint64_t m = 0;
+    for (int b = 0; b < 64; b += 4)
+      m |= static_cast<uint64_t>(_mm_movemask_ps(_mm_cmpge_ps(_mm_loadu_ps(src + b), t))) << b;
+    return m;
+  }
+#endif
+  uint64_t m = 0;
+  for (int b = 0; b < 64; ++b) m |= uint64_t{src[b] >= inside.threshold} << b;
+  return m;
+}
 
 template <class T>
 void classify(const VolumeView& view, double iso, BitGrid& grid) {
@@ -74,8 +130,10 @@ void classify(const VolumeView& view, double iso, BitGrid& grid) {
       for (int64_t w = 0; w < words; ++w) {
         const int64_t i0 = w * 64, n = std::min<int64_t>(64, nx - i0);
         uint64_t m = 0;
-        if (sx == 1) {
-          for (int64_t b = 0; b < n; ++b) m |= uint64_t{inside(src[i0 + b])} << b;
+        if (inside.all || inside.none) {
+          m = inside.all ? valid_bits(0, n) : 0;
+        } else if (sx == 1 && n == 64) {
+          m = pack64(src + i0, inside);
         } else {
           for (int64_t b = 0; b < n; ++b) m |= uint64_t{inside(src[(i0 + b) * sx])} << b;
         }
@@ -89,22 +147,24 @@ void classify(const VolumeView& view, double iso, BitGrid& grid) {
 // (i+1, j, k), (i, j+1, k) and (i, j, k+1) is owned by point (i, j, k). `prefix[a][w]` counts the
 // crossed edges of axis a before word w, so the rank of any edge is prefix + popcount of a word.
 struct RowEdges {
-  std::vector<uint64_t> mask[3];
-  std::vector<uint32_t> prefix[3];
+  struct Word {
+    uint64_t mask;    // crossed edges among these 64
+    uint32_t prefix;  // crossed edges of the same axis in earlier words
+  };
+  int64_t words = 0;
+  std::vector<Word> bits;  // axis-major: bits[a * words + w]
   uint32_t count[3] = {0, 0, 0};
+  uint32_t start[3] = {0, 0, 0};  // first local index of each axis: x-edges, then y, then z
 
-  explicit RowEdges(int64_t words) {
-    for (int a = 0; a < 3; ++a) {
-      mask[a].resize(words);
-      prefix[a].resize(words);
-    }
-  }
+  explicit RowEdges(int64_t n_words) : words(n_words), bits(static_cast<size_t>(3 * n_words)) {}
+
+  uint64_t mask(int a, int64_t w) const { return bits[a * words + w].mask; }
 
   // Rank of the edge of axis a at x index i among this row's vertices.
   uint32_t local_index(int a, int64_t i) const {
-    const uint32_t base = a == 0 ? 0 : (a == 1 ? count[0] : count[0] + count[1]);
-    const uint64_t below = mask[a][i >> 6] & ((uint64_t{1} << (i & 63)) - 1);
-    return base + prefix[a][i >> 6] + static_cast<uint32_t>(std::popcount(below));
+    const Word& wd = bits[a * words + (i >> 6)];
+    const uint64_t below = wd.mask & ((uint64_t{1} << (i & 63)) - 1);
+    return start[a] + wd.prefix + static_cast<uint32_t>(std::popcount(below));
   }
 };
 
@@ -112,14 +172,6 @@ struct RowEdges {
 inline uint64_t shifted(const uint64_t* row, int64_t w, int64_t words) {
   const uint64_t hi = w + 1 < words ? row[w + 1] << 63 : 0;
   return (row[w] >> 1) | hi;
-}
-
-// Bits [0, n) set for word w of a row holding n meaningful bits.
-inline uint64_t valid_bits(int64_t w, int64_t n) {
-  const int64_t left = n - w * 64;
-  if (left >= 64) return ~uint64_t{0};
-  if (left <= 0) return 0;
-  return (uint64_t{1} << left) - 1;
 }
 
 void row_edges(const BitGrid& g, int64_t j, int64_t k, RowEdges& out) {
@@ -133,33 +185,71 @@ void row_edges(const BitGrid& g, int64_t j, int64_t k, RowEdges& out) {
     const uint64_t mz = c ? (a[w] ^ c[w]) & valid_bits(w, g.nx) : 0;
     const uint64_t m[3] = {mx, my, mz};
     for (int ax = 0; ax < 3; ++ax) {
-      out.mask[ax][w] = m[ax];
-      out.prefix[ax][w] = total[ax];
+      out.bits[ax * g.words + w] = {m[ax], total[ax]};
       total[ax] += static_cast<uint32_t>(std::popcount(m[ax]));
     }
   }
   for (int ax = 0; ax < 3; ++ax) out.count[ax] = total[ax];
+  out.start[1] = total[0];
+  out.start[2] = total[0] + total[1];
 }
 
-// Mixed cells of the cell row (j, k): cells whose eight corners are not all on one side.
-inline uint64_t mixed_cells(const uint64_t* a, const uint64_t* b, const uint64_t* c,
-                            const uint64_t* d, int64_t w, int64_t words, int64_t nx) {
-  const uint64_t any = a[w] | b[w] | c[w] | d[w];
-  const uint64_t all = a[w] & b[w] & c[w] & d[w];
-  const uint64_t any_r = shifted(a, w, words) | shifted(b, w, words) | shifted(c, w, words) |
-                         shifted(d, w, words);
-  const uint64_t all_r = shifted(a, w, words) & shifted(b, w, words) & shifted(c, w, words) &
-                         shifted(d, w, words);
-  return (any | any_r) & ~(all & all_r) & valid_bits(w, nx - 1);
+// Number of crossed edges owned by the row; the count pass needs nothing more.
+uint32_t row_edge_count(const BitGrid& g, int64_t j, int64_t k) {
+  const uint64_t* a = g.row(j, k);
+  const uint64_t* b = j + 1 < g.ny ? g.row(j + 1, k) : nullptr;
+  const uint64_t* c = k + 1 < g.nz ? g.row(j, k + 1) : nullptr;
+  uint32_t n = 0;
+  for (int64_t w = 0; w < g.words; ++w) {
+    const uint64_t valid = valid_bits(w, g.nx);
+    n += static_cast<uint32_t>(
+        std::popcount((a[w] ^ shifted(a, w, g.words)) & valid_bits(w, g.nx - 1)));
+    if (b) n += static_cast<uint32_t>(std::popcount((a[w] ^ b[w]) & valid));
+    if (c) n += static_cast<uint32_t>(std::popcount((a[w] ^ c[w]) & valid));
+  }
+  return n;
 }
 
-inline int bit(const uint64_t* row, int64_t i) { return static_cast<int>((row[i >> 6] >> (i & 63)) & 1); }
+// One 64-cell word of a cell row (j, k): for each of its four point rows (j,k), (j+1,k), (j,k+1),
+// (j+1,k+1), the inside bits of the cells' lower x corners (lo) and upper x corners (hi).
+struct CellWord {
+  uint64_t lo[4], hi[4];
+  uint64_t mixed;  // cells whose eight corners are not all on one side
 
-inline int cell_case(const uint64_t* a, const uint64_t* b, const uint64_t* c, const uint64_t* d,
-                     int64_t i) {
-  return bit(a, i) | bit(a, i + 1) << 1 | bit(b, i) << 2 | bit(b, i + 1) << 3 | bit(c, i) << 4 |
-         bit(c, i + 1) << 5 | bit(d, i) << 6 | bit(d, i + 1) << 7;
-}
+  CellWord(const uint64_t* const rows[4], int64_t w, int64_t words, int64_t nx) {
+    uint64_t any = 0, all = ~uint64_t{0};
+    for (int r = 0; r < 4; ++r) {
+      lo[r] = rows[r][w];
+      hi[r] = shifted(rows[r], w, words);
+      any |= lo[r] | hi[r];
+      all &= lo[r] & hi[r];
+    }
+    mixed = any & ~all & valid_bits(w, nx - 1);
+  }
+
+  // Case of the cell at bit b: corner x + 2y + 4z.
+  int cell_case(int b) const {
+    return static_cast<int>(((lo[0] >> b) & 1) | ((hi[0] >> b) & 1) << 1 | ((lo[1] >> b) & 1) << 2 |
+                            ((hi[1] >> b) & 1) << 3 | ((lo[2] >> b) & 1) << 4 |
+                            ((hi[2] >> b) & 1) << 5 | ((lo[3] >> b) & 1) << 6 |
+                            ((hi[3] >> b) & 1) << 7);
+  }
+};
+
+// Where the vertex of cell edge e lives: the point row that owns it (0 = (j,k), 1 = (j+1,k),
+// 2 = (j,k+1), 3 = (j+1,k+1)), the edge's axis, and the x offset of its owner from the cell.
+struct EdgeHome {
+  std::uint8_t row, axis, dx;
+};
+constexpr std::array<EdgeHome, 12> kEdgeHome = [] {
+  std::array<EdgeHome, 12> h{};
+  for (int e = 0; e < 12; ++e) {
+    const int lo = mc::kEdgeCorners[e][0];  // corner x + 2y + 4z of the owning point
+    h[e] = {static_cast<std::uint8_t>(((lo >> 1) & 1) | (((lo >> 2) & 1) << 1)),
+            static_cast<std::uint8_t>(e / 4), static_cast<std::uint8_t>(lo & 1)};
+  }
+  return h;
+}();
 
 template <class T>
 class Extractor {
@@ -182,11 +272,9 @@ class Extractor {
     // Count.
     std::vector<uint32_t> vertex_count(rows), triangle_count(rows);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      RowEdges edges(grid_.words);
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = r % grid_.ny, k = r / grid_.ny;
-        row_edges(grid_, j, k, edges);
-        vertex_count[r] = edges.count[0] + edges.count[1] + edges.count[2];
+        vertex_count[r] = row_edge_count(grid_, j, k);
         triangle_count[r] = count_triangles(j, k);
       }
     });
@@ -205,39 +293,59 @@ class Extractor {
     if (options_.normals) mesh.normals.resize(n_vertices);
     mesh.triangles.resize(n_triangles);
 
-    // Fill.
+    // Fill. Consecutive cell rows share two point rows, so the masks of rows (j+1, k) and
+    // (j+1, k+1) computed for one cell row are reused as (j, k) and (j, k+1) for the next.
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      RowEdges e00(grid_.words), e10(grid_.words), e01(grid_.words), e11(grid_.words);
+      RowEdges store[4] = {RowEdges(grid_.words), RowEdges(grid_.words), RowEdges(grid_.words),
+                           RowEdges(grid_.words)};
+      // Point rows (j,k), (j+1,k), (j,k+1), (j+1,k+1), swapped by pointer.
+      RowEdges* e[4] = {&store[0], &store[1], &store[2], &store[3]};
+      int64_t upper_rows_of = -1;  // the row whose e[1], e[3] were computed last
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = r % grid_.ny, k = r / grid_.ny;
-        row_edges(grid_, j, k, e00);
-        fill_vertices(j, k, e00, static_cast<uint32_t>(vertex_offset[r]), mesh);
+        const bool reuse = upper_rows_of == r - 1 && j > 0;
+        if (reuse) {
+          std::swap(e[0], e[1]);
+          std::swap(e[2], e[3]);
+        } else {
+          row_edges(grid_, j, k, *e[0]);
+        }
+        fill_vertices(j, k, *e[0], static_cast<uint32_t>(vertex_offset[r]), mesh);
+        upper_rows_of = -1;
         if (triangle_count[r] == 0) continue;
-        row_edges(grid_, j + 1, k, e10);
-        row_edges(grid_, j, k + 1, e01);
-        row_edges(grid_, j + 1, k + 1, e11);
+        if (!reuse) row_edges(grid_, j, k + 1, *e[2]);
+        row_edges(grid_, j + 1, k, *e[1]);
+        row_edges(grid_, j + 1, k + 1, *e[3]);
+        upper_rows_of = r;
         const uint32_t base[4] = {static_cast<uint32_t>(vertex_offset[r]),
                                   static_cast<uint32_t>(vertex_offset[r + 1]),
                                   static_cast<uint32_t>(vertex_offset[r + grid_.ny]),
                                   static_cast<uint32_t>(vertex_offset[r + grid_.ny + 1])};
-        const RowEdges* rows4[4] = {&e00, &e10, &e01, &e11};
-        fill_triangles(j, k, rows4, base, mesh.triangles.data() + triangle_offset[r]);
+        const RowEdges* edges[4] = {e[0], e[1], e[2], e[3]};
+        fill_triangles(j, k, edges, base, mesh.triangles.data() + triangle_offset[r]);
       }
     });
     return mesh;
   }
 
  private:
+  // The four point rows around cell row (j, k).
+  void cell_rows(int64_t j, int64_t k, const uint64_t* rows[4]) const {
+    rows[0] = grid_.row(j, k);
+    rows[1] = grid_.row(j + 1, k);
+    rows[2] = grid_.row(j, k + 1);
+    rows[3] = grid_.row(j + 1, k + 1);
+  }
+
   uint32_t count_triangles(int64_t j, int64_t k) const {
     if (j + 1 >= grid_.ny || k + 1 >= grid_.nz) return 0;
-    const uint64_t *a = grid_.row(j, k), *b = grid_.row(j + 1, k), *c = grid_.row(j, k + 1),
-                   *d = grid_.row(j + 1, k + 1);
+    const uint64_t* rows[4];
+    cell_rows(j, k, rows);
     uint32_t n = 0;
     for (int64_t w = 0; w < grid_.words; ++w) {
-      for (uint64_t m = mixed_cells(a, b, c, d, w, grid_.words, grid_.nx); m; m &= m - 1) {
-        const int64_t i = w * 64 + std::countr_zero(m);
-        n += mc::kCaseTable.triangle_count[cell_case(a, b, c, d, i)];
-      }
+      const CellWord cw(rows, w, grid_.words, grid_.nx);
+      for (uint64_t m = cw.mixed; m; m &= m - 1)
+        n += mc::kCaseTable.triangle_count[cw.cell_case(std::countr_zero(m))];
     }
     return n;
   }
@@ -265,7 +373,7 @@ class Extractor {
     uint32_t index = base;
     for (int a = 0; a < 3; ++a) {
       for (int64_t w = 0; w < grid_.words; ++w) {
-        for (uint64_t m = e.mask[a][w]; m; m &= m - 1) {
+        for (uint64_t m = e.mask(a, w); m; m &= m - 1) {
           const int64_t i = w * 64 + std::countr_zero(m);
           int64_t p1[3] = {i, j, k};
           ++p1[a];
@@ -294,36 +402,27 @@ class Extractor {
     }
   }
 
-  void fill_triangles(int64_t j, int64_t k, const RowEdges* const rows[4], const uint32_t base[4],
+  void fill_triangles(int64_t j, int64_t k, const RowEdges* const edges[4], const uint32_t base[4],
                       Tri* out) const {
-    const uint64_t *a = grid_.row(j, k), *b = grid_.row(j + 1, k), *c = grid_.row(j, k + 1),
-                   *d = grid_.row(j + 1, k + 1);
+    const uint64_t* rows[4];
+    cell_rows(j, k, rows);
     for (int64_t w = 0; w < grid_.words; ++w) {
-      for (uint64_t m = mixed_cells(a, b, c, d, w, grid_.words, grid_.nx); m; m &= m - 1) {
-        const int64_t i = w * 64 + std::countr_zero(m);
-        const int cs = cell_case(a, b, c, d, i);
+      const CellWord cw(rows, w, grid_.words, grid_.nx);
+      for (uint64_t m = cw.mixed; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const int64_t i = w * 64 + b;
+        const int cs = cw.cell_case(b);
+        // Each crossed edge's vertex index once, then the triangles pick from them.
+        uint32_t id[12];
+        for (unsigned em = mc::kCaseTable.edge_mask[cs]; em; em &= em - 1) {
+          const int e = std::countr_zero(em);
+          const EdgeHome h = kEdgeHome[e];
+          id[e] = base[h.row] + edges[h.row]->local_index(h.axis, i + h.dx);
+        }
         const auto& tris = mc::kCaseTable.triangles[cs];
         const int n = mc::kCaseTable.triangle_count[cs];
-        for (int t = 0; t < n; ++t) {
-          Tri& tri = *out++;
-          for (int v = 0; v < 3; ++v) {
-            // Edge e along axis e/4; its other two coordinates are the bits of e%4, lower axis
-            // first. Rows: 0 = (j,k), 1 = (j+1,k), 2 = (j,k+1), 3 = (j+1,k+1).
-            const int e = tris[3 * t + v], axis = e / 4, m4 = e % 4;
-            int row = 0;
-            int64_t x = i;
-            if (axis == 0) {
-              row = m4;  // (dy, dz) = (m4 & 1, m4 >> 1)
-            } else if (axis == 1) {
-              x += m4 & 1;
-              row = (m4 >> 1) << 1;  // dz
-            } else {
-              x += m4 & 1;
-              row = m4 >> 1;  // dy
-            }
-            tri[v] = base[row] + rows[row]->local_index(axis, x);
-          }
-        }
+        for (int t = 0; t < n; ++t)
+          *out++ = {id[tris[3 * t]], id[tris[3 * t + 1]], id[tris[3 * t + 2]]};
       }
     }
   }

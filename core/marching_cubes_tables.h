@@ -27,8 +27,8 @@ inline constexpr std::array<std::array<std::uint8_t, 2>, 12> kEdgeCorners = [] {
   std::array<std::array<std::uint8_t, 2>, 12> e{};
   for (int edge = 0; edge < 12; ++edge) {
     const int axis = edge / 4, m = edge % 4;
-    const int u = axis == 0 ? 1 : 0;      // lower of the two other axes
-    const int v = axis == 2 ? 1 : 2;      // higher of the two other axes
+    const int u = axis == 0 ? 1 : 0;  // lower of the two other axes
+    const int v = axis == 2 ? 1 : 2;  // higher of the two other axes
     const int lo = ((m & 1) << u) | (((m >> 1) & 1) << v);
     e[edge] = {static_cast<std::uint8_t>(lo), static_cast<std::uint8_t>(lo | (1 << axis))};
   }

@@ -20,7 +20,7 @@ struct Mesh {
   std::vector<Vec3f> positions;  // world coordinates
   std::vector<Vec3f> normals;    // empty, or one unit normal per position
   std::vector<Tri> triangles;
-  std::vector<Quad> quads;       // Dual Contouring may keep quads; most meshes have none
+  std::vector<Quad> quads;  // Dual Contouring may keep quads; most meshes have none
 };
 
 }  // namespace isotile

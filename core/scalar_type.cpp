@@ -22,9 +22,15 @@ constexpr std::array<TypeInfo, kScalarTypeCount> kTypes = {{
 }};
 }  // namespace
 
-std::size_t scalar_size(ScalarType type) { return kTypes[static_cast<int>(type)].size; }
-std::string_view scalar_name(ScalarType type) { return kTypes[static_cast<int>(type)].name; }
-bool is_floating(ScalarType type) { return kTypes[static_cast<int>(type)].floating; }
+std::size_t scalar_size(ScalarType type) {
+  return kTypes[static_cast<int>(type)].size;
+}
+std::string_view scalar_name(ScalarType type) {
+  return kTypes[static_cast<int>(type)].name;
+}
+bool is_floating(ScalarType type) {
+  return kTypes[static_cast<int>(type)].floating;
+}
 
 std::optional<ScalarType> parse_scalar_type(std::string_view name) {
   for (int i = 0; i < kScalarTypeCount; ++i)
@@ -34,8 +40,8 @@ std::optional<ScalarType> parse_scalar_type(std::string_view name) {
     ScalarType type;
   };
   static constexpr Alias kAliases[] = {
-      {"char", ScalarType::Int8},     {"uchar", ScalarType::UInt8},  {"short", ScalarType::Int16},
-      {"ushort", ScalarType::UInt16}, {"int", ScalarType::Int32},    {"uint", ScalarType::UInt32},
+      {"char", ScalarType::Int8},     {"uchar", ScalarType::UInt8},   {"short", ScalarType::Int16},
+      {"ushort", ScalarType::UInt16}, {"int", ScalarType::Int32},     {"uint", ScalarType::UInt32},
       {"float", ScalarType::Float32}, {"double", ScalarType::Float64}};
   for (const Alias& a : kAliases)
     if (a.name == name) return a.type;

@@ -8,7 +8,16 @@
 
 namespace isotile {
 
-enum class ScalarType : std::uint8_t { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+enum class ScalarType : std::uint8_t {
+  Int8,
+  UInt8,
+  Int16,
+  UInt16,
+  Int32,
+  UInt32,
+  Float32,
+  Float64
+};
 inline constexpr int kScalarTypeCount = 8;
 
 // Bytes per sample.
@@ -23,27 +32,59 @@ bool is_floating(ScalarType type);
 template <class F>
 decltype(auto) visit_scalar(ScalarType type, F&& f) {
   switch (type) {
-    case ScalarType::Int8: return f(std::int8_t{});
-    case ScalarType::UInt8: return f(std::uint8_t{});
-    case ScalarType::Int16: return f(std::int16_t{});
-    case ScalarType::UInt16: return f(std::uint16_t{});
-    case ScalarType::Int32: return f(std::int32_t{});
-    case ScalarType::UInt32: return f(std::uint32_t{});
-    case ScalarType::Float32: return f(float{});
-    case ScalarType::Float64: break;
+    case ScalarType::Int8:
+      return f(std::int8_t{});
+    case ScalarType::UInt8:
+      return f(std::uint8_t{});
+    case ScalarType::Int16:
+      return f(std::int16_t{});
+    case ScalarType::UInt16:
+      return f(std::uint16_t{});
+    case ScalarType::Int32:
+      return f(std::int32_t{});
+    case ScalarType::UInt32:
+      return f(std::uint32_t{});
+    case ScalarType::Float32:
+      return f(float{});
+    case ScalarType::Float64:
+      break;
   }
   return f(double{});
 }
 
 template <class T>
 constexpr ScalarType scalar_type_of();
-template <> constexpr ScalarType scalar_type_of<std::int8_t>() { return ScalarType::Int8; }
-template <> constexpr ScalarType scalar_type_of<std::uint8_t>() { return ScalarType::UInt8; }
-template <> constexpr ScalarType scalar_type_of<std::int16_t>() { return ScalarType::Int16; }
-template <> constexpr ScalarType scalar_type_of<std::uint16_t>() { return ScalarType::UInt16; }
-template <> constexpr ScalarType scalar_type_of<std::int32_t>() { return ScalarType::Int32; }
-template <> constexpr ScalarType scalar_type_of<std::uint32_t>() { return ScalarType::UInt32; }
-template <> constexpr ScalarType scalar_type_of<float>() { return ScalarType::Float32; }
-template <> constexpr ScalarType scalar_type_of<double>() { return ScalarType::Float64; }
+template <>
+constexpr ScalarType scalar_type_of<std::int8_t>() {
+  return ScalarType::Int8;
+}
+template <>
+constexpr ScalarType scalar_type_of<std::uint8_t>() {
+  return ScalarType::UInt8;
+}
+template <>
+constexpr ScalarType scalar_type_of<std::int16_t>() {
+  return ScalarType::Int16;
+}
+template <>
+constexpr ScalarType scalar_type_of<std::uint16_t>() {
+  return ScalarType::UInt16;
+}
+template <>
+constexpr ScalarType scalar_type_of<std::int32_t>() {
+  return ScalarType::Int32;
+}
+template <>
+constexpr ScalarType scalar_type_of<std::uint32_t>() {
+  return ScalarType::UInt32;
+}
+template <>
+constexpr ScalarType scalar_type_of<float>() {
+  return ScalarType::Float32;
+}
+template <>
+constexpr ScalarType scalar_type_of<double>() {
+  return ScalarType::Float64;
+}
 
 }  // namespace isotile

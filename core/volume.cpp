@@ -15,8 +15,7 @@ double VolumeView::value(std::int64_t i, std::int64_t j, std::int64_t k) const {
   });
 }
 
-VolumeView dense_view(const void* data, ScalarType type, Index3 dims, Vec3d spacing,
-                      Vec3d origin) {
+VolumeView dense_view(const void* data, ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin) {
   VolumeView v;
   v.data = data;
   v.type = type;
@@ -60,7 +59,8 @@ std::size_t checked_volume_bytes(ScalarType type, const Index3& dims) {
   }
   const auto size = static_cast<std::int64_t>(scalar_size(type));
   if (n > kMax / size)
-    throw CapacityError("volume of " + std::to_string(n) + " samples overflows a 64-bit byte count");
+    throw CapacityError("volume of " + std::to_string(n) +
+                        " samples overflows a 64-bit byte count");
   return static_cast<std::size_t>(n * size);
 }
 
@@ -80,6 +80,8 @@ Volume::Volume(ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin)
   }
 }
 
-VolumeView Volume::view() const { return dense_view(data_.get(), type_, dims_, spacing_, origin_); }
+VolumeView Volume::view() const {
+  return dense_view(data_.get(), type_, dims_, spacing_, origin_);
+}
 
 }  // namespace isotile

@@ -32,11 +32,11 @@ struct Box3 {
 struct VolumeView {
   const void* data = nullptr;
   ScalarType type = ScalarType::Float32;
-  Index3 dims{0, 0, 0};      // samples along x, y, z
-  Index3 strides{0, 0, 0};   // in samples, not bytes
-  Vec3d spacing{1, 1, 1};    // world distance between neighbouring samples
-  Vec3d origin{0, 0, 0};     // world position of global sample (0, 0, 0)
-  Box3 box{};                // global samples this view covers; box.hi - box.lo == dims
+  Index3 dims{0, 0, 0};         // samples along x, y, z
+  Index3 strides{0, 0, 0};      // in samples, not bytes
+  Vec3d spacing{1, 1, 1};       // world distance between neighbouring samples
+  Vec3d origin{0, 0, 0};        // world position of global sample (0, 0, 0)
+  Box3 box{};                   // global samples this view covers; box.hi - box.lo == dims
   Index3 global_dims{0, 0, 0};  // dims of the whole volume this view is part of
 
   std::int64_t sample_count() const { return dims[0] * dims[1] * dims[2]; }

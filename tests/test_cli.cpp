@@ -67,7 +67,9 @@ class Cli : public ::testing::Test {
   fs::path dir_;
 };
 
-int line_count(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+int line_count(const std::string& s) {
+  return static_cast<int>(std::count(s.begin(), s.end(), '\n'));
+}
 
 TEST_F(Cli, HelpForEverySubcommand) {
   for (const char* sub : {"", "extract ", "info ", "quality ", "demo "}) {

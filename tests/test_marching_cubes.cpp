@@ -263,8 +263,8 @@ TEST(MarchingCubesRealData, BonsaiIsWatertightWithThePapersQuality) {
   const Volume vol = read_volume(path.string());
   const Mesh m = mc(vol.view(), 49.5);
   const TopologyStats t = mesh_topology(m, {.border_box = border_of(vol.view())});
-  EXPECT_TRUE(t.watertight) << t.boundary_edges << " boundary edges, "
-                            << t.border_boundary_edges << " on the border";
+  EXPECT_TRUE(t.watertight) << t.boundary_edges << " boundary edges, " << t.border_boundary_edges
+                            << " on the border";
   EXPECT_EQ(t.nonmanifold_edges, 0u);
   EXPECT_EQ(t.inconsistently_oriented_edges, 0u);
   const QualityStats q = triangle_quality(m);

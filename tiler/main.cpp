@@ -99,9 +99,11 @@ struct InputArgs {
                    "field:NAME:N (sphere, torus, gyroid, csg-box, marschner-lobb)")
         ->required();
     app.add_option("--dims", dims, "Raw input: samples along x,y,z, e.g. 256,256,128");
-    app.add_option("--type", type, "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64");
+    app.add_option("--type", type,
+                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64");
     app.add_option("--spacing", spacing, "Sample spacing x,y,z (overrides the file's)");
-    app.add_option("--origin", origin, "World position x,y,z of the first sample (overrides the file's)");
+    app.add_option("--origin", origin,
+                   "World position x,y,z of the first sample (overrides the file's)");
     app.add_option("--endian", endian, "Raw input byte order")
         ->check(CLI::IsMember({"little", "big"}));
   }
@@ -155,8 +157,8 @@ std::array<Vec3f, 2> border_box(const VolumeView& v) {
   std::array<Vec3f, 2> box{};
   for (int a = 0; a < 3; ++a) {
     box[0][a] = static_cast<float>(v.origin[a] + v.spacing[a] * 0.0);
-    box[1][a] = static_cast<float>(v.origin[a] +
-                                   v.spacing[a] * static_cast<double>(v.global_dims[a] - 1));
+    box[1][a] =
+        static_cast<float>(v.origin[a] + v.spacing[a] * static_cast<double>(v.global_dims[a] - 1));
   }
   return box;
 }
@@ -345,7 +347,8 @@ int run_info(const InputArgs& in, bool as_json) {
   for (int b = 0; b < kBins; ++b)
     bins.push_back({{"from", lo + b * width}, {"to", lo + (b + 1) * width}, {"count", hist[b]}});
   j["histogram"] = bins;
-  if (const auto field = parse_field_spec(in.input)) j["default_iso"] = field_default_iso(field->kind);
+  if (const auto field = parse_field_spec(in.input))
+    j["default_iso"] = field_default_iso(field->kind);
   if (as_json) {
     std::cout << j.dump(2) << "\n";
     return 0;
@@ -432,13 +435,15 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"mc", "macet", "dc"}));
   extract_cmd->add_option("--backend", ex.backend, "Where to run it")
       ->check(CLI::IsMember({"cpu", "gs", "hp", "auto"}));
-  extract_cmd->add_option("--stats", ex.stats, "Write statistics as JSON to this file ('-': stdout)");
+  extract_cmd->add_option("--stats", ex.stats,
+                          "Write statistics as JSON to this file ('-': stdout)");
   extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
   extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
 
   InputArgs info_in;
   bool info_json = false;
-  auto* info_cmd = app.add_subcommand("info", "Describe a volume: dims, type, value range, histogram");
+  auto* info_cmd =
+      app.add_subcommand("info", "Describe a volume: dims, type, value range, histogram");
   info_in.add_to(*info_cmd);
   info_cmd->add_flag("--json", info_json, "Print JSON");
 

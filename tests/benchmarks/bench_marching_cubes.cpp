@@ -22,11 +22,7 @@
 #include "core/volume_io.h"
 
 #ifdef ISOTILE_HAVE_VTK
-#include <vtkFlyingEdges3D.h>
-#include <vtkImageData.h>
-#include <vtkNew.h>
-#include <vtkPolyData.h>
-#include <vtkSMPTools.h>
+#include "vtk_peer.h"
 #endif
 
 namespace {
@@ -38,30 +34,6 @@ struct Case {
   std::shared_ptr<Volume> volume;
   double iso;
 };
-
-#ifdef ISOTILE_HAVE_VTK
-vtkSmartPointer<vtkImageData> to_vtk(const Volume& v) {
-  auto image = vtkSmartPointer<vtkImageData>::New();
-  image->SetDimensions(static_cast<int>(v.dims()[0]), static_cast<int>(v.dims()[1]),
-                       static_cast<int>(v.dims()[2]));
-  image->SetSpacing(v.spacing().data());
-  image->SetOrigin(v.origin().data());
-  int vtk_type = VTK_FLOAT;
-  switch (v.type()) {
-    case ScalarType::Int8: vtk_type = VTK_SIGNED_CHAR; break;
-    case ScalarType::UInt8: vtk_type = VTK_UNSIGNED_CHAR; break;
-    case ScalarType::Int16: vtk_type = VTK_SHORT; break;
-    case ScalarType::UInt16: vtk_type = VTK_UNSIGNED_SHORT; break;
-    case ScalarType::Int32: vtk_type = VTK_INT; break;
-    case ScalarType::UInt32: vtk_type = VTK_UNSIGNED_INT; break;
-    case ScalarType::Float32: vtk_type = VTK_FLOAT; break;
-    case ScalarType::Float64: vtk_type = VTK_DOUBLE; break;
-  }
-  image->AllocateScalars(vtk_type, 1);
-  std::memcpy(image->GetScalarPointer(), v.bytes(), v.byte_size());
-  return image;
-}
-#endif
 
 std::map<std::string, double> g_median_ms;
 
@@ -89,10 +61,9 @@ int main(int argc, char** argv) {
   }
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
 #ifdef ISOTILE_HAVE_VTK
-  vtkSMPTools::SetBackend("TBB");
-  vtkSMPTools::Initialize(threads);
+  bench::VtkFlyingEdges::set_threads(threads);
   std::printf("threads: %d (isotile TBB, VTK SMP backend %s)\n", threads,
-              vtkSMPTools::GetBackend());
+              bench::VtkFlyingEdges::backend());
 #else
   std::printf("threads: %d; VTK not found, isotile only\n", threads);
 #endif
@@ -102,40 +73,42 @@ int main(int argc, char** argv) {
   for (auto [file, name] : {std::pair{"bonsai_256x256x256_uint8.raw.gz", "bonsai"},
                             std::pair{"engine_256x256x128_uint8.raw.gz", "engine"}}) {
     if (std::filesystem::exists(shared / file))
-      cases.push_back({name, std::make_shared<Volume>(read_volume((shared / file).string())), 49.5});
+      cases.push_back(
+          {name, std::make_shared<Volume>(read_volume((shared / file).string())), 49.5});
     else
       std::printf("skipping %s: %s not found\n", name, (shared / file).c_str());
   }
-  cases.push_back({"gyroid256", std::make_shared<Volume>(make_field_volume({FieldKind::Gyroid, 256})),
-                   0.0});
+  cases.push_back(
+      {"gyroid256", std::make_shared<Volume>(make_field_volume({FieldKind::Gyroid, 256})), 0.0});
 
   for (const Case& c : cases) {
-    benchmark::RegisterBenchmark(("isotile_mc/" + c.name).c_str(), [c](benchmark::State& state) {
-      std::size_t tris = 0;
-      for (auto _ : state) {
-        Mesh m = marching_cubes(c.volume->view(), {.iso = c.iso, .normals = false});
-        tris = m.triangles.size();
-        benchmark::DoNotOptimize(m.positions.data());
-      }
-      state.counters["triangles"] = static_cast<double>(tris);
-    })->Unit(benchmark::kMillisecond)->UseRealTime()->Repetitions(5)->ReportAggregatesOnly(true);
+    benchmark::RegisterBenchmark(("isotile_mc/" + c.name).c_str(),
+                                 [c](benchmark::State& state) {
+                                   std::size_t tris = 0;
+                                   for (auto _ : state) {
+                                     Mesh m = marching_cubes(c.volume->view(),
+                                                             {.iso = c.iso, .normals = false});
+                                     tris = m.triangles.size();
+                                     benchmark::DoNotOptimize(m.positions.data());
+                                   }
+                                   state.counters["triangles"] = static_cast<double>(tris);
+                                 })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->Repetitions(5)
+        ->ReportAggregatesOnly(true);
 #ifdef ISOTILE_HAVE_VTK
-    auto image = to_vtk(*c.volume);
+    auto peer = std::make_shared<bench::VtkFlyingEdges>(c.volume->view());
     benchmark::RegisterBenchmark(("vtk_flying_edges/" + c.name).c_str(),
-                                 [c, image](benchmark::State& state) {
-      std::size_t tris = 0;
-      for (auto _ : state) {
-        vtkNew<vtkFlyingEdges3D> fe;
-        fe->SetInputData(image);
-        fe->SetValue(0, c.iso);
-        fe->ComputeNormalsOff();
-        fe->ComputeGradientsOff();
-        fe->ComputeScalarsOff();
-        fe->Update();
-        tris = static_cast<std::size_t>(fe->GetOutput()->GetNumberOfPolys());
-      }
-      state.counters["triangles"] = static_cast<double>(tris);
-    })->Unit(benchmark::kMillisecond)->UseRealTime()->Repetitions(5)->ReportAggregatesOnly(true);
+                                 [c, peer](benchmark::State& state) {
+                                   std::size_t tris = 0;
+                                   for (auto _ : state) tris = peer->run(c.iso);
+                                   state.counters["triangles"] = static_cast<double>(tris);
+                                 })
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->Repetitions(5)
+        ->ReportAggregatesOnly(true);
 #endif
   }
 
