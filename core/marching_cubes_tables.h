@@ -11,9 +11,11 @@
 // inside on the same side; on a face whose inside corners lie diagonally (an ambiguous face) the
 // segments separate the two inside corners. The rule depends only on the face's four samples, so
 // the two cells sharing a face always agree and the mesh has no cracks. Segments chain into closed
-// polygons, each fanned into triangles. Winding: normals point out of the inside (see mesh.h).
-// With this rule the tables give the same triangle count as VTK's vtkMarchingCubes /
-// vtkFlyingEdges3D on the paper's volumes (checked in the benchmark).
+// polygons, each split into triangles by ear clipping that never draws a diagonal between two
+// crossings on one face (the neighbour could draw it too, making a non-manifold edge). Winding:
+// normals point out of the inside (see mesh.h). With this rule the tables give the same triangle
+// count as VTK's vtkMarchingCubes / vtkFlyingEdges3D on the paper's volumes (checked in the
+// benchmark).
 #pragma once
 
 #include <array>
@@ -50,6 +52,47 @@ constexpr int edge_between(int a, int b) {
         (kEdgeCorners[e][0] == b && kEdgeCorners[e][1] == a))
       return e;
   return -1;
+}
+
+// True when cube edges e1 and e2 lie on a common face.
+constexpr bool share_face(int e1, int e2) {
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      bool on = true;
+      for (int e : {e1, e2})
+        for (int c : kEdgeCorners[e]) on = on && ((c >> axis) & 1) == side;
+      if (on) return true;
+    }
+  return false;
+}
+
+// Triangulates the polygon of crossings poly[0..len) by clipping ears, appending edge triples to
+// out. A diagonal between two crossings on one cube face is refused: the cell across that face
+// could draw the same diagonal, and the edge would then have four triangles. Backtracks until
+// every diagonal is allowed; returns false when no such triangulation exists.
+constexpr bool triangulate(const std::array<int, 12>& poly, int len,
+                           std::array<std::int8_t, 3 * kMaxTrianglesPerCase>& out, int& n) {
+  if (len == 3) {
+    if (n >= kMaxTrianglesPerCase) return false;
+    for (int v = 0; v < 3; ++v) out[3 * n + v] = static_cast<std::int8_t>(poly[v]);
+    ++n;
+    return true;
+  }
+  for (int i = 0; i < len; ++i) {
+    const int prev = poly[(i + len - 1) % len], cur = poly[i], next = poly[(i + 1) % len];
+    if (share_face(prev, next) || n >= kMaxTrianglesPerCase) continue;
+    std::array<int, 12> rest{};
+    for (int k = 0, r = 0; k < len; ++k)
+      if (k != i) rest[r++] = poly[k];
+    const int saved = n;
+    out[3 * n + 0] = static_cast<std::int8_t>(prev);
+    out[3 * n + 1] = static_cast<std::int8_t>(cur);
+    out[3 * n + 2] = static_cast<std::int8_t>(next);
+    ++n;
+    if (triangulate(rest, len - 1, out, n)) return true;
+    n = saved;
+  }
+  return false;
 }
 
 constexpr CaseTable build_case_table() {
@@ -107,12 +150,7 @@ constexpr CaseTable build_case_table() {
         seen |= 1u << e;
         poly[len++] = e;
       }
-      for (int k = 1; k + 1 < len; ++k) {
-        t.triangles[c][3 * n_tri + 0] = static_cast<std::int8_t>(poly[0]);
-        t.triangles[c][3 * n_tri + 1] = static_cast<std::int8_t>(poly[k]);
-        t.triangles[c][3 * n_tri + 2] = static_cast<std::int8_t>(poly[k + 1]);
-        ++n_tri;
-      }
+      if (!triangulate(poly, len, t.triangles[c], n_tri)) throw "no valid triangulation";
     }
     t.triangle_count[c] = static_cast<std::uint8_t>(n_tri);
   }

@@ -86,10 +86,11 @@ TEST(MarchingCubes, TwoCellsShareTheirCrossings) {
   v[1] = 1.0f;
   const Mesh m = mc(dense_view(v.data(), ScalarType::Float32, {3, 2, 2}), 0.25);
   ASSERT_EQ(m.positions.size(), 4u);
-  EXPECT_EQ(m.positions[0], (Vec3f{0.75f, 0, 0}));  // x-edge (0,0,0)-(1,0,0), t = 0.75
-  EXPECT_EQ(m.positions[1], (Vec3f{1.25f, 0, 0}));  // x-edge (1,0,0)-(2,0,0), t = 0.25
-  EXPECT_EQ(m.positions[2], (Vec3f{1, 0.25f, 0}));  // y-edge of (1,0,0)
-  EXPECT_EQ(m.positions[3], (Vec3f{1, 0, 0.25f}));  // z-edge of (1,0,0)
+  // t runs from the lower-index end: (0.25 - v0) / (v1 - v0).
+  EXPECT_EQ(m.positions[0], (Vec3f{0.25f, 0, 0}));  // x-edge (0,0,0)-(1,0,0): 0 -> 1, t = 0.25
+  EXPECT_EQ(m.positions[1], (Vec3f{1.75f, 0, 0}));  // x-edge (1,0,0)-(2,0,0): 1 -> 0, t = 0.75
+  EXPECT_EQ(m.positions[2], (Vec3f{1, 0.75f, 0}));  // y-edge of (1,0,0)
+  EXPECT_EQ(m.positions[3], (Vec3f{1, 0, 0.75f}));  // z-edge of (1,0,0)
   ASSERT_EQ(m.triangles.size(), 2u);
   // Cell 0 sees its corner 1 inside: outward means facing -x, i.e. (v0, v3, v2).
   EXPECT_EQ(canonical_rotation(m.triangles[0]), (Tri{0, 3, 2}));
