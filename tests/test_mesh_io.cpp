@@ -1,1 +1,753 @@
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <bit>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/atomic_file.h"
+#include "core/errors.h"
+#include "core/mesh_io.h"
+
+namespace isotile {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A fresh directory per test, removed afterwards.
+class TempDir {
+ public:
+  TempDir() {
+    static std::atomic<int> counter{0};
+    path_ = fs::temp_directory_path() / ("isotile-test-mesh-io-" + std::to_string(::getpid()) +
+                                         "-" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  fs::path operator/(const std::string& name) const { return path_ / name; }
+  const fs::path& path() const { return path_; }
+  std::vector<std::string> entries() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(path_)) names.push_back(e.path().filename());
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+
+ private:
+  fs::path path_;
+};
+
+void write_bytes(const fs::path& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  ASSERT_TRUE(out.good());
+}
+
+std::string read_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Bitwise, so that -0 and +0 (and every last bit) must survive.
+bool same_bits(const std::vector<Vec3f>& a, const std::vector<Vec3f>& b) {
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Vec3f)) == 0);
+}
+
+void expect_same_mesh(const Mesh& expected, const Mesh& actual) {
+  EXPECT_TRUE(same_bits(expected.positions, actual.positions));
+  EXPECT_TRUE(same_bits(expected.normals, actual.normals));
+  EXPECT_EQ(expected.triangles, actual.triangles);
+  EXPECT_EQ(expected.quads, actual.quads);
+}
+
+// Awkward floats: shortest decimal forms, extremes, subnormals, negative zero.
+const std::vector<float> kTrickyFloats = {0.1f,
+                                          -0.0f,
+                                          1e-30f,
+                                          std::numeric_limits<float>::denorm_min(),
+                                          std::numeric_limits<float>::max(),
+                                          -std::numeric_limits<float>::max(),
+                                          1.0f / 3.0f,
+                                          123456.789f,
+                                          -7.25f,
+                                          std::nextafter(1.0f, 2.0f),
+                                          16777217.0f,
+                                          3.0e-39f,
+                                          std::numeric_limits<float>::min(),
+                                          2.5f,
+                                          -1e10f,
+                                          0.0f};
+
+// Five vertices with tricky coordinates, two triangles and one quad, unit normals.
+Mesh small_mesh(bool normals, bool quads) {
+  Mesh m;
+  for (std::size_t i = 0; i < 5; ++i) {
+    m.positions.push_back({kTrickyFloats[(3 * i) % kTrickyFloats.size()],
+                           kTrickyFloats[(3 * i + 1) % kTrickyFloats.size()],
+                           kTrickyFloats[(3 * i + 2) % kTrickyFloats.size()]});
+  }
+  if (normals) {
+    m.normals = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.6f, 0.8f, 0}, {0, -0.6f, 0.8f}};
+  }
+  m.triangles = {{0, 1, 2}, {2, 3, 4}};
+  if (quads) m.quads = {{0, 1, 3, 4}};
+  return m;
+}
+
+// A grid large enough for many writer chunks, with random bit-pattern coordinates.
+Mesh big_mesh(bool normals, bool quads) {
+  std::mt19937 rng(12345);
+  Mesh m;
+  const std::uint32_t n = 150;
+  auto random_float = [&] {
+    for (;;) {
+      const float f = std::bit_cast<float>(static_cast<std::uint32_t>(rng()));
+      if (std::isfinite(f)) return f;
+    }
+  };
+  for (std::uint32_t i = 0; i < n * n; ++i) {
+    m.positions.push_back({random_float(), random_float(), random_float()});
+    if (normals) m.normals.push_back({random_float(), random_float(), random_float()});
+  }
+  for (std::uint32_t y = 0; y + 1 < n; ++y) {
+    for (std::uint32_t x = 0; x + 1 < n; ++x) {
+      const std::uint32_t a = y * n + x, b = a + 1, c = a + n, d = c + 1;
+      if (quads && (x + y) % 3 == 0) {
+        m.quads.push_back({a, b, d, c});
+      } else {
+        m.triangles.push_back({a, b, d});
+        m.triangles.push_back({a, d, c});
+      }
+    }
+  }
+  return m;
+}
+
+Mesh round_trip(const Mesh& m, const fs::path& path, MeshWriteOptions options = {}) {
+  write_mesh(m, path, options);
+  return read_mesh(path);
+}
+
+TEST(MeshFormat, FromExtension) {
+  EXPECT_EQ(mesh_format_from_path("a/b.ply"), MeshFormat::Ply);
+  EXPECT_EQ(mesh_format_from_path("B.PLY"), MeshFormat::Ply);
+  EXPECT_EQ(mesh_format_from_path("x.Obj"), MeshFormat::Obj);
+  EXPECT_EQ(mesh_format_from_path("x.stl"), MeshFormat::Stl);
+  EXPECT_EQ(mesh_format_from_path("x.off"), MeshFormat::Off);
+  EXPECT_THROW(mesh_format_from_path("x.vtk"), InputError);
+  EXPECT_THROW(mesh_format_from_path("ply"), InputError);
+}
+
+TEST(MeshRoundTrip, PlyBinary) {
+  TempDir dir;
+  for (bool normals : {false, true}) {
+    for (bool quads : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << "normals " << normals << " quads " << quads);
+      const Mesh m = small_mesh(normals, quads);
+      expect_same_mesh(m, round_trip(m, dir / "m.ply"));
+      const Mesh big = big_mesh(normals, quads);
+      expect_same_mesh(big, round_trip(big, dir / "big.ply"));
+    }
+  }
+  // Header as documented, then 3 floats per vertex and "3 a b c" with a uchar count.
+  const Mesh m = small_mesh(false, false);
+  write_mesh(m, dir / "m.ply");
+  const std::string bytes = read_bytes(dir / "m.ply");
+  const std::string header_end = "end_header\n";
+  const std::size_t data = bytes.find(header_end) + header_end.size();
+  EXPECT_NE(bytes.find("format binary_little_endian 1.0\n"), std::string::npos);
+  EXPECT_NE(bytes.find("element vertex 5\n"), std::string::npos);
+  EXPECT_NE(bytes.find("element face 2\nproperty list uchar uint vertex_indices\n"),
+            std::string::npos);
+  EXPECT_EQ(bytes.size(), data + 5 * 12 + 2 * 13);
+  EXPECT_EQ(bytes[data + 60], 3);
+}
+
+TEST(MeshRoundTrip, PlyAscii) {
+  TempDir dir;
+  MeshWriteOptions ascii;
+  ascii.ascii = true;
+  for (bool normals : {false, true}) {
+    for (bool quads : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << "normals " << normals << " quads " << quads);
+      const Mesh m = small_mesh(normals, quads);
+      expect_same_mesh(m, round_trip(m, dir / "m.ply", ascii));
+      const Mesh big = big_mesh(normals, quads);
+      expect_same_mesh(big, round_trip(big, dir / "big.ply", ascii));
+    }
+  }
+  write_mesh(small_mesh(false, true), dir / "m.ply", ascii);
+  const std::string text = read_bytes(dir / "m.ply");
+  EXPECT_NE(text.find("format ascii 1.0\n"), std::string::npos);
+  EXPECT_NE(text.find("\n3 0 1 2\n3 2 3 4\n4 0 1 3 4\n"), std::string::npos);
+}
+
+TEST(MeshRoundTrip, PlyWithoutNormalsWhenAsked) {
+  TempDir dir;
+  MeshWriteOptions options;
+  options.write_normals = false;
+  const Mesh m = small_mesh(true, false);
+  const Mesh back = round_trip(m, dir / "m.ply", options);
+  EXPECT_TRUE(back.normals.empty());
+  EXPECT_TRUE(same_bits(m.positions, back.positions));
+}
+
+TEST(MeshRoundTrip, Obj) {
+  TempDir dir;
+  for (bool normals : {false, true}) {
+    for (bool quads : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << "normals " << normals << " quads " << quads);
+      const Mesh m = small_mesh(normals, quads);
+      expect_same_mesh(m, round_trip(m, dir / "m.obj"));
+      const Mesh big = big_mesh(normals, quads);
+      expect_same_mesh(big, round_trip(big, dir / "big.obj"));
+    }
+  }
+  write_mesh(small_mesh(true, false), dir / "m.obj");
+  EXPECT_NE(read_bytes(dir / "m.obj").find("\nf 1//1 2//2 3//3\n"), std::string::npos);
+}
+
+TEST(MeshRoundTrip, Off) {
+  TempDir dir;
+  for (bool quads : {false, true}) {
+    SCOPED_TRACE(::testing::Message() << "quads " << quads);
+    const Mesh m = small_mesh(false, quads);
+    expect_same_mesh(m, round_trip(m, dir / "m.off"));
+    const Mesh big = big_mesh(false, quads);
+    expect_same_mesh(big, round_trip(big, dir / "big.off"));
+  }
+  // OFF has no per-vertex normals here: they are dropped, the rest survives.
+  const Mesh back = round_trip(small_mesh(true, false), dir / "n.off");
+  EXPECT_TRUE(back.normals.empty());
+  EXPECT_EQ(read_bytes(dir / "n.off").substr(0, 10), "OFF\n5 2 0\n");
+}
+
+TEST(MeshRoundTrip, StlWeldsAndSplitsQuads) {
+  TempDir dir;
+  // Positions listed in order of first use by the written triangles, so welding restores them.
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.1f, -0.0f, 1e-30f}};
+  m.triangles = {{0, 1, 2}};
+  m.quads = {{0, 2, 3, 4}};
+  const Mesh back = round_trip(m, dir / "m.stl");
+  Mesh expected;
+  // -0 welds with +0, and a welded position is stored as +0.
+  expected.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.1f, 0.0f, 1e-30f}};
+  expected.triangles = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4}};
+  expect_same_mesh(expected, back);
+
+  const std::string bytes = read_bytes(dir / "m.stl");
+  ASSERT_EQ(bytes.size(), 84u + 3 * 50);
+  EXPECT_NE(bytes.substr(0, 5), "solid");
+  std::uint32_t count;
+  std::memcpy(&count, bytes.data() + 80, 4);
+  EXPECT_EQ(count, 3u);
+  float normal[3];
+  std::memcpy(normal, bytes.data() + 84, 12);
+  EXPECT_EQ(normal[0], 0.0f);
+  EXPECT_EQ(normal[1], 0.0f);
+  EXPECT_EQ(normal[2], 1.0f);
+
+  // Duplicated positions in the input become one vertex.
+  Mesh dup;
+  dup.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  dup.triangles = {{0, 1, 2}, {3, 5, 4}};
+  const Mesh welded = round_trip(dup, dir / "dup.stl");
+  EXPECT_EQ(welded.positions.size(), 4u);
+  EXPECT_EQ(welded.triangles, (std::vector<Tri>{{0, 1, 2}, {1, 3, 2}}));
+
+  const Mesh big = big_mesh(false, true);
+  const Mesh big_back = round_trip(big, dir / "big.stl");
+  EXPECT_EQ(big_back.triangles.size(), big.triangles.size() + 2 * big.quads.size());
+}
+
+TEST(MeshRoundTrip, ExplicitFormatOverridesExtension) {
+  TempDir dir;
+  MeshWriteOptions options;
+  options.format = MeshFormat::Obj;
+  write_mesh(small_mesh(false, false), dir / "m.ply", options);
+  EXPECT_EQ(read_bytes(dir / "m.ply").substr(0, 1), "#");
+}
+
+TEST(MeshRoundTrip, EmptyMesh) {
+  TempDir dir;
+  for (const char* name : {"e.ply", "e.obj", "e.off", "e.stl"}) {
+    SCOPED_TRACE(name);
+    expect_same_mesh(Mesh{}, round_trip(Mesh{}, dir / name));
+  }
+}
+
+// Appends big-endian bytes of any scalar.
+template <class T>
+void put_be(std::string& s, T v) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  for (std::size_t i = 0; i < sizeof(T); ++i) s += b[sizeof(T) - 1 - i];
+}
+
+TEST(MeshReader, PlyBigEndianWithExtraProperties) {
+  TempDir dir;
+  std::string s =
+      "ply\n"
+      "format binary_big_endian 1.0\n"
+      "comment hand-made: doubles, skipped scalars and lists, an extra element\n"
+      "element vertex 5\n"
+      "property double x\n"
+      "property uchar red\n"
+      "property double y\n"
+      "property double z\n"
+      "property list uchar int16 extra\n"
+      "element material 2\n"
+      "property float shininess\n"
+      "element face 3\n"
+      "property int flags\n"
+      "property list int uint vertex_index\n"
+      "end_header\n";
+  const double xyz[5][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0.5}, {-2.5, 1e-3, 7}};
+  for (int v = 0; v < 5; ++v) {
+    put_be(s, xyz[v][0]);
+    put_be(s, std::uint8_t{200});
+    put_be(s, xyz[v][1]);
+    put_be(s, xyz[v][2]);
+    put_be(s, static_cast<std::uint8_t>(v % 3));  // list length 0, 1 or 2
+    for (int k = 0; k < v % 3; ++k) put_be(s, std::int16_t{-1});
+  }
+  put_be(s, 1.5f);
+  put_be(s, 2.5f);
+  auto face = [&](std::vector<std::uint32_t> corners) {
+    put_be(s, std::int32_t{-7});
+    put_be(s, static_cast<std::int32_t>(corners.size()));
+    for (std::uint32_t c : corners) put_be(s, c);
+  };
+  face({0, 1, 2});
+  face({0, 1, 2, 3});
+  face({0, 1, 2, 3, 4});  // fanned around corner 0
+  write_bytes(dir / "be.ply", s);
+
+  const Mesh m = read_mesh(dir / "be.ply");
+  ASSERT_EQ(m.positions.size(), 5u);
+  for (int v = 0; v < 5; ++v) {
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(m.positions[v][k], static_cast<float>(xyz[v][k]));
+  }
+  EXPECT_TRUE(m.normals.empty());
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {0, 1, 2}, {0, 2, 3}, {0, 3, 4}}));
+  EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
+}
+
+TEST(MeshReader, PlyAsciiHandWritten) {
+  TempDir dir;
+  // CRLF line ends, integer coordinates, normals out of order, a skipped element before faces.
+  const std::string s =
+      "ply\r\nformat ascii 1.0\r\nobj_info made by hand\r\n"
+      "element vertex 3\r\n"
+      "property int x\r\nproperty float nz\r\nproperty short y\r\nproperty double z\r\n"
+      "property float nx\r\nproperty float ny\r\nproperty list uint8 float uv\r\n"
+      "element edge 1\r\nproperty int vertex1\r\nproperty int vertex2\r\n"
+      "element face 1\r\nproperty list uint8 uint32 vertex_indices\r\nproperty uchar flag\r\n"
+      "end_header\r\n"
+      "1 1 2 3.5 0 0 2 0.5 0.5\r\n"
+      "-4 0.5 -5 0.1 0.6 0.8 0\r\n"
+      "0 1 0 0 0 0 1 0.25\r\n"
+      "0 1\r\n"
+      "3 2 1 0 9\r\n";
+  write_bytes(dir / "a.ply", s);
+  const Mesh m = read_mesh(dir / "a.ply");
+  EXPECT_TRUE(same_bits(m.positions, {{1, 2, 3.5f}, {-4, -5, 0.1f}, {0, 0, 0}}));
+  EXPECT_TRUE(same_bits(m.normals, {{0, 0, 1}, {0.6f, 0.8f, 0.5f}, {0, 0, 1}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{2, 1, 0}}));
+}
+
+TEST(MeshReader, DoublesRoundToNearestFloat) {
+  TempDir dir;
+  // FLT_MAX printed to 8 digits is slightly above it as a double yet rounds back to FLT_MAX;
+  // 3.5e38 is past the halfway point to 2^128 and becomes infinity; 0.1 rounds once.
+  const std::string s =
+      "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\n"
+      "property double z\nend_header\n3.4028235e38 -3.4028235e38 0.1\n3.5e38 -3.5e38 1e-50\n";
+  write_bytes(dir / "d.ply", s);
+  const Mesh m = read_mesh(dir / "d.ply");
+  const float inf = std::numeric_limits<float>::infinity();
+  const float max = std::numeric_limits<float>::max();
+  EXPECT_TRUE(same_bits(m.positions, {{max, -max, 0.1f}, {inf, -inf, 0.0f}}));
+}
+
+TEST(MeshReader, ObjHandWritten) {
+  TempDir dir;
+  const std::string s =
+      "# a comment\n"
+      "mtllib none.mtl\n"
+      "o thing\n"
+      "v 0 0 0\n"
+      "v 1 0 0\n"
+      "v 1 1 0 1.0\n"          // w
+      "v 0 1 0 0.5 0.5 0.5\n"  // vertex colour
+      "vt 0 0\n"
+      "vn 0 0 1\n"
+      "\n"
+      "f 1/1/1 2/1/1 3/1/1\n"
+      "f -4//-1 -2//-1 -1//-1   # trailing comment\n"
+      "usemtl x\n"
+      "s off\n"
+      "v 0.5 2 0\n"
+      "f 1 2 3 4\n"
+      "f 1/1 2/1 3/1/ 4/1 5/1\n"
+      "g group\n";
+  write_bytes(dir / "h.obj", s);
+  const Mesh m = read_mesh(dir / "h.obj");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5f, 2, 0}}));
+  // One normal for five positions does not map onto per-position normals.
+  EXPECT_TRUE(m.normals.empty());
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {0, 2, 3}, {0, 1, 2}, {0, 2, 3}, {0, 3, 4}}));
+  EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
+}
+
+TEST(MeshReader, OffHandWritten) {
+  TempDir dir;
+  const std::string s =
+      "COFF 5 3 0\n"
+      "# colours follow the coordinates\n"
+      "0 0 0 255 0 0 255\n"
+      "1 0 0 255 0 0 255\n"
+      "\n"
+      "1 1 0 255 0 0 255\n"
+      "0 1 0 255 0 0 255\n"
+      "0.5 2 0 255 0 0 255\n"
+      "3 0 1 2\n"
+      "4 0 1 2 3 0.5 0.5 0.5\n"
+      "5 0 1 2 3 4\n";
+  write_bytes(dir / "h.off", s);
+  const Mesh m = read_mesh(dir / "h.off");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5f, 2, 0}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {0, 1, 2}, {0, 2, 3}, {0, 3, 4}}));
+  EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
+}
+
+TEST(MeshReader, StlAscii) {
+  TempDir dir;
+  const std::string s =
+      "solid first\n"
+      "  facet normal 0 0 1\n"
+      "    outer loop\n"
+      "      vertex 0 0 0\n"
+      "      vertex 1 0 0\n"
+      "      vertex 0 1 0\n"
+      "    endloop\n"
+      "  endfacet\n"
+      "endsolid first\n"
+      "solid second\n"
+      "  facet normal 0 0 0\n"
+      "    outer loop\n"
+      "      vertex 1 0 0\n"
+      "      vertex 1 1 -0\n"
+      "      vertex 0 1 0\n"
+      "    endloop\n"
+      "  endfacet\n"
+      "endsolid\n";
+  write_bytes(dir / "a.stl", s);
+  const Mesh m = read_mesh(dir / "a.stl");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {1, 3, 2}}));
+}
+
+// A binary STL whose header begins with "solid" is still binary when its size says so.
+TEST(MeshReader, StlBinaryStartingWithSolid) {
+  TempDir dir;
+  std::string s(80, ' ');
+  s.replace(0, 11, "solid thing");
+  const std::uint32_t count = 1;
+  s.append(reinterpret_cast<const char*>(&count), 4);
+  const float tri[12] = {0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0};
+  s.append(reinterpret_cast<const char*>(tri), sizeof(tri));
+  s.append(2, '\0');
+  write_bytes(dir / "b.stl", s);
+  const Mesh m = read_mesh(dir / "b.stl");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+std::string error_of(const fs::path& path) {
+  try {
+    read_mesh(path);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no InputError)";
+}
+
+TEST(MeshReaderErrors, MessagesNameFileAndProblem) {
+  TempDir dir;
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 7\n";
+  write_bytes(dir / "x.ply", ply);
+  EXPECT_EQ(error_of(dir / "x.ply"),
+            (dir / "x.ply").string() + ": face 1 references vertex 7 but there are 3 vertices");
+
+  write_bytes(dir / "x.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n");
+  EXPECT_EQ(error_of(dir / "x.obj"),
+            (dir / "x.obj").string() + ": face 1 references vertex 9 but there are 3 vertices");
+
+  write_bytes(dir / "x.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+  EXPECT_EQ(error_of(dir / "x.off"),
+            (dir / "x.off").string() + ": face 0 references vertex 3 but there are 3 vertices");
+
+  write_bytes(dir / "neg.obj", "v 0 0 0\nf -1 -2 -3\n");
+  EXPECT_NE(error_of(dir / "neg.obj").find("line 2"), std::string::npos);
+
+  write_bytes(dir / "bad.obj", "v 0 zero 0\n");
+  EXPECT_NE(error_of(dir / "bad.obj").find("bad number 'zero'"), std::string::npos);
+
+  write_bytes(dir / "two.ply",
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+              "end_header\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n");
+  EXPECT_NE(error_of(dir / "two.ply").find("face 0 has 2 corners"), std::string::npos);
+
+  write_bytes(dir / "nox.ply",
+              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nend_header\n0\n");
+  EXPECT_NE(error_of(dir / "nox.ply").find("no x, y and z"), std::string::npos);
+
+  write_bytes(dir / "fmt.ply", "ply\nformat binary_middle_endian 1.0\nend_header\n");
+  EXPECT_NE(error_of(dir / "fmt.ply").find("unknown format 'binary_middle_endian'"),
+            std::string::npos);
+
+  write_bytes(dir / "e.ply", "");
+  EXPECT_EQ(error_of(dir / "e.ply"), (dir / "e.ply").string() + ": empty file");
+}
+
+TEST(MeshReaderErrors, HugeCountsAreRejectedBeforeAllocating) {
+  TempDir dir;
+  write_bytes(dir / "v.ply",
+              "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000000\n"
+              "property float x\nproperty float y\nproperty float z\nend_header\n0123456789ab");
+  EXPECT_NE(error_of(dir / "v.ply").find("declares 4000000000000 records"), std::string::npos);
+  write_bytes(dir / "f.ply",
+              "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\n"
+              "property float y\nproperty float z\nelement face 1\n"
+              "property list uint uint vertex_indices\nend_header\n\xff\xff\xff\xff");
+  EXPECT_NE(error_of(dir / "f.ply").find("file ends in face 0"), std::string::npos);
+  write_bytes(dir / "o.off", "OFF\n999999999999 999999999 0\n0 0 0\n");
+  EXPECT_NE(error_of(dir / "o.off").find("declares"), std::string::npos);
+  std::string stl(84, '\0');
+  stl[80] = stl[81] = stl[82] = stl[83] = '\xff';
+  write_bytes(dir / "s.stl", stl);
+  EXPECT_NE(error_of(dir / "s.stl").find("4294967295 triangles"), std::string::npos);
+}
+
+TEST(MeshReaderErrors, MissingFileIsIoError) {
+  TempDir dir;
+  EXPECT_THROW(read_mesh(dir / "absent.ply"), IoError);
+  EXPECT_THROW(read_mesh(dir / "absent.xyz"), InputError);
+}
+
+// Reading must end in a mesh or an InputError; anything else (another exception, a crash, a
+// sanitizer report) fails.
+void expect_ok_or_input_error(const fs::path& path, const std::string& what) {
+  try {
+    read_mesh(path);
+  } catch (const InputError&) {
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << what << ": unexpected " << e.what();
+  }
+}
+
+struct Sample {
+  std::string name;
+  MeshWriteOptions options;
+  bool every_truncation_fails;  // binary layouts have no valid shorter prefix
+};
+
+std::vector<Sample> samples() {
+  MeshWriteOptions ascii;
+  ascii.ascii = true;
+  return {{"s.ply", {}, true},
+          {"a.ply", ascii, false},
+          {"s.obj", {}, false},
+          {"s.off", {}, false},
+          {"s.stl", {}, true}};
+}
+
+TEST(MeshReaderErrors, EveryTruncation) {
+  TempDir dir;
+  for (const Sample& sample : samples()) {
+    SCOPED_TRACE(sample.name);
+    write_mesh(small_mesh(true, true), dir / sample.name, sample.options);
+    const std::string full = read_bytes(dir / sample.name);
+    const fs::path cut = dir / ("cut" + fs::path(sample.name).extension().string());
+    for (std::size_t n = 0; n < full.size(); ++n) {
+      write_bytes(cut, full.substr(0, n));
+      if (sample.every_truncation_fails) {
+        EXPECT_THROW(read_mesh(cut), InputError) << "length " << n;
+      } else {
+        expect_ok_or_input_error(cut, "length " + std::to_string(n));
+      }
+    }
+  }
+}
+
+TEST(MeshReaderErrors, MutatedAndGarbageBytes) {
+  TempDir dir;
+  std::mt19937 rng(7);
+  const char replacements[] = {'\0', '\xff', '-', '9', ' ', '\n', '/', 'e', '\x80'};
+  for (const Sample& sample : samples()) {
+    SCOPED_TRACE(sample.name);
+    write_mesh(small_mesh(true, true), dir / sample.name, sample.options);
+    const std::string full = read_bytes(dir / sample.name);
+    const fs::path bad = dir / ("bad" + fs::path(sample.name).extension().string());
+    for (std::size_t i = 0; i < full.size(); ++i) {
+      for (char c : replacements) {
+        std::string mutated = full;
+        mutated[i] = c;
+        write_bytes(bad, mutated);
+        expect_ok_or_input_error(bad, "byte " + std::to_string(i));
+      }
+    }
+    // Random tails after a valid beginning, and pure noise.
+    for (int trial = 0; trial < 200; ++trial) {
+      std::string noisy = full.substr(0, rng() % full.size());
+      const std::size_t extra = rng() % 300;
+      for (std::size_t k = 0; k < extra; ++k) noisy += static_cast<char>(rng());
+      write_bytes(bad, noisy);
+      expect_ok_or_input_error(bad, "noise trial " + std::to_string(trial));
+    }
+  }
+}
+
+TEST(MeshWriterErrors, MissingDirectory) {
+  TempDir dir;
+  const fs::path target = dir / "no-such-dir" / "m.ply";
+  try {
+    write_mesh(small_mesh(false, false), target);
+    ADD_FAILURE() << "no IoError";
+  } catch (const IoError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "cannot write " + target.string() + ": No such file or directory");
+  }
+  EXPECT_FALSE(fs::exists(target));
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(MeshWriterErrors, BadIndexWritesNothing) {
+  TempDir dir;
+  Mesh m = small_mesh(false, false);
+  m.triangles.push_back({0, 1, 5});
+  EXPECT_THROW(write_mesh(m, dir / "m.ply"), InputError);
+  Mesh n = small_mesh(false, false);
+  n.normals.resize(2);
+  EXPECT_THROW(write_mesh(n, dir / "m.obj"), InputError);
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+// Simulates a full disk with the file size limit: writes past it fail with EFBIG.
+TEST(MeshWriterErrors, FailedWriteKeepsPreviousTarget) {
+  TempDir dir;
+  const fs::path target = dir / "m.ply";
+  write_bytes(target, "previous content");
+  const Mesh big = big_mesh(true, false);
+
+  struct sigaction ignore {
+  }, old{};
+  ignore.sa_handler = SIG_IGN;
+  ASSERT_EQ(::sigaction(SIGXFSZ, &ignore, &old), 0);
+  rlimit saved{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &saved), 0);
+  rlimit limited = saved;
+  limited.rlim_cur = 64 * 1024;
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &limited), 0);
+  bool threw = false;
+  std::string message;
+  try {
+    write_mesh(big, target);
+  } catch (const IoError& e) {
+    threw = true;
+    message = e.what();
+  }
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &saved), 0);
+  ASSERT_EQ(::sigaction(SIGXFSZ, &old, nullptr), 0);
+
+  EXPECT_TRUE(threw);
+  EXPECT_EQ(message.rfind("cannot write " + target.string() + ": ", 0), 0u) << message;
+  EXPECT_EQ(read_bytes(target), "previous content");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"m.ply"});
+}
+
+TEST(AtomicFile, UncommittedLeavesNothing) {
+  TempDir dir;
+  const fs::path target = dir / "t.bin";
+  write_bytes(target, "old");
+  {
+    AtomicFile f(target);
+    f.write("new data", 8);
+    EXPECT_EQ(dir.entries().size(), 2u);  // the target and the temporary beside it
+  }
+  EXPECT_EQ(read_bytes(target), "old");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"t.bin"});
+}
+
+TEST(AtomicFile, CommitReplacesTarget) {
+  TempDir dir;
+  const fs::path target = dir / "t.bin";
+  write_bytes(target, "old");
+  AtomicFile f(target);
+  f.write("new", 3);
+  std::fputs(" data", f.stream());
+  EXPECT_EQ(read_bytes(target), "old");
+  f.commit();
+  EXPECT_EQ(read_bytes(target), "new data");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"t.bin"});
+  EXPECT_THROW(f.write("x", 1), IoError);
+}
+
+TEST(AtomicFile, FailedRenameRemovesTemporary) {
+  TempDir dir;
+  // A non-empty directory cannot be replaced by a file.
+  const fs::path target = dir / "occupied";
+  fs::create_directories(target / "inside");
+  AtomicFile f(target);
+  f.write("x", 1);
+  EXPECT_THROW(f.commit(), IoError);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"occupied"});
+  EXPECT_TRUE(fs::is_directory(target / "inside"));
+}
+
+TEST(AtomicFile, SignalCleanupRemovesTemporaries) {
+  TempDir dir;
+  {
+    AtomicFile a(dir / "a.bin");
+    AtomicFile b(dir / "b.bin");
+    a.write("a", 1);
+    EXPECT_EQ(dir.entries().size(), 2u);
+    remove_pending_temporaries();
+    EXPECT_TRUE(dir.entries().empty());
+    // The temporary is gone, so the rename cannot happen: an error, not a half-written target.
+    EXPECT_THROW(a.commit(), IoError);
+  }
+  EXPECT_TRUE(dir.entries().empty());
+  // Slots are reused after release: many files in sequence keep working.
+  for (int i = 0; i < 200; ++i) {
+    AtomicFile f(dir / "seq.bin");
+    f.write(&i, sizeof(i));
+    f.commit();
+  }
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"seq.bin"});
+}
+
+}  // namespace
+}  // namespace isotile

@@ -1,1 +1,422 @@
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <numeric>
+#include <random>
+
+#include "core/errors.h"
+#include "core/mesh_topology.h"
+
+namespace isotile {
+namespace {
+
+// Outward-facing tetrahedron.
+Mesh tetrahedron() {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  return m;
+}
+
+// Unit cube, vertex x + 2y + 4z, faces wound outward.
+Mesh cube(bool quads) {
+  Mesh m;
+  for (int i = 0; i < 8; ++i) {
+    m.positions.push_back({float(i & 1), float((i >> 1) & 1), float((i >> 2) & 1)});
+  }
+  const std::vector<Quad> faces = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                                   {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const Quad& q : faces) {
+    if (quads) {
+      m.quads.push_back(q);
+    } else {
+      m.triangles.push_back({q[0], q[1], q[2]});
+      m.triangles.push_back({q[0], q[2], q[3]});
+    }
+  }
+  return m;
+}
+
+// An n x m grid whose rows and columns wrap around: a torus.
+Mesh torus(std::uint32_t n, std::uint32_t m, bool quads) {
+  Mesh mesh;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    for (std::uint32_t j = 0; j < m; ++j) {
+      const double u = 2 * M_PI * i / n, v = 2 * M_PI * j / m;
+      mesh.positions.push_back({float((3 + std::cos(v)) * std::cos(u)),
+                                float((3 + std::cos(v)) * std::sin(u)), float(std::sin(v))});
+    }
+  }
+  for (std::uint32_t i = 0; i < n; ++i) {
+    for (std::uint32_t j = 0; j < m; ++j) {
+      const std::uint32_t a = i * m + j, b = i * m + (j + 1) % m, c = ((i + 1) % n) * m + j,
+                          d = ((i + 1) % n) * m + (j + 1) % m;
+      if (quads) {
+        mesh.quads.push_back({a, b, d, c});
+      } else {
+        mesh.triangles.push_back({a, b, d});
+        mesh.triangles.push_back({a, d, c});
+      }
+    }
+  }
+  return mesh;
+}
+
+TEST(MeshTopology, Tetrahedron) {
+  const TopologyStats s = mesh_topology(tetrahedron());
+  EXPECT_EQ(s.vertices, 4u);
+  EXPECT_EQ(s.unreferenced_vertices, 0u);
+  EXPECT_EQ(s.edges, 6u);
+  EXPECT_EQ(s.faces, 4u);
+  EXPECT_EQ(s.boundary_edges, 0u);
+  EXPECT_EQ(s.nonmanifold_edges, 0u);
+  EXPECT_EQ(s.nonmanifold_vertices, 0u);
+  EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+  EXPECT_EQ(s.euler, 2);
+  EXPECT_EQ(s.components, 1u);
+  EXPECT_TRUE(s.closed);
+  EXPECT_TRUE(s.watertight);
+}
+
+TEST(MeshTopology, FlippedFace) {
+  Mesh m = tetrahedron();
+  std::swap(m.triangles[3][1], m.triangles[3][2]);
+  const TopologyStats s = mesh_topology(m);
+  // Each of the flipped face's three edges now runs the same way in both of its faces.
+  EXPECT_EQ(s.inconsistently_oriented_edges, 3u);
+  EXPECT_EQ(s.boundary_edges, 0u);
+  EXPECT_EQ(s.euler, 2);
+  EXPECT_TRUE(s.closed);
+}
+
+TEST(MeshTopology, CubeOfTriangles) {
+  const TopologyStats s = mesh_topology(cube(false));
+  EXPECT_EQ(s.vertices, 8u);
+  EXPECT_EQ(s.edges, 18u);
+  EXPECT_EQ(s.faces, 12u);
+  EXPECT_EQ(s.euler, 2);
+  EXPECT_EQ(s.boundary_edges, 0u);
+  EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+  EXPECT_EQ(s.nonmanifold_vertices, 0u);
+  EXPECT_EQ(s.components, 1u);
+  EXPECT_TRUE(s.closed);
+}
+
+TEST(MeshTopology, CubeOfQuads) {
+  const TopologyStats s = mesh_topology(cube(true));
+  EXPECT_EQ(s.vertices, 8u);
+  EXPECT_EQ(s.edges, 12u);
+  EXPECT_EQ(s.faces, 6u);
+  EXPECT_EQ(s.euler, 2);
+  EXPECT_EQ(s.boundary_edges, 0u);
+  EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+  EXPECT_EQ(s.nonmanifold_vertices, 0u);
+  EXPECT_TRUE(s.closed);
+}
+
+TEST(MeshTopology, SingleTriangle) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}};
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.vertices, 3u);
+  EXPECT_EQ(s.edges, 3u);
+  EXPECT_EQ(s.boundary_edges, 3u);
+  EXPECT_EQ(s.border_boundary_edges, 0u);
+  EXPECT_EQ(s.nonmanifold_vertices, 0u);
+  EXPECT_EQ(s.euler, 1);
+  EXPECT_EQ(s.components, 1u);
+  EXPECT_FALSE(s.closed);
+  EXPECT_FALSE(s.watertight);
+}
+
+TEST(MeshTopology, TetrahedraSharingOneVertex) {
+  Mesh m = tetrahedron();
+  m.positions.push_back({-1, 0, 0});
+  m.positions.push_back({0, -1, 0});
+  m.positions.push_back({0, 0, -1});
+  // The point reflection of the first one, meeting it only at vertex 0.
+  m.triangles.push_back({0, 5, 4});
+  m.triangles.push_back({0, 4, 6});
+  m.triangles.push_back({0, 6, 5});
+  m.triangles.push_back({4, 5, 6});
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.vertices, 7u);
+  EXPECT_EQ(s.edges, 12u);
+  EXPECT_EQ(s.faces, 8u);
+  EXPECT_EQ(s.euler, 3);
+  EXPECT_EQ(s.nonmanifold_vertices, 1u);
+  EXPECT_EQ(s.nonmanifold_edges, 0u);
+  EXPECT_EQ(s.boundary_edges, 0u);
+  EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+  EXPECT_EQ(s.components, 1u);
+  EXPECT_TRUE(s.closed);
+}
+
+TEST(MeshTopology, BowtieOfTwoTriangles) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 3, 4}};
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.nonmanifold_vertices, 1u);
+  EXPECT_EQ(s.boundary_edges, 6u);
+  EXPECT_EQ(s.components, 1u);
+  EXPECT_EQ(s.euler, 5 - 6 + 2);
+}
+
+TEST(MeshTopology, ThreeTrianglesOnOneEdge) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}};
+  m.triangles = {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}};
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.nonmanifold_edges, 1u);
+  EXPECT_EQ(s.boundary_edges, 6u);
+  EXPECT_EQ(s.edges, 7u);
+  EXPECT_EQ(s.vertices, 5u);
+  EXPECT_EQ(s.euler, 1);
+  // All three faces share the edge at both of its ends: one fan each.
+  EXPECT_EQ(s.nonmanifold_vertices, 0u);
+  EXPECT_EQ(s.inconsistently_oriented_edges, 0u);  // only manifold edges can be
+  EXPECT_FALSE(s.closed);
+  EXPECT_FALSE(s.watertight);
+}
+
+TEST(MeshTopology, SquareOnTheBorder) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  TopologyOptions options;
+  options.border_box = std::array<Vec3f, 2>{Vec3f{0, 0, 0}, Vec3f{1, 1, 1}};
+  TopologyStats s = mesh_topology(m, options);
+  EXPECT_EQ(s.boundary_edges, 4u);
+  EXPECT_EQ(s.border_boundary_edges, 4u);
+  EXPECT_FALSE(s.closed);
+  EXPECT_TRUE(s.watertight);
+  EXPECT_EQ(s.euler, 1);
+
+  // Without a box nothing is border.
+  s = mesh_topology(m);
+  EXPECT_EQ(s.border_boundary_edges, 0u);
+  EXPECT_FALSE(s.watertight);
+
+  // A box the square does not touch.
+  options.border_box = std::array<Vec3f, 2>{Vec3f{-1, -1, -1}, Vec3f{2, 2, 2}};
+  s = mesh_topology(m, options);
+  EXPECT_EQ(s.border_boundary_edges, 0u);
+  EXPECT_FALSE(s.watertight);
+}
+
+TEST(MeshTopology, BorderNeedsBothEndsOnOneFace) {
+  // A on x = 0, B on y = 0, C on both: A-C and B-C lie in a box face, A-B only touches two.
+  Mesh m;
+  m.positions = {{0, 0.5f, 0.5f}, {0.5f, 0, 0.5f}, {0, 0, 0.5f}};
+  m.triangles = {{0, 1, 2}};
+  TopologyOptions options;
+  options.border_box = std::array<Vec3f, 2>{Vec3f{0, 0, 0}, Vec3f{1, 1, 1}};
+  const TopologyStats s = mesh_topology(m, options);
+  EXPECT_EQ(s.boundary_edges, 3u);
+  EXPECT_EQ(s.border_boundary_edges, 2u);
+  EXPECT_FALSE(s.watertight);
+}
+
+TEST(MeshTopology, Torus) {
+  for (bool quads : {false, true}) {
+    SCOPED_TRACE(quads ? "quads" : "triangles");
+    const TopologyStats s = mesh_topology(torus(7, 5, quads));
+    EXPECT_EQ(s.vertices, 35u);
+    EXPECT_EQ(s.edges, quads ? 70u : 105u);
+    EXPECT_EQ(s.faces, quads ? 35u : 70u);
+    EXPECT_EQ(s.euler, 0);
+    EXPECT_EQ(s.boundary_edges, 0u);
+    EXPECT_EQ(s.nonmanifold_vertices, 0u);
+    EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+    EXPECT_EQ(s.components, 1u);
+    EXPECT_TRUE(s.closed);
+  }
+}
+
+TEST(MeshTopology, LargeTorusAndDisjointCopies) {
+  Mesh m = torus(300, 200, false);
+  // A second, shifted copy, plus three vertices no face uses.
+  const auto n = static_cast<std::uint32_t>(m.positions.size());
+  const std::size_t nt = m.triangles.size();
+  for (std::uint32_t i = 0; i < n; ++i) {
+    Vec3f p = m.positions[i];
+    p[0] += 10;
+    m.positions.push_back(p);
+  }
+  for (std::size_t t = 0; t < nt; ++t) {
+    const Tri tri = m.triangles[t];
+    m.triangles.push_back({tri[0] + n, tri[1] + n, tri[2] + n});
+  }
+  m.positions.resize(m.positions.size() + 3);
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.vertices, 120000u);
+  EXPECT_EQ(s.unreferenced_vertices, 3u);
+  EXPECT_EQ(s.edges, 360000u);
+  EXPECT_EQ(s.faces, 240000u);
+  EXPECT_EQ(s.euler, 0);
+  EXPECT_EQ(s.components, 2u);
+  EXPECT_TRUE(s.closed);
+}
+
+TEST(MeshTopology, DegenerateFacesDoNotCrash) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles = {{0, 0, 1}, {1, 1, 1}, {0, 1, 2}};
+  m.quads = {{0, 1, 0, 2}};
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.faces, 4u);
+  EXPECT_EQ(s.vertices, 3u);
+  EXPECT_EQ(s.components, 1u);
+}
+
+TEST(MeshTopology, EmptyMesh) {
+  Mesh m;
+  m.positions.resize(4);
+  const TopologyStats s = mesh_topology(m);
+  EXPECT_EQ(s.vertices, 0u);
+  EXPECT_EQ(s.unreferenced_vertices, 4u);
+  EXPECT_EQ(s.edges, 0u);
+  EXPECT_EQ(s.components, 0u);
+  EXPECT_EQ(s.euler, 0);
+}
+
+TEST(MeshTopology, BadIndex) {
+  Mesh m = tetrahedron();
+  m.triangles.push_back({0, 1, 4});
+  EXPECT_THROW(mesh_topology(m), InputError);
+}
+
+// Straightforward reference: an edge map over all half-edges and, per vertex, an O(d^2)
+// union-find of its corners.
+TopologyStats reference(const Mesh& m) {
+  std::vector<std::vector<std::uint32_t>> faces;
+  for (const Tri& t : m.triangles) faces.push_back({t[0], t[1], t[2]});
+  for (const Quad& q : m.quads) faces.push_back({q[0], q[1], q[2], q[3]});
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<bool>> edges;  // forward flags
+  std::vector<std::vector<std::pair<std::size_t, std::size_t>>> corners(m.positions.size());
+  for (std::size_t f = 0; f < faces.size(); ++f) {
+    const auto& face = faces[f];
+    for (std::size_t i = 0; i < face.size(); ++i) {
+      const std::uint32_t a = face[i], b = face[(i + 1) % face.size()];
+      edges[{std::min(a, b), std::max(a, b)}].push_back(a <= b);
+      corners[a].emplace_back(f, i);
+    }
+  }
+  TopologyStats s;
+  s.faces = faces.size();
+  s.edges = edges.size();
+  for (const auto& [key, dirs] : edges) {
+    if (dirs.size() == 1) ++s.boundary_edges;
+    if (dirs.size() > 2) ++s.nonmanifold_edges;
+    if (dirs.size() == 2 && dirs[0] == dirs[1]) ++s.inconsistently_oriented_edges;
+  }
+  std::vector<std::uint32_t> component(m.positions.size());
+  std::iota(component.begin(), component.end(), 0u);
+  std::function<std::uint32_t(std::uint32_t)> root = [&](std::uint32_t x) {
+    return component[x] == x ? x : component[x] = root(component[x]);
+  };
+  for (const auto& face : faces) {
+    for (std::uint32_t v : face) component[root(v)] = root(face[0]);
+  }
+  for (std::uint32_t v = 0; v < m.positions.size(); ++v) {
+    const auto& cs = corners[v];
+    if (cs.empty()) {
+      ++s.unreferenced_vertices;
+      continue;
+    }
+    ++s.vertices;
+    if (root(v) == v) ++s.components;
+    auto neighbours = [&](std::pair<std::size_t, std::size_t> c) {
+      const auto& face = faces[c.first];
+      return std::array<std::uint32_t, 2>{face[(c.second + 1) % face.size()],
+                                          face[(c.second + face.size() - 1) % face.size()]};
+    };
+    std::vector<std::size_t> group(cs.size());
+    std::iota(group.begin(), group.end(), 0u);
+    // Relabel until stable: simple and obviously right for small degrees.
+    for (bool changed = true; changed;) {
+      changed = false;
+      for (std::size_t i = 0; i < cs.size(); ++i) {
+        for (std::size_t j = 0; j < cs.size(); ++j) {
+          bool linked = cs[i].first == cs[j].first;
+          for (std::uint32_t a : neighbours(cs[i])) {
+            for (std::uint32_t b : neighbours(cs[j])) linked |= a == b && a != v;
+          }
+          if (linked && group[j] < group[i]) {
+            group[i] = group[j];
+            changed = true;
+          }
+        }
+      }
+    }
+    if (std::any_of(group.begin(), group.end(), [](std::size_t g) { return g != 0; })) {
+      ++s.nonmanifold_vertices;
+    }
+  }
+  s.euler = static_cast<std::int64_t>(s.vertices) - static_cast<std::int64_t>(s.edges) +
+            static_cast<std::int64_t>(s.faces);
+  return s;
+}
+
+TEST(MeshTopology, MatchesReferenceOnRandomMeshes) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 200; ++trial) {
+    SCOPED_TRACE(trial);
+    Mesh m;
+    // Alternate dense random soups (much non-manifoldness) with damaged tori.
+    if (trial % 2 == 0) {
+      const std::uint32_t nv = 3 + rng() % 30;
+      m.positions.resize(nv);
+      auto v = [&] { return static_cast<std::uint32_t>(rng() % nv); };
+      for (std::uint32_t i = rng() % 40; i > 0; --i) m.triangles.push_back({v(), v(), v()});
+      for (std::uint32_t i = rng() % 10; i > 0; --i) m.quads.push_back({v(), v(), v(), v()});
+    } else {
+      m = torus(3 + rng() % 6, 3 + rng() % 6, rng() % 2 == 0);
+      for (auto& t : m.triangles) {
+        if (rng() % 8 == 0) std::swap(t[0], t[1]);
+      }
+      if (!m.triangles.empty()) m.triangles.erase(m.triangles.begin() + rng() % m.triangles.size());
+      if (!m.quads.empty()) m.quads.erase(m.quads.begin() + rng() % m.quads.size());
+      m.positions.resize(m.positions.size() + rng() % 3);
+    }
+    const TopologyStats got = mesh_topology(m), want = reference(m);
+    EXPECT_EQ(got.vertices, want.vertices);
+    EXPECT_EQ(got.unreferenced_vertices, want.unreferenced_vertices);
+    EXPECT_EQ(got.edges, want.edges);
+    EXPECT_EQ(got.faces, want.faces);
+    EXPECT_EQ(got.boundary_edges, want.boundary_edges);
+    EXPECT_EQ(got.nonmanifold_edges, want.nonmanifold_edges);
+    EXPECT_EQ(got.nonmanifold_vertices, want.nonmanifold_vertices);
+    EXPECT_EQ(got.inconsistently_oriented_edges, want.inconsistently_oriented_edges);
+    EXPECT_EQ(got.components, want.components);
+    EXPECT_EQ(got.euler, want.euler);
+  }
+}
+
+TEST(MeshTopology, DeterministicAcrossThreadCounts) {
+  std::mt19937 rng(5);
+  Mesh m;
+  m.positions.resize(5000);
+  auto v = [&] { return static_cast<std::uint32_t>(rng() % 5000); };
+  for (int i = 0; i < 40000; ++i) m.triangles.push_back({v(), v(), v()});
+  for (int i = 0; i < 5000; ++i) m.quads.push_back({v(), v(), v(), v()});
+  TopologyStats one, many;
+  tbb::task_arena(1).execute([&] { one = mesh_topology(m); });
+  many = mesh_topology(m);  // all available threads
+  EXPECT_EQ(one.vertices, many.vertices);
+  EXPECT_EQ(one.edges, many.edges);
+  EXPECT_EQ(one.boundary_edges, many.boundary_edges);
+  EXPECT_EQ(one.nonmanifold_edges, many.nonmanifold_edges);
+  EXPECT_EQ(one.nonmanifold_vertices, many.nonmanifold_vertices);
+  EXPECT_EQ(one.inconsistently_oriented_edges, many.inconsistently_oriented_edges);
+  EXPECT_EQ(one.components, many.components);
+  EXPECT_EQ(one.euler, many.euler);
+}
+
+}  // namespace
+}  // namespace isotile
