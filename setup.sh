@@ -4,19 +4,21 @@
 #   ./setup.sh                 install, configure and build into build/ (Release)
 #   ./setup.sh --bench         also the benchmarks and their VTK peer (a large download)
 #   ./setup.sh --sanitize      ASan + UBSan build into build-asan/
-#   ./setup.sh --tsan          ThreadSanitizer build into build-tsan/
+#   ./setup.sh --tsan          ThreadSanitizer build into build-tsan/, against a TBB built from
+#                              Debian's own onetbb source with TSan (Debian's libtbb is not
+#                              instrumented, so TSan cannot see its synchronisation)
 #   ./setup.sh --no-install    skip the package step (packages already present)
 #
 # Safe to run again: installed packages are skipped and the build is incremental.
 set -euo pipefail
 cd "$(dirname "$0")"
 
-bench=0 install=1 build_dir=build extra=()
+bench=0 install=1 tsan=0 build_dir=build extra=()
 for arg in "$@"; do
   case "$arg" in
     --bench) bench=1 ;;
     --sanitize) build_dir=build-asan; extra+=(-DISOTILE_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
-    --tsan) build_dir=build-tsan; extra+=(-DISOTILE_TSAN=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
+    --tsan) tsan=1; build_dir=build-tsan; extra+=(-DISOTILE_TSAN=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
     --no-install) install=0 ;;
     *) echo "setup.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
@@ -28,6 +30,9 @@ packages=(
   libteem-dev libopenvdb-dev libboost-iostreams-dev
   libgtest-dev
 )
+if [ "$tsan" = 1 ]; then
+  packages+=(dpkg-dev)
+fi
 if [ "$bench" = 1 ]; then
   packages+=(libbenchmark-dev libvtk9-dev)
   extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
@@ -45,6 +50,28 @@ if [ "$install" = 1 ]; then
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
   fi
+fi
+
+if [ "$tsan" = 1 ]; then
+  tbb_prefix="$PWD/$build_dir/tbb-tsan"
+  if [ ! -f "$tbb_prefix/lib/cmake/TBB/TBBConfig.cmake" ]; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    if ! grep -rqs '^Types:.*deb-src' /etc/apt/sources.list.d/ && ! grep -qs '^deb-src' /etc/apt/sources.list; then
+      sed 's/^Types: deb$/Types: deb-src/' /etc/apt/sources.list.d/debian.sources |
+        $sudo tee /etc/apt/sources.list.d/isotile-deb-src.sources >/dev/null
+      $sudo apt-get update -qq
+    fi
+    src="$PWD/$build_dir/onetbb-src"
+    rm -rf "$src" && mkdir -p "$src"
+    (cd "$src" && apt-get source -qq onetbb >/dev/null 2>&1)
+    tbb_dir=$(find "$src" -maxdepth 1 -type d -name 'onetbb-*' | head -n 1)
+    cmake -S "$tbb_dir" -B "$src/build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTBB_TEST=OFF \
+      -DTBB_STRICT=OFF -DTBB_SANITIZE=thread -DCMAKE_INSTALL_PREFIX="$tbb_prefix" >/dev/null
+    cmake --build "$src/build" >/dev/null
+    cmake --install "$src/build" >/dev/null
+  fi
+  extra+=(-DCMAKE_PREFIX_PATH="$tbb_prefix")
 fi
 
 cmake -S . -B "$build_dir" -G Ninja "${extra[@]}" >/dev/null

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "core/marching_cubes.h"
@@ -197,7 +198,12 @@ TEST_P(ClosedShapes, AreClosedTwoManifoldsWithTheRightEuler) {
 INSTANTIATE_TEST_SUITE_P(Fields, ClosedShapes,
                          ::testing::Values(ShapeCase{FieldKind::Sphere, 2},
                                            ShapeCase{FieldKind::CsgBox, 2},
-                                           ShapeCase{FieldKind::Torus, 0}));
+                                           ShapeCase{FieldKind::Torus, 0}),
+                         [](const auto& info) {
+                           std::string name(field_name(info.param.kind));
+                           std::erase(name, '-');
+                           return name;
+                         });
 
 double max_distance(const FieldSpec& spec, const Mesh& m) {
   double worst = 0;
