@@ -401,7 +401,9 @@ double field_default_iso(FieldKind kind) {
 std::optional<FieldSpec> parse_field_spec(std::string_view input) {
   constexpr std::string_view kPrefix = "field:";
   if (!input.starts_with(kPrefix)) return std::nullopt;
-  const std::string quoted = "'" + std::string(input) + "'";
+  // Built by append: GCC 12 warns falsely (-Wrestrict) on "'" + std::string at -O2.
+  std::string quoted(1, '\'');
+  quoted.append(input).push_back('\'');
   const std::string_view rest = input.substr(kPrefix.size());
   const auto colon = rest.find(':');
   if (colon == std::string_view::npos)
