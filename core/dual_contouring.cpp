@@ -1,0 +1,502 @@
+#include "core/dual_contouring.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <bit>
+#include <cassert>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "core/dual_contouring_table.h"
+#include "core/errors.h"
+#include "core/inside_bits.h"
+#include "core/marching_cubes_tables.h"
+
+namespace isotile {
+
+namespace dc {
+
+namespace {
+
+double clamp01(double v) {
+  return std::min(1.0, std::max(0.0, v));
+}
+
+}  // namespace
+
+// Inlined into the extractor's per-cell loop (a call per cell showed in profiles).
+inline CellQef accumulate_planes(const HermitePlane* planes, int count, bool with_normals) {
+  assert(count >= 1);
+  CellQef q{};
+  for (int i = 0; i < count; ++i)
+    for (int c = 0; c < 3; ++c) q.mass[c] += planes[i].p[c];
+  for (double& m : q.mass) m /= count;
+  if (!with_normals) return q;
+  for (int i = 0; i < count; ++i) {
+    const auto& n = planes[i].n;
+    const double d = n[0] * planes[i].p[0] + n[1] * planes[i].p[1] + n[2] * planes[i].p[2];
+    for (int r = 0; r < 3; ++r) {
+      q.b[r] += n[r] * d;
+      for (int c = 0; c < 3; ++c) q.a[r][c] += n[r] * n[c];
+    }
+  }
+  return q;
+}
+
+CellQef accumulate(const HermitePlane* planes, int count, bool with_normals) {
+  return accumulate_planes(planes, count, with_normals);
+}
+
+void run_particles(const CellQef* cells, int n, const DualContouringOptions& options,
+                   std::array<double, 3>* out) {
+  // The paper interpolates corner forces F_k = b - A V_k trilinearly; trilinear weights sum to
+  // one and reproduce x, so the interpolant is exactly b - A x, and a step x + c (b - A x) is the
+  // affine map (I - c A) x + c b. Each cell's steps form one long dependent chain, so cells run
+  // in lanes side by side; every lane does exactly the arithmetic a lone cell would.
+  constexpr int kLanes = 8;
+  const double c = options.particle_rate;
+  const double tol2 = options.particle_tolerance * options.particle_tolerance;
+  for (int base = 0; base < n; base += kLanes) {
+    const int lanes = std::min(kLanes, n - base);
+    // Lanes stop one by one (tolerance); a stopped lane keeps its position and is carried along.
+    double m[3][3][kLanes], shift[3][kLanes], x[3][kLanes];
+    bool active[kLanes];
+    for (int l = 0; l < kLanes; ++l) {
+      const CellQef& q = cells[base + std::min(l, lanes - 1)];  // spare lanes repeat the last
+      for (int r = 0; r < 3; ++r) {
+        shift[r][l] = c * q.b[r];
+        x[r][l] = q.mass[r];
+        for (int k = 0; k < 3; ++k) m[r][k][l] = (r == k ? 1.0 : 0.0) - c * q.a[r][k];
+      }
+      active[l] = true;
+    }
+    for (int step = 0; step < options.particle_steps; ++step) {
+      bool any = false;
+      for (int l = 0; l < kLanes; ++l) {
+        double next[3], moved2 = 0;
+        for (int r = 0; r < 3; ++r) {
+          next[r] = clamp01(m[r][0][l] * x[0][l] + m[r][1][l] * x[1][l] + m[r][2][l] * x[2][l] +
+                            shift[r][l]);
+          moved2 += (next[r] - x[r][l]) * (next[r] - x[r][l]);
+        }
+        if (!active[l]) continue;
+        for (int r = 0; r < 3; ++r) x[r][l] = next[r];
+        // Measured after the clamp: a particle pinned to a face by an outward force has
+        // converged although |c F| stays large.
+        active[l] = !(moved2 < tol2);
+        any = any || active[l];
+      }
+      if (!any) break;
+    }
+    for (int l = 0; l < lanes; ++l) out[base + l] = {x[0][l], x[1][l], x[2][l]};
+  }
+}
+
+std::array<double, 3> solve_qef(const CellQef& q, const DualContouringOptions& options) {
+  // Least squares about the mass point, ignoring directions whose eigenvalue is small relative to
+  // the largest (the planes barely constrain them), as Ju et al. and libfive do. The closed-form
+  // 3x3 eigen solver is several times faster than the iterative one, and the truncation keeps
+  // its weak spot (nearly equal small eigenvalues) out of the result.
+  Eigen::Matrix3d a;
+  Eigen::Vector3d residual, mass(q.mass[0], q.mass[1], q.mass[2]);
+  for (int r = 0; r < 3; ++r) {
+    residual(r) = q.b[r];
+    for (int c = 0; c < 3; ++c) a(r, c) = q.a[r][c];
+  }
+  residual -= a * mass;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
+  eigen.computeDirect(a);
+  const Eigen::Vector3d& lambda = eigen.eigenvalues();  // ascending
+  Eigen::Vector3d x = mass;
+  const double floor = options.qef_eigen_cutoff * lambda(2);
+  if (lambda(2) > 0)
+    for (int e = 0; e < 3; ++e)
+      if (lambda(e) > floor && lambda(e) > 0) {
+        const Eigen::Vector3d u = eigen.eigenvectors().col(e);
+        x += u * (u.dot(residual) / lambda(e));
+      }
+  return {clamp01(x(0)), clamp01(x(1)), clamp01(x(2))};
+}
+
+std::array<double, 3> place_vertex(const HermitePlane* planes, int count,
+                                   const DualContouringOptions& options) {
+  const CellQef q = accumulate(planes, count, options.solver != DcSolver::MassPoint);
+  switch (options.solver) {
+    case DcSolver::MassPoint:
+      return q.mass;
+    case DcSolver::Qef:
+      return solve_qef(q, options);
+    case DcSolver::Particle:
+      break;
+  }
+  std::array<double, 3> x;
+  run_particles(&q, 1, options, &x);
+  return x;
+}
+
+}  // namespace dc
+
+namespace {
+
+using namespace detail;
+using std::int64_t;
+using std::uint32_t;
+using std::uint64_t;
+
+// Mixed cells of one cell row, with the number of mixed cells in earlier words of the row, so a
+// cell's vertex index is its row's offset + prefix + popcount below it.
+struct MixedWord {
+  uint64_t mask;
+  uint32_t prefix;
+};
+
+template <class T>
+class Extractor {
+ public:
+  Extractor(const VolumeView& view, const DualContouringOptions& options)
+      : view_(view), options_(options), data_(view.typed<T>()) {
+    grid_.nx = view.dims[0];
+    grid_.ny = view.dims[1];
+    grid_.nz = view.dims[2];
+    grid_.words = (grid_.nx + 63) / 64;
+    for (int c = 0; c < 8; ++c) corner_offset_[c] = view.offset(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+  }
+
+  Mesh run() {
+    Mesh mesh;
+    if (grid_.nx < 2 || grid_.ny < 2 || grid_.nz < 2) return mesh;
+    const int64_t rows = grid_.ny * grid_.nz, words = grid_.words;
+    grid_.bits.resize(static_cast<size_t>(rows * words));
+    classify<T>(view_, options_.iso, grid_);
+
+    // Count: mixed cells per cell row (kept: they index the vertices), quads per sample row.
+    mixed_.resize(static_cast<size_t>(rows * words));
+    std::vector<uint32_t> vertex_count(rows), quad_count(rows);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+      for (int64_t r = range.begin(); r != range.end(); ++r) {
+        const int64_t j = r % grid_.ny, k = r / grid_.ny;
+        vertex_count[r] = mark_mixed(j, k, mixed_.data() + r * words);
+        uint32_t n = 0;
+        for (int64_t w = 0; w < words; ++w) {
+          const EdgeWord e = edge_word(j, k, w);
+          n += static_cast<uint32_t>(std::popcount(e.active[0]) + std::popcount(e.active[1]) +
+                                     std::popcount(e.active[2]));
+        }
+        quad_count[r] = n;
+      }
+    });
+
+    // Scan.
+    vertex_offset_.assign(rows + 1, 0);
+    std::vector<uint64_t> quad_offset(rows + 1);
+    for (int64_t r = 0; r < rows; ++r) {
+      vertex_offset_[r + 1] = vertex_offset_[r] + vertex_count[r];
+      quad_offset[r + 1] = quad_offset[r] + quad_count[r];
+    }
+    const uint64_t n_vertices = vertex_offset_[rows], n_quads = quad_offset[rows];
+    if (n_vertices > std::numeric_limits<uint32_t>::max())
+      throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
+                          " vertices, more than an in-memory mesh can index (2^32 - 1)");
+    mesh.positions.resize(n_vertices);
+    if (options_.normals) mesh.normals.resize(n_vertices);
+
+    // Fill vertices, then faces: splitting a quad looks at its vertices' final positions.
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+      std::vector<dc::CellQef> qef;
+      std::vector<std::array<double, 3>> x;
+      for (int64_t r = range.begin(); r != range.end(); ++r)
+        if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, mesh);
+    });
+    if (options_.keep_quads)
+      mesh.quads.resize(n_quads);
+    else
+      mesh.triangles.resize(2 * n_quads);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+      for (int64_t r = range.begin(); r != range.end(); ++r)
+        if (quad_count[r]) fill_faces(r % grid_.ny, r / grid_.ny, quad_offset[r], mesh);
+    });
+    return mesh;
+  }
+
+ private:
+  // Marks the mixed cells of cell row (j, k) (none on the last point rows); returns their count.
+  uint32_t mark_mixed(int64_t j, int64_t k, MixedWord* out) const {
+    uint32_t total = 0;
+    const bool has_cells = j + 1 < grid_.ny && k + 1 < grid_.nz;
+    const uint64_t* rows[4];
+    if (has_cells) cell_rows(j, k, rows);
+    for (int64_t w = 0; w < grid_.words; ++w) {
+      const uint64_t m = has_cells ? CellWord(rows, w, grid_.words, grid_.nx).mixed : 0;
+      out[w] = {m, total};
+      total += static_cast<uint32_t>(std::popcount(m));
+    }
+    return total;
+  }
+
+  void cell_rows(int64_t j, int64_t k, const uint64_t* rows[4]) const {
+    rows[0] = grid_.row(j, k);
+    rows[1] = grid_.row(j + 1, k);
+    rows[2] = grid_.row(j, k + 1);
+    rows[3] = grid_.row(j + 1, k + 1);
+  }
+
+  // The crossed edges owned by 64 samples of row (j, k) that get a quad: those whose four cells
+  // all exist. The x-edge of (i, j, k) needs cells at j-1, j and k-1, k; the y-edge cells at i-1,
+  // i and k-1, k; the z-edge cells at i-1, i and j-1, j.
+  struct EdgeWord {
+    uint64_t origin;     // inside bits of the samples
+    uint64_t active[3];  // per axis
+  };
+  EdgeWord edge_word(int64_t j, int64_t k, int64_t w) const {
+    const int64_t ny = grid_.ny, nz = grid_.nz, words = grid_.words;
+    const uint64_t* a = grid_.row(j, k);
+    const bool mid_j = j >= 1 && j + 1 < ny, mid_k = k >= 1 && k + 1 < nz;
+    // Samples 1 .. nx-2: those with a cell on both sides in x.
+    const uint64_t mid_i = valid_bits(w, grid_.nx - 1) & (w == 0 ? ~uint64_t{1} : ~uint64_t{0});
+    EdgeWord e{a[w], {0, 0, 0}};
+    if (mid_j && mid_k) e.active[0] = (a[w] ^ shifted(a, w, words)) & valid_bits(w, grid_.nx - 1);
+    if (j + 1 < ny && mid_k) e.active[1] = (a[w] ^ grid_.row(j + 1, k)[w]) & mid_i;
+    if (k + 1 < nz && mid_j) e.active[2] = (a[w] ^ grid_.row(j, k + 1)[w]) & mid_i;
+    return e;
+  }
+
+  double sample(int64_t i, int64_t j, int64_t k) const {
+    return static_cast<double>(data_[view_.offset(i, j, k)]);
+  }
+
+  // Gradient in index space (per voxel, not per world unit): normals in cell-local coordinates
+  // are what the QEF needs. Central differences inside, one-sided at the border of the view.
+  std::array<double, 3> gradient(int64_t i, int64_t j, int64_t k, bool interior) const {
+    std::array<double, 3> g{};
+    if (interior) {
+      const T* c = data_ + view_.offset(i, j, k);
+      for (int a = 0; a < 3; ++a) {
+        const int64_t s = view_.strides[a];
+        g[a] = 0.5 * (static_cast<double>(c[s]) - static_cast<double>(c[-s]));
+      }
+      return g;
+    }
+    const int64_t p[3] = {i, j, k};
+    for (int a = 0; a < 3; ++a) {
+      int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
+      lo[a] = std::max<int64_t>(p[a] - 1, 0);
+      hi[a] = std::min<int64_t>(p[a] + 1, view_.dims[a] - 1);
+      const int64_t h = hi[a] - lo[a];
+      g[a] = h > 0 ? (sample(hi[0], hi[1], hi[2]) - sample(lo[0], lo[1], lo[2])) /
+                         static_cast<double>(h)
+                   : 0.0;
+    }
+    return g;
+  }
+
+  // Cells whose corners all have both neighbours along every axis skip the border checks.
+  bool interior(int64_t i, int64_t j, int64_t k) const {
+    return i >= 1 && i + 2 < grid_.nx && j >= 1 && j + 2 < grid_.ny && k >= 1 && k + 2 < grid_.nz;
+  }
+
+  std::array<double, 3> corner_gradient(int64_t i, int64_t j, int64_t k, int c, bool inner) const {
+    return gradient(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1), inner);
+  }
+
+  // The Hermite planes of cell (i, j, k) with MC case `cs`; returns their number. Normals only
+  // when the solver uses them (the mass point does not).
+  int hermite(int64_t i, int64_t j, int64_t k, int cs, bool with_normals,
+              dc::HermitePlane* planes) const {
+    double value[8];
+    const T* origin = data_ + view_.offset(i, j, k);
+    for (int c = 0; c < 8; ++c) value[c] = static_cast<double>(origin[corner_offset_[c]]);
+    const bool inner = interior(i, j, k);
+    std::array<double, 3> grad[8];
+    unsigned have = 0;
+    int count = 0;
+    for (unsigned em = mc::kCaseTable.edge_mask[cs]; em; em &= em - 1) {
+      const int e = std::countr_zero(em), axis = e / 4;
+      const int c0 = mc::kEdgeCorners[e][0], c1 = mc::kEdgeCorners[e][1];
+      const double t = (options_.iso - value[c0]) / (value[c1] - value[c0]);
+      dc::HermitePlane& h = planes[count++];
+      for (int a = 0; a < 3; ++a) h.p[a] = static_cast<double>((c0 >> a) & 1);
+      h.p[axis] = t;
+      h.n = {0, 0, 0};
+      if (!with_normals) continue;
+      for (int c : {c0, c1})
+        if (!((have >> c) & 1)) {
+          grad[c] = corner_gradient(i, j, k, c, inner);
+          have |= 1u << c;
+        }
+      double len2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        h.n[a] = grad[c0][a] + t * (grad[c1][a] - grad[c0][a]);
+        len2 += h.n[a] * h.n[a];
+      }
+      const double inv = len2 > 0 ? 1.0 / std::sqrt(len2) : 0.0;
+      for (double& n : h.n) n *= inv;
+    }
+    return count;
+  }
+
+  // Outward unit normal at cell-local x: the corner gradients interpolated trilinearly, in world
+  // units (zero where they cancel, as in MC).
+  Vec3f vertex_normal(int64_t i, int64_t j, int64_t k, const std::array<double, 3>& x) const {
+    const bool inner = interior(i, j, k);
+    double n[3] = {0, 0, 0}, len2 = 0;
+    for (int c = 0; c < 8; ++c) {
+      const auto g = corner_gradient(i, j, k, c, inner);
+      double weight = 1;
+      for (int a = 0; a < 3; ++a) weight *= ((c >> a) & 1) ? x[a] : 1 - x[a];
+      for (int a = 0; a < 3; ++a) n[a] -= weight * g[a] / view_.spacing[a];
+    }
+    for (double v : n) len2 += v * v;
+    const double inv = len2 > 0 ? 1.0 / std::sqrt(len2) : 0.0;
+    return {static_cast<float>(n[0] * inv), static_cast<float>(n[1] * inv),
+            static_cast<float>(n[2] * inv)};
+  }
+
+  // One row of cells in three sweeps (Hermite data, solve, write), so particles can run many
+  // cells abreast. `qef` and `x` are scratch reused across rows.
+  void fill_vertices(int64_t j, int64_t k, std::vector<dc::CellQef>& qef,
+                     std::vector<std::array<double, 3>>& x, Mesh& mesh) const {
+    const int64_t r = k * grid_.ny + j;
+    const uint64_t first = vertex_offset_[r];
+    const size_t n = static_cast<size_t>(vertex_offset_[r + 1] - first);
+    qef.resize(n);
+    x.resize(n);
+    const bool with_normals = options_.solver != DcSolver::MassPoint;
+    const uint64_t* rows[4];
+    cell_rows(j, k, rows);
+    const MixedWord* mixed = mixed_.data() + r * grid_.words;
+    size_t v = 0;
+    for (int64_t w = 0; w < grid_.words; ++w) {
+      if (!mixed[w].mask) continue;
+      const CellWord cw(rows, w, grid_.words, grid_.nx);
+      for (uint64_t m = mixed[w].mask; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        dc::HermitePlane planes[12];
+        const int count = hermite(w * 64 + b, j, k, cw.cell_case(b), with_normals, planes);
+        qef[v++] = dc::accumulate_planes(planes, count, with_normals);
+      }
+    }
+    assert(v == n);
+
+    switch (options_.solver) {
+      case DcSolver::MassPoint:
+        for (size_t c = 0; c < n; ++c) x[c] = qef[c].mass;
+        break;
+      case DcSolver::Qef:
+        for (size_t c = 0; c < n; ++c) x[c] = dc::solve_qef(qef[c], options_);
+        break;
+      case DcSolver::Particle:
+        dc::run_particles(qef.data(), static_cast<int>(n), options_, x.data());
+        break;
+    }
+
+    v = 0;
+    for (int64_t w = 0; w < grid_.words; ++w)
+      for (uint64_t m = mixed[w].mask; m; m &= m - 1) {
+        const int64_t cell[3] = {w * 64 + std::countr_zero(m), j, k};
+        const size_t index = first + v;
+        Vec3f& pos = mesh.positions[index];
+        for (int a = 0; a < 3; ++a)
+          pos[a] = static_cast<float>(
+              view_.origin[a] +
+              view_.spacing[a] * (static_cast<double>(view_.box.lo[a] + cell[a]) + x[v][a]));
+        if (options_.normals) mesh.normals[index] = vertex_normal(cell[0], j, k, x[v]);
+        ++v;
+      }
+  }
+
+  uint32_t vertex_of_cell(int64_t i, int64_t j, int64_t k) const {
+    const int64_t r = k * grid_.ny + j;
+    const MixedWord& mw = mixed_[r * grid_.words + (i >> 6)];
+    assert((mw.mask >> (i & 63)) & 1);
+    const uint64_t below = mw.mask & ((uint64_t{1} << (i & 63)) - 1);
+    return static_cast<uint32_t>(vertex_offset_[r] + mw.prefix +
+                                 static_cast<uint32_t>(std::popcount(below)));
+  }
+
+  void fill_faces(int64_t j, int64_t k, uint64_t first, Mesh& mesh) const {
+    uint64_t out = first;
+    for (int64_t w = 0; w < grid_.words; ++w) {
+      const EdgeWord e = edge_word(j, k, w);
+      for (uint64_t m = e.active[0] | e.active[1] | e.active[2]; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const int64_t i = w * 64 + b;
+        // An edge without a quad (border) is given its origin's bit, so the table skips it.
+        const unsigned o = (e.origin >> b) & 1;
+        unsigned code = o << 3;
+        for (int a = 0; a < 3; ++a) code |= (o ^ ((e.active[a] >> b) & 1)) << a;
+        const dc::DcCase& cs = dc::kDcTable[code];
+        for (int q = 0; q < cs.count; ++q) {
+          Quad quad;
+          for (int v = 0; v < 4; ++v) {
+            const auto& d = dc::kBlockCell[cs.quads[q][v]];
+            quad[v] = vertex_of_cell(i + d[0], j + d[1], k + d[2]);
+          }
+          if (options_.keep_quads) {
+            mesh.quads[out++] = quad;
+          } else {
+            split(mesh.positions, quad, mesh.triangles.data() + 2 * out);
+            ++out;
+          }
+        }
+      }
+    }
+  }
+
+  // The rule of triangle_quality's quad measure (0-2 unless 1-3 leaves a strictly better worst
+  // triangle), so splitting here and measuring kept quads agree. The four triangles share six
+  // edge lengths; each is computed once, exactly as radius_ratio() computes it (mesh_quality.cpp),
+  // and combined in radius_ratio's order, which gives its values bit for bit at half the square
+  // roots (a test compares the two).
+  static double length(const Vec3f& p, const Vec3f& q) {
+    const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
+    return std::sqrt(dx * dx + dy * dy + dz * dz);
+  }
+  static double ratio(double la, double lb, double lc) {
+    if (la == 0 || lb == 0 || lc == 0) return 0;
+    const double q = (lb + lc - la) * (lc + la - lb) * (la + lb - lc) / (la * lb * lc);
+    if (!(q > 0)) return 0;
+    return std::min(q, 1.0);
+  }
+  static void split(const std::vector<Vec3f>& p, const Quad& q, Tri* out) {
+    const Vec3f &p0 = p[q[0]], &p1 = p[q[1]], &p2 = p[q[2]], &p3 = p[q[3]];
+    const double s01 = length(p0, p1), s12 = length(p1, p2), s23 = length(p2, p3);
+    const double s30 = length(p3, p0), d02 = length(p0, p2), d13 = length(p1, p3);
+    const double a = std::min(ratio(s12, d02, s01), ratio(s23, s30, d02));  // (0,1,2), (0,2,3)
+    const double b = std::min(ratio(d13, s30, s01), ratio(s23, d13, s12));  // (0,1,3), (1,2,3)
+    // Which diagonal wins is a coin toss to the branch predictor; select without branching.
+    const bool d13_wins = b > a;
+    out[0] = {q[0], q[1], d13_wins ? q[3] : q[2]};
+    out[1] = {d13_wins ? q[1] : q[0], q[2], q[3]};
+  }
+
+  const VolumeView& view_;
+  const DualContouringOptions& options_;
+  const T* data_;
+  BitGrid grid_;
+  std::vector<MixedWord> mixed_;
+  int64_t corner_offset_[8];  // of a cell's corner c from its corner 0, in samples
+  std::vector<uint64_t> vertex_offset_;
+};
+
+}  // namespace
+
+Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options) {
+  if (options.particle_steps < 0)
+    throw InputError("dual contouring: particle_steps must be >= 0, got " +
+                     std::to_string(options.particle_steps));
+  if (!(options.particle_rate > 0))
+    throw InputError("dual contouring: particle_rate must be positive");
+  return visit_scalar(view.type, [&](auto tag) {
+    using T = decltype(tag);
+    return Extractor<T>(view, options).run();
+  });
+}
+
+}  // namespace isotile
