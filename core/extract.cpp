@@ -4,6 +4,7 @@
 #include <array>
 #include <string>
 
+#include "core/dual_contouring.h"
 #include "core/errors.h"
 #include "core/marching_cubes.h"
 
@@ -17,6 +18,15 @@ Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
   return marching_cubes(view, {.iso = o.iso, .normals = o.normals});
 }
 
+Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
+  DualContouringOptions dc;
+  dc.iso = o.iso;
+  dc.solver = o.dc_solver;
+  dc.keep_quads = o.keep_quads;
+  dc.normals = o.normals;
+  return dual_contouring(view, dc);
+}
+
 struct BackendEntry {
   Backend backend;
   std::string_view name;
@@ -26,10 +36,10 @@ struct BackendEntry {
   std::string_view missing;
 };
 
-// Macet and Dual Contouring, and the GL backends, are not part of this build yet: their entries
-// say so, and selecting them is a clear error rather than a silent fallback.
+// Macet and the GL backends are not part of this build yet: their entries say so, and selecting
+// them is a clear error rather than a silent fallback.
 const std::array<BackendEntry, kBackendCount - 1> kBackends = {{
-    {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, nullptr}, ""},
+    {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, cpu_dual_contouring}, ""},
     {Backend::GeometryShader,
      "gs",
      {nullptr, nullptr, nullptr},

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/dual_contouring.h"
 #include "core/mesh.h"
 #include "core/volume.h"
 
@@ -28,6 +29,9 @@ struct ExtractOptions {
   Backend backend = Backend::Auto;
   double iso = 0.0;
   bool normals = false;
+  // Dual Contouring only.
+  DcSolver dc_solver = DcSolver::MassPoint;
+  bool keep_quads = false;
 };
 
 struct BackendCaps {

@@ -127,6 +127,24 @@ TEST_F(Cli, SameOutputBytesForAnyThreadCount) {
   EXPECT_EQ(a, slurp(dir_ / "c.ply"));
 }
 
+TEST_F(Cli, DualContouringKeepsOrSplitsQuads) {
+  Result r = run("extract field:sphere:32 --method dc -q -o s.ply --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["method"], "dc");
+  EXPECT_EQ(j["euler"], 2);
+  EXPECT_EQ(j["closed"], true);
+  const isotile::Mesh split = isotile::read_mesh(dir_ / "s.ply");
+  EXPECT_TRUE(split.quads.empty());
+  r = run("extract field:sphere:32 --method dc --dc-solver particle --quads -q -o q.ply --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  j = nlohmann::json::parse(r.out);
+  const isotile::Mesh quads = isotile::read_mesh(dir_ / "q.ply");
+  EXPECT_TRUE(quads.triangles.empty());
+  EXPECT_EQ(2 * quads.quads.size(), split.triangles.size());
+  EXPECT_EQ(j["triangles"].get<std::size_t>(), split.triangles.size());
+}
+
 TEST_F(Cli, EveryFormatIsWritten) {
   for (const char* name : {"m.ply", "m.obj", "m.stl", "m.off"}) {
     ASSERT_EQ(run(std::string("extract field:csg-box:20 -q -o ") + name).code, 0) << name;
@@ -160,6 +178,7 @@ TEST_F(Cli, ErrorsAreOneLineAndLeaveNoFiles) {
       {"extract short.raw --iso 1 --dims 4,4 --type uint8 -o out.ply", "--dims"},
       {"extract short.raw --iso 1 --dims 4,4,4 --type uint9 -o out.ply", "uint9"},
       {"extract field:sphere:16 --method macet -o out.ply", "macet"},
+      {"extract field:sphere:16 --method dc --backend hp -o out.ply", "hp"},
       {"extract field:sphere:16 --backend gs -o out.ply", "gs"},
       {"quality missing.ply", "missing.ply"},
       {"info missing.nrrd", "missing.nrrd"},

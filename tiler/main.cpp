@@ -215,6 +215,8 @@ struct ExtractArgs {
   std::string stats;
   bool normals = false;
   bool ascii = false;
+  std::string dc_solver = "mass";
+  bool quads = false;
 };
 
 Method parse_method(const std::string& s) {
@@ -238,6 +240,10 @@ int run_extract(const ExtractArgs& args) {
   options.method = parse_method(args.method);
   options.backend = parse_backend(args.backend);
   options.normals = args.normals;
+  options.dc_solver = args.dc_solver == "particle" ? DcSolver::Particle
+                      : args.dc_solver == "qef"    ? DcSolver::Qef
+                                                   : DcSolver::MassPoint;
+  options.keep_quads = args.quads;
   const Backend backend = resolve_backend(options);
 
   const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
@@ -439,6 +445,13 @@ int main(int argc, char** argv) {
                           "Write statistics as JSON to this file ('-': stdout)");
   extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
   extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
+  extract_cmd
+      ->add_option("--dc-solver", ex.dc_solver,
+                   "Dual Contouring vertex placement: mass (mass point, best triangles), "
+                   "particle (the paper's minimizer, 10 steps), qef (truncated SVD)")
+      ->check(CLI::IsMember({"mass", "particle", "qef"}));
+  extract_cmd->add_flag("--quads", ex.quads,
+                        "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
 
   InputArgs info_in;
   bool info_json = false;
