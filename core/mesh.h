@@ -23,4 +23,8 @@ struct Mesh {
   std::vector<Quad> quads;  // Dual Contouring may keep quads; most meshes have none
 };
 
+// Throws InputError naming the first triangle or quad that references a vertex past the end of
+// positions. Readers, writers and measures call it before trusting indices from outside.
+void check_face_indices(const Mesh& mesh);
+
 }  // namespace isotile

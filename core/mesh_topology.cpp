@@ -38,30 +38,6 @@ struct Counts {
   }
 };
 
-void check_indices(const Mesh& mesh) {
-  const std::size_t nv = mesh.positions.size();
-  auto check = [&](const auto& faces, const char* what) {
-    const std::size_t bad = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, faces.size(), 1 << 16), faces.size(),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t found) {
-          for (std::size_t f = r.begin(); f < r.end() && f < found; ++f) {
-            for (std::uint32_t v : faces[f]) {
-              if (v >= nv) return f;
-            }
-          }
-          return found;
-        },
-        [](std::size_t a, std::size_t b) { return std::min(a, b); });
-    if (bad == faces.size()) return;
-    std::uint32_t v = 0;
-    for (std::uint32_t c : faces[bad]) v = c >= nv ? c : v;
-    throw InputError(std::string(what) + " " + std::to_string(bad) + " references vertex " +
-                     std::to_string(v) + " but the mesh has " + std::to_string(nv) + " vertices");
-  };
-  check(mesh.triangles, "triangle");
-  check(mesh.quads, "quad");
-}
-
 // Lock-free union-find: a root is only ever linked below a smaller index, so no cycles form,
 // and path halving only shortcuts to ancestors.
 class ConcurrentUnionFind {
@@ -302,7 +278,7 @@ TopologyStats compute(const Mesh& mesh, const TopologyOptions& options) {
 }  // namespace
 
 TopologyStats mesh_topology(const Mesh& mesh, const TopologyOptions& options) {
-  check_indices(mesh);
+  check_face_indices(mesh);
   const std::uint64_t corners =
       3 * std::uint64_t{mesh.triangles.size()} + 4 * std::uint64_t{mesh.quads.size()};
   // 32-bit corner numbers halve the memory of the incidence table whenever they suffice.

@@ -1,6 +1,5 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_pipeline.h>
-#include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -134,35 +133,11 @@ void check_mesh(const Mesh& mesh, const std::filesystem::path& path) {
                      std::to_string(mesh.normals.size()) + " normals for " + std::to_string(nv) +
                      " vertices");
   }
-  auto first_bad = [nv](const auto& faces) {
-    return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, faces.size(), 1 << 16), faces.size(),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t found) {
-          for (std::size_t f = r.begin(); f < r.end() && f < found; ++f) {
-            for (std::uint32_t v : faces[f]) {
-              if (v >= nv) return f;
-            }
-          }
-          return found;
-        },
-        [](std::size_t a, std::size_t b) { return std::min(a, b); });
-  };
-  auto report = [&](const auto& faces, const char* what) {
-    const std::size_t f = first_bad(faces);
-    if (f == faces.size()) return;
-    std::uint32_t bad = 0;
-    for (std::uint32_t v : faces[f]) {
-      if (v >= nv) {
-        bad = v;
-        break;
-      }
-    }
-    throw InputError("cannot write " + path.string() + ": " + what + " " + std::to_string(f) +
-                     " references vertex " + std::to_string(bad) + " but the mesh has " +
-                     std::to_string(nv) + " vertices");
-  };
-  report(mesh.triangles, "triangle");
-  report(mesh.quads, "quad");
+  try {
+    check_face_indices(mesh);
+  } catch (const InputError& e) {
+    throw InputError("cannot write " + path.string() + ": " + e.what());
+  }
 }
 
 bool use_normals(const Mesh& mesh, const MeshWriteOptions& options) {
