@@ -1,4 +1,3 @@
-#include <tbb/blocked_range.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
