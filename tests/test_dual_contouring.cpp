@@ -21,9 +21,13 @@
 #include "core/mesh_topology.h"
 #include "core/procedural_fields.h"
 #include "core/volume_io.h"
+#include "test_support.h"
 
 namespace isotile {
 namespace {
+
+using testing::max_distance;
+using testing::shared_volume;
 
 using Cell = std::array<std::int64_t, 3>;
 
@@ -575,13 +579,6 @@ TEST(DualContouring, OutputIsIdenticalForAnyThreadCount) {
   }
 }
 
-double max_distance(const FieldSpec& spec, const Mesh& m) {
-  double worst = 0;
-  for (const Vec3f& p : m.positions)
-    worst = std::max(worst, distance_voxels(spec, {p[0], p[1], p[2]}));
-  return worst;
-}
-
 // What holds on csg-box: the Hermite solvers move the worst vertices (at the sharp edges and
 // corners) closer to the surface than the mass point does. The target, a quarter of MC's
 // worst error, is not reached: normals from central differences blur within a voxel of a sharp
@@ -619,10 +616,6 @@ TEST(DualContouring, SmoothSurfacesConvergeAsTheGridRefines) {
       previous = mass;
     }
   }
-}
-
-std::filesystem::path shared_volume(const char* name) {
-  return std::filesystem::path(ISOTILE_SHARED_DATA) / name;
 }
 
 // The targets for the default solver: mean radius ratio >= 0.76 (the paper's Table I

@@ -17,9 +17,13 @@
 #include "core/mesh_topology.h"
 #include "core/procedural_fields.h"
 #include "core/volume_io.h"
+#include "test_support.h"
 
 namespace isotile {
 namespace {
+
+using testing::max_distance;
+using testing::shared_volume;
 
 // A triangle rotated so its smallest index comes first; winding is kept.
 Tri canonical_rotation(Tri t) {
@@ -205,13 +209,6 @@ INSTANTIATE_TEST_SUITE_P(Fields, ClosedShapes,
                            return name;
                          });
 
-double max_distance(const FieldSpec& spec, const Mesh& m) {
-  double worst = 0;
-  for (const Vec3f& p : m.positions)
-    worst = std::max(worst, distance_voxels(spec, {p[0], p[1], p[2]}));
-  return worst;
-}
-
 TEST(MarchingCubes, SmoothSurfacesConvergeAsTheGridRefines) {
   for (FieldKind kind : {FieldKind::Sphere, FieldKind::Torus}) {
     double previous = 1e9;
@@ -258,10 +255,6 @@ TEST(MarchingCubes, OutputIsIdenticalForAnyThreadCount) {
     EXPECT_EQ(meshes[i].normals, meshes[0].normals);
     EXPECT_EQ(meshes[i].triangles, meshes[0].triangles);
   }
-}
-
-std::filesystem::path shared_volume(const char* name) {
-  return std::filesystem::path(ISOTILE_SHARED_DATA) / name;
 }
 
 TEST(MarchingCubesRealData, BonsaiIsWatertightWithThePapersQuality) {
