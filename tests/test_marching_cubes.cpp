@@ -250,11 +250,7 @@ TEST(MarchingCubes, OutputIsIdenticalForAnyThreadCount) {
     meshes.push_back(mc(vol.view(), 0.0, true));
   }
   ASSERT_GT(meshes[0].triangles.size(), 10000u);
-  for (std::size_t i = 1; i < meshes.size(); ++i) {
-    EXPECT_EQ(meshes[i].positions, meshes[0].positions);
-    EXPECT_EQ(meshes[i].normals, meshes[0].normals);
-    EXPECT_EQ(meshes[i].triangles, meshes[0].triangles);
-  }
+  testing::expect_identical_runs(meshes);
 }
 
 TEST(MarchingCubesRealData, BonsaiIsWatertightWithThePapersQuality) {
