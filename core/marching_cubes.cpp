@@ -22,64 +22,71 @@ using std::int64_t;
 using std::uint32_t;
 using std::uint64_t;
 
+// Bits [lo, hi) of word w of a row.
+inline uint64_t range_bits(int64_t w, int64_t lo, int64_t hi) {
+  return valid_bits(w, hi) & ~valid_bits(w, lo);
+}
+
 // Masks of the crossed edges owned by one row of grid points: the edge from (i, j, k) to
-// (i+1, j, k), (i, j+1, k) and (i, j, k+1) is owned by point (i, j, k). `prefix[a][w]` counts the
-// crossed edges of axis a before word w, so the rank of any edge is prefix + popcount of a word.
+// (i+1, j, k), (i, j+1, k) and (i, j, k+1) is owned by point (i, j, k). Vertices are numbered in
+// key order, by point and then axis, so a vertex's rank in the row is the number of crossed edges
+// of earlier points plus those of lower axes at its own point: `prefix[w]` counts the crossed edges
+// of words before w, popcounts do the rest.
 struct RowEdges {
   struct Word {
-    uint64_t mask;    // crossed edges among these 64
-    uint32_t prefix;  // crossed edges of the same axis in earlier words
+    uint64_t mask[3];  // crossed edges among these 64 points, per axis
+    uint32_t prefix;   // crossed edges (all axes) in earlier words
   };
-  int64_t words = 0;
-  std::vector<Word> bits;  // axis-major: bits[a * words + w]
-  uint32_t count[3] = {0, 0, 0};
-  uint32_t start[3] = {0, 0, 0};  // first local index of each axis: x-edges, then y, then z
+  std::vector<Word> bits;
+  uint32_t count = 0;
 
-  explicit RowEdges(int64_t n_words) : words(n_words), bits(static_cast<size_t>(3 * n_words)) {}
-
-  uint64_t mask(int a, int64_t w) const { return bits[a * words + w].mask; }
+  explicit RowEdges(int64_t n_words) : bits(static_cast<size_t>(n_words)) {}
 
   // Rank of the edge of axis a at x index i among this row's vertices.
   uint32_t local_index(int a, int64_t i) const {
-    const Word& wd = bits[a * words + (i >> 6)];
-    const uint64_t below = wd.mask & ((uint64_t{1} << (i & 63)) - 1);
-    return start[a] + wd.prefix + static_cast<uint32_t>(std::popcount(below));
+    const Word& wd = bits[i >> 6];
+    const int b = static_cast<int>(i & 63);
+    const uint64_t below = (uint64_t{1} << b) - 1;
+    uint32_t r = wd.prefix;
+    for (int c = 0; c < 3; ++c) {
+      r += static_cast<uint32_t>(std::popcount(wd.mask[c] & below));
+      if (c < a) r += static_cast<uint32_t>((wd.mask[c] >> b) & 1);
+    }
+    return r;
   }
 };
 
-void row_edges(const BitGrid& g, int64_t j, int64_t k, RowEdges& out) {
+// The crossed edges owned by points x in [x0, x1] of row (j, k) whose far end is in the grid.
+template <class Out>
+void edge_masks(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1, Out&& out) {
   const uint64_t* a = g.row(j, k);
   const uint64_t* b = j + 1 < g.ny ? g.row(j + 1, k) : nullptr;
   const uint64_t* c = k + 1 < g.nz ? g.row(j, k + 1) : nullptr;
-  uint32_t total[3] = {0, 0, 0};
-  for (int64_t w = 0; w < g.words; ++w) {
-    const uint64_t mx = (a[w] ^ shifted(a, w, g.words)) & valid_bits(w, g.nx - 1);
-    const uint64_t my = b ? (a[w] ^ b[w]) & valid_bits(w, g.nx) : 0;
-    const uint64_t mz = c ? (a[w] ^ c[w]) & valid_bits(w, g.nx) : 0;
-    const uint64_t m[3] = {mx, my, mz};
-    for (int ax = 0; ax < 3; ++ax) {
-      out.bits[ax * g.words + w] = {m[ax], total[ax]};
-      total[ax] += static_cast<uint32_t>(std::popcount(m[ax]));
-    }
+  const int64_t w0 = x0 >> 6, w1 = x1 >> 6;
+  for (int64_t w = w0; w <= w1; ++w) {
+    const uint64_t in = range_bits(w, x0, x1 + 1);
+    const uint64_t mx = (a[w] ^ shifted(a, w, g.words)) & in & valid_bits(w, g.nx - 1);
+    const uint64_t my = b ? (a[w] ^ b[w]) & in : 0;
+    const uint64_t mz = c ? (a[w] ^ c[w]) & in : 0;
+    out(w, mx, my, mz);
   }
-  for (int ax = 0; ax < 3; ++ax) out.count[ax] = total[ax];
-  out.start[1] = total[0];
-  out.start[2] = total[0] + total[1];
+}
+
+void row_edges(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1, RowEdges& out) {
+  uint32_t total = 0;
+  edge_masks(g, j, k, x0, x1, [&](int64_t w, uint64_t mx, uint64_t my, uint64_t mz) {
+    out.bits[w] = {{mx, my, mz}, total};
+    total += static_cast<uint32_t>(std::popcount(mx) + std::popcount(my) + std::popcount(mz));
+  });
+  out.count = total;
 }
 
 // Number of crossed edges owned by the row; the count pass needs nothing more.
-uint32_t row_edge_count(const BitGrid& g, int64_t j, int64_t k) {
-  const uint64_t* a = g.row(j, k);
-  const uint64_t* b = j + 1 < g.ny ? g.row(j + 1, k) : nullptr;
-  const uint64_t* c = k + 1 < g.nz ? g.row(j, k + 1) : nullptr;
+uint32_t row_edge_count(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1) {
   uint32_t n = 0;
-  for (int64_t w = 0; w < g.words; ++w) {
-    const uint64_t valid = valid_bits(w, g.nx);
-    n += static_cast<uint32_t>(
-        std::popcount((a[w] ^ shifted(a, w, g.words)) & valid_bits(w, g.nx - 1)));
-    if (b) n += static_cast<uint32_t>(std::popcount((a[w] ^ b[w]) & valid));
-    if (c) n += static_cast<uint32_t>(std::popcount((a[w] ^ c[w]) & valid));
-  }
+  edge_masks(g, j, k, x0, x1, [&](int64_t, uint64_t mx, uint64_t my, uint64_t mz) {
+    n += static_cast<uint32_t>(std::popcount(mx) + std::popcount(my) + std::popcount(mz));
+  });
   return n;
 }
 
@@ -107,22 +114,28 @@ class Extractor {
     grid_.ny = view.dims[1];
     grid_.nz = view.dims[2];
     grid_.words = (grid_.nx + 63) / 64;
+    cells_ = local_cell_box(view, options.cells, marching_cubes_halo(options));
   }
 
-  Mesh run() {
+  // With `keys`, fills only the vertices' keys (the mesh stays empty).
+  Mesh run(std::vector<uint64_t>* keys = nullptr) {
     Mesh mesh;
-    if (grid_.nx < 2 || grid_.ny < 2 || grid_.nz < 2) return mesh;
-    const int64_t rows = grid_.ny * grid_.nz;
-    grid_.bits.resize(static_cast<size_t>(rows * grid_.words));
+    if (cells_.empty()) return mesh;
+    grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
     classify<T>(view_, options_.iso, grid_);
+
+    // Point rows [lo, hi] in y and z carry the vertices; cell rows [lo, hi) the triangles. Row r
+    // is point row (lo.y + r % ny, lo.z + r / ny).
+    const int64_t ny = cells_.extent(1) + 1, rows = ny * (cells_.extent(2) + 1);
+    const int64_t x0 = cells_.lo[0], x1 = cells_.hi[0];
 
     // Count.
     std::vector<uint32_t> vertex_count(rows), triangle_count(rows);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = r % grid_.ny, k = r / grid_.ny;
-        vertex_count[r] = row_edge_count(grid_, j, k);
-        triangle_count[r] = count_triangles(j, k);
+        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+        vertex_count[r] = row_edge_count(grid_, j, k, x0, x1);
+        triangle_count[r] = has_cells(j, k) ? count_triangles(j, k) : 0;
       }
     });
 
@@ -136,6 +149,18 @@ class Extractor {
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
+    if (keys) {
+      keys->resize(n_vertices);
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+        RowEdges e(grid_.words);
+        for (int64_t r = range.begin(); r != range.end(); ++r) {
+          const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+          row_edges(grid_, j, k, x0, x1, e);
+          fill_keys(j, k, e, keys->data() + vertex_offset[r]);
+        }
+      });
+      return mesh;
+    }
     mesh.positions.resize(n_vertices);
     if (options_.normals) mesh.normals.resize(n_vertices);
     mesh.triangles.resize(n_triangles);
@@ -149,25 +174,25 @@ class Extractor {
       RowEdges* e[4] = {&store[0], &store[1], &store[2], &store[3]};
       int64_t upper_rows_of = -1;  // the row whose e[1], e[3] were computed last
       for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = r % grid_.ny, k = r / grid_.ny;
-        const bool reuse = upper_rows_of == r - 1 && j > 0;
+        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+        const bool reuse = upper_rows_of == r - 1 && j > cells_.lo[1];
         if (reuse) {
           std::swap(e[0], e[1]);
           std::swap(e[2], e[3]);
         } else {
-          row_edges(grid_, j, k, *e[0]);
+          row_edges(grid_, j, k, x0, x1, *e[0]);
         }
         fill_vertices(j, k, *e[0], static_cast<uint32_t>(vertex_offset[r]), mesh);
         upper_rows_of = -1;
         if (triangle_count[r] == 0) continue;
-        if (!reuse) row_edges(grid_, j, k + 1, *e[2]);
-        row_edges(grid_, j + 1, k, *e[1]);
-        row_edges(grid_, j + 1, k + 1, *e[3]);
+        if (!reuse) row_edges(grid_, j, k + 1, x0, x1, *e[2]);
+        row_edges(grid_, j + 1, k, x0, x1, *e[1]);
+        row_edges(grid_, j + 1, k + 1, x0, x1, *e[3]);
         upper_rows_of = r;
         const uint32_t base[4] = {static_cast<uint32_t>(vertex_offset[r]),
                                   static_cast<uint32_t>(vertex_offset[r + 1]),
-                                  static_cast<uint32_t>(vertex_offset[r + grid_.ny]),
-                                  static_cast<uint32_t>(vertex_offset[r + grid_.ny + 1])};
+                                  static_cast<uint32_t>(vertex_offset[r + ny]),
+                                  static_cast<uint32_t>(vertex_offset[r + ny + 1])};
         const RowEdges* edges[4] = {e[0], e[1], e[2], e[3]};
         fill_triangles(j, k, edges, base, mesh.triangles.data() + triangle_offset[r]);
       }
@@ -176,6 +201,8 @@ class Extractor {
   }
 
  private:
+  bool has_cells(int64_t j, int64_t k) const { return j < cells_.hi[1] && k < cells_.hi[2]; }
+
   // The four point rows around cell row (j, k).
   void cell_rows(int64_t j, int64_t k, const uint64_t* rows[4]) const {
     rows[0] = grid_.row(j, k);
@@ -184,14 +211,18 @@ class Extractor {
     rows[3] = grid_.row(j + 1, k + 1);
   }
 
+  // Mixed cells of one word of cell row (j, k), restricted to the cell box.
+  uint64_t mixed_cells(const CellWord& cw, int64_t w) const {
+    return cw.mixed & range_bits(w, cells_.lo[0], cells_.hi[0]);
+  }
+
   uint32_t count_triangles(int64_t j, int64_t k) const {
-    if (j + 1 >= grid_.ny || k + 1 >= grid_.nz) return 0;
     const uint64_t* rows[4];
     cell_rows(j, k, rows);
     uint32_t n = 0;
-    for (int64_t w = 0; w < grid_.words; ++w) {
+    for (int64_t w = cells_.lo[0] >> 6; w <= (cells_.hi[0] - 1) >> 6; ++w) {
       const CellWord cw(rows, w, grid_.words, grid_.nx);
-      for (uint64_t m = cw.mixed; m; m &= m - 1)
+      for (uint64_t m = mixed_cells(cw, w); m; m &= m - 1)
         n += mc::kCaseTable.triangle_count[cw.cell_case(std::countr_zero(m))];
     }
     return n;
@@ -201,14 +232,18 @@ class Extractor {
     return static_cast<double>(data_[view_.offset(i, j, k)]);
   }
 
-  // Central differences inside, one-sided at the border of the view; in world units.
+  // Central differences, one-sided only at the border of the whole volume (never at a brick's
+  // border, so that bricks agree); in world units.
   std::array<double, 3> gradient(int64_t i, int64_t j, int64_t k) const {
     const int64_t p[3] = {i, j, k};
     std::array<double, 3> g{};
     for (int a = 0; a < 3; ++a) {
+      const int64_t global = view_.box.lo[a] + p[a];
       int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
-      lo[a] = std::max<int64_t>(p[a] - 1, 0);
-      hi[a] = std::min<int64_t>(p[a] + 1, view_.dims[a] - 1);
+      // The view's own border is only reached when the caller extracts every cell of a view
+      // that is part of a larger volume (no halo); brick mode checks the halo up front.
+      if (global > 0 && p[a] > 0) lo[a] = p[a] - 1;
+      if (global + 1 < view_.global_dims[a] && p[a] + 1 < view_.dims[a]) hi[a] = p[a] + 1;
       const double h = static_cast<double>(hi[a] - lo[a]) * view_.spacing[a];
       g[a] = h > 0 ? (sample(hi[0], hi[1], hi[2]) - sample(lo[0], lo[1], lo[2])) / h : 0.0;
     }
@@ -218,10 +253,13 @@ class Extractor {
   void fill_vertices(int64_t j, int64_t k, const RowEdges& e, uint32_t base, Mesh& mesh) const {
     const double iso = options_.iso;
     uint32_t index = base;
-    for (int a = 0; a < 3; ++a) {
-      for (int64_t w = 0; w < grid_.words; ++w) {
-        for (uint64_t m = e.mask(a, w); m; m &= m - 1) {
-          const int64_t i = w * 64 + std::countr_zero(m);
+    for (int64_t w = cells_.lo[0] >> 6; w <= cells_.hi[0] >> 6; ++w) {
+      const uint64_t* mask = e.bits[w].mask;
+      for (uint64_t m = mask[0] | mask[1] | mask[2]; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const int64_t i = w * 64 + b;
+        for (int a = 0; a < 3; ++a) {
+          if (!((mask[a] >> b) & 1)) continue;
           int64_t p1[3] = {i, j, k};
           ++p1[a];
           const double v0 = sample(i, j, k), v1 = sample(p1[0], p1[1], p1[2]);
@@ -249,13 +287,28 @@ class Extractor {
     }
   }
 
+  void fill_keys(int64_t j, int64_t k, const RowEdges& e, uint64_t* out) const {
+    const Index3& n = view_.global_dims;
+    const uint64_t row = static_cast<uint64_t>(
+        n[0] * ((view_.box.lo[1] + j) + n[1] * (view_.box.lo[2] + k)) + view_.box.lo[0]);
+    for (int64_t w = cells_.lo[0] >> 6; w <= cells_.hi[0] >> 6; ++w) {
+      const uint64_t* mask = e.bits[w].mask;
+      for (uint64_t m = mask[0] | mask[1] | mask[2]; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const uint64_t lin = row + static_cast<uint64_t>(w * 64 + b);
+        for (int a = 0; a < 3; ++a)
+          if ((mask[a] >> b) & 1) *out++ = lin * 3 + static_cast<uint64_t>(a);
+      }
+    }
+  }
+
   void fill_triangles(int64_t j, int64_t k, const RowEdges* const edges[4], const uint32_t base[4],
                       Tri* out) const {
     const uint64_t* rows[4];
     cell_rows(j, k, rows);
-    for (int64_t w = 0; w < grid_.words; ++w) {
+    for (int64_t w = cells_.lo[0] >> 6; w <= (cells_.hi[0] - 1) >> 6; ++w) {
       const CellWord cw(rows, w, grid_.words, grid_.nx);
-      for (uint64_t m = cw.mixed; m; m &= m - 1) {
+      for (uint64_t m = mixed_cells(cw, w); m; m &= m - 1) {
         const int b = std::countr_zero(m);
         const int64_t i = w * 64 + b;
         const int cs = cw.cell_case(b);
@@ -278,15 +331,30 @@ class Extractor {
   const MarchingCubesOptions& options_;
   const T* data_;
   BitGrid grid_;
+  Box3 cells_;  // the cells to extract, in the view's own indices
 };
 
 }  // namespace
+
+int marching_cubes_halo(const MarchingCubesOptions& options) {
+  return options.normals ? 2 : 1;
+}
 
 Mesh marching_cubes(const VolumeView& view, const MarchingCubesOptions& options) {
   return visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
     return Extractor<T>(view, options).run();
   });
+}
+
+std::vector<std::uint64_t> marching_cubes_vertex_keys(const VolumeView& view,
+                                                      const MarchingCubesOptions& options) {
+  std::vector<std::uint64_t> keys;
+  visit_scalar(view.type, [&](auto tag) {
+    using T = decltype(tag);
+    Extractor<T>(view, options).run(&keys);
+  });
+  return keys;
 }
 
 }  // namespace isotile

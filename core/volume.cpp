@@ -43,6 +43,30 @@ VolumeView subview(const VolumeView& view, const Box3& local) {
   return v;
 }
 
+Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo) {
+  Box3 local;
+  if (global_cells.empty()) {
+    for (int a = 0; a < 3; ++a) local.hi[a] = std::max<std::int64_t>(view.dims[a] - 1, 0);
+    return local;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t lo = std::max<std::int64_t>(global_cells.lo[a], 0);
+    const std::int64_t hi = std::min<std::int64_t>(global_cells.hi[a], view.global_dims[a] - 1);
+    // Samples needed: [lo - halo, hi + halo], clipped to the volume.
+    const std::int64_t need_lo = std::max<std::int64_t>(lo - halo, 0);
+    const std::int64_t need_hi = std::min<std::int64_t>(hi + halo, view.global_dims[a] - 1);
+    if (lo >= hi || need_lo < view.box.lo[a] || need_hi >= view.box.hi[a])
+      throw InputError("the view (samples " + std::to_string(view.box.lo[a]) + ".." +
+                       std::to_string(view.box.hi[a] - 1) + " along axis " + std::to_string(a) +
+                       ") does not hold cells " + std::to_string(global_cells.lo[a]) + ".." +
+                       std::to_string(global_cells.hi[a] - 1) + " with a halo of " +
+                       std::to_string(halo) + " samples");
+    local.lo[a] = lo - view.box.lo[a];
+    local.hi[a] = hi - view.box.lo[a];
+  }
+  return local;
+}
+
 std::size_t checked_volume_bytes(ScalarType type, const Index3& dims) {
   for (int a = 0; a < 3; ++a)
     if (dims[a] <= 0)

@@ -58,6 +58,11 @@ VolumeView dense_view(const void* data, ScalarType type, Index3 dims, Vec3d spac
 // The part of `view` inside `local` (in the view's own sample indices); clamped to the view.
 VolumeView subview(const VolumeView& view, const Box3& local);
 
+// The cells an extractor works on, in the view's own indices. An empty `global_cells` means every
+// cell of the view. Otherwise the view must hold those cells and `halo` samples beyond them on
+// every side where the volume goes on (InputError if not); the result is clipped to the volume.
+Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo);
+
 // An owning dense volume. Samples are left uninitialised on creation (volumes are large and are
 // always filled right after).
 class Volume {

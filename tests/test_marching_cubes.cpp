@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/errors.h"
 #include "core/marching_cubes.h"
 #include "core/marching_cubes_tables.h"
 #include "core/mesh_quality.h"
@@ -251,6 +252,60 @@ TEST(MarchingCubes, OutputIsIdenticalForAnyThreadCount) {
   }
   ASSERT_GT(meshes[0].triangles.size(), 10000u);
   testing::expect_identical_runs(meshes);
+}
+
+TEST(MarchingCubes, VerticesComeInKeyOrderOnTheirEdges) {
+  Volume vol = make_field_volume({FieldKind::Gyroid, 37});
+  vol.set_spacing({1.0, 0.5, 2.0});
+  vol.set_origin({-3.0, 1.0, 0.25});
+  const VolumeView v = vol.view();
+  const Mesh m = mc(v, 0.1);
+  const auto keys = marching_cubes_vertex_keys(v, {.iso = 0.1});
+  ASSERT_EQ(keys.size(), m.positions.size());
+  ASSERT_GT(keys.size(), 1000u);
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    if (i > 0) {
+      ASSERT_LT(keys[i - 1], keys[i]);
+    }
+    const std::uint64_t lin = keys[i] / 3;
+    const int axis = static_cast<int>(keys[i] % 3);
+    const std::int64_t s[3] = {static_cast<std::int64_t>(lin % 37),
+                               static_cast<std::int64_t>(lin / 37 % 37),
+                               static_cast<std::int64_t>(lin / (37 * 37))};
+    for (int a = 0; a < 3; ++a) {
+      const double lo = v.origin[a] + v.spacing[a] * static_cast<double>(s[a]);
+      const double hi = a == axis ? lo + v.spacing[a] : lo;
+      EXPECT_GE(m.positions[i][a], static_cast<float>(lo)) << "vertex " << i << " axis " << a;
+      EXPECT_LE(m.positions[i][a], static_cast<float>(hi)) << "vertex " << i << " axis " << a;
+    }
+  }
+}
+
+// The brick contract the tiler relies on, for brick sizes from one cell to more than the volume.
+TEST(MarchingCubes, BricksEqualTheWholeVolume) {
+  Volume vol = make_field_volume({FieldKind::Torus, 23});
+  vol.set_spacing({0.7, 1.0, 1.3});
+  for (bool normals : {false, true}) {
+    const MarchingCubesOptions base{.iso = 0.0, .normals = normals};
+    const testing::KeyedExtract run = [&](const VolumeView& v, const Box3& cells) {
+      MarchingCubesOptions o = base;
+      o.cells = cells;
+      return testing::KeyedMesh{marching_cubes(v, o), marching_cubes_vertex_keys(v, o)};
+    };
+    for (const Index3& brick :
+         {Index3{1, 1, 1}, Index3{3, 5, 2}, Index3{7, 7, 7}, Index3{22, 4, 9}, Index3{64, 64, 64}})
+      testing::expect_bricks_equal_whole(vol.view(), run, marching_cubes_halo(base), brick);
+  }
+}
+
+TEST(MarchingCubes, BrickModeRejectsAViewWithoutTheHalo) {
+  const Volume vol = make_field_volume({FieldKind::Sphere, 16});
+  const VolumeView part = subview(vol.view(), {{4, 4, 4}, {10, 10, 10}});
+  MarchingCubesOptions o{.iso = 0.0, .normals = true};
+  o.cells = {{5, 5, 5}, {8, 8, 8}};  // needs samples 3..10 with normals
+  EXPECT_THROW(marching_cubes(part, o), InputError);
+  o.normals = false;  // needs samples 4..9
+  EXPECT_NO_THROW(marching_cubes(part, o));
 }
 
 TEST(MarchingCubesRealData, BonsaiIsWatertightWithThePapersQuality) {

@@ -4,11 +4,15 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <vector>
 
 #include "core/mesh.h"
 #include "core/procedural_fields.h"
+#include "core/volume.h"
 
 namespace isotile::testing {
 
@@ -34,6 +38,63 @@ inline void expect_identical_runs(const std::vector<Mesh>& runs) {
     EXPECT_EQ(runs[i].triangles, runs[0].triangles) << "run " << i;
     EXPECT_EQ(runs[i].quads, runs[0].quads) << "run " << i;
   }
+}
+
+// An extraction of `cells` (global cell box; empty = all) from `view`, with the keys of its
+// vertices.
+struct KeyedMesh {
+  Mesh mesh;
+  std::vector<std::uint64_t> keys;
+};
+using KeyedExtract = std::function<KeyedMesh(const VolumeView& view, const Box3& cells)>;
+
+// Cuts the cells of `whole` into bricks of `brick` cells (the last ones shorter), extracts each
+// from a view holding it plus `halo` samples, and checks the brick contract: every vertex a brick
+// lists exists in the whole-volume mesh under the same key with bit-identical position and normal,
+// and the bricks' faces, mapped through the keys, are exactly the whole mesh's faces.
+inline void expect_bricks_equal_whole(const VolumeView& whole, const KeyedExtract& extract,
+                                      int halo, const Index3& brick) {
+  const KeyedMesh ref = extract(whole, Box3{});
+  ASSERT_TRUE(std::is_sorted(ref.keys.begin(), ref.keys.end()));
+  ASSERT_EQ(ref.keys.size(), ref.mesh.positions.size());
+  std::vector<std::array<std::uint32_t, 4>> want, got;
+  auto add = [](std::vector<std::array<std::uint32_t, 4>>& out, const Mesh& m, auto&& map) {
+    for (const Tri& t : m.triangles) out.push_back({map(t[0]), map(t[1]), map(t[2]), ~0u});
+    for (const Quad& q : m.quads) out.push_back({map(q[0]), map(q[1]), map(q[2]), map(q[3])});
+  };
+  add(want, ref.mesh, [](std::uint32_t i) { return i; });
+  Index3 cells;
+  for (int a = 0; a < 3; ++a) cells[a] = whole.dims[a] - 1;
+  for (std::int64_t z = 0; z < cells[2]; z += brick[2])
+    for (std::int64_t y = 0; y < cells[1]; y += brick[1])
+      for (std::int64_t x = 0; x < cells[0]; x += brick[0]) {
+        Box3 box{{x, y, z},
+                 {std::min(x + brick[0], cells[0]), std::min(y + brick[1], cells[1]),
+                  std::min(z + brick[2], cells[2])}};
+        Box3 local;
+        for (int a = 0; a < 3; ++a) {
+          local.lo[a] = std::max<std::int64_t>(box.lo[a] - halo, 0);
+          local.hi[a] = std::min<std::int64_t>(box.hi[a] + halo + 1, whole.dims[a]);
+        }
+        const KeyedMesh b = extract(subview(whole, local), box);
+        ASSERT_EQ(b.keys.size(), b.mesh.positions.size());
+        ASSERT_TRUE(std::is_sorted(b.keys.begin(), b.keys.end()));
+        std::vector<std::uint32_t> to_whole(b.keys.size());
+        for (std::size_t i = 0; i < b.keys.size(); ++i) {
+          const auto it = std::lower_bound(ref.keys.begin(), ref.keys.end(), b.keys[i]);
+          ASSERT_TRUE(it != ref.keys.end() && *it == b.keys[i]) << "key " << b.keys[i];
+          const auto w = static_cast<std::uint32_t>(it - ref.keys.begin());
+          to_whole[i] = w;
+          ASSERT_EQ(b.mesh.positions[i], ref.mesh.positions[w]) << "key " << b.keys[i];
+          if (!ref.mesh.normals.empty()) {
+            ASSERT_EQ(b.mesh.normals[i], ref.mesh.normals[w]) << "key " << b.keys[i];
+          }
+        }
+        add(got, b.mesh, [&](std::uint32_t i) { return to_whole[i]; });
+      }
+  std::sort(want.begin(), want.end());
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, want);
 }
 
 }  // namespace isotile::testing
