@@ -27,7 +27,7 @@ done
 packages=(
   cmake ninja-build g++ pkg-config python3
   libtbb-dev libeigen3-dev zlib1g-dev nlohmann-json3-dev libcli11-dev
-  libteem-dev libopenvdb-dev libboost-iostreams-dev
+  libteem-dev libopenvdb-dev libboost-iostreams-dev libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev
 )
 if [ "$tsan" = 1 ]; then
