@@ -31,6 +31,7 @@
 #include "core/mesh_quality.h"
 #include "core/mesh_topology.h"
 #include "core/procedural_fields.h"
+#include "core/self_intersections.h"
 #include "core/volume_io.h"
 
 namespace {
@@ -217,6 +218,7 @@ struct ExtractArgs {
   bool ascii = false;
   std::string dc_solver = "mass";
   bool quads = false;
+  bool check_intersections = false;
 };
 
 Method parse_method(const std::string& s) {
@@ -300,6 +302,7 @@ int run_extract(const ExtractArgs& args) {
   j.update(quality_json(q));
   j.update(topology_json(topo));
   j["bricks"] = 1;
+  if (args.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
   if (field) {
     const auto [mean, max] = field_distances(*field, mesh, view);
     j["distance_mean"] = mean;
@@ -376,7 +379,7 @@ int run_info(const InputArgs& in, bool as_json) {
 
 // --- quality -------------------------------------------------------------------------------
 
-int run_quality(const std::string& path, bool as_json) {
+int run_quality(const std::string& path, bool as_json, bool check_intersections) {
   const Mesh mesh = read_mesh(path);
   const QualityStats q = triangle_quality(mesh);
   const TopologyStats t = mesh_topology(mesh);
@@ -388,6 +391,8 @@ int run_quality(const std::string& path, bool as_json) {
   j.update(topology_json(t));
   j["edges"] = t.edges;
   j["unreferenced_vertices"] = t.unreferenced_vertices;
+  std::optional<std::uint64_t> crossing;
+  if (check_intersections) j["self_intersections"] = *(crossing = self_intersections(mesh).pairs);
   if (as_json) {
     std::cout << j.dump(2) << "\n";
     return 0;
@@ -407,6 +412,9 @@ int run_quality(const std::string& path, bool as_json) {
   std::printf("euler / components    %lld / %llu\n", static_cast<long long>(t.euler),
               static_cast<unsigned long long>(t.components));
   std::printf("closed                %s\n", t.closed ? "yes" : "no");
+  if (crossing)
+    std::printf("self-intersections    %llu triangle pairs\n",
+                static_cast<unsigned long long>(*crossing));
   return 0;
 }
 
@@ -452,6 +460,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"mass", "particle", "qef"}));
   extract_cmd->add_flag("--quads", ex.quads,
                         "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
+  extract_cmd->add_flag("--check-intersections", ex.check_intersections,
+                        "Count self-intersecting triangle pairs (stats key self_intersections)");
 
   InputArgs info_in;
   bool info_json = false;
@@ -466,6 +476,9 @@ int main(int argc, char** argv) {
       "quality", "Measure a mesh: radius ratios, boundary, manifoldness, Euler characteristic");
   quality_cmd->add_option("MESH", quality_path, "Mesh file (.ply, .obj, .stl, .off)")->required();
   quality_cmd->add_flag("--json", quality_json_flag, "Print JSON");
+  bool quality_intersections = false;
+  quality_cmd->add_flag("--check-intersections", quality_intersections,
+                        "Count self-intersecting triangle pairs");
 
   std::string demo_output = "isotile-demo.ply";
   auto* demo_cmd = app.add_subcommand(
@@ -488,7 +501,7 @@ int main(int argc, char** argv) {
   try {
     if (*extract_cmd) return run_extract(ex);
     if (*info_cmd) return run_info(info_in, info_json);
-    if (*quality_cmd) return run_quality(quality_path, quality_json_flag);
+    if (*quality_cmd) return run_quality(quality_path, quality_json_flag, quality_intersections);
     if (*demo_cmd) {
       ExtractArgs d;
       d.in.input = "field:gyroid:128";
