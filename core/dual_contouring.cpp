@@ -150,6 +150,11 @@ using std::int64_t;
 using std::uint32_t;
 using std::uint64_t;
 
+// Bits of word w for the indices [lo, hi) of a row.
+inline uint64_t bits_in(int64_t w, int64_t lo, int64_t hi) {
+  return valid_bits(w, hi) & ~valid_bits(w, lo);
+}
+
 // Mixed cells of one cell row, with the number of mixed cells in earlier words of the row, so a
 // cell's vertex index is its row's offset + prefix + popcount below it.
 struct MixedWord {
@@ -162,6 +167,11 @@ class Extractor {
  public:
   Extractor(const VolumeView& view, const DualContouringOptions& options)
       : view_(view), options_(options), data_(view.typed<T>()) {
+    cells_ = local_cell_box(view, options.cells, dual_contouring_halo(options));
+    for (int a = 0; a < 3; ++a) {
+      vcells_.lo[a] = std::max<int64_t>(cells_.lo[a] - 1, 0);
+      vcells_.hi[a] = cells_.hi[a];
+    }
     grid_.nx = view.dims[0];
     grid_.ny = view.dims[1];
     grid_.nz = view.dims[2];
@@ -169,9 +179,31 @@ class Extractor {
     for (int c = 0; c < 8; ++c) corner_offset_[c] = view.offset(c & 1, (c >> 1) & 1, (c >> 2) & 1);
   }
 
+  // The global keys (cell index with the sample dims as strides) of the vertices, in order.
+  std::vector<uint64_t> keys() {
+    std::vector<uint64_t> out;
+    if (cells_.empty()) return out;
+    grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
+    classify<T>(view_, options_.iso, grid_);
+    mixed_.resize(grid_.bits.size());
+    tbb::parallel_for(int64_t{0}, grid_.ny * grid_.nz, [&](int64_t r) {
+      mark_mixed(r % grid_.ny, r / grid_.ny, mixed_.data() + r * grid_.words);
+    });
+    const Index3& n = view_.global_dims;
+    for (int64_t r = 0; r < grid_.ny * grid_.nz; ++r) {
+      const int64_t j = r % grid_.ny, k = r / grid_.ny;
+      const uint64_t row = static_cast<uint64_t>(
+          n[0] * ((view_.box.lo[1] + j) + n[1] * (view_.box.lo[2] + k)) + view_.box.lo[0]);
+      for (int64_t w = 0; w < grid_.words; ++w)
+        for (uint64_t m = mixed_[r * grid_.words + w].mask; m; m &= m - 1)
+          out.push_back(row + static_cast<uint64_t>(w * 64 + std::countr_zero(m)));
+    }
+    return out;
+  }
+
   Mesh run() {
     Mesh mesh;
-    if (grid_.nx < 2 || grid_.ny < 2 || grid_.nz < 2) return mesh;
+    if (cells_.empty()) return mesh;
     const int64_t rows = grid_.ny * grid_.nz, words = grid_.words;
     grid_.bits.resize(static_cast<size_t>(rows * words));
     classify<T>(view_, options_.iso, grid_);
@@ -229,11 +261,14 @@ class Extractor {
   // Marks the mixed cells of cell row (j, k) (none on the last point rows); returns their count.
   uint32_t mark_mixed(int64_t j, int64_t k, MixedWord* out) const {
     uint32_t total = 0;
-    const bool has_cells = j + 1 < grid_.ny && k + 1 < grid_.nz;
+    const bool has_cells =
+        j >= vcells_.lo[1] && j < vcells_.hi[1] && k >= vcells_.lo[2] && k < vcells_.hi[2];
     const uint64_t* rows[4];
     if (has_cells) cell_rows(j, k, rows);
     for (int64_t w = 0; w < grid_.words; ++w) {
-      const uint64_t m = has_cells ? CellWord(rows, w, grid_.words, grid_.nx).mixed : 0;
+      const uint64_t m = has_cells ? CellWord(rows, w, grid_.words, grid_.nx).mixed &
+                                         bits_in(w, vcells_.lo[0], vcells_.hi[0])
+                                   : 0;
       out[w] = {m, total};
       total += static_cast<uint32_t>(std::popcount(m));
     }
@@ -247,23 +282,25 @@ class Extractor {
     rows[3] = grid_.row(j + 1, k + 1);
   }
 
-  // The crossed edges owned by 64 samples of row (j, k) that get a quad: those whose four cells
-  // all exist. The x-edge of (i, j, k) needs cells at j-1, j and k-1, k; the y-edge cells at i-1,
-  // i and k-1, k; the z-edge cells at i-1, i and j-1, j.
+  // The crossed edges owned by 64 samples of row (j, k) that get a quad: those of samples in the
+  // cell box whose four cells all exist (are vertex cells). The x-edge of (i, j, k) needs cells at
+  // j-1, j and k-1, k; the y-edge cells at i-1, i and k-1, k; the z-edge cells at i-1, i and j-1,
+  // j. Cells up to the box's upper end are vertex cells, so only the lower neighbours need
+  // checking.
   struct EdgeWord {
     uint64_t origin;     // inside bits of the samples
     uint64_t active[3];  // per axis
   };
   EdgeWord edge_word(int64_t j, int64_t k, int64_t w) const {
-    const int64_t ny = grid_.ny, nz = grid_.nz, words = grid_.words;
     const uint64_t* a = grid_.row(j, k);
-    const bool mid_j = j >= 1 && j + 1 < ny, mid_k = k >= 1 && k + 1 < nz;
-    // Samples 1 .. nx-2: those with a cell on both sides in x.
-    const uint64_t mid_i = valid_bits(w, grid_.nx - 1) & (w == 0 ? ~uint64_t{1} : ~uint64_t{0});
     EdgeWord e{a[w], {0, 0, 0}};
-    if (mid_j && mid_k) e.active[0] = (a[w] ^ shifted(a, w, words)) & valid_bits(w, grid_.nx - 1);
-    if (j + 1 < ny && mid_k) e.active[1] = (a[w] ^ grid_.row(j + 1, k)[w]) & mid_i;
-    if (k + 1 < nz && mid_j) e.active[2] = (a[w] ^ grid_.row(j, k + 1)[w]) & mid_i;
+    if (j < cells_.lo[1] || j >= cells_.hi[1] || k < cells_.lo[2] || k >= cells_.hi[2]) return e;
+    const bool mid_j = j > vcells_.lo[1], mid_k = k > vcells_.lo[2];
+    const uint64_t in_i = bits_in(w, cells_.lo[0], cells_.hi[0]);
+    const uint64_t mid_i = in_i & bits_in(w, vcells_.lo[0] + 1, cells_.hi[0]);
+    if (mid_j && mid_k) e.active[0] = (a[w] ^ shifted(a, w, grid_.words)) & in_i;
+    if (mid_k) e.active[1] = (a[w] ^ grid_.row(j + 1, k)[w]) & mid_i;
+    if (mid_j) e.active[2] = (a[w] ^ grid_.row(j, k + 1)[w]) & mid_i;
     return e;
   }
 
@@ -272,7 +309,10 @@ class Extractor {
   }
 
   // Gradient in index space (per voxel, not per world unit): normals in cell-local coordinates
-  // are what the QEF needs. Central differences inside, one-sided at the border of the view.
+  // are what the QEF needs. Central differences, one-sided only at the border of the whole volume
+  // (never at a brick's, so bricks agree; x / 2 and 0.5 * x round alike, so both paths give the
+  // same bits). A view's own border is reached only when every cell of a view that is part of a
+  // larger volume is extracted without a halo; brick mode checks the halo up front.
   std::array<double, 3> gradient(int64_t i, int64_t j, int64_t k, bool interior) const {
     std::array<double, 3> g{};
     if (interior) {
@@ -286,8 +326,9 @@ class Extractor {
     const int64_t p[3] = {i, j, k};
     for (int a = 0; a < 3; ++a) {
       int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
-      lo[a] = std::max<int64_t>(p[a] - 1, 0);
-      hi[a] = std::min<int64_t>(p[a] + 1, view_.dims[a] - 1);
+      const int64_t global = view_.box.lo[a] + p[a];
+      if (global > 0 && p[a] > 0) lo[a] = p[a] - 1;
+      if (global + 1 < view_.global_dims[a] && p[a] + 1 < view_.dims[a]) hi[a] = p[a] + 1;
       const int64_t h = hi[a] - lo[a];
       g[a] = h > 0 ? (sample(hi[0], hi[1], hi[2]) - sample(lo[0], lo[1], lo[2])) /
                          static_cast<double>(h)
@@ -479,6 +520,8 @@ class Extractor {
   const VolumeView& view_;
   const DualContouringOptions& options_;
   const T* data_;
+  Box3 cells_;   // the cells whose faces are wanted, in the view's indices
+  Box3 vcells_;  // the cells that get vertices: cells_ and the layer below it, within the view
   BitGrid grid_;
   std::vector<MixedWord> mixed_;
   int64_t corner_offset_[8];  // of a cell's corner c from its corner 0, in samples
@@ -487,12 +530,32 @@ class Extractor {
 
 }  // namespace
 
-Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options) {
+int dual_contouring_halo(const DualContouringOptions& options) {
+  // Vertex cells start one below the box; gradients reach one sample beyond their corners.
+  return options.solver != DcSolver::MassPoint || options.normals ? 2 : 1;
+}
+
+namespace {
+void check_options(const DualContouringOptions& options) {
   if (options.particle_steps < 0)
     throw InputError("dual contouring: particle_steps must be >= 0, got " +
                      std::to_string(options.particle_steps));
   if (!(options.particle_rate > 0))
     throw InputError("dual contouring: particle_rate must be positive");
+}
+}  // namespace
+
+std::vector<std::uint64_t> dual_contouring_vertex_keys(const VolumeView& view,
+                                                       const DualContouringOptions& options) {
+  check_options(options);
+  return visit_scalar(view.type, [&](auto tag) {
+    using T = decltype(tag);
+    return Extractor<T>(view, options).keys();
+  });
+}
+
+Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options) {
+  check_options(options);
   return visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
     return Extractor<T>(view, options).run();

@@ -4,22 +4,33 @@
 // between samples (i..i+1, j..j+1, k..k+1)) with a crossed edge among its 12 gets one dual vertex,
 // placed from the cell's Hermite data: the crossings of its edges (linear interpolation from each
 // edge's lower-index end, as in MC) and unit normals there (central-difference gradients of the
-// samples, one-sided at the border of the view, interpolated along the edge). Every crossed edge
-// whose four surrounding cells all exist gets one quad joining their vertices, wound so its normal
-// points from the inside end of the edge to the outside end. Edges on the border of the view lack
-// some of those cells and get no quad: the mesh is open there, like MC's. A cell whose only
-// crossed edges lie on the border still gets its vertex, which no face then uses.
+// samples, one-sided only at the border of the whole volume, interpolated along the edge). Every
+// crossed edge whose four surrounding cells all exist gets one quad joining their vertices, wound
+// so its normal points from the inside end of the edge to the outside end. Edges on the border of
+// the volume lack some of those cells and get no quad: the mesh is open there, like MC's. A cell
+// whose only crossed edges lie on the border still gets its vertex, which no face then uses.
 //
 // Positions are origin + spacing * (global cell index + offset in the cell), computed in double
 // and rounded to float, so bricks of one volume agree on the vertices they share.
 //
 // Parallel and deterministic: count, exclusive scan, fill over rows of cells and of samples.
-// Vertices are numbered cell by cell (rows ordered by z, then y; x within a row); faces sample by
-// sample in the same order, and within a sample in table order (x-, y-, then z-edge). A split quad
-// q becomes triangles 2q and 2q + 1. The output is byte-identical for any thread count.
+// Order (the brick contract): vertices cell by cell in ascending global key lin(cell) = x + Nx (y
+// + Ny z) with the volume's sample dims N as strides; faces by the global index of their edge's
+// lower sample, then axis x, y, z (the table lists a case's quads in that order). A split quad q
+// becomes triangles 2q and 2q + 1. The output is byte-identical for any thread count.
+//
+// Brick mode (`cells` non-empty, global cell indices): the faces of the crossed edges (s, a) with
+// s in the half-open box [cells.lo, cells.hi) whose four cells exist in the volume, and the
+// vertices of every active cell in [cells.lo - 1, cells.hi) clipped to the volume, in key order.
+// The view must hold those cells plus dual_contouring_halo() samples on every side (less where
+// the volume ends; InputError otherwise). Every vertex is computed from the same samples with the
+// same arithmetic as in a whole-volume run, so bricks agree bit for bit on shared vertices and
+// their union (faces mapped through the keys) is the whole-volume mesh.
 #pragma once
 
 #include <array>
+#include <cstdint>
+#include <vector>
 
 #include "core/mesh.h"
 #include "core/volume.h"
@@ -54,11 +65,21 @@ struct DualContouringOptions {
   bool keep_quads = false;  // true: Mesh::quads; false: two triangles per quad, split along the
                             // diagonal whose worse triangle has the better radius ratio
   bool normals = false;     // unit normals at the vertices, pointing outward
+  Box3 cells{};             // brick mode, in global cell indices; empty: every cell of the view
 };
+
+// Samples beyond `cells` that brick mode reads: 1 for the mass point without normals (vertex cells
+// reach one cell below the box), 2 when gradients are needed (solver or normals).
+int dual_contouring_halo(const DualContouringOptions& options);
 
 // Extracts the isosurface of the cells of `view`. Throws CapacityError when the mesh would need
 // more than 2^32 - 1 vertices, InputError for a negative step count or a non-positive rate.
 Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options);
+
+// The keys lin(cell) (global, sample dims as strides) of the vertices dual_contouring(view,
+// options) returns, in the same order.
+std::vector<std::uint64_t> dual_contouring_vertex_keys(const VolumeView& view,
+                                                       const DualContouringOptions& options);
 
 namespace dc {
 

@@ -451,6 +451,7 @@ TEST(DualContouring, SubviewGivesGlobalPositions) {
         copy[(k * 23 + j) * 26 + i] = static_cast<float>(whole.value(i + 5, j + 7, k + 9));
   VolumeView dense = dense_view(copy.data(), ScalarType::Float32, {26, 23, 20});
   dense.box = {{5, 7, 9}, {31, 30, 29}};
+  dense.global_dims = whole.global_dims;  // the same part of the same volume
   const DualContouringOptions o{.normals = true};
   const Mesh a = dual_contouring(part, o), b = dual_contouring(dense, o);
   ASSERT_GT(a.triangles.size(), 100u);
@@ -573,6 +574,54 @@ TEST(DualContouring, OutputIsIdenticalForAnyThreadCount) {
     ASSERT_GT(meshes[0].triangles.size(), 10000u);
     testing::expect_identical_runs(meshes);
   }
+}
+
+// The brick contract the tiler relies on (brick_contract.md), for every solver, with and without
+// normals, brick sizes from one cell to more than the volume, anisotropic spacing.
+TEST(DualContouring, BricksEqualTheWholeVolume) {
+  Volume vol = make_field_volume({FieldKind::Torus, 23});
+  vol.set_spacing({0.7, 1.0, 1.3});
+  for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
+    for (bool normals : {false, true}) {
+      const DualContouringOptions base{.solver = solver, .normals = normals};
+      const testing::KeyedExtract run = [&](const VolumeView& v, const Box3& cells) {
+        DualContouringOptions o = base;
+        o.cells = cells;
+        return testing::KeyedMesh{dual_contouring(v, o), dual_contouring_vertex_keys(v, o)};
+      };
+      for (const Index3& brick : {Index3{1, 1, 1}, Index3{3, 5, 2}, Index3{7, 7, 7},
+                                  Index3{22, 4, 9}, Index3{64, 64, 64}})
+        testing::expect_bricks_equal_whole(vol.view(), run, dual_contouring_halo(base), brick);
+    }
+}
+
+TEST(DualContouring, VertexKeysAscendAndNameTheCells) {
+  const Volume vol = make_field_volume({FieldKind::Sphere, 19});
+  const Mesh m = dual_contouring(vol.view(), {});
+  const std::vector<std::uint64_t> keys = dual_contouring_vertex_keys(vol.view(), {});
+  ASSERT_EQ(keys.size(), m.positions.size());
+  ASSERT_TRUE(std::is_sorted(keys.begin(), keys.end()));
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    const std::int64_t c[3] = {static_cast<std::int64_t>(keys[i] % 19),
+                               static_cast<std::int64_t>(keys[i] / 19 % 19),
+                               static_cast<std::int64_t>(keys[i] / (19 * 19))};
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_GE(m.positions[i][a], static_cast<float>(c[a])) << "vertex " << i;
+      EXPECT_LE(m.positions[i][a], static_cast<float>(c[a] + 1)) << "vertex " << i;
+    }
+  }
+}
+
+TEST(DualContouring, BrickModeRejectsAViewWithoutTheHalo) {
+  const Volume vol = make_field_volume({FieldKind::Sphere, 16});
+  const VolumeView part = subview(vol.view(), {{4, 4, 4}, {10, 10, 10}});
+  DualContouringOptions o{.solver = DcSolver::Qef};
+  o.cells = {{6, 6, 6}, {7, 7, 7}};  // halo 2: needs samples 4..9
+  EXPECT_NO_THROW(dual_contouring(part, o));
+  o.cells = {{5, 5, 5}, {8, 8, 8}};  // needs samples 3..10
+  EXPECT_THROW(dual_contouring(part, o), InputError);
+  o.solver = DcSolver::MassPoint;  // halo 1: needs samples 4..9
+  EXPECT_NO_THROW(dual_contouring(part, o));
 }
 
 // What holds on csg-box: the Hermite solvers move the worst vertices (at the sharp edges and
