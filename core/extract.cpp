@@ -12,8 +12,6 @@ namespace isotile {
 
 namespace {
 
-using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
-
 Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
   return marching_cubes(view, {.iso = o.iso, .normals = o.normals});
 }
@@ -34,11 +32,14 @@ struct BackendEntry {
   std::array<ExtractFn, kMethodCount> run;
   // Empty when the backend is compiled in; otherwise why it is not.
   std::string_view missing;
+  // Set by register_backend(): whether it can run here (see extract.h).
+  ProbeFn probe = nullptr;
 };
 
-// Macet and the GL backends are not part of this build yet: their entries say so, and selecting
-// them is a clear error rather than a silent fallback.
-const std::array<BackendEntry, kBackendCount - 1> kBackends = {{
+// The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
+// then they say they are not built in, and selecting them is a clear error rather than a silent
+// fallback.
+std::array<BackendEntry, kBackendCount - 1> kBackends = {{
     {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, cpu_dual_contouring}, ""},
     {Backend::GeometryShader,
      "gs",
@@ -63,6 +64,17 @@ const BackendEntry& entry(Backend b) {
 constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::GeometryShader,
                                                Backend::Cpu};
 
+// Whether `e` can run here; `why` says why not, `hardware` whether it runs on a real GPU.
+bool usable(const BackendEntry& e, std::string* why, bool* hardware) {
+  *hardware = false;
+  if (!e.missing.empty()) {
+    *why = e.missing;
+    return false;
+  }
+  *why = e.probe ? e.probe(hardware) : "";
+  return why->empty();
+}
+
 }  // namespace
 
 std::string_view method_name(Method m) {
@@ -74,10 +86,23 @@ std::string_view backend_name(Backend b) {
   return entry(b).name;
 }
 
+void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
+                      ProbeFn probe) {
+  for (auto& e : kBackends)
+    if (e.backend == backend) {
+      e.run = run;
+      e.missing = "";
+      e.probe = probe;
+    }
+}
+
 std::vector<BackendCaps> capabilities() {
   std::vector<BackendCaps> caps;
   for (const auto& e : kBackends) {
-    BackendCaps c{e.backend, e.missing.empty(), {}, std::string(e.missing)};
+    std::string why;
+    bool hardware = false;
+    const bool ok = usable(e, &why, &hardware);
+    BackendCaps c{e.backend, ok, hardware, {}, why};
     for (int m = 0; m < kMethodCount; ++m)
       if (e.run[m]) c.methods.push_back(static_cast<Method>(m));
     caps.push_back(std::move(c));
@@ -88,19 +113,27 @@ std::vector<BackendCaps> capabilities() {
 Backend resolve_backend(const ExtractOptions& options) {
   const int m = static_cast<int>(options.method);
   if (options.backend == Backend::Auto) {
+    // A GPU backend only on a real GPU: on a software rasteriser the CPU path is faster.
     for (Backend b : kAutoOrder) {
       const auto& e = entry(b);
-      if (e.missing.empty() && e.run[m]) return b;
+      if (!e.run[m]) continue;
+      std::string why;
+      bool hardware = false;
+      if (usable(e, &why, &hardware) && (b == Backend::Cpu || hardware)) return b;
     }
     throw InputError("method '" + std::string(method_name(options.method)) +
                      "' is not implemented by any backend of this build");
   }
   const auto& e = entry(options.backend);
-  if (!e.missing.empty())
+  if (!e.run[m] && !e.missing.empty())
     throw InputError("backend '" + std::string(e.name) + "': " + std::string(e.missing));
   if (!e.run[m])
     throw InputError("backend '" + std::string(e.name) + "' does not implement method '" +
                      std::string(method_name(options.method)) + "'");
+  std::string why;
+  bool hardware = false;
+  if (!usable(e, &why, &hardware))
+    throw InputError("backend '" + std::string(e.name) + "': " + why);
   return options.backend;
 }
 

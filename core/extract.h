@@ -6,6 +6,7 @@
 // reference and the fallback.
 #pragma once
 
+#include <array>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -37,6 +38,7 @@ struct ExtractOptions {
 struct BackendCaps {
   Backend backend;
   bool available = false;
+  bool hardware = false;  // runs on a real GPU (not the CPU, not a software rasteriser)
   std::vector<Method> methods;  // methods this backend implements
   std::string why_unavailable;  // empty when available
 };
@@ -49,5 +51,14 @@ std::vector<BackendCaps> capabilities();
 Backend resolve_backend(const ExtractOptions& options);
 
 Mesh extract(const VolumeView& view, const ExtractOptions& options);
+
+// Optional backends live in their own targets (the GL ones in shaders/, isotile_gl) so that core
+// does not depend on them; the program installs them at startup, before any extract(). `probe`
+// returns "" when the backend can run on this machine, setting *hardware when it runs on a real
+// GPU (Auto picks a GPU backend only then), else why it cannot.
+using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
+using ProbeFn = std::string (*)(bool* hardware);
+void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
+                      ProbeFn probe);
 
 }  // namespace isotile

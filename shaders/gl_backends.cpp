@@ -1,0 +1,112 @@
+// Brick planning for the GL extractors and their installation into core's backend table.
+#include "gl_backends.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/errors.h"
+#include "core/extract.h"
+#include "gl_context.h"
+#include "gl_program.h"
+
+namespace isotile::gl {
+
+std::uint64_t memory_budget(std::uint64_t requested) {
+  if (requested > 0) return requested;
+  const DeviceInfo& dev = device();
+  if (dev.memory_free_kib > 0) return static_cast<std::uint64_t>(dev.memory_free_kib) * 1024 / 2;
+  return std::uint64_t{1} << 30;
+}
+
+Box3 cells_to_extract(const VolumeView& view, const Box3& cells) {
+  Box3 all;
+  for (int a = 0; a < 3; ++a) {
+    all.lo[a] = view.box.lo[a];
+    all.hi[a] = view.box.hi[a] - 1;
+  }
+  if (cells.empty()) return all;
+  Box3 b;
+  for (int a = 0; a < 3; ++a) {
+    b.lo[a] = std::max(cells.lo[a], all.lo[a]);
+    b.hi[a] = std::min(cells.hi[a], all.hi[a]);
+  }
+  return b;
+}
+
+Box3 slab_region(const VolumeView& view, const Box3& cells, int halo) {
+  Box3 r;
+  for (int a = 0; a < 3; ++a) {
+    // Cells need samples [lo, hi]; the closed box's edges reach hi + 1; gradients one more.
+    r.lo[a] = std::max(cells.lo[a] - halo, view.box.lo[a]);
+    r.hi[a] = std::min(cells.hi[a] + 2 + halo, view.box.hi[a]);
+  }
+  return r;
+}
+
+std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double bytes_per_sample,
+                             double largest_per_sample, int halo, std::uint64_t budget,
+                             std::int64_t max_cells_z) {
+  std::vector<Box3> slabs;
+  if (cells.empty()) return slabs;
+  const DeviceInfo& dev = device();
+  // The largest storage-buffer binding, and never more than 2 GiB (32-bit element indices).
+  const double binding =
+      static_cast<double>(std::min<std::int64_t>(dev.max_ssbo_bytes, std::int64_t{1} << 31));
+  const Box3 full = slab_region(view, cells, halo);
+  const double plane = static_cast<double>(full.extent(0) * full.extent(1));
+  const double planes = std::min(static_cast<double>(budget) / (plane * bytes_per_sample),
+                                 binding / (plane * largest_per_sample));
+  // A slab of t cells uploads t + 2 + 2 * halo sample planes.
+  std::int64_t t = static_cast<std::int64_t>(std::floor(planes)) - 2 - 2 * halo;
+  if (t < 1)
+    throw CapacityError("one x-y slab of " + std::to_string(full.extent(0)) + " x " +
+                        std::to_string(full.extent(1)) +
+                        " samples does not fit the GL device's buffers (bricking in x and y is "
+                        "not implemented for the GL backends; use the CPU backend)");
+  if (max_cells_z > 0) t = std::min(t, max_cells_z);
+  for (std::int64_t z = cells.lo[2]; z < cells.hi[2]; z += t) {
+    Box3 s = cells;
+    s.lo[2] = z;
+    s.hi[2] = std::min(z + t, cells.hi[2]);
+    slabs.push_back(s);
+  }
+  return slabs;
+}
+
+namespace {
+
+McOptions mc_options(const ExtractOptions& o) {
+  McOptions m;
+  m.iso = o.iso;
+  m.normals = o.normals;
+  // Brick mode, once ExtractOptions carries a cell box (the tiler's addition).
+  if constexpr (requires { o.cells; }) m.cells = o.cells;
+  return m;
+}
+
+Mesh run_gs(const VolumeView& view, const ExtractOptions& o) {
+  return mc_geometry_shader(view, mc_options(o));
+}
+
+Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
+  return mc_histopyramid(view, mc_options(o));
+}
+
+// Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
+// only prefers the GPU paths on a real GPU.
+std::string probe(bool* hardware) {
+  std::string why;
+  if (!available(&why)) return why;
+  *hardware = !device().software;
+  return {};
+}
+
+}  // namespace
+
+void register_gl_backends() {
+  register_backend(Backend::GeometryShader, {run_gs, nullptr, nullptr}, probe);
+  register_backend(Backend::HistoPyramid, {run_hp, nullptr, nullptr}, probe);
+}
+
+}  // namespace isotile::gl

@@ -1,0 +1,317 @@
+#include "gl_context.h"
+
+#include <EGL/egl.h>
+#include <EGL/eglext.h>
+#include <dlfcn.h>
+#include <glad/gl.h>
+
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <string_view>
+
+#include "core/errors.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// OSMesa's interface, declared here because the library is dlopen'ed (osmesa.h would make us link
+// it). Values from GL/osmesa.h.
+using OSMesaContext = void*;
+constexpr int kOsmesaFormat = 0x22, kOsmesaRgba = 0x1908, kOsmesaDepthBits = 0x30,
+              kOsmesaStencilBits = 0x31, kOsmesaAccumBits = 0x32, kOsmesaProfile = 0x33,
+              kOsmesaCoreProfile = 0x34, kOsmesaMajor = 0x36, kOsmesaMinor = 0x37;
+using OsmesaCreateFn = OSMesaContext (*)(const int*, OSMesaContext);
+using OsmesaMakeCurrentFn = unsigned char (*)(OSMesaContext, void*, unsigned, int, int);
+using OsmesaGetProcFn = GLADapiproc (*)(const char*);
+
+struct Context {
+  DeviceInfo info;
+  // EGL
+  EGLDisplay display = EGL_NO_DISPLAY;
+  EGLContext egl = EGL_NO_CONTEXT;
+  // OSMesa
+  OSMesaContext osmesa = nullptr;
+  OsmesaMakeCurrentFn osmesa_make_current = nullptr;
+  unsigned char pixel[4] = {};
+  GLuint framebuffer = 0;
+
+  bool make_current() {
+    if (osmesa) return osmesa_make_current(osmesa, pixel, GL_UNSIGNED_BYTE, 1, 1);
+    return eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, egl) == EGL_TRUE;
+  }
+  void release() {
+    if (osmesa)
+      osmesa_make_current(nullptr, nullptr, 0, 0, 0);
+    else
+      eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+  }
+};
+
+std::recursive_mutex g_mutex;
+std::unique_ptr<Context> g_context;  // set once created; lives until exit
+std::string g_failure;               // set once creation failed
+thread_local int t_depth = 0;
+
+bool has_word(const char* list, std::string_view word) {
+  if (!list) return false;
+  std::string_view s(list);
+  for (std::size_t pos = 0; (pos = s.find(word, pos)) != std::string_view::npos;
+       pos += word.size()) {
+    const bool start = pos == 0 || s[pos - 1] == ' ';
+    const bool end = pos + word.size() == s.size() || s[pos + word.size()] == ' ';
+    if (start && end) return true;
+  }
+  return false;
+}
+
+std::string egl_error(const char* what) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "%s failed (EGL error 0x%04x)", what, eglGetError());
+  return buf;
+}
+
+// A 4.5 core context on an initialised EGL display, current on this thread.
+bool egl_context_on(EGLDisplay display, Context& c, std::string& why) {
+  EGLint major = 0, minor = 0;
+  if (!eglInitialize(display, &major, &minor)) return why = egl_error("eglInitialize"), false;
+  if (!eglBindAPI(EGL_OPENGL_API)) return why = egl_error("eglBindAPI(OpenGL)"), false;
+  EGLConfig config = nullptr;  // EGL_NO_CONFIG_KHR where the display supports it
+  const char* exts = eglQueryString(display, EGL_EXTENSIONS);
+  if (!has_word(exts, "EGL_KHR_no_config_context")) {
+    const EGLint attrs[] = {EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_SURFACE_TYPE, EGL_PBUFFER_BIT,
+                            EGL_NONE};
+    EGLint n = 0;
+    if (!eglChooseConfig(display, attrs, &config, 1, &n) || n < 1)
+      return why = "no OpenGL-capable EGL config", false;
+  }
+  const EGLint ctx_attrs[] = {EGL_CONTEXT_MAJOR_VERSION,
+                              4,
+                              EGL_CONTEXT_MINOR_VERSION,
+                              5,
+                              EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                              EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                              EGL_NONE};
+  EGLContext ctx = eglCreateContext(display, config, EGL_NO_CONTEXT, ctx_attrs);
+  if (ctx == EGL_NO_CONTEXT) return why = egl_error("eglCreateContext(OpenGL 4.5 core)"), false;
+  if (!eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, ctx)) {
+    why = egl_error("eglMakeCurrent without a surface");
+    eglDestroyContext(display, ctx);
+    return false;
+  }
+  c.display = display;
+  c.egl = ctx;
+  return true;
+}
+
+GLADapiproc egl_proc(const char* name) {
+  return eglGetProcAddress(name);
+}
+
+bool try_egl_device(Context& c, std::string& why) {
+  auto query_devices =
+      reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+  auto device_string = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(
+      eglGetProcAddress("eglQueryDeviceStringEXT"));
+  auto platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
+      eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (!query_devices || !device_string || !platform_display)
+    return why = "EGL_EXT_device_enumeration is not supported", false;
+  EGLDeviceEXT devices[16];
+  EGLint n = 0;
+  if (!query_devices(16, devices, &n) || n == 0) return why = "no EGL device", false;
+  why = "no hardware EGL device (only software ones)";
+  for (EGLint i = 0; i < n; ++i) {
+    if (has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software")) continue;
+    EGLDisplay d = platform_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr);
+    if (d == EGL_NO_DISPLAY) {
+      why = egl_error("eglGetPlatformDisplayEXT(device)");
+      continue;
+    }
+    if (egl_context_on(d, c, why)) {
+      c.info.platform = "egl-device";
+      return gladLoadGL(egl_proc) != 0 || (why = "loading OpenGL functions failed", false);
+    }
+    eglTerminate(d);
+  }
+  return false;
+}
+
+bool try_egl_surfaceless(Context& c, std::string& why) {
+  auto platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
+      eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (!platform_display ||
+      !has_word(eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS), "EGL_MESA_platform_surfaceless"))
+    return why = "EGL_MESA_platform_surfaceless is not supported", false;
+  EGLDisplay d = platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+  if (d == EGL_NO_DISPLAY) return why = egl_error("eglGetPlatformDisplayEXT(surfaceless)"), false;
+  if (!egl_context_on(d, c, why)) {
+    eglTerminate(d);
+    return false;
+  }
+  c.info.platform = "egl-surfaceless";
+  return gladLoadGL(egl_proc) != 0 || (why = "loading OpenGL functions failed", false);
+}
+
+OsmesaGetProcFn g_osmesa_proc = nullptr;
+GLADapiproc osmesa_proc(const char* name) {
+  return g_osmesa_proc(name);
+}
+
+bool try_osmesa(Context& c, std::string& why) {
+  void* lib = dlopen("libOSMesa.so.8", RTLD_NOW | RTLD_LOCAL);
+  if (!lib) lib = dlopen("libOSMesa.so", RTLD_NOW | RTLD_LOCAL);
+  if (!lib) return why = "libOSMesa.so.8 not found (Debian: libosmesa6)", false;
+  auto create = reinterpret_cast<OsmesaCreateFn>(dlsym(lib, "OSMesaCreateContextAttribs"));
+  auto make_current = reinterpret_cast<OsmesaMakeCurrentFn>(dlsym(lib, "OSMesaMakeCurrent"));
+  g_osmesa_proc = reinterpret_cast<OsmesaGetProcFn>(dlsym(lib, "OSMesaGetProcAddress"));
+  if (!create || !make_current || !g_osmesa_proc)
+    return why = "libOSMesa lacks OSMesaCreateContextAttribs", false;
+  const int attrs[] = {kOsmesaFormat,
+                       kOsmesaRgba,
+                       kOsmesaDepthBits,
+                       0,
+                       kOsmesaStencilBits,
+                       0,
+                       kOsmesaAccumBits,
+                       0,
+                       kOsmesaProfile,
+                       kOsmesaCoreProfile,
+                       kOsmesaMajor,
+                       4,
+                       kOsmesaMinor,
+                       5,
+                       0};
+  c.osmesa = create(attrs, nullptr);
+  if (!c.osmesa) return why = "OSMesaCreateContextAttribs(OpenGL 4.5 core) failed", false;
+  c.osmesa_make_current = make_current;
+  if (!c.make_current()) return why = "OSMesaMakeCurrent failed", false;
+  c.info.platform = "osmesa";
+  return gladLoadGL(osmesa_proc) != 0 || (why = "loading OpenGL functions failed", false);
+}
+
+std::int64_t get_int(GLenum e) {
+  GLint64 v = 0;
+  glGetInteger64v(e, &v);
+  return v;
+}
+
+const char* gl_string(GLenum e) {
+  const auto* s = reinterpret_cast<const char*>(glGetString(e));
+  return s ? s : "";
+}
+
+void describe(Context& c) {
+  DeviceInfo& i = c.info;
+  i.vendor = gl_string(GL_VENDOR);
+  i.renderer = gl_string(GL_RENDERER);
+  i.version = gl_string(GL_VERSION);
+  i.glsl_version = gl_string(GL_SHADING_LANGUAGE_VERSION);
+  for (const char* sw : {"llvmpipe", "softpipe", "swrast", "SWR", "lavapipe"})
+    if (i.renderer.find(sw) != std::string::npos) i.software = true;
+  GLint n_ext = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n_ext);
+  bool nvx = false, ati = false;
+  for (GLint e = 0; e < n_ext; ++e) {
+    const std::string_view name = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, e));
+    nvx = nvx || name == "GL_NVX_gpu_memory_info";
+    ati = ati || name == "GL_ATI_meminfo";
+  }
+  if (nvx) {
+    i.memory_total_kib = get_int(GL_GPU_MEMORY_INFO_TOTAL_AVAILABLE_MEMORY_NVX);
+    i.memory_free_kib = get_int(GL_GPU_MEMORY_INFO_CURRENT_AVAILABLE_VIDMEM_NVX);
+  } else if (ati) {
+    GLint v[4] = {};
+    glGetIntegerv(GL_VBO_FREE_MEMORY_ATI, v);  // v[0]: total free in the pool, KiB
+    i.memory_free_kib = v[0];
+  }
+  i.max_ssbo_bytes = get_int(GL_MAX_SHADER_STORAGE_BLOCK_SIZE);
+  for (GLuint a = 0; a < 3; ++a) {
+    GLint v = 0;
+    glGetIntegeri_v(GL_MAX_COMPUTE_WORK_GROUP_COUNT, a, &v);
+    i.max_compute_groups[a] = v;
+  }
+  i.max_gs_output_vertices = get_int(GL_MAX_GEOMETRY_OUTPUT_VERTICES);
+  i.max_tf_interleaved = get_int(GL_MAX_TRANSFORM_FEEDBACK_INTERLEAVED_COMPONENTS);
+  i.max_vertex_ssbo_blocks = get_int(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS);
+  i.max_geometry_ssbo_blocks = get_int(GL_MAX_GEOMETRY_SHADER_STORAGE_BLOCKS);
+  i.max_3d_texture = get_int(GL_MAX_3D_TEXTURE_SIZE);
+}
+
+// Creates the context (current on this thread) or records why not. Caller holds g_mutex.
+void create() {
+  if (g_context || !g_failure.empty()) return;
+  const char* env = std::getenv("ISOTILE_GL");
+  const std::string only = env ? env : "";
+  if (only == "off") {
+    g_failure = "no OpenGL context: disabled by ISOTILE_GL=off";
+    return;
+  }
+  struct Way {
+    const char* name;
+    bool (*fn)(Context&, std::string&);
+  };
+  const Way ways[] = {
+      {"device", try_egl_device}, {"surfaceless", try_egl_surfaceless}, {"osmesa", try_osmesa}};
+  std::string reasons;
+  for (const Way& w : ways) {
+    if (!only.empty() && only != w.name) continue;
+    auto c = std::make_unique<Context>();
+    std::string why;
+    if (w.fn(*c, why)) {
+      glCreateFramebuffers(1, &c->framebuffer);
+      glNamedFramebufferParameteri(c->framebuffer, GL_FRAMEBUFFER_DEFAULT_WIDTH, 1);
+      glNamedFramebufferParameteri(c->framebuffer, GL_FRAMEBUFFER_DEFAULT_HEIGHT, 1);
+      glBindFramebuffer(GL_FRAMEBUFFER, c->framebuffer);
+      describe(*c);
+      if (glGetError() == GL_NO_ERROR) {
+        g_context = std::move(c);
+        return;
+      }
+      why = "setting up the context raised a GL error";
+    }
+    if (!reasons.empty()) reasons += "; ";
+    reasons += w.name;
+    reasons += ": ";
+    reasons += why;
+  }
+  if (reasons.empty())
+    reasons = "ISOTILE_GL='" + only + "' names no way (device, surfaceless, osmesa, off)";
+  g_failure = "no usable OpenGL 4.5 context (" + reasons + ")";
+}
+
+}  // namespace
+
+const DeviceInfo& device() {
+  Scope scope;
+  return g_context->info;
+}
+
+bool available(std::string* why) {
+  std::lock_guard lock(g_mutex);
+  if (!g_context && g_failure.empty()) {
+    create();
+    if (g_context && t_depth == 0) g_context->release();
+  }
+  if (why) *why = g_failure;
+  return g_context != nullptr;
+}
+
+Scope::Scope() : lock_(g_mutex) {
+  if (t_depth == 0) {
+    if (!g_context) {
+      create();
+      if (!g_context) throw InputError(g_failure);
+    } else if (!g_context->make_current()) {
+      throw Error("OpenGL: making the context current failed");
+    }
+  }
+  ++t_depth;
+}
+
+Scope::~Scope() {
+  if (--t_depth == 0 && g_context) g_context->release();
+}
+
+}  // namespace isotile::gl

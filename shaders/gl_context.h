@@ -1,0 +1,57 @@
+// The process's one headless OpenGL 4.5 core context, shared by the GL extractors.
+//
+// Created on first use, trying in turn: EGL's device platform with a hardware device (a real GPU,
+// no window system needed), EGL's surfaceless platform (Mesa: llvmpipe on CPU-only machines), and
+// OSMesa loaded with dlopen (so machines with a GPU need not have it). Without a surface every draw
+// fails with GL_INVALID_FRAMEBUFFER_OPERATION, so a framebuffer object without attachments is
+// bound once the context exists. Functions come from a glad loader generated at build time (see
+// shaders/CMakeLists.txt; libepoxy aborts under OSMesa).
+//
+// Environment (for tests and diagnosis):
+//   ISOTILE_GL=off                               no context: every GL backend reports unavailable
+//   ISOTILE_GL=device|surfaceless|osmesa         try only that way
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace isotile::gl {
+
+struct DeviceInfo {
+  std::string platform;  // "egl-device", "egl-surfaceless" or "osmesa"
+  std::string vendor, renderer, version, glsl_version;
+  bool software = false;  // llvmpipe, softpipe, swrast, or an EGL device marked as software
+  // Device memory in KiB from GL_NVX_gpu_memory_info or GL_ATI_meminfo; -1 when not told.
+  std::int64_t memory_total_kib = -1, memory_free_kib = -1;
+  std::int64_t max_ssbo_bytes = 0;            // GL_MAX_SHADER_STORAGE_BLOCK_SIZE
+  std::int64_t max_compute_groups[3] = {};    // GL_MAX_COMPUTE_WORK_GROUP_COUNT
+  std::int64_t max_gs_output_vertices = 0;    // GL_MAX_GEOMETRY_OUTPUT_VERTICES
+  std::int64_t max_tf_interleaved = 0;        // GL_MAX_TRANSFORM_FEEDBACK_INTERLEAVED_COMPONENTS
+  std::int64_t max_vertex_ssbo_blocks = 0;    // GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS
+  std::int64_t max_geometry_ssbo_blocks = 0;  // GL_MAX_GEOMETRY_SHADER_STORAGE_BLOCKS
+  std::int64_t max_3d_texture = 0;            // GL_MAX_3D_TEXTURE_SIZE
+};
+
+// The context's description; creates the context on first call. Throws InputError naming why
+// each way of creating one failed (the same message on every later call).
+const DeviceInfo& device();
+
+// True when a context can be (or was) created; never throws. `why` gets the reason when not.
+bool available(std::string* why = nullptr);
+
+// Holds the context current on the calling thread, and every other thread's GL work off it, for
+// its lifetime. Creates the context when needed (throws like device()).
+class Scope {
+ public:
+  Scope();
+  ~Scope();
+  Scope(const Scope&) = delete;
+  Scope& operator=(const Scope&) = delete;
+
+ private:
+  std::unique_lock<std::recursive_mutex> lock_;
+};
+
+}  // namespace isotile::gl

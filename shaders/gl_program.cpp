@@ -1,0 +1,217 @@
+#include "gl_program.h"
+
+#include <tbb/parallel_for.h>
+
+#include <array>
+#include <cstring>
+#include <map>
+#include <memory>
+
+#include "core/errors.h"
+#include "core/marching_cubes_tables.h"
+
+namespace isotile::gl {
+
+void check(const char* where) {
+  const GLenum e = glGetError();
+  if (e == GL_NO_ERROR) return;
+  char buf[128];
+  std::snprintf(buf, sizeof buf, "OpenGL error 0x%04x in %s", e, where);
+  if (e == GL_OUT_OF_MEMORY)
+    throw CapacityError(std::string(buf) + " (device memory exhausted: try a smaller --memory)");
+  throw Error(buf);
+}
+
+namespace {
+
+std::string stage_source(const Stage& s, const std::string& defines) {
+  std::string src = "#version 450 core\n";
+  if (s.type == GL_COMPUTE_SHADER) src += "#define STAGE_COMPUTE\n";
+  src += defines;
+  src += "#line 1\n";
+  src += embedded_glsl("mc_common.glsl");
+  // HistoPyramid output passes share the traversal.
+  if (s.file.starts_with("hp_") && s.file != "hp_classify.comp" && s.file != "hp_reduce.comp")
+    src += embedded_glsl("hp_common.glsl");
+  const std::string_view body = embedded_glsl(s.file);
+  if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");
+  src += body;
+  return src;
+}
+
+GLuint compile(const Stage& s, const std::string& defines) {
+  const std::string src = stage_source(s, defines);
+  const GLuint sh = glCreateShader(s.type);
+  const char* text = src.c_str();
+  glShaderSource(sh, 1, &text, nullptr);
+  glCompileShader(sh);
+  GLint ok = 0;
+  glGetShaderiv(sh, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[4096] = {};
+    glGetShaderInfoLog(sh, sizeof log, nullptr, log);
+    glDeleteShader(sh);
+    throw Error("compiling " + std::string(s.file) + " failed: " + log);
+  }
+  return sh;
+}
+
+}  // namespace
+
+GLuint program(const std::vector<Stage>& stages, const std::string& defines,
+               const std::vector<const char*>& varyings) {
+  // Programs live as long as the context (the process), like the context itself.
+  static std::map<std::string, GLuint> cache;
+  std::string key = defines;
+  for (const Stage& s : stages) key += "|" + std::string(s.file);
+  if (auto it = cache.find(key); it != cache.end()) return it->second;
+  const GLuint prog = glCreateProgram();
+  std::vector<GLuint> shaders;
+  for (const Stage& s : stages) {
+    shaders.push_back(compile(s, defines));
+    glAttachShader(prog, shaders.back());
+  }
+  if (!varyings.empty())
+    glTransformFeedbackVaryings(prog, static_cast<GLsizei>(varyings.size()), varyings.data(),
+                                GL_INTERLEAVED_ATTRIBS);
+  glLinkProgram(prog);
+  for (GLuint sh : shaders) glDeleteShader(sh);
+  GLint ok = 0;
+  glGetProgramiv(prog, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char log[4096] = {};
+    glGetProgramInfoLog(prog, sizeof log, nullptr, log);
+    glDeleteProgram(prog);
+    throw Error("linking " + std::string(stages.front().file) + " failed: " + log);
+  }
+  check("linking a program");
+  cache.emplace(key, prog);
+  return prog;
+}
+
+Buffer::Buffer(std::size_t bytes, const void* data, GLbitfield flags) : bytes_(bytes) {
+  glCreateBuffers(1, &id_);
+  glNamedBufferStorage(id_, static_cast<GLsizeiptr>(std::max<std::size_t>(bytes, 4)), data, flags);
+  check("allocating a buffer");
+}
+
+Buffer::~Buffer() {
+  if (id_) glDeleteBuffers(1, &id_);
+}
+
+Buffer& Buffer::operator=(Buffer&& o) noexcept {
+  if (this != &o) {
+    if (id_) glDeleteBuffers(1, &id_);
+    id_ = o.id_;
+    bytes_ = o.bytes_;
+    o.id_ = 0;
+  }
+  return *this;
+}
+
+void Buffer::bind(GLenum target, GLuint index) const {
+  glBindBufferRange(target, index, id_, 0,
+                    static_cast<GLsizeiptr>(std::max<std::size_t>(bytes_, 4)));
+}
+
+void Buffer::read(std::size_t offset, std::size_t bytes, void* out) const {
+  if (bytes == 0) return;
+  glGetNamedBufferSubData(id_, static_cast<GLintptr>(offset), static_cast<GLsizeiptr>(bytes), out);
+  check("reading a buffer back");
+}
+
+void dispatch(std::uint64_t n) {
+  if (n == 0) return;
+  const std::uint64_t groups = (n + 255) / 256;
+  const std::uint64_t x = std::min<std::uint64_t>(groups, 65535);
+  const std::uint64_t y = (groups + x - 1) / x;
+  glDispatchCompute(static_cast<GLuint>(x), static_cast<GLuint>(y), 1);
+  // Every pass reads what the one before wrote through storage buffers.
+  glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+}
+
+void bind_case_tables() {
+  static std::unique_ptr<Buffer> tables;
+  if (!tables) {
+    // std140 layout of `Tables` in mc_common.glsl.
+    struct {
+      std::array<std::uint32_t, 256 * 4> tri{};
+      std::array<std::uint32_t, 256> mask{};
+      std::array<std::int32_t, 12 * 4> edge{};
+    } t;
+    const auto& ct = mc::kCaseTable;
+    for (int c = 0; c < 256; ++c) {
+      std::uint8_t bytes[16];
+      std::memset(bytes, 0xff, sizeof bytes);
+      for (int i = 0; i < 3 * mc::kMaxTrianglesPerCase; ++i)
+        bytes[i] = static_cast<std::uint8_t>(ct.triangles[c][i]);
+      bytes[15] = ct.triangle_count[c];
+      std::memcpy(&t.tri[4 * c], bytes, 16);  // little-endian, as GL's uint is on the host
+      t.mask[c] = ct.edge_mask[c];
+    }
+    for (int e = 0; e < 12; ++e) {
+      const int lo = mc::kEdgeCorners[e][0];
+      t.edge[4 * e + 0] = lo & 1;
+      t.edge[4 * e + 1] = (lo >> 1) & 1;
+      t.edge[4 * e + 2] = (lo >> 2) & 1;
+      t.edge[4 * e + 3] = e / 4;
+    }
+    tables = std::make_unique<Buffer>(sizeof t, &t);
+  }
+  tables->bind(GL_UNIFORM_BUFFER, 0);
+}
+
+Samples upload_samples(const VolumeView& view, const Box3& region) {
+  Samples out;
+  const bool exact_in_float = view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
+                              view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
+                              view.type == ScalarType::Float32;
+  const Index3 d = {region.extent(0), region.extent(1), region.extent(2)};
+  const std::int64_t rows = d[1] * d[2];
+  auto convert = [&](auto tag) {
+    using Out = decltype(tag);
+    std::vector<Out> buf(static_cast<std::size_t>(d[0] * rows));
+    visit_scalar(view.type, [&](auto in_tag) {
+      using In = decltype(in_tag);
+      const In* src = view.typed<In>();
+      tbb::parallel_for(std::int64_t{0}, rows, [&](std::int64_t r) {
+        const std::int64_t j = region.lo[1] - view.box.lo[1] + r % d[1];
+        const std::int64_t k = region.lo[2] - view.box.lo[2] + r / d[1];
+        const std::int64_t i0 = region.lo[0] - view.box.lo[0];
+        Out* dst = buf.data() + r * d[0];
+        for (std::int64_t i = 0; i < d[0]; ++i)
+          dst[i] = static_cast<Out>(src[view.offset(i0 + i, j, k)]);
+      });
+    });
+    out.buffer = Buffer(buf.size() * sizeof(Out), buf.data());
+  };
+  if (exact_in_float) {
+    convert(float{});
+    out.defines = "#define SAMPLE_T float\n";
+  } else {
+    convert(double{});
+    out.defines = "#define SAMPLE_T double\n";
+  }
+  return out;
+}
+
+void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
+  auto i3 = [&](const char* name, const Index3& v) {
+    glProgramUniform3i(prog, glGetUniformLocation(prog, name), static_cast<GLint>(v[0]),
+                       static_cast<GLint>(v[1]), static_cast<GLint>(v[2]));
+  };
+  auto d3 = [&](const char* name, const Vec3d& v) {
+    glProgramUniform3d(prog, glGetUniformLocation(prog, name), v[0], v[1], v[2]);
+  };
+  i3("u_region_lo", u.region.lo);
+  i3("u_region_dims", {u.region.extent(0), u.region.extent(1), u.region.extent(2)});
+  i3("u_global_dims", u.global_dims);
+  i3("u_box_lo", u.cells.lo);
+  i3("u_box_hi", u.cells.hi);
+  glProgramUniform1d(prog, glGetUniformLocation(prog, "u_iso"), u.iso);
+  d3("u_origin", u.origin);
+  d3("u_spacing", u.spacing);
+  check("setting the grid uniforms");
+}
+
+}  // namespace isotile::gl

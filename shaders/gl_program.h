@@ -1,0 +1,104 @@
+// Small GL helpers shared by the GL extractors: programs built from the embedded GLSL (cached per
+// variant), buffers, compute dispatch, the Marching Cubes tables as a uniform buffer, and the
+// upload of a volume region. Call only inside a gl::Scope.
+#pragma once
+
+#include <glad/gl.h>
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/volume.h"
+
+namespace isotile::gl {
+
+std::string_view embedded_glsl(std::string_view name);  // generated: embedded_shaders.cpp
+
+// Throws isotile::Error naming `where` when GL reports an error.
+void check(const char* where);
+
+struct Stage {
+  GLenum type;
+  std::string_view file;  // a file of shaders/glsl/
+};
+
+// The program of `stages`, each compiled as "#version 450", the extension lines, `defines`, then
+// mc_common.glsl, then its file; with transform-feedback `varyings` (interleaved) when given.
+// Built once per (stages, defines) and kept for the context's life. Throws Error with the
+// compiler's log.
+GLuint program(const std::vector<Stage>& stages, const std::string& defines,
+               const std::vector<const char*>& varyings = {});
+
+// A GL buffer object owned by this handle.
+class Buffer {
+ public:
+  Buffer() = default;
+  // Immutable storage of `bytes` (at least 4), filled from `data` when given.
+  explicit Buffer(std::size_t bytes, const void* data = nullptr, GLbitfield flags = 0);
+  ~Buffer();
+  Buffer(Buffer&& o) noexcept : id_(o.id_), bytes_(o.bytes_) { o.id_ = 0; }
+  Buffer& operator=(Buffer&& o) noexcept;
+  GLuint id() const { return id_; }
+  std::size_t bytes() const { return bytes_; }
+  void bind(GLenum target, GLuint index) const;
+  void read(std::size_t offset, std::size_t bytes, void* out) const;
+
+ private:
+  GLuint id_ = 0;
+  std::size_t bytes_ = 0;
+};
+
+// Runs the current compute program (local size 256 in x) over n invocations; the shaders compute
+// their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.
+void dispatch(std::uint64_t n);
+
+// The Marching Cubes case tables (core/marching_cubes_tables.h) as the std140 uniform block
+// `Tables` of mc_common.glsl, bound at uniform binding 0. Uploaded once per context.
+void bind_case_tables();
+
+// Samples of `view` in the global box `region` (inside view.box), x fastest, as float when every
+// value of the type converts exactly (8- and 16-bit integers, float32), else as double: the
+// shaders then see exactly the CPU's values. `defines` gets SAMPLE_T.
+struct Samples {
+  Buffer buffer;
+  std::string defines;
+};
+Samples upload_samples(const VolumeView& view, const Box3& region);
+
+// Sets the uniforms every MC shader reads (mc_common.glsl) on `prog`.
+struct GridUniforms {
+  Box3 region;  // global samples uploaded
+  Box3 cells;   // global cells extracted
+  Index3 global_dims;
+  double iso;
+  Vec3d origin, spacing;
+};
+void set_grid_uniforms(GLuint prog, const GridUniforms& u);
+
+}  // namespace isotile::gl
+
+namespace isotile::gl {
+
+// Bytes of device memory to plan for: `requested` when non-zero, else half the free memory the
+// driver reports, else 1 GiB.
+std::uint64_t memory_budget(std::uint64_t requested);
+
+// The global cells to extract: `cells` clipped to the view's cells, or all of them when empty.
+Box3 cells_to_extract(const VolumeView& view, const Box3& cells);
+
+// Splits `cells` into slabs along z (full x and y) so that one slab's buffers fit:
+// `bytes_per_sample` device bytes per uploaded sample, no single buffer above the largest
+// storage-buffer binding (`largest_per_sample` bytes per sample for the largest), `halo` extra
+// sample planes on each side. `max_cells_z` (> 0) caps the thickness. Throws CapacityError when
+// even a one-cell slab does not fit.
+std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double bytes_per_sample,
+                             double largest_per_sample, int halo, std::uint64_t budget,
+                             std::int64_t max_cells_z);
+
+// The global samples a slab of cells needs: its cells' corners and the far ends of the edges of
+// its closed box, plus `halo` samples around (gradients), clipped to the view.
+Box3 slab_region(const VolumeView& view, const Box3& cells, int halo);
+
+}  // namespace isotile::gl

@@ -1,0 +1,53 @@
+// HistoPyramid traversal, shared by the output passes (after mc_common.glsl).
+layout(std430, binding = 1) readonly buffer Codes { uint codes[]; };
+layout(std430, binding = 2) readonly buffer Pyramid { uvec2 pyramid[]; };
+
+uniform int u_levels;             // L: level L is one node holding the totals
+uniform uint u_level_offset[16];  // level l >= 1 starts at pyramid[u_level_offset[l]]
+uniform uint u_level_count[16];   // nodes of level l; level 0: the elements
+
+uint code_of(uint e) { return (codes[e >> 1] >> (16u * (e & 1u))) & 0xffffu; }
+uint vertex_count_of(uint code) { return uint(bitCount(code >> 8)); }
+// which = 0: vertices, 1: triangles.
+uint leaf_count(uint code, int which) {
+  return which == 0 ? vertex_count_of(code) : tri_count(code & 0xffu);
+}
+
+// Descends from the top node to the element holding output number k (of kind `which`); k becomes
+// the rank of the output within that element. Children are visited in element order, so outputs
+// come out in element order.
+uint find_element(inout uint k, int which) {
+  uint idx = 0u;
+  for (int l = u_levels - 1; l >= 1; --l) {
+    uint base = 8u * idx;
+    for (uint c = 0u; c < 8u; ++c) {
+      uint q = base + c;
+      uint n = pyramid[u_level_offset[l] + q][which];
+      if (k < n || c == 7u || q + 1u >= u_level_count[l]) {
+        idx = q;
+        break;
+      }
+      k -= n;
+    }
+  }
+  uint base = 8u * idx;
+  for (uint c = 0u; c < 8u; ++c) {
+    uint e = base + c;
+    uint n = leaf_count(code_of(e), which);
+    if (k < n || c == 7u || e + 1u >= u_level_count[0]) return e;
+    k -= n;
+  }
+  return base;
+}
+
+// Number of vertices of the elements before e: the left siblings' counts at every level.
+uint vertex_prefix(uint e) {
+  uint sum = 0u;
+  for (uint q = e & ~7u; q < e; ++q) sum += vertex_count_of(code_of(q));
+  uint idx = e >> 3;
+  for (int l = 1; l < u_levels; ++l) {
+    for (uint q = idx & ~7u; q < idx; ++q) sum += pyramid[u_level_offset[l] + q].x;
+    idx >>= 3;
+  }
+  return sum;
+}

@@ -1,0 +1,28 @@
+// HistoPyramid pass 3: one invocation per output vertex, in key order.
+layout(std430, binding = 3) writeonly buffer Positions { float out_pos[]; };
+#ifdef NORMALS
+layout(std430, binding = 4) writeonly buffer Normals { float out_nrm[]; };
+#endif
+
+uniform uint u_first;  // first vertex of this chunk
+uniform uint u_count;  // vertices in this chunk
+
+void main() {
+  uint i = invocation();
+  if (i >= u_count) return;
+  uint k = u_first + i;
+  uint e = find_element(k, 0);
+  uint bits = code_of(e) >> 8;
+  int axis = 0;
+  for (; axis < 2; ++axis) {  // the k-th crossed edge of the element
+    if (((bits >> axis) & 1u) == 0u) continue;
+    if (k == 0u) break;
+    --k;
+  }
+  vec3 p, n;
+  edge_vertex(element_sample(e), axis, p, n);
+  for (int c = 0; c < 3; ++c) out_pos[3u * i + uint(c)] = p[c];
+#ifdef NORMALS
+  for (int c = 0; c < 3; ++c) out_nrm[3u * i + uint(c)] = n[c];
+#endif
+}

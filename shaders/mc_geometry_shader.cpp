@@ -1,0 +1,216 @@
+// Marching Cubes on the geometry-shader path (the paper's Sec. IV-A): one point per cell, the
+// geometry shader classifies it with the CPU's case tables and emits its triangles, captured by
+// transform feedback; the triangle soup is then welded into an indexed mesh by global edge key.
+//
+// Capture limits: a binding of more than 2 GiB loses data silently on Mesa (see gl.md), so the
+// capture range is at most 2 GiB (and what memory allows). The GL_PRIMITIVES_GENERATED and
+// GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN queries detect an overflow (written < generated); the
+// triangles of the last, possibly partial, cell are dropped and the draw resumes at that cell
+// into a buffer sized from the generated count. Transform feedback keeps primitive order, so the
+// soup is cell by cell in table order, and welding in key order gives the CPU's mesh.
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <utility>
+
+#include "core/errors.h"
+#include "gl_backends.h"
+#include "gl_context.h"
+#include "gl_program.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// The largest capture range (bytes) a binding may have: 2 GiB.
+constexpr std::uint64_t kMaxCaptureBytes = std::uint64_t{1} << 31;
+
+struct Soup {
+  std::vector<std::uint64_t> keys;  // per triangle corner: lin(s) * 3 + axis, global
+  std::vector<Vec3f> positions, normals;
+  std::vector<char> in_box;  // per triangle: its cell is one of the cells asked for
+};
+
+// An initial capture size in triangles: enough for a smooth surface crossing the slab, so that
+// most slabs need one pass; a second pass is sized from the generated count.
+std::uint64_t first_guess(const Box3& cells) {
+  const std::uint64_t x = cells.extent(0), y = cells.extent(1), z = cells.extent(2);
+  return 8 * (x * y + y * z + x * z) + 64;
+}
+
+}  // namespace
+
+Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* stats) {
+  Scope scope;
+  Mesh mesh;
+  for (int a = 0; a < 3; ++a)
+    if (view.dims[a] < 2) return mesh;
+  const int halo = o.normals ? 1 : 0;
+  const bool wide = !(view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
+                      view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
+                      view.type == ScalarType::Float32);
+  const double sample_bytes = wide ? 8 : 4;
+  const std::uint64_t budget = memory_budget(o.memory);
+  // Half the budget for the samples, half for the capture.
+  const Box3 box = cells_to_extract(view, o.cells);
+  if (box.empty()) return mesh;
+  const std::vector<Box3> slabs =
+      plan_slabs(view, box, sample_bytes, sample_bytes, halo, budget / 2, o.max_brick_cells_z);
+
+  // Captured per corner: key, cell, position (and normal): 32-bit words.
+  const std::size_t words = o.normals ? 8 : 5;
+  const std::size_t tri_bytes = 3 * words * 4;
+  std::uint64_t limit = o.capture_bytes ? o.capture_bytes : std::min(kMaxCaptureBytes, budget / 2);
+  limit = std::min(limit, kMaxCaptureBytes) / tri_bytes;
+  limit = std::max<std::uint64_t>(limit, 5);  // one cell's triangles always fit
+
+  std::vector<const char*> varyings = {"tf_key", "tf_cell", "tf_pos"};
+  if (o.normals) varyings.push_back("tf_nrm");
+  static GLuint vao = 0;
+  if (!vao) glCreateVertexArrays(1, &vao);
+  GLuint queries[2];
+  glCreateQueries(GL_PRIMITIVES_GENERATED, 1, &queries[0]);
+  glCreateQueries(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, 1, &queries[1]);
+  bind_case_tables();
+  glEnable(GL_RASTERIZER_DISCARD);
+  glBindVertexArray(vao);
+
+  Soup soup;
+  int passes = 0;
+  std::vector<std::uint32_t> staging;
+  try {
+    for (const Box3& slab : slabs) {
+      // In brick mode the vertices on the box's upper faces are listed although no cell of the
+      // box uses some of them: draw one more layer of cells there, weld its corners too, and
+      // drop its triangles.
+      Box3 cells = slab;
+      for (int a = 0; a < 3; ++a)
+        if (slab.hi[a] == box.hi[a]) cells.hi[a] = std::min(box.hi[a] + 1, view.global_dims[a] - 1);
+      const Box3 region = slab_region(view, cells, halo);
+      const Samples samples = upload_samples(view, region);
+      const std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
+      const GLuint prog =
+          program({{GL_VERTEX_SHADER, "gs_mc.vert"}, {GL_GEOMETRY_SHADER, "gs_mc.geom"}}, defines,
+                  varyings);
+      set_grid_uniforms(prog, {region, cells, view.global_dims, o.iso, view.origin, view.spacing});
+      glUseProgram(prog);
+      samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
+      const Index3 d = {cells.extent(0) + 1, cells.extent(1) + 1, cells.extent(2) + 1};
+      const std::int64_t n_cells = cells.extent(0) * cells.extent(1) * cells.extent(2);
+      std::uint64_t cap = std::min(limit, first_guess(cells));
+      Buffer capture(cap * tri_bytes);
+      for (std::int64_t first = 0; first < n_cells;) {
+        glBindBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, capture.id(), 0,
+                          static_cast<GLsizeiptr>(cap * tri_bytes));
+        glBeginQuery(GL_PRIMITIVES_GENERATED, queries[0]);
+        glBeginQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, queries[1]);
+        glBeginTransformFeedback(GL_TRIANGLES);
+        glDrawArrays(GL_POINTS, static_cast<GLint>(first), static_cast<GLsizei>(n_cells - first));
+        glEndTransformFeedback();
+        glEndQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN);
+        glEndQuery(GL_PRIMITIVES_GENERATED);
+        GLuint64 generated = 0, written = 0;
+        glGetQueryObjectui64v(queries[0], GL_QUERY_RESULT, &generated);
+        glGetQueryObjectui64v(queries[1], GL_QUERY_RESULT, &written);
+        check("capturing triangles");
+        ++passes;
+        staging.resize(written * 3 * words);
+        capture.read(0, written * tri_bytes, staging.data());
+        auto cell_of = [&](std::uint64_t t) { return staging[t * 3 * words + 1]; };
+        std::uint64_t keep = written;
+        std::int64_t resume = n_cells;
+        if (written < generated) {
+          // The last captured cell may be cut short: drop it and draw again from it.
+          const std::uint32_t last_cell = cell_of(written - 1);
+          while (keep > 0 && cell_of(keep - 1) == last_cell) --keep;
+          resume = last_cell;
+          if (keep == 0 && resume == first) throw Error("transform feedback captured no cell");
+          const std::uint64_t needed = generated - keep;
+          if (needed > cap) {
+            cap = std::min(needed, limit);
+            capture = Buffer(cap * tri_bytes);
+          }
+        }
+        const std::size_t base = soup.keys.size();
+        soup.keys.resize(base + 3 * keep);
+        soup.positions.resize(base + 3 * keep);
+        soup.in_box.resize(base / 3 + keep);
+        if (o.normals) soup.normals.resize(base + 3 * keep);
+        const Index3 dc = {cells.extent(0), cells.extent(1), cells.extent(2)};
+        for (std::size_t t = 0; t < keep; ++t) {
+          const std::int64_t c = cell_of(t);
+          soup.in_box[base / 3 + t] = cells.lo[0] + c % dc[0] < box.hi[0] &&
+                                      cells.lo[1] + (c / dc[0]) % dc[1] < box.hi[1] &&
+                                      cells.lo[2] + c / (dc[0] * dc[1]) < box.hi[2];
+        }
+        for (std::size_t c = 0; c < 3 * keep; ++c) {
+          const std::uint32_t* w = staging.data() + c * words;
+          const std::uint64_t e = w[0] / 3, axis = w[0] % 3;
+          const std::int64_t sx = cells.lo[0] + static_cast<std::int64_t>(e % d[0]);
+          const std::int64_t sy = cells.lo[1] + static_cast<std::int64_t>((e / d[0]) % d[1]);
+          const std::int64_t sz = cells.lo[2] + static_cast<std::int64_t>(e / (d[0] * d[1]));
+          const std::uint64_t lin = static_cast<std::uint64_t>(
+              sx + view.global_dims[0] * (sy + view.global_dims[1] * sz));
+          soup.keys[base + c] = lin * 3 + axis;
+          std::memcpy(soup.positions[base + c].data(), w + 2, 12);
+          if (o.normals) std::memcpy(soup.normals[base + c].data(), w + 5, 12);
+        }
+        first = resume;
+      }
+    }
+  } catch (...) {
+    glDisable(GL_RASTERIZER_DISCARD);
+    glDeleteQueries(2, queries);
+    throw;
+  }
+  glDisable(GL_RASTERIZER_DISCARD);
+  glDeleteQueries(2, queries);
+  glUseProgram(0);
+
+  // Weld: corners sorted by (key, position in the soup); one vertex per distinct key whose lower
+  // sample lies in the closed box, in key order. Every such crossed edge borders a drawn cell, so
+  // these are exactly the CPU's vertices.
+  const std::size_t n = soup.keys.size();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = {soup.keys[i], static_cast<std::uint32_t>(i)};
+  tbb::parallel_sort(order.begin(), order.end());
+  auto in_closed_box = [&](std::uint64_t key) {
+    const std::uint64_t lin = key / 3;
+    const auto nx = static_cast<std::uint64_t>(view.global_dims[0]);
+    const auto ny = static_cast<std::uint64_t>(view.global_dims[1]);
+    const std::int64_t s[3] = {static_cast<std::int64_t>(lin % nx),
+                               static_cast<std::int64_t>((lin / nx) % ny),
+                               static_cast<std::int64_t>(lin / (nx * ny))};
+    for (int a = 0; a < 3; ++a)
+      if (s[a] < box.lo[a] || s[a] > box.hi[a]) return false;
+    return true;
+  };
+  std::vector<std::uint32_t> vertex_of(n, ~0u);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!in_closed_box(order[i].first)) continue;
+    if (i == 0 || order[i].first != order[i - 1].first) {
+      if (mesh.positions.size() == std::numeric_limits<std::uint32_t>::max())
+        throw CapacityError(
+            "the mesh would have more than 2^32 - 1 vertices, more than an "
+            "in-memory mesh can index");
+      mesh.positions.push_back(soup.positions[order[i].second]);
+      if (o.normals) mesh.normals.push_back(soup.normals[order[i].second]);
+    }
+    vertex_of[order[i].second] = static_cast<std::uint32_t>(mesh.positions.size() - 1);
+  }
+  mesh.triangles.reserve(n / 3);
+  for (std::size_t t = 0; t < n / 3; ++t)
+    if (soup.in_box[t])
+      mesh.triangles.push_back({vertex_of[3 * t], vertex_of[3 * t + 1], vertex_of[3 * t + 2]});
+  if (stats) {
+    stats->bricks = static_cast<int>(slabs.size());
+    stats->capture_passes = passes;
+  }
+  return mesh;
+}
+
+}  // namespace isotile::gl

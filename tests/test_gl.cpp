@@ -1,0 +1,229 @@
+// The OpenGL Marching Cubes backends (geometry shader, HistoPyramid) against the CPU reference:
+// the same mesh (vertices in key order, triangles cell by cell), whole-volume, sliced into slabs,
+// in brick mode, with a capture buffer that overflows, and for every sample width. Runs on any
+// OpenGL 4.5 device; on CPU-only machines on Mesa's llvmpipe. Skips when no context can be made.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/extract.h"
+#include "core/marching_cubes.h"
+#include "core/procedural_fields.h"
+#include "core/volume_io.h"
+#include "shaders/gl_backends.h"
+#include "shaders/gl_context.h"
+#include "test_support.h"
+
+namespace isotile {
+namespace {
+
+using testing::shared_volume;
+
+#define REQUIRE_GL()                               \
+  do {                                             \
+    std::string why;                               \
+    if (!gl::available(&why)) GTEST_SKIP() << why; \
+  } while (0)
+
+enum class Path { Gs, Hp };
+
+Mesh run(Path p, const VolumeView& v, const gl::McOptions& o, gl::McStats* stats = nullptr) {
+  return p == Path::Gs ? gl::mc_geometry_shader(v, o, stats) : gl::mc_histopyramid(v, o, stats);
+}
+
+// Same triangles and vertex order as the CPU; positions within 1e-5 voxel (and counted when not
+// bit-equal), normals within 1e-5.
+void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v, const char* what) {
+  ASSERT_EQ(gl.positions.size(), cpu.positions.size()) << what;
+  ASSERT_EQ(gl.normals.size(), cpu.normals.size()) << what;
+  ASSERT_EQ(gl.triangles.size(), cpu.triangles.size()) << what;
+  EXPECT_TRUE(gl.triangles == cpu.triangles) << what;
+  std::size_t differ = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < cpu.positions.size(); ++i)
+    for (int a = 0; a < 3; ++a) {
+      const double d = std::abs(double(gl.positions[i][a]) - double(cpu.positions[i][a]));
+      worst = std::max(worst, d / v.spacing[a]);
+      differ += gl.positions[i][a] != cpu.positions[i][a];
+    }
+  EXPECT_LE(worst, 1e-5) << what;
+  // llvmpipe's double arithmetic is IEEE: the positions are the CPU's bit for bit.
+  if (gl::device().software) {
+    EXPECT_EQ(differ, 0u) << what;
+  }
+  double worst_n = 0;
+  for (std::size_t i = 0; i < cpu.normals.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
+  EXPECT_LE(worst_n, 1e-5) << what;
+}
+
+// A field sampled into a volume of another scalar type, scaled so that integers keep the shape.
+Volume convert(const Volume& src, ScalarType type, double scale, double offset) {
+  Volume out(type, src.dims(), src.spacing(), src.origin());
+  const float* in = src.data<float>();
+  visit_scalar(type, [&](auto tag) {
+    using T = decltype(tag);
+    T* dst = out.data<T>();
+    for (std::int64_t i = 0; i < src.sample_count(); ++i)
+      dst[i] = static_cast<T>(std::round(in[i] * scale + offset));
+  });
+  return out;
+}
+
+class GlPaths : public ::testing::TestWithParam<Path> {};
+
+TEST_P(GlPaths, FieldsEqualCpu) {
+  REQUIRE_GL();
+  for (const char* name : {"field:sphere:33", "field:gyroid:48", "field:torus:37"})
+    for (bool normals : {false, true}) {
+      const FieldSpec spec = *parse_field_spec(name);
+      Volume vol = make_field_volume(spec);
+      vol.set_spacing({0.5, 1.0, 2.0});
+      vol.set_origin({-3.0, 0.25, 7.0});
+      const double iso = field_default_iso(spec.kind);
+      const Mesh cpu = marching_cubes(vol.view(), {.iso = iso, .normals = normals});
+      ASSERT_GT(cpu.triangles.size(), 100u);
+      const Mesh gl = run(GetParam(), vol.view(), {.iso = iso, .normals = normals});
+      expect_same_mesh(gl, cpu, vol.view(), (std::string(name) + (normals ? " +n" : "")).c_str());
+    }
+}
+
+// Every sample width: 8/16-bit integers and float upload as float, 32-bit integers and doubles
+// as double; the inside test must agree with the CPU's at values equal to the isovalue.
+TEST_P(GlPaths, EveryScalarTypeEqualsCpu) {
+  REQUIRE_GL();
+  const Volume field = make_field_volume({FieldKind::Gyroid, 29});
+  for (ScalarType t : {ScalarType::Int8, ScalarType::UInt8, ScalarType::Int16, ScalarType::UInt16,
+                       ScalarType::Int32, ScalarType::UInt32, ScalarType::Float64}) {
+    const bool is_unsigned =
+        t == ScalarType::UInt8 || t == ScalarType::UInt16 || t == ScalarType::UInt32;
+    const Volume v = convert(field, t, 40.0, is_unsigned ? 64.0 : 0.0);
+    const double iso = is_unsigned ? 64.0 : 0.0;  // many samples exactly at the isovalue
+    const Mesh cpu = marching_cubes(v.view(), {.iso = iso, .normals = true});
+    const Mesh gl = run(GetParam(), v.view(), {.iso = iso, .normals = true});
+    expect_same_mesh(gl, cpu, v.view(), std::string(scalar_name(t)).c_str());
+  }
+}
+
+// Slabs along z (as for a volume larger than the device's memory) give the whole-volume mesh.
+TEST_P(GlPaths, SlabsEqualWholeVolume) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::Torus, 41});
+  const double iso = field_default_iso(FieldKind::Torus);
+  const Mesh cpu = marching_cubes(vol.view(), {.iso = iso, .normals = true});
+  for (std::int64_t slab : {1, 2, 7, 13}) {
+    gl::McStats stats;
+    const Mesh gl = run(GetParam(), vol.view(),
+                        {.iso = iso, .normals = true, .max_brick_cells_z = slab}, &stats);
+    EXPECT_EQ(stats.bricks, (40 + slab - 1) / slab);
+    expect_same_mesh(gl, cpu, vol.view(), ("slab " + std::to_string(slab)).c_str());
+  }
+}
+
+// Brick mode (the tiler's contract, core/marching_cubes.h): the GL output for a box of cells from
+// a view holding it plus the halo equals the CPU's brick output.
+TEST_P(GlPaths, BrickModeEqualsCpu) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::Gyroid, 40});
+  const VolumeView whole = vol.view();
+  for (bool normals : {false, true}) {
+    const int halo = marching_cubes_halo({.normals = normals});
+    for (const Box3& cells : {Box3{{0, 0, 0}, {1, 1, 1}}, Box3{{5, 3, 11}, {18, 20, 17}},
+                              Box3{{30, 0, 29}, {39, 39, 39}}, Box3{{0, 33, 2}, {7, 39, 9}}}) {
+      Box3 local;
+      for (int a = 0; a < 3; ++a) {
+        local.lo[a] = std::max<std::int64_t>(cells.lo[a] - halo, 0);
+        local.hi[a] = std::min<std::int64_t>(cells.hi[a] + halo + 1, whole.dims[a]);
+      }
+      const VolumeView view = subview(whole, local);
+      const Mesh cpu = marching_cubes(view, {.iso = 0.0, .normals = normals, .cells = cells});
+      for (std::int64_t slab : {0, 2}) {
+        const Mesh gl =
+            run(GetParam(), view, {.normals = normals, .cells = cells, .max_brick_cells_z = slab});
+        expect_same_mesh(gl, cpu, view, "brick");
+      }
+    }
+  }
+}
+
+TEST_P(GlPaths, RealVolumeEqualsCpu) {
+  REQUIRE_GL();
+  const auto path = shared_volume("neghip_66x66x66_uint8.raw.gz");
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << path << " not found";
+  const Volume vol = read_volume(path.string());
+  for (double iso : {25.5, 100.0}) {
+    const Mesh cpu = marching_cubes(vol.view(), {.iso = iso, .normals = true});
+    ASSERT_GT(cpu.triangles.size(), 1000u);
+    const Mesh gl = run(GetParam(), vol.view(), {.iso = iso, .normals = true});
+    expect_same_mesh(gl, cpu, vol.view(), "neghip");
+  }
+}
+
+TEST_P(GlPaths, EmptyAndTinyVolumes) {
+  REQUIRE_GL();
+  // No crossing at all, and the smallest volume with a cell.
+  const Volume vol = make_field_volume({FieldKind::Sphere, 16});
+  EXPECT_TRUE(run(GetParam(), vol.view(), {.iso = 1e9}).triangles.empty());
+  EXPECT_TRUE(run(GetParam(), vol.view(), {.iso = 1e9}).positions.empty());
+  float s[8] = {1, 0, 0, 0, 0, 0, 0, 0};
+  const VolumeView tiny = dense_view(s, ScalarType::Float32, {2, 2, 2});
+  const Mesh cpu = marching_cubes(tiny, {.iso = 0.5});
+  ASSERT_EQ(cpu.triangles.size(), 1u);
+  expect_same_mesh(run(GetParam(), tiny, {.iso = 0.5}), cpu, tiny, "one cell");
+}
+
+INSTANTIATE_TEST_SUITE_P(Gl, GlPaths, ::testing::Values(Path::Gs, Path::Hp),
+                         [](const auto& info) { return info.param == Path::Gs ? "Gs" : "Hp"; });
+
+// A capture buffer far too small: the geometry-shader path detects the overflow (written <
+// generated), drops the cut cell and resumes; the result is unchanged.
+TEST(GlGeometryShader, CaptureOverflowResumes) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::Gyroid, 24});
+  const Mesh cpu = marching_cubes(vol.view(), {.iso = 0.0, .normals = true});
+  for (std::uint64_t bytes : {1u, 500u, 20000u}) {
+    gl::McStats stats;
+    const Mesh gl = gl::mc_geometry_shader(
+        vol.view(), {.normals = true, .max_brick_cells_z = 9, .capture_bytes = bytes}, &stats);
+    EXPECT_GT(stats.capture_passes, stats.bricks) << bytes;
+    expect_same_mesh(gl, cpu, vol.view(), "overflow");
+  }
+}
+
+TEST(GlBackends, RegisteredInTheTable) {
+  REQUIRE_GL();
+  gl::register_gl_backends();
+  const Volume vol = make_field_volume({FieldKind::Sphere, 20});
+  const Mesh cpu = marching_cubes(vol.view(), {.iso = 0.0});
+  for (Backend b : {Backend::GeometryShader, Backend::HistoPyramid}) {
+    const ExtractOptions o{.backend = b};
+    EXPECT_EQ(resolve_backend(o), b);
+    expect_same_mesh(extract(vol.view(), o), cpu, vol.view(), "table");
+  }
+  // Auto takes a GPU path only on a real GPU.
+  const Backend a = resolve_backend({});
+  EXPECT_EQ(a == Backend::Cpu, gl::device().software);
+  for (const BackendCaps& c : capabilities())
+    if (c.backend != Backend::Cpu) {
+      EXPECT_TRUE(c.available);
+      EXPECT_EQ(c.hardware, !gl::device().software);
+    }
+}
+
+TEST(GlContext, DescribesTheDevice) {
+  REQUIRE_GL();
+  const gl::DeviceInfo& d = gl::device();
+  EXPECT_FALSE(d.renderer.empty());
+  EXPECT_EQ(d.version.rfind("4.", 0), 0u) << d.version;
+  EXPECT_GE(d.max_gs_output_vertices, 15);
+  EXPECT_GT(d.max_ssbo_bytes, 0);
+}
+
+}  // namespace
+}  // namespace isotile
