@@ -100,6 +100,28 @@ void AtomicFile::write(const void* data, std::size_t n) {
   }
 }
 
+void AtomicFile::write_at(std::uint64_t offset, const void* data, std::size_t n) {
+  if (!file_) throw IoError("cannot write " + target_.string() + ": file already closed");
+  // Buffered writes must reach the descriptor before a positioned one can land beside them.
+  if (std::fflush(file_) != 0) {
+    const int err = errno;
+    throw IoError("cannot write " + target_.string() + ": " + describe(err));
+  }
+  const int fd = fileno(file_);
+  const char* p = static_cast<const char*>(data);
+  while (n > 0) {
+    const ssize_t done = ::pwrite(fd, p, n, static_cast<off_t>(offset));
+    if (done < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      throw IoError("cannot write " + target_.string() + ": " + describe(err));
+    }
+    p += done;
+    n -= static_cast<std::size_t>(done);
+    offset += static_cast<std::uint64_t>(done);
+  }
+}
+
 void AtomicFile::commit() {
   if (!file_) throw IoError("cannot write " + target_.string() + ": file already closed");
   auto fail = [&](int err) {

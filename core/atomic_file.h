@@ -6,6 +6,7 @@
 // from the CLI's SIGINT/SIGTERM handler; async-signal-safe) can delete them on Ctrl-C.
 #pragma once
 
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 
@@ -22,6 +23,9 @@ class AtomicFile {
   std::FILE* stream() { return file_; }
   // Writes n bytes; throws IoError on a short write (e.g. disk full).
   void write(const void* data, std::size_t n);
+  // Writes n bytes at byte `offset`, wherever the stream is (a file written out of order, e.g.
+  // brick by brick with every record's place known in advance); throws IoError on failure.
+  void write_at(std::uint64_t offset, const void* data, std::size_t n);
   // Flush, fsync, close and rename over the target; throws IoError on any failure (and then the
   // temporary is removed).
   void commit();

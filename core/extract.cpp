@@ -13,7 +13,7 @@ namespace isotile {
 namespace {
 
 Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
-  return marching_cubes(view, {.iso = o.iso, .normals = o.normals});
+  return marching_cubes(view, {.iso = o.iso, .normals = o.normals, .cells = o.cells});
 }
 
 Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
@@ -135,6 +135,18 @@ Backend resolve_backend(const ExtractOptions& options) {
   if (!usable(e, &why, &hardware))
     throw InputError("backend '" + std::string(e.name) + "': " + why);
   return options.backend;
+}
+
+int extract_halo(const ExtractOptions& options) {
+  switch (options.method) {
+    case Method::MarchingCubes:
+      return marching_cubes_halo({.iso = options.iso, .normals = options.normals});
+    case Method::Macet:
+    case Method::DualContouring:
+      break;
+  }
+  // Central-difference gradients at the samples of the cells one beyond a brick.
+  return 2;
 }
 
 Mesh extract(const VolumeView& view, const ExtractOptions& options) {

@@ -33,7 +33,14 @@ struct ExtractOptions {
   // Dual Contouring only.
   DcSolver dc_solver = DcSolver::MassPoint;
   bool keep_quads = false;
+  // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one
+  // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
+  // core/marching_cubes.h and core/brick_sites.h.
+  Box3 cells{};
 };
+
+// Samples beyond a brick's cells that `options` needs the view to hold.
+int extract_halo(const ExtractOptions& options);
 
 struct BackendCaps {
   Backend backend;

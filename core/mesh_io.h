@@ -10,6 +10,8 @@
 // Polygons with more than three corners are kept as quads (4) or fanned into triangles (>4).
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -33,5 +35,16 @@ void write_mesh(const Mesh& mesh, const std::filesystem::path& path,
                 const MeshWriteOptions& options = {});
 
 Mesh read_mesh(const std::filesystem::path& path);
+
+// Record layouts shared with the tiler's streamed writer, which places every record at its final
+// offset brick by brick; using the same pieces keeps its files byte-identical to write_mesh's.
+// PLY header; `index64` declares uint64 face indices (meshes past 2^32 - 1 vertices).
+std::string ply_header(std::uint64_t vertices, std::uint64_t faces, bool normals, bool ascii,
+                       bool index64);
+inline constexpr std::size_t kStlHeaderBytes = 84;
+inline constexpr std::size_t kStlTriangleBytes = 50;
+void stl_header(char* out, std::uint64_t triangles);  // kStlHeaderBytes bytes
+// One binary STL triangle record (facet normal from the corners); returns the end.
+char* put_stl_triangle(char* p, const Vec3f& a, const Vec3f& b, const Vec3f& c);
 
 }  // namespace isotile

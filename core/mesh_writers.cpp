@@ -145,15 +145,9 @@ bool use_normals(const Mesh& mesh, const MeshWriteOptions& options) {
 
 void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options) {
   const bool normals = use_normals(mesh, options);
-  std::string header = "ply\nformat ";
-  header += options.ascii ? "ascii" : "binary_little_endian";
-  header += " 1.0\ncomment written by isotile\nelement vertex ";
-  header += std::to_string(mesh.positions.size());
-  header += "\nproperty float x\nproperty float y\nproperty float z\n";
-  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
-  header += "element face ";
-  header += std::to_string(mesh.triangles.size() + mesh.quads.size());
-  header += "\nproperty list uchar uint vertex_indices\nend_header\n";
+  const std::string header = ply_header(mesh.positions.size(),
+                                        mesh.triangles.size() + mesh.quads.size(), normals,
+                                        options.ascii, false);
   file.write(header.data(), header.size());
 
   const auto& pos = mesh.positions;
@@ -324,6 +318,8 @@ void write_off(const Mesh& mesh, AtomicFile& file) {
   faces(mesh.quads, '4');
 }
 
+}  // namespace
+
 char* put_stl_triangle(char* p, const Vec3f& a, const Vec3f& b, const Vec3f& c) {
   // The stored normal is recomputed from the corners: per-vertex normals are not facet normals.
   const double u[3] = {double{b[0]} - a[0], double{b[1]} - a[1], double{b[2]} - a[2]};
@@ -338,14 +334,35 @@ char* put_stl_triangle(char* p, const Vec3f& a, const Vec3f& b, const Vec3f& c) 
   return put_le(p, std::uint16_t{0});
 }
 
+void stl_header(char* out, std::uint64_t triangles) {
+  std::memset(out, ' ', 80);
+  // Must not start with "solid", which readers take for ASCII STL.
+  std::memcpy(out, "binary STL written by isotile", 29);
+  put_le(out + 80, static_cast<std::uint32_t>(triangles));
+}
+
+std::string ply_header(std::uint64_t vertices, std::uint64_t faces, bool normals, bool ascii,
+                       bool index64) {
+  std::string header = "ply\nformat ";
+  header += ascii ? "ascii" : "binary_little_endian";
+  header += " 1.0\ncomment written by isotile\nelement vertex ";
+  header += std::to_string(vertices);
+  header += "\nproperty float x\nproperty float y\nproperty float z\n";
+  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  header += "element face ";
+  header += std::to_string(faces);
+  header += index64 ? "\nproperty list uchar uint64 vertex_indices\nend_header\n"
+                    : "\nproperty list uchar uint vertex_indices\nend_header\n";
+  return header;
+}
+
+namespace {
+
 void write_stl(const Mesh& mesh, AtomicFile& file) {
   const std::uint64_t count =
       std::uint64_t{mesh.triangles.size()} + 2 * std::uint64_t{mesh.quads.size()};
-  char header[84];
-  std::memset(header, ' ', 80);
-  // Must not start with "solid", which readers take for ASCII STL.
-  std::memcpy(header, "binary STL written by isotile", 29);
-  put_le(header + 80, static_cast<std::uint32_t>(count));
+  char header[kStlHeaderBytes];
+  stl_header(header, count);
   file.write(header, sizeof(header));
   const auto& pos = mesh.positions;
   const auto& tris = mesh.triangles;

@@ -455,25 +455,30 @@ double field_value(FieldKind kind, const Vec3d& u) {
   return 0;
 }
 
-Volume make_field_volume(const FieldSpec& spec) {
+void fill_field_box(const FieldSpec& spec, const Box3& box, float* out) {
   const std::int64_t n = spec.n;
   // One sample per axis leaves the normalised coordinate undefined (0/0).
   if (n < 2) throw InputError("field size must be at least 2, got " + std::to_string(n));
-  Volume vol(ScalarType::Float32, {n, n, n});
-  float* out = vol.data<float>();
   const double denom = static_cast<double>(n - 1);
   auto coord = [denom](std::int64_t g) { return 2.0 * static_cast<double>(g) / denom - 1.0; };
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n), [&](const auto& range) {
+  const std::int64_t nx = box.extent(0), ny = box.extent(1);
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(box.lo[2], box.hi[2]), [&](const auto& range) {
     for (std::int64_t k = range.begin(); k != range.end(); ++k) {
       const double z = coord(k);
-      for (std::int64_t j = 0; j < n; ++j) {
+      for (std::int64_t j = box.lo[1]; j < box.hi[1]; ++j) {
         const double y = coord(j);
-        float* row = out + (k * n + j) * n;
-        for (std::int64_t i = 0; i < n; ++i)
-          row[i] = static_cast<float>(field_value(spec.kind, {coord(i), y, z}));
+        float* row = out + ((k - box.lo[2]) * ny + (j - box.lo[1])) * nx;
+        for (std::int64_t i = box.lo[0]; i < box.hi[0]; ++i)
+          row[i - box.lo[0]] = static_cast<float>(field_value(spec.kind, {coord(i), y, z}));
       }
     }
   });
+}
+
+Volume make_field_volume(const FieldSpec& spec) {
+  if (spec.n < 2) throw InputError("field size must be at least 2, got " + std::to_string(spec.n));
+  Volume vol(ScalarType::Float32, {spec.n, spec.n, spec.n});
+  fill_field_box(spec, {{0, 0, 0}, {spec.n, spec.n, spec.n}}, vol.data<float>());
   return vol;
 }
 

@@ -54,6 +54,9 @@ double field_value(FieldKind kind, const Vec3d& u);
 
 // Samples the field into a float32 volume (spacing 1, origin 0); parallel.
 Volume make_field_volume(const FieldSpec& spec);
+// The samples of global box `box` of that volume, x fastest, into `out` (box volume floats); the
+// values are bit-identical to make_field_volume's. For out-of-core extraction brick by brick.
+void fill_field_box(const FieldSpec& spec, const Box3& box, float* out);
 
 // Unsigned distance, in voxels, from world point p (voxel units, as in the mesh) to the field's
 // isosurface at its default isovalue.

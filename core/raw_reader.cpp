@@ -197,10 +197,7 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
   if (code != Z_OK) throw_gz_error(path, file.get());
 }
 
-struct Layout {
-  Index3 dims;
-  ScalarType type;
-};
+using Layout = RawLayout;
 
 Layout resolve_layout(const std::string& path, const RawOptions& options) {
   std::optional<Index3> dims = options.dims;
@@ -237,6 +234,10 @@ Layout resolve_layout(const std::string& path, const RawOptions& options) {
 }
 
 }  // namespace
+
+RawLayout resolve_raw_layout(const std::string& path, const RawOptions& options) {
+  return resolve_layout(path, options);
+}
 
 std::optional<RawNameInfo> parse_raw_name(const std::string& path) {
   const std::optional<NameMatch> m = match_raw_name(path);

@@ -37,6 +37,13 @@ struct RawNameInfo {
 };
 std::optional<RawNameInfo> parse_raw_name(const std::string& path);
 
+// Dims and type of a raw file: the options where given, else its name; InputError if unknown.
+struct RawLayout {
+  Index3 dims;
+  ScalarType type;
+};
+RawLayout resolve_raw_layout(const std::string& path, const RawOptions& options);
+
 // Reads any supported input (dispatches on the name as described above).
 Volume read_volume(const std::string& input, const RawOptions& raw = {});
 

@@ -1,0 +1,109 @@
+#include "tiler/brick_plan.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <string>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+Box3 BrickPlan::cells(std::int64_t b) const {
+  const std::int64_t idx[3] = {b % count[0], b / count[0] % count[1], b / count[0] / count[1]};
+  Box3 box;
+  for (int a = 0; a < 3; ++a) {
+    box.lo[a] = idx[a] * brick[a];
+    box.hi[a] = std::min(box.lo[a] + brick[a], dims[a] - 1);
+  }
+  return box;
+}
+
+std::int64_t BrickPlan::owner(int axis, std::int64_t v) const {
+  return std::min(v / brick[axis], count[axis] - 1);
+}
+
+std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& o) {
+  double samples = 1, n_cells = 1;
+  for (int a = 0; a < 3; ++a) {
+    samples *= static_cast<double>(cells[a] + 1 + 2 * o.halo);
+    n_cells *= static_cast<double>(cells[a]);
+  }
+  const double bytes =
+      samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8) + n_cells * o.output_bytes_per_cell;
+  return bytes >= 1.8e19 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
+}
+
+BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
+  BrickPlan plan;
+  plan.dims = dims;
+  Index3 cells;
+  for (int a = 0; a < 3; ++a) cells[a] = std::max<std::int64_t>(dims[a] - 1, 1);
+  // Largest side s with per-axis clamping that fits; brick_bytes grows with s.
+  auto shape = [&](std::int64_t s) {
+    Index3 c;
+    for (int a = 0; a < 3; ++a) c[a] = options.slabs && a < 2 ? cells[a] : std::min(s, cells[a]);
+    return c;
+  };
+  if (brick_bytes(shape(1), options) > options.memory)
+    throw InputError("memory budget of " + std::to_string(options.memory) +
+                     " bytes is too small: one " +
+                     (options.slabs ? "slab of one cell layer" : "brick of one cell") + " needs " +
+                     std::to_string(brick_bytes(shape(1), options)) + " bytes");
+  std::int64_t lo = 1, hi = *std::max_element(cells.begin(), cells.end());
+  while (lo < hi) {
+    const std::int64_t mid = lo + (hi - lo + 1) / 2;
+    if (brick_bytes(shape(mid), options) <= options.memory)
+      lo = mid;
+    else
+      hi = mid - 1;
+  }
+  const Index3 c = shape(lo);
+  for (int a = 0; a < 3; ++a) {
+    plan.count[a] = (cells[a] + c[a] - 1) / c[a];
+    // Even out: the same number of bricks, each as equal as possible (never larger than c).
+    plan.brick[a] = (cells[a] + plan.count[a] - 1) / plan.count[a];
+    plan.count[a] = (cells[a] + plan.brick[a] - 1) / plan.brick[a];
+  }
+  return plan;
+}
+
+std::uint64_t parse_memory_size(const std::string& text) {
+  std::size_t used = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  std::string unit = text.substr(used);
+  std::transform(unit.begin(), unit.end(), unit.begin(),
+                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  double scale = 0;
+  if (unit.empty() || unit == "b")
+    scale = 1;
+  else if (unit == "k" || unit == "kib")
+    scale = 1024.0;
+  else if (unit == "m" || unit == "mib")
+    scale = 1024.0 * 1024;
+  else if (unit == "g" || unit == "gib")
+    scale = 1024.0 * 1024 * 1024;
+  else if (unit == "t" || unit == "tib")
+    scale = 1024.0 * 1024 * 1024 * 1024;
+  else if (unit == "kb")
+    scale = 1e3;
+  else if (unit == "mb")
+    scale = 1e6;
+  else if (unit == "gb")
+    scale = 1e9;
+  else if (unit == "tb")
+    scale = 1e12;
+  if (used == 0 || scale == 0 || !(value > 0) || !std::isfinite(value * scale) ||
+      value * scale >= 1.8e19)
+    throw InputError("bad memory size '" + text +
+                     "': expected a positive number with an optional unit (B, KiB, MiB, GiB, TiB, "
+                     "KB, MB, GB, TB), e.g. 256MiB");
+  return static_cast<std::uint64_t>(value * scale);
+}
+
+}  // namespace isotile

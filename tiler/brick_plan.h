@@ -1,0 +1,49 @@
+// The brick planner: cuts a volume's cells into a regular 3D grid of bricks whose working set
+// (samples with halo, classification bits, expected output) fits a memory budget.
+//
+// Bricks are as close to cubes as the volume allows (a cube has the least halo per cell), sized
+// to the budget and then evened out so that the last brick along an axis is not a sliver; no
+// dimension is rounded up to a power of two or padded. A source that can only be read in order
+// (gzip) gets whole x-y slabs instead.
+#pragma once
+
+#include <cstdint>
+
+#include "core/volume.h"
+
+namespace isotile {
+
+struct BrickPlanOptions {
+  std::uint64_t memory = 0;  // bytes for one brick's working set
+  int halo = 2;              // samples read beyond a brick's cells on each side
+  std::size_t sample_bytes = 1;
+  // Output expected per cell when planning (vertices, faces, keys and their global indices). The
+  // tiler checks every brick's real output (known after its counting pass) against the budget
+  // and cuts a brick into thinner z-slices when it would not fit.
+  double output_bytes_per_cell = 8;
+  bool slabs = false;  // whole x-y slabs (sources read in order)
+};
+
+struct BrickPlan {
+  Index3 dims{0, 0, 0};   // samples of the volume
+  Index3 brick{1, 1, 1};  // cells per brick along each axis (the last brick may be shorter)
+  Index3 count{0, 0, 0};  // bricks along each axis
+
+  std::int64_t total() const { return count[0] * count[1] * count[2]; }
+  // Cells of brick b; bricks are numbered x fastest, then y, then z.
+  Box3 cells(std::int64_t b) const;
+  // The brick index along `axis` that owns cell or sample coordinate v (the last sample plane
+  // belongs to the last brick).
+  std::int64_t owner(int axis, std::int64_t v) const;
+};
+
+// Bytes one brick of `cells` cells needs under `options` (samples, bits, expected output).
+std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& options);
+
+// Throws InputError when not even a brick of one cell (one cell layer, for slabs) fits.
+BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options);
+
+// "256MiB", "1.5GB", "4096" (bytes), "2G" ... -> bytes; InputError naming the text otherwise.
+std::uint64_t parse_memory_size(const std::string& text);
+
+}  // namespace isotile

@@ -1,0 +1,449 @@
+#include "tiler/tiled_extract.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "core/atomic_file.h"
+#include "core/brick_sites.h"
+#include "core/errors.h"
+#include "core/volume_io.h"
+
+namespace isotile {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+constexpr int kQualityBins = 1 << 16;
+
+// Samples a brick reads: its cells' samples grown by `halo`, clipped to the volume.
+Box3 grow(const Box3& cells, int halo, const Index3& n) {
+  Box3 r;
+  for (int a = 0; a < 3; ++a) {
+    r.lo[a] = std::max<std::int64_t>(cells.lo[a] - halo, 0);
+    r.hi[a] = std::min<std::int64_t>(cells.hi[a] + 1 + halo, n[a]);
+  }
+  return r;
+}
+
+// The samples a brick owns: its cells' lower corners, plus the volume's last sample plane for the
+// last brick along an axis.
+Box3 owned_samples(const Box3& cells, const Index3& n) {
+  Box3 s = cells;
+  for (int a = 0; a < 3; ++a)
+    if (cells.hi[a] == n[a] - 1) s.hi[a] = n[a];
+  return s;
+}
+
+bool contains(const Box3& b, std::int64_t x, std::int64_t y, std::int64_t z) {
+  return x >= b.lo[0] && x < b.hi[0] && y >= b.lo[1] && y < b.hi[1] && z >= b.lo[2] && z < b.hi[2];
+}
+
+// Per-row, per-brick-column counts, turned into offsets by an exclusive scan: entry
+// (y, z, column) is where that segment's records start in the file's global order.
+class SegmentTable {
+ public:
+  SegmentTable(const Index3& n, std::int64_t columns)
+      : ny_(n[1]), columns_(columns), v_(static_cast<std::size_t>(n[1] * n[2] * columns) + 1) {}
+  std::size_t index(std::int64_t y, std::int64_t z, std::int64_t column) const {
+    return static_cast<std::size_t>((z * ny_ + y) * columns_ + column);
+  }
+  std::uint64_t& operator[](std::size_t i) { return v_[i]; }
+  std::uint64_t offset(std::size_t i) const { return v_[i]; }
+  std::uint64_t count(std::size_t i) const { return v_[i + 1] - v_[i]; }
+  std::uint64_t scan() {
+    std::uint64_t sum = 0;
+    for (auto& x : v_) {
+      const std::uint64_t c = x;
+      x = sum;
+      sum += c;
+    }
+    return sum;
+  }
+
+ private:
+  std::int64_t ny_, columns_;
+  std::vector<std::uint64_t> v_;
+};
+
+template <class T>
+char* put_le(char* p, T v) {
+  static_assert(std::endian::native == std::endian::little, "little-endian hosts only");
+  std::memcpy(p, &v, sizeof(T));
+  return p + sizeof(T);
+}
+
+struct QualityAccumulator {
+  std::uint64_t triangles = 0, degenerate = 0;
+  double min = 1, max = 0, sum = 0;
+  std::vector<std::uint64_t> bins = std::vector<std::uint64_t>(kQualityBins);
+
+  void add(double q) {
+    ++triangles;
+    if (q < 1e-6) ++degenerate;
+    min = std::min(min, q);
+    max = std::max(max, q);
+    sum += q;
+    ++bins[std::min(kQualityBins - 1, static_cast<int>(q * kQualityBins))];
+  }
+  // Two triangles of a quad, along the diagonal whose worse triangle is better (0-2 on ties), as
+  // core/mesh_quality.h counts them.
+  void add_quad(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
+    const double a0 = radius_ratio(a, b, c), a1 = radius_ratio(a, c, d);
+    const double b0 = radius_ratio(a, b, d), b1 = radius_ratio(b, c, d);
+    if (std::min(b0, b1) > std::min(a0, a1)) {
+      add(b0);
+      add(b1);
+    } else {
+      add(a0);
+      add(a1);
+    }
+  }
+  // Lower-tail quantile p, at the upper edge of the bin that reaches it.
+  double quantile(double p) const {
+    const auto need = static_cast<std::uint64_t>(std::ceil(p * static_cast<double>(triangles)));
+    std::uint64_t seen = 0;
+    for (int i = 0; i < kQualityBins; ++i) {
+      seen += bins[i];
+      if (seen >= std::max<std::uint64_t>(need, 1))
+        return std::min(max, static_cast<double>(i + 1) / kQualityBins);
+    }
+    return max;
+  }
+  QualityStats stats() const {
+    QualityStats s;
+    s.triangles = triangles;
+    s.degenerate = degenerate;
+    if (triangles == 0) return s;
+    s.min = min;
+    s.max = max;
+    s.mean = sum / static_cast<double>(triangles);
+    s.q001 = quantile(0.001);
+    s.q01 = quantile(0.01);
+    s.median = quantile(0.5);
+    for (int i = 0; i < kQualityBins; ++i)
+      s.histogram[std::min<std::size_t>(19, static_cast<std::size_t>(i) * 20 / kQualityBins)] +=
+          bins[i];
+    return s;
+  }
+};
+
+class TiledExtraction {
+ public:
+  TiledExtraction(VolumeSource& source, const TiledOptions& options)
+      : src_(source), opt_(options), n_(source.dims) {
+    const ExtractOptions& ex = options.extract;
+    if (ex.backend != Backend::Cpu && ex.backend != Backend::Auto)
+      throw InputError("--memory runs the CPU backend; drop --backend " +
+                       std::string(backend_name(ex.backend)) + " or --memory");
+    if (options.format != MeshFormat::Ply && options.format != MeshFormat::Stl)
+      throw InputError(
+          "streamed (--memory) output is binary PLY or STL: their records have a "
+          "fixed size, so each brick can be written in place");
+    ex_ = ex;
+    ex_.backend = Backend::Cpu;
+    resolve_backend(ex_);  // the method must exist on the CPU
+    layout_ =
+        ex.method == Method::DualContouring ? SiteLayout::CellVertices : SiteLayout::EdgeVertices;
+    quads_ = ex.method == Method::DualContouring && ex.keep_quads;
+    face_mult_ = ex.method == Method::DualContouring && !ex.keep_quads ? 2 : 1;
+    halo_ = extract_halo(ex_);
+  }
+
+  TiledResult run(const std::filesystem::path& output) {
+    TiledResult result;
+    for (int a = 0; a < 3; ++a)
+      if (n_[a] < 2) return write_empty(output, result);
+
+    BrickPlanOptions po;
+    po.memory = opt_.memory;
+    po.halo = halo_;
+    po.sample_bytes = scalar_size(src_.type);
+    po.slabs = src_.sequential();
+    plan_ = plan_bricks(n_, po);
+    result.plan = plan_;
+    const std::int64_t bricks = plan_.total();
+    SegmentTable vseg(n_, plan_.count[0]), fseg(n_, plan_.count[0]);
+    std::vector<std::uint64_t> brick_vertices(static_cast<std::size_t>(bricks)),
+        brick_faces(static_cast<std::size_t>(bricks));
+
+    // Pass 1: count.
+    auto t0 = Clock::now();
+    src_.rewind();
+    for (std::int64_t b = 0; b < bricks; ++b) {
+      const Box3 cells = plan_.cells(b);
+      const Box3 owned = owned_samples(cells, n_);
+      const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
+      Box3 read_box = grow(cells, 0, n_);
+      for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1, n_[a]);
+      const VolumeView view = read(read_box);
+      check_finite(view, src_.name);
+      const BrickCounts counts = count_brick_sites(view, ex_.iso, layout_, vbox, cells);
+      const std::int64_t xb = plan_.owner(0, cells.lo[0]);
+      brick_vertices[b] = scatter(counts.vertices, xb, 1, vseg);
+      brick_faces[b] = scatter(counts.faces, xb, face_mult_, fseg);
+      if (opt_.progress) opt_.progress("count", b + 1, bricks);
+    }
+    result.vertices = vseg.scan();
+    result.faces = fseg.scan();
+    result.triangles = quads_ ? 2 * result.faces : result.faces;
+    result.seconds_count = since(t0);
+
+    // The file: header, then every record at its final offset.
+    index64_ = result.vertices > std::numeric_limits<std::uint32_t>::max();
+    const bool ply = opt_.format == MeshFormat::Ply;
+    if (!ply && result.triangles > std::numeric_limits<std::uint32_t>::max())
+      throw InputError("binary STL holds at most 2^32 - 1 triangles; this mesh has " +
+                       std::to_string(result.triangles) + ": write PLY instead");
+    AtomicFile file(output);
+    if (ply) {
+      const std::string header =
+          ply_header(result.vertices, result.faces, ex_.normals, false, index64_);
+      file.write(header.data(), header.size());
+      vertex_base_ = header.size();
+      vertex_bytes_ = ex_.normals ? 24 : 12;
+      face_base_ = vertex_base_ + result.vertices * vertex_bytes_;
+      face_bytes_ = 1 + (quads_ ? 4 : 3) * (index64_ ? 8 : 4);
+    } else {
+      char header[kStlHeaderBytes];
+      stl_header(header, result.triangles);
+      file.write(header, sizeof(header));
+      face_base_ = kStlHeaderBytes;
+      face_bytes_ = (quads_ ? 2 : 1) * kStlTriangleBytes;
+    }
+
+    // Pass 2: extract and write.
+    t0 = Clock::now();
+    src_.rewind();
+    QualityAccumulator quality;
+    for (std::int64_t b = 0; b < bricks; ++b) {
+      const Box3 cells = plan_.cells(b);
+      // The real output is known now: cut a brick whose output would overflow the budget into
+      // thinner z-slices (same columns, so the segment tables still apply).
+      std::uint64_t bytes = estimate(cells, brick_vertices[b], brick_faces[b]);
+      std::int64_t slices = 1;
+      if (bytes > opt_.memory && !src_.sequential()) {
+        slices = std::min<std::int64_t>(
+            cells.extent(2), static_cast<std::int64_t>((bytes + opt_.memory - 1) / opt_.memory));
+      }
+      for (std::int64_t s = 0; s < slices; ++s) {
+        Box3 part = cells;
+        part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
+        part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
+        extract_brick(part, vseg, fseg, file, quality);
+        ++result.bricks_extracted;
+      }
+      bytes = estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
+                       brick_faces[b] / static_cast<std::uint64_t>(slices));
+      result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
+      if (opt_.progress) opt_.progress("extract", b + 1, bricks);
+    }
+    result.seconds_extract = since(t0);
+    if (written_faces_ != result.faces)
+      throw Error("tiled extraction wrote " + std::to_string(written_faces_) + " faces of " +
+                  std::to_string(result.faces) + " counted");
+    file.commit();
+    if (opt_.quality) result.quality = quality.stats();
+    return result;
+  }
+
+ private:
+  TiledResult write_empty(const std::filesystem::path& output, TiledResult& result) {
+    write_mesh(Mesh{}, output, {.format = opt_.format, .ascii = false, .write_normals = false});
+    return result;
+  }
+
+  VolumeView read(const Box3& box) {
+    const std::size_t bytes =
+        checked_volume_bytes(src_.type, {box.extent(0), box.extent(1), box.extent(2)});
+    if (buffer_.size() < bytes) buffer_.resize(bytes);
+    src_.read(box, buffer_.data());
+    return brick_view(src_, box, buffer_.data());
+  }
+
+  // Copies one brick's row counts into the table; returns their sum.
+  std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
+                        SegmentTable& table) {
+    std::uint64_t sum = 0;
+    const std::int64_t ny = rc.box.extent(1);
+    for (std::size_t r = 0; r < rc.count.size(); ++r) {
+      const std::int64_t y = rc.box.lo[1] + static_cast<std::int64_t>(r) % ny;
+      const std::int64_t z = rc.box.lo[2] + static_cast<std::int64_t>(r) / ny;
+      table[table.index(y, z, column)] = rc.count[r] * mult;
+      sum += rc.count[r] * mult;
+    }
+    return sum;
+  }
+
+  // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
+  // and the records being written.
+  std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces) const {
+    const Box3 r = grow(cells, halo_, n_);
+    const double samples = static_cast<double>(r.extent(0)) * static_cast<double>(r.extent(1)) *
+                           static_cast<double>(r.extent(2));
+    const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
+    const double per_face = 16.0 + 4 * 8;
+    return static_cast<std::uint64_t>(
+        samples * (static_cast<double>(scalar_size(src_.type)) + 0.125) +
+        static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face);
+  }
+
+  void extract_brick(const Box3& cells, const SegmentTable& vseg, const SegmentTable& fseg,
+                     AtomicFile& file, QualityAccumulator& quality) {
+    const VolumeView view = read(grow(cells, halo_, n_));
+    ExtractOptions o = ex_;
+    o.cells = cells;
+    const Mesh mesh = extract(view, o);
+    const std::vector<std::uint64_t> keys = brick_vertex_keys(view, ex_.iso, layout_, cells);
+    if (keys.size() != mesh.positions.size())
+      throw Error("brick contract broken: the extractor listed " +
+                  std::to_string(mesh.positions.size()) + " vertices where " +
+                  std::to_string(keys.size()) + " were expected");
+
+    // Final index of every listed vertex. Keys are sorted, so a segment's listed vertices are
+    // consecutive: a prefix of it when the segment is this brick's column or the next one
+    // (Marching Cubes' vertices on the upper x face), a suffix when it is the previous column
+    // (Dual Contouring's cells just below the brick).
+    const std::int64_t column = plan_.owner(0, cells.lo[0]);
+    const Box3 owned = layout_ == SiteLayout::EdgeVertices ? owned_samples(cells, n_) : cells;
+    std::vector<std::uint64_t> index(keys.size());
+    std::vector<char> is_owned(keys.size());
+    const auto nx = static_cast<std::uint64_t>(n_[0]), ny = static_cast<std::uint64_t>(n_[1]);
+    const std::uint64_t per_site = layout_ == SiteLayout::EdgeVertices ? 3 : 1;
+    for (std::size_t g0 = 0; g0 < keys.size();) {
+      const std::uint64_t lin = keys[g0] / per_site;
+      const auto y = static_cast<std::int64_t>(lin / nx % ny);
+      const auto z = static_cast<std::int64_t>(lin / nx / ny);
+      const std::int64_t col = plan_.owner(0, static_cast<std::int64_t>(lin % nx));
+      const std::size_t seg = vseg.index(y, z, col);
+      std::size_t g1 = g0 + 1;
+      for (; g1 < keys.size(); ++g1) {
+        const std::uint64_t l = keys[g1] / per_site;
+        if (l / nx != lin / nx || plan_.owner(0, static_cast<std::int64_t>(l % nx)) != col) break;
+      }
+      const std::uint64_t first =
+          vseg.offset(seg) + (col < column ? vseg.count(seg) - (g1 - g0) : 0);
+      for (std::size_t i = g0; i < g1; ++i) {
+        index[i] = first + (i - g0);
+        const std::uint64_t l = keys[i] / per_site;
+        is_owned[i] = contains(owned, static_cast<std::int64_t>(l % nx), y, z);
+      }
+      g0 = g1;
+    }
+    if (opt_.format == MeshFormat::Ply) write_vertices(mesh, index, is_owned, file);
+    write_faces(cells, mesh, index, fseg, file, quality);
+  }
+
+  void write_vertices(const Mesh& mesh, const std::vector<std::uint64_t>& index,
+                      const std::vector<char>& is_owned, AtomicFile& file) {
+    std::vector<char> run;
+    std::uint64_t run_first = 0, run_next = 0;
+    auto flush = [&] {
+      if (!run.empty())
+        file.write_at(vertex_base_ + run_first * vertex_bytes_, run.data(), run.size());
+      run.clear();
+    };
+    for (std::size_t i = 0; i < index.size(); ++i) {
+      if (!is_owned[i]) continue;
+      if (run.empty() || index[i] != run_next || run.size() >= (8u << 20)) {
+        flush();
+        run_first = index[i];
+      }
+      char rec[24];
+      char* p = rec;
+      for (float c : mesh.positions[i]) p = put_le(p, c);
+      if (ex_.normals)
+        for (float c : mesh.normals[i]) p = put_le(p, c);
+      run.insert(run.end(), rec, p);
+      run_next = index[i] + 1;
+    }
+    flush();
+  }
+
+  void write_faces(const Box3& cells, const Mesh& mesh, const std::vector<std::uint64_t>& index,
+                   const SegmentTable& fseg, AtomicFile& file, QualityAccumulator& quality) {
+    const std::int64_t column = plan_.owner(0, cells.lo[0]);
+    const std::size_t total = quads_ ? mesh.quads.size() : mesh.triangles.size();
+    std::size_t next = 0;
+    std::vector<char> buf;
+    for (std::int64_t z = cells.lo[2]; z < cells.hi[2]; ++z)
+      for (std::int64_t y = cells.lo[1]; y < cells.hi[1]; ++y) {
+        const std::size_t seg = fseg.index(y, z, column);
+        const std::uint64_t n = fseg.count(seg);
+        if (n == 0) continue;
+        if (next + n > total)
+          throw Error("brick contract broken: the extractor made fewer faces than counted");
+        buf.resize(static_cast<std::size_t>(n) * face_bytes_);
+        char* p = buf.data();
+        for (std::uint64_t f = 0; f < n; ++f, ++next) {
+          if (quads_) {
+            const Quad& q = mesh.quads[next];
+            const auto& P = mesh.positions;
+            if (opt_.quality) quality.add_quad(P[q[0]], P[q[1]], P[q[2]], P[q[3]]);
+            p = opt_.format == MeshFormat::Ply
+                    ? put_face(p, q.data(), 4, index)
+                    : put_stl_triangle(put_stl_triangle(p, P[q[0]], P[q[1]], P[q[2]]), P[q[0]],
+                                       P[q[2]], P[q[3]]);
+          } else {
+            const Tri& t = mesh.triangles[next];
+            const auto& P = mesh.positions;
+            if (opt_.quality) quality.add(radius_ratio(P[t[0]], P[t[1]], P[t[2]]));
+            p = opt_.format == MeshFormat::Ply ? put_face(p, t.data(), 3, index)
+                                               : put_stl_triangle(p, P[t[0]], P[t[1]], P[t[2]]);
+          }
+        }
+        file.write_at(face_base_ + fseg.offset(seg) * face_bytes_, buf.data(), buf.size());
+      }
+    if (next != total)
+      throw Error("brick contract broken: the extractor made " + std::to_string(total) +
+                  " faces where " + std::to_string(next) + " were counted");
+    written_faces_ += total;
+  }
+
+  char* put_face(char* p, const std::uint32_t* v, int n,
+                 const std::vector<std::uint64_t>& index) const {
+    *p++ = static_cast<char>(n);
+    for (int i = 0; i < n; ++i) {
+      if (index64_)
+        p = put_le(p, index[v[i]]);
+      else
+        p = put_le(p, static_cast<std::uint32_t>(index[v[i]]));
+    }
+    return p;
+  }
+
+  VolumeSource& src_;
+  const TiledOptions& opt_;
+  Index3 n_;
+  ExtractOptions ex_;
+  SiteLayout layout_ = SiteLayout::EdgeVertices;
+  bool quads_ = false;
+  std::uint64_t face_mult_ = 1;
+  int halo_ = 2;
+  BrickPlan plan_;
+  std::vector<char> buffer_;
+  bool index64_ = false;
+  std::uint64_t vertex_base_ = 0, vertex_bytes_ = 12, face_base_ = 0, face_bytes_ = 13;
+  std::uint64_t written_faces_ = 0;
+};
+
+}  // namespace
+
+TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
+                          const std::filesystem::path& output) {
+  return TiledExtraction(source, options).run(output);
+}
+
+}  // namespace isotile

@@ -1,0 +1,54 @@
+// Out-of-core extraction: a volume is cut into bricks that fit a memory budget, extracted brick by
+// brick and streamed into one mesh file that is byte-identical to a whole-volume extraction
+// written by write_mesh, for any budget.
+//
+// Two passes over the bricks. The first only classifies samples and counts, per grid row and per
+// column of bricks, the vertices and faces each brick owns (a vertex belongs to the brick that
+// owns its site: its edge's lower sample, or its cell; a face to the brick of its cell or edge).
+// An exclusive scan of those counts in global key order gives every vertex and face its final
+// index before any is placed. The second pass extracts each brick in brick mode, turns its local
+// indices into final ones (core/brick_sites.h) and writes its records straight to their offsets
+// in the output file, so nothing but the current brick and the count tables is held in memory.
+// The file is written to a temporary name and renamed when complete (core/atomic_file.h).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string_view>
+
+#include "core/extract.h"
+#include "core/mesh_io.h"
+#include "core/mesh_quality.h"
+#include "tiler/brick_plan.h"
+#include "tiler/volume_source.h"
+
+namespace isotile {
+
+struct TiledOptions {
+  ExtractOptions extract;               // method, iso, normals, ... (cells is set per brick)
+  std::uint64_t memory = 0;             // budget for one brick's working set, bytes
+  MeshFormat format = MeshFormat::Ply;  // binary PLY or binary STL (fixed-size records)
+  bool quality = true;                  // accumulate radius-ratio statistics of the faces
+  // Called after each brick of each pass ("count", "extract").
+  std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
+};
+
+struct TiledResult {
+  BrickPlan plan;
+  std::int64_t bricks_extracted = 0;  // plan.total() plus extra z-slices of bricks that were cut
+  std::uint64_t vertices = 0, faces = 0, triangles = 0;
+  std::uint64_t largest_brick_bytes = 0;  // estimated working set of the largest brick run
+  double seconds_count = 0, seconds_extract = 0;
+  // Radius ratio over all triangles (quads as their two triangles along the better diagonal).
+  // min, mean and degenerate are exact; q001, q01 and median come from a histogram of 2^16 bins
+  // (within 1.6e-5).
+  QualityStats quality;
+};
+
+// Throws InputError for a budget too small or a format without fixed-size records, and whatever
+// the source, the extractor or the writer throws; the output is then left untouched.
+TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
+                          const std::filesystem::path& output);
+
+}  // namespace isotile

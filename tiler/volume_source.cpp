@@ -1,0 +1,261 @@
+#include "tiler/volume_source.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/procedural_fields.h"
+
+namespace isotile {
+
+namespace {
+
+void swap_sample_bytes(void* data, std::size_t count, std::size_t size) {
+  auto* b = static_cast<unsigned char*>(data);
+  for (std::size_t i = 0; i < count; ++i, b += size) std::reverse(b, b + size);
+}
+
+class FieldSource final : public VolumeSource {
+ public:
+  explicit FieldSource(const FieldSpec& spec) : spec_(spec) {
+    type = ScalarType::Float32;
+    dims = {spec.n, spec.n, spec.n};
+  }
+  void read(const Box3& box, void* out) override {
+    fill_field_box(spec_, box, static_cast<float*>(out));
+  }
+
+ private:
+  FieldSpec spec_;
+};
+
+class RawFileSource final : public VolumeSource {
+ public:
+  RawFileSource(const std::string& path, const RawOptions& options) {
+    name = path;
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    const RawLayout layout = resolve_raw_layout(path, options);
+    type = layout.type;
+    dims = layout.dims;
+    const std::size_t need = checked_volume_bytes(type, dims);
+    struct stat st {};
+    if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode) &&
+        static_cast<std::uint64_t>(st.st_size) != need)
+      throw InputError(path + ": file holds " + std::to_string(st.st_size) + " bytes but " +
+                       std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                       std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
+                       " samples need " + std::to_string(need));
+    swap_ = (options.endian == Endian::Big) != (std::endian::native == std::endian::big);
+  }
+  ~RawFileSource() override {
+    if (fd_ >= 0) ::close(fd_);
+  }
+
+  void read(const Box3& box, void* out) override {
+    const auto size = static_cast<std::int64_t>(scalar_size(type));
+    const std::int64_t row_bytes = box.extent(0) * size;
+    auto* dst = static_cast<char*>(out);
+    for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k)
+      for (std::int64_t j = box.lo[1]; j < box.hi[1]; ++j, dst += row_bytes) {
+        const std::int64_t offset = ((k * dims[1] + j) * dims[0] + box.lo[0]) * size;
+        std::int64_t done = 0;
+        while (done < row_bytes) {
+          const ssize_t n = ::pread(fd_, dst + done, static_cast<std::size_t>(row_bytes - done),
+                                    static_cast<off_t>(offset + done));
+          if (n < 0 && errno == EINTR) continue;
+          if (n <= 0)
+            throw IoError("cannot read " + name + ": " +
+                          (n == 0 ? std::string("file is shorter than its dims say")
+                                  : std::string(std::strerror(errno))));
+          done += n;
+        }
+      }
+    if (swap_)
+      swap_sample_bytes(out,
+                        static_cast<std::size_t>(box.extent(0) * box.extent(1) * box.extent(2)),
+                        static_cast<std::size_t>(size));
+  }
+
+ private:
+  int fd_ = -1;
+  bool swap_ = false;
+};
+
+// gzip'd raw: one pass decompresses the stream once, front to back, with a bounded buffer: the
+// planner asks for whole x-y slabs in ascending z, which may overlap by their halos, so the last
+// planes read are kept for the next box.
+class GzipRawSource final : public VolumeSource {
+ public:
+  GzipRawSource(const std::string& path, const RawOptions& options) {
+    name = path;
+    {
+      // Read once so that a bad name, a non-gzip file or a size mismatch are reported up front
+      // exactly as the in-core reader reports them.
+      const RawLayout layout = resolve_raw_layout(path, options);
+      type = layout.type;
+      dims = layout.dims;
+      checked_volume_bytes(type, dims);
+    }
+    file_ = gzopen(path.c_str(), "rb");
+    if (!file_) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    if (gzdirect(file_))
+      throw InputError(path + ": not gzip data (the name ends in .gz); rename it or recompress it");
+    gzbuffer(file_, 1 << 20);
+    swap_ = (options.endian == Endian::Big) != (std::endian::native == std::endian::big);
+    plane_bytes_ = static_cast<std::size_t>(dims[0] * dims[1]) * scalar_size(type);
+  }
+  ~GzipRawSource() override {
+    if (file_) gzclose(file_);
+  }
+
+  bool sequential() const override { return true; }
+  void rewind() override {
+    if (gzrewind(file_) != 0) throw IoError("cannot rewind " + name);
+    next_plane_ = 0;
+    kept_.clear();
+    kept_lo_ = 0;
+  }
+
+  void read(const Box3& box, void* out) override {
+    if (box.lo[0] != 0 || box.lo[1] != 0 || box.hi[0] != dims[0] || box.hi[1] != dims[1])
+      throw InputError(name + ": a gzip'd volume can only be read in whole x-y slabs");
+    if (box.lo[2] < kept_lo_) throw InputError(name + ": gzip'd slabs must be read in ascending z");
+    auto* dst = static_cast<char*>(out);
+    for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k, dst += plane_bytes_) {
+      if (k < next_plane_) {
+        // A halo plane the previous slab read.
+        std::memcpy(dst, kept_.data() + static_cast<std::size_t>(k - kept_lo_) * plane_bytes_,
+                    plane_bytes_);
+        continue;
+      }
+      while (next_plane_ < k) skip_plane();
+      read_plane(dst);
+    }
+    // Keep the last planes: the next slab's lower halo starts at most this far back.
+    const std::int64_t keep = std::min<std::int64_t>(box.extent(2), kKeepPlanes);
+    kept_lo_ = box.hi[2] - keep;
+    kept_.assign(
+        static_cast<const char*>(out) +
+            static_cast<std::size_t>(kept_lo_ - box.lo[2]) * plane_bytes_,
+        static_cast<const char*>(out) + static_cast<std::size_t>(box.extent(2)) * plane_bytes_);
+  }
+
+ private:
+  static constexpr std::int64_t kKeepPlanes = 8;  // more than any method's halo on both sides
+
+  void read_plane(char* dst) {
+    std::size_t done = 0;
+    while (done < plane_bytes_) {
+      const unsigned chunk =
+          static_cast<unsigned>(std::min<std::size_t>(plane_bytes_ - done, 1u << 30));
+      const int n = gzread(file_, dst + done, chunk);
+      if (n <= 0) {
+        int code = Z_OK;
+        const char* message = gzerror(file_, &code);
+        throw InputError(name + ": " +
+                         (n == 0 ? std::string("gzip data ends before the volume does")
+                                 : std::string(message ? message : "bad gzip data")));
+      }
+      done += static_cast<std::size_t>(n);
+    }
+    if (swap_) swap_sample_bytes(dst, plane_bytes_ / scalar_size(type), scalar_size(type));
+    ++next_plane_;
+  }
+  void skip_plane() {
+    std::vector<char> scratch(plane_bytes_);
+    read_plane(scratch.data());
+  }
+
+  gzFile file_ = nullptr;
+  bool swap_ = false;
+  std::size_t plane_bytes_ = 0;
+  std::int64_t next_plane_ = 0;
+  std::vector<char> kept_;
+  std::int64_t kept_lo_ = 0;
+};
+
+// Formats read whole by their libraries (NRRD, VDB): served from memory.
+class InMemorySource final : public VolumeSource {
+ public:
+  explicit InMemorySource(Volume v) : volume_(std::move(v)) {
+    type = volume_.type();
+    dims = volume_.dims();
+    spacing = volume_.spacing();
+    origin = volume_.origin();
+  }
+  bool in_memory() const override { return true; }
+  void read(const Box3& box, void* out) override {
+    const std::size_t size = scalar_size(type);
+    const std::size_t row = static_cast<std::size_t>(box.extent(0)) * size;
+    auto* dst = static_cast<char*>(out);
+    const auto* src = reinterpret_cast<const char*>(volume_.bytes());
+    for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k)
+      for (std::int64_t j = box.lo[1]; j < box.hi[1]; ++j, dst += row)
+        std::memcpy(dst,
+                    src + static_cast<std::size_t>((k * dims[1] + j) * dims[0] + box.lo[0]) * size,
+                    row);
+  }
+
+ private:
+  Volume volume_;
+};
+
+bool ends_with(const std::string& s, const char* suffix) {
+  const std::size_t n = std::strlen(suffix);
+  if (s.size() < n) return false;
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
+  return true;
+}
+
+}  // namespace
+
+std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw) {
+  std::unique_ptr<VolumeSource> source;
+  if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
+    if (raw.dims || raw.type || raw.endian == Endian::Big)
+      throw InputError(input + ": --dims, --type and big-endian apply only to raw files");
+    source = std::make_unique<FieldSource>(*spec);
+    source->name = input;
+  } else if (ends_with(input, ".nrrd") || ends_with(input, ".nhdr") || ends_with(input, ".vdb")) {
+    source = std::make_unique<InMemorySource>(read_volume(input, raw));
+    source->name = input;
+  } else {
+    struct stat st {};
+    if (::stat(input.c_str(), &st) != 0)
+      throw IoError("cannot open " + input + ": " + std::strerror(errno));
+    if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + input + ": " + std::strerror(EISDIR));
+    if (ends_with(input, ".gz"))
+      source = std::make_unique<GzipRawSource>(input, raw);
+    else
+      source = std::make_unique<RawFileSource>(input, raw);
+  }
+  if (raw.spacing) source->spacing = *raw.spacing;
+  if (raw.origin) source->origin = *raw.origin;
+  return source;
+}
+
+VolumeView brick_view(const VolumeSource& source, const Box3& box, const void* data) {
+  VolumeView v;
+  v.data = data;
+  v.type = source.type;
+  for (int a = 0; a < 3; ++a) v.dims[a] = box.extent(a);
+  v.strides = {1, v.dims[0], v.dims[0] * v.dims[1]};
+  v.spacing = source.spacing;
+  v.origin = source.origin;
+  v.box = box;
+  v.global_dims = source.dims;
+  return v;
+}
+
+}  // namespace isotile

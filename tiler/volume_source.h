@@ -1,0 +1,48 @@
+// Volumes read box by box, for out-of-core extraction: a brick's samples are read when the brick
+// is extracted, and no source holds the whole volume unless its format leaves no other way.
+//
+//   field:NAME:N       evaluated per box
+//   raw (plain)        positioned reads (pread) of the box's rows
+//   raw .gz            decompressed in order: boxes must come in ascending z and span whole x-y
+//                      slabs (the planner is told so by sequential()); each pass restarts the
+//                      stream
+//   NRRD, VDB          read whole by their libraries, then served box by box (not out of core)
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/volume.h"
+#include "core/volume_io.h"
+
+namespace isotile {
+
+class VolumeSource {
+ public:
+  virtual ~VolumeSource() = default;
+
+  ScalarType type = ScalarType::Float32;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+
+  // True when boxes can only be read as whole x-y slabs in ascending z (per pass; rewind() starts
+  // a new pass).
+  virtual bool sequential() const { return false; }
+  virtual void rewind() {}
+  // Whether the whole volume is held in memory anyway (its bytes count as resident).
+  virtual bool in_memory() const { return false; }
+  // Reads global box `box` into `out` (box extent samples of `type`, x fastest). Throws IoError
+  // or InputError (e.g. NaN samples) naming the input.
+  virtual void read(const Box3& box, void* out) = 0;
+
+  std::string name;
+};
+
+// Opens any input read_volume() accepts. Spacing and origin in `raw` override the file's.
+std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw);
+
+// A view of `data` (which holds `box` of the source's volume, dense) placed in the global grid.
+VolumeView brick_view(const VolumeSource& source, const Box3& box, const void* data);
+
+}  // namespace isotile
