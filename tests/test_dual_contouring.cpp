@@ -581,9 +581,14 @@ TEST(DualContouring, OutputIsIdenticalForAnyThreadCount) {
 TEST(DualContouring, BricksEqualTheWholeVolume) {
   Volume vol = make_field_volume({FieldKind::Torus, 23});
   vol.set_spacing({0.7, 1.0, 1.3});
+  // Kinks (where DcHermite::Eno takes its other branch) need sharp features: csg-box.
+  Volume box = make_field_volume({FieldKind::CsgBox, 21});
+  box.set_spacing({1.0, 1.2, 0.9});
   for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
-    for (bool normals : {false, true}) {
-      const DualContouringOptions base{.solver = solver, .normals = normals};
+    for (int variant = 0; variant < 4; ++variant) {
+      DualContouringOptions base{.solver = solver, .normals = variant == 1};
+      if (variant >= 2) base.hermite = DcHermite::Eno;
+      const VolumeView whole = variant == 3 ? box.view() : vol.view();
       const testing::KeyedExtract run = [&](const VolumeView& v, const Box3& cells) {
         DualContouringOptions o = base;
         o.cells = cells;
@@ -591,7 +596,7 @@ TEST(DualContouring, BricksEqualTheWholeVolume) {
       };
       for (const Index3& brick : {Index3{1, 1, 1}, Index3{3, 5, 2}, Index3{7, 7, 7},
                                   Index3{22, 4, 9}, Index3{64, 64, 64}})
-        testing::expect_bricks_equal_whole(vol.view(), run, dual_contouring_halo(base), brick);
+        testing::expect_bricks_equal_whole(whole, run, dual_contouring_halo(base), brick);
     }
 }
 
@@ -642,6 +647,32 @@ TEST(DualContouring, CsgBoxHermiteSolversBeatTheMassPointAtSharpFeatures) {
     // Every solver stays within a voxel of the surface.
     EXPECT_LT(mass, 0.6) << "N=" << n;
   }
+}
+
+// DcHermite::Eno puts the crossings and normals of edges beside sharp features on the right side
+// of the kink: the worst vertex error drops below MC's and well below central differences'.
+// (Measured, QEF: N = 32 / 64 / 128: 0.13 / 0.09 / 0.10 voxel; central 0.21-0.27; MC 0.20 / 0.13
+// / 0.22. The target, a quarter of MC's, is not met; see docs/quality.md.)
+TEST(DualContouring, EnoHermiteDataBeatMarchingCubesOnCsgBox) {
+  for (std::int64_t n : {32, 64, 128}) {
+    const FieldSpec spec{FieldKind::CsgBox, n};
+    const Volume vol = make_field_volume(spec);
+    const double mc = max_distance(spec, marching_cubes(vol.view(), {}));
+    const double central =
+        max_distance(spec, dual_contouring(vol.view(), {.solver = DcSolver::Qef}));
+    const double eno = max_distance(
+        spec, dual_contouring(vol.view(), {.solver = DcSolver::Qef, .hermite = DcHermite::Eno}));
+    EXPECT_LT(eno, mc) << "N=" << n;
+    EXPECT_LT(eno, 0.75 * central) << "N=" << n;
+  }
+  // On a smooth surface it is no worse than central differences.
+  const FieldSpec torus{FieldKind::Torus, 64};
+  const Volume vol = make_field_volume(torus);
+  const double central =
+      max_distance(torus, dual_contouring(vol.view(), {.solver = DcSolver::Qef}));
+  const double eno = max_distance(
+      torus, dual_contouring(vol.view(), {.solver = DcSolver::Qef, .hermite = DcHermite::Eno}));
+  EXPECT_LE(eno, 1.05 * central);
 }
 
 // On a smooth surface the vertices converge like MC's (error O(1/N) in voxels), and a few
