@@ -1,0 +1,604 @@
+// isotile: the batch command-line front end of the isotile library.
+//
+//   isotile extract INPUT -o OUT.{ply,obj,stl,off} [--iso V] [--method mc] [--backend ...]
+//   isotile info INPUT [--json]
+//   isotile quality MESH [--json]
+//   isotile demo [-o OUT]
+//
+// Errors are one line on stderr and a non-zero exit status (1 for failures, 2 for bad usage).
+// Progress and timings go to stderr unless --quiet; machine-readable output goes to stdout or to
+// the --stats file.
+#include <sys/resource.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <string>
+
+#include "core/atomic_file.h"
+#include "core/errors.h"
+#include "core/extract.h"
+#include "core/mesh_io.h"
+#include "core/mesh_quality.h"
+#include "core/mesh_topology.h"
+#include "core/procedural_fields.h"
+#include "core/self_intersections.h"
+#include "core/volume_io.h"
+#include "tiler/tiled_extract.h"
+
+namespace {
+
+using namespace isotile;
+using json = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+bool g_quiet = false;
+
+void progress(const std::string& message) {
+  if (!g_quiet) std::fprintf(stderr, "isotile: %s\n", message.c_str());
+}
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::string fmt_seconds(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f s", s);
+  return buf;
+}
+
+double peak_rss_mb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+// "256,256,128" -> three numbers.
+template <class T>
+std::array<T, 3> parse_triple(const std::string& text, const char* what) {
+  std::array<T, 3> out{};
+  std::stringstream ss(text);
+  std::string item;
+  int n = 0;
+  while (std::getline(ss, item, ',')) {
+    if (n == 3) break;
+    std::size_t used = 0;
+    try {
+      if constexpr (std::is_integral_v<T>)
+        out[n] = std::stoll(item, &used);
+      else
+        out[n] = std::stod(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size()) break;
+    ++n;
+  }
+  if (n != 3 || ss.rdbuf()->in_avail() != 0)
+    throw InputError(std::string(what) + " must be three comma-separated numbers, got '" + text +
+                     "'");
+  return out;
+}
+
+// Options describing how to read a raw input, shared by `extract` and `info`.
+struct InputArgs {
+  std::string input;
+  std::string dims, type, spacing, origin, endian = "little";
+
+  void add_to(CLI::App& app) {
+    app.add_option("INPUT", input,
+                   "Volume file (raw, raw.gz, nrrd, nhdr, vdb) or a procedural field "
+                   "field:NAME:N (sphere, torus, gyroid, csg-box, marschner-lobb)")
+        ->required();
+    app.add_option("--dims", dims, "Raw input: samples along x,y,z, e.g. 256,256,128");
+    app.add_option("--type", type,
+                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64");
+    app.add_option("--spacing", spacing, "Sample spacing x,y,z (overrides the file's)");
+    app.add_option("--origin", origin,
+                   "World position x,y,z of the first sample (overrides the file's)");
+    app.add_option("--endian", endian, "Raw input byte order")
+        ->check(CLI::IsMember({"little", "big"}));
+  }
+
+  RawOptions raw_options() const {
+    RawOptions o;
+    if (!dims.empty()) o.dims = parse_triple<std::int64_t>(dims, "--dims");
+    if (!type.empty()) {
+      o.type = parse_scalar_type(type);
+      if (!o.type)
+        throw InputError("unknown --type '" + type +
+                         "' (expected int8, uint8, int16, uint16, int32, uint32, float32 or "
+                         "float64)");
+    }
+    if (!spacing.empty()) o.spacing = parse_triple<double>(spacing, "--spacing");
+    if (!origin.empty()) o.origin = parse_triple<double>(origin, "--origin");
+    o.endian = endian == "big" ? Endian::Big : Endian::Little;
+    return o;
+  }
+};
+
+json quality_json(const QualityStats& q) {
+  json j;
+  j["radius_ratio_min"] = q.min;
+  j["radius_ratio_mean"] = q.mean;
+  j["radius_ratio_q001"] = q.q001;
+  j["radius_ratio_q01"] = q.q01;
+  j["radius_ratio_median"] = q.median;
+  j["radius_ratio_histogram"] = q.histogram;
+  j["degenerate_triangles"] = q.degenerate;
+  return j;
+}
+
+json topology_json(const TopologyStats& t) {
+  json j;
+  j["boundary_edges"] = t.boundary_edges;
+  j["border_boundary_edges"] = t.border_boundary_edges;
+  j["nonmanifold_edges"] = t.nonmanifold_edges;
+  j["nonmanifold_vertices"] = t.nonmanifold_vertices;
+  j["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;
+  j["euler"] = t.euler;
+  j["components"] = t.components;
+  j["closed"] = t.closed;
+  j["watertight"] = t.watertight;
+  return j;
+}
+
+// The world-space box of the volume, computed exactly as extractors compute vertex positions, so
+// that vertices on the border compare equal to it.
+std::array<Vec3f, 2> border_box(const VolumeView& v) {
+  std::array<Vec3f, 2> box{};
+  for (int a = 0; a < 3; ++a) {
+    box[0][a] = static_cast<float>(v.origin[a] + v.spacing[a] * 0.0);
+    box[1][a] =
+        static_cast<float>(v.origin[a] + v.spacing[a] * static_cast<double>(v.global_dims[a] - 1));
+  }
+  return box;
+}
+
+// Mean and max distance of the vertices to the exact surface of a procedural field. Sums are
+// taken per fixed chunk and added in chunk order, so the result does not depend on threads.
+std::pair<double, double> field_distances(const FieldSpec& spec, const Mesh& mesh,
+                                          const VolumeView& view) {
+  const std::size_t n = mesh.positions.size();
+  if (n == 0) return {0.0, 0.0};
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<double> sum(chunks), max(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    double s = 0, m = 0;
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+      Vec3d p;
+      for (int a = 0; a < 3; ++a)
+        p[a] = (static_cast<double>(mesh.positions[i][a]) - view.origin[a]) / view.spacing[a];
+      const double d = distance_voxels(spec, p);
+      s += d;
+      m = std::max(m, d);
+    }
+    sum[c] = s;
+    max[c] = m;
+  });
+  double s = 0, m = 0;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    s += sum[c];
+    m = std::max(m, max[c]);
+  }
+  return {s / static_cast<double>(n), m};
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  if (path == "-") {
+    std::fwrite(text.data(), 1, text.size(), stdout);
+    std::fflush(stdout);
+    return;
+  }
+  AtomicFile f(path);
+  f.write(text.data(), text.size());
+  f.commit();
+}
+
+// --- extract -------------------------------------------------------------------------------
+
+struct ExtractArgs {
+  InputArgs in;
+  std::string output;
+  std::optional<double> iso;
+  std::string method = "mc";
+  std::string backend = "auto";
+  std::string stats;
+  bool normals = false;
+  bool ascii = false;
+  std::string dc_solver = "mass";
+  std::string quality = "fast";  // Macet
+  bool quads = false;
+  bool check_intersections = false;
+  std::string memory;  // empty: in core
+};
+
+Method parse_method(const std::string& s) {
+  if (s == "mc") return Method::MarchingCubes;
+  if (s == "macet") return Method::Macet;
+  return Method::DualContouring;
+}
+
+Backend parse_backend(const std::string& s) {
+  if (s == "cpu") return Backend::Cpu;
+  if (s == "gs") return Backend::GeometryShader;
+  if (s == "hp") return Backend::HistoPyramid;
+  return Backend::Auto;
+}
+
+// Out of core: brick by brick within --memory, streamed into the output file.
+int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, MeshFormat format,
+                      Clock::time_point t_total) {
+  TiledOptions to;
+  to.extract = options;
+  to.memory = parse_memory_size(args.memory);
+  to.format = format;
+  if (args.ascii) throw InputError("--memory writes binary PLY or STL; drop --ascii");
+  if (args.check_intersections)
+    throw InputError(
+        "--check-intersections needs the whole mesh in memory; drop --memory, or run "
+        "`isotile quality --check-intersections` on the output");
+  to.progress = [&](std::string_view pass, std::int64_t done, std::int64_t total) {
+    // About twenty lines per pass, whatever the brick count.
+    const std::int64_t step = std::max<std::int64_t>(1, total / 20);
+    if (done != total && done % step != 0) return;
+    progress(std::string(pass) + ": " + std::to_string(done) + "/" + std::to_string(total) +
+             " bricks");
+  };
+  auto source = open_volume_source(args.in.input, args.in.raw_options());
+  progress("extracting " + args.in.input + " (" + std::to_string(source->dims[0]) + "x" +
+           std::to_string(source->dims[1]) + "x" + std::to_string(source->dims[2]) + " " +
+           std::string(scalar_name(source->type)) + ") brick by brick within " + args.memory +
+           (source->in_memory() ? " (this format is read whole first)" : ""));
+  const TiledResult r = extract_tiled(*source, to, args.output);
+  progress("extracted " + std::to_string(r.triangles) + " triangles, " +
+           std::to_string(r.vertices) + " vertices in " + std::to_string(r.plan.total()) +
+           " bricks of " + std::to_string(r.plan.brick[0]) + "x" + std::to_string(r.plan.brick[1]) +
+           "x" + std::to_string(r.plan.brick[2]) + " cells");
+  if (!args.stats.empty()) {
+    json j;
+    j["input"] = args.in.input;
+    j["output"] = args.output;
+    j["dims"] = source->dims;
+    j["type"] = scalar_name(source->type);
+    j["iso"] = options.iso;
+    j["method"] = method_name(options.method);
+    if (options.method == Method::Macet) j["quality"] = args.quality;
+    j["backend"] = "cpu";
+    j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+    j["triangles"] = r.triangles;
+    j["vertices"] = r.vertices;
+    j.update(quality_json(r.quality));
+    // Topology needs every edge's faces at once; a streamed run does not hold them.
+    for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "watertight"})
+      j[key] = nullptr;
+    j["bricks"] = r.plan.total();
+    j["brick_cells"] = r.plan.brick;
+    j["brick_grid"] = r.plan.count;
+    j["bricks_extracted"] = r.bricks_extracted;
+    j["memory_budget"] = to.memory;
+    j["largest_brick_bytes"] = r.largest_brick_bytes;
+    j["seconds"] = {{"count", r.seconds_count},
+                    {"extract", r.seconds_extract},
+                    {"total", seconds_since(t_total)}};
+    j["peak_rss_mb"] = peak_rss_mb();
+    write_text(args.stats, j.dump(2) + "\n");
+  }
+  progress("done in " + fmt_seconds(seconds_since(t_total)));
+  return 0;
+}
+
+int run_extract(const ExtractArgs& args) {
+  const auto t_total = Clock::now();
+  // Fail on a bad output name or an unavailable method before spending time on reading.
+  const MeshFormat format = mesh_format_from_path(args.output);
+  ExtractOptions options;
+  options.method = parse_method(args.method);
+  options.backend = parse_backend(args.backend);
+  options.normals = args.normals;
+  options.dc_solver = args.dc_solver == "particle" ? DcSolver::Particle
+                      : args.dc_solver == "qef"    ? DcSolver::Qef
+                                                   : DcSolver::MassPoint;
+  options.keep_quads = args.quads;
+  options.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
+  const Backend backend = resolve_backend(options);
+
+  const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
+  if (args.iso) {
+    options.iso = *args.iso;
+  } else if (field) {
+    options.iso = field_default_iso(field->kind);
+  } else {
+    throw InputError("--iso is required for a volume file (`isotile info " + args.in.input +
+                     "` shows its value range)");
+  }
+  if (!std::isfinite(options.iso)) throw InputError("--iso must be a finite number");
+  if (!args.memory.empty()) return run_extract_tiled(args, options, format, t_total);
+
+  progress("reading " + args.in.input);
+  auto t0 = Clock::now();
+  const Volume volume = read_volume(args.in.input, args.in.raw_options());
+  const double t_read = seconds_since(t0);
+  const VolumeView view = volume.view();
+  progress("read " + std::to_string(view.dims[0]) + "x" + std::to_string(view.dims[1]) + "x" +
+           std::to_string(view.dims[2]) + " " + std::string(scalar_name(view.type)) + " in " +
+           fmt_seconds(t_read));
+
+  progress("extracting (" + std::string(method_name(options.method)) + ", " +
+           std::string(backend_name(backend)) + ", iso " + std::to_string(options.iso) + ")");
+  t0 = Clock::now();
+  const Mesh mesh = extract(view, options);
+  const double t_extract = seconds_since(t0);
+  progress("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
+           std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
+
+  progress("writing " + args.output);
+  t0 = Clock::now();
+  write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  const double t_write = seconds_since(t0);
+
+  if (args.stats.empty()) {
+    progress("done in " + fmt_seconds(seconds_since(t_total)));
+    return 0;
+  }
+  t0 = Clock::now();
+  const QualityStats q = triangle_quality(mesh);
+  const TopologyStats topo = mesh_topology(mesh, {.border_box = border_box(view)});
+  json j;
+  j["input"] = args.in.input;
+  j["output"] = args.output;
+  j["dims"] = view.dims;
+  j["type"] = scalar_name(view.type);
+  j["iso"] = options.iso;
+  j["method"] = method_name(options.method);
+  if (options.method == Method::Macet) j["quality"] = args.quality;
+  j["backend"] = backend_name(backend);
+  j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+  j["triangles"] = mesh.triangles.size() + 2 * mesh.quads.size();
+  j["vertices"] = mesh.positions.size();
+  j.update(quality_json(q));
+  j.update(topology_json(topo));
+  j["bricks"] = 1;
+  if (args.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
+  if (field) {
+    const auto [mean, max] = field_distances(*field, mesh, view);
+    j["distance_mean"] = mean;
+    j["distance_max"] = max;
+  }
+  const double t_measure = seconds_since(t0);
+  j["seconds"] = {{"read", t_read},
+                  {"extract", t_extract},
+                  {"write", t_write},
+                  {"measure", t_measure},
+                  {"total", seconds_since(t_total)}};
+  j["peak_rss_mb"] = peak_rss_mb();
+  write_text(args.stats, j.dump(2) + "\n");
+  progress("done in " + fmt_seconds(seconds_since(t_total)));
+  return 0;
+}
+
+// --- info ----------------------------------------------------------------------------------
+
+int run_info(const InputArgs& in, bool as_json) {
+  const Volume volume = read_volume(in.input, in.raw_options());
+  const VolumeView v = volume.view();
+  const auto [lo, hi] = value_range(v);
+  constexpr int kBins = 16;
+  std::array<std::uint64_t, kBins> hist{};
+  // A cheap whole-volume histogram: one pass, per-slab counts merged in slab order.
+  std::vector<std::array<std::uint64_t, kBins>> slabs(v.dims[2]);
+  const double width = hi > lo ? (hi - lo) / kBins : 1.0;
+  tbb::parallel_for(std::int64_t{0}, v.dims[2], [&](std::int64_t k) {
+    auto& h = slabs[k];
+    h.fill(0);
+    for (std::int64_t j = 0; j < v.dims[1]; ++j)
+      for (std::int64_t i = 0; i < v.dims[0]; ++i) {
+        const int b = static_cast<int>((v.value(i, j, k) - lo) / width);
+        ++h[std::clamp(b, 0, kBins - 1)];
+      }
+  });
+  for (const auto& h : slabs)
+    for (int b = 0; b < kBins; ++b) hist[b] += h[b];
+
+  json j;
+  j["input"] = in.input;
+  j["dims"] = v.dims;
+  j["type"] = scalar_name(v.type);
+  j["spacing"] = v.spacing;
+  j["origin"] = v.origin;
+  j["bytes"] = volume.byte_size();
+  j["min"] = lo;
+  j["max"] = hi;
+  json bins = json::array();
+  for (int b = 0; b < kBins; ++b)
+    bins.push_back({{"from", lo + b * width}, {"to", lo + (b + 1) * width}, {"count", hist[b]}});
+  j["histogram"] = bins;
+  if (const auto field = parse_field_spec(in.input))
+    j["default_iso"] = field_default_iso(field->kind);
+  if (as_json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::printf("input    %s\n", in.input.c_str());
+  std::printf("dims     %lld x %lld x %lld\n", static_cast<long long>(v.dims[0]),
+              static_cast<long long>(v.dims[1]), static_cast<long long>(v.dims[2]));
+  std::printf("type     %s (%zu bytes)\n", std::string(scalar_name(v.type)).c_str(),
+              volume.byte_size());
+  std::printf("spacing  %g, %g, %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
+  std::printf("origin   %g, %g, %g\n", v.origin[0], v.origin[1], v.origin[2]);
+  std::printf("range    %g .. %g\n", lo, hi);
+  std::printf("histogram\n");
+  for (int b = 0; b < kBins; ++b)
+    std::printf("  %12g .. %-12g %llu\n", lo + b * width, lo + (b + 1) * width,
+                static_cast<unsigned long long>(hist[b]));
+  return 0;
+}
+
+// --- quality -------------------------------------------------------------------------------
+
+int run_quality(const std::string& path, bool as_json, bool check_intersections) {
+  const Mesh mesh = read_mesh(path);
+  const QualityStats q = triangle_quality(mesh);
+  const TopologyStats t = mesh_topology(mesh);
+  json j;
+  j["mesh"] = path;
+  j["triangles"] = q.triangles;
+  j["vertices"] = mesh.positions.size();
+  j.update(quality_json(q));
+  j.update(topology_json(t));
+  j["edges"] = t.edges;
+  j["unreferenced_vertices"] = t.unreferenced_vertices;
+  std::optional<std::uint64_t> crossing;
+  if (check_intersections) j["self_intersections"] = *(crossing = self_intersections(mesh).pairs);
+  if (as_json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::printf("mesh                  %s\n", path.c_str());
+  std::printf("vertices / triangles  %zu / %llu\n", mesh.positions.size(),
+              static_cast<unsigned long long>(q.triangles));
+  std::printf("radius ratio          min %.4g  q0.1%% %.4g  q1%% %.4g  mean %.4f  median %.4f\n",
+              q.min, q.q001, q.q01, q.mean, q.median);
+  std::printf("degenerate triangles  %llu\n", static_cast<unsigned long long>(q.degenerate));
+  std::printf("boundary edges        %llu\n", static_cast<unsigned long long>(t.boundary_edges));
+  std::printf("non-manifold          %llu edges, %llu vertices\n",
+              static_cast<unsigned long long>(t.nonmanifold_edges),
+              static_cast<unsigned long long>(t.nonmanifold_vertices));
+  std::printf("orientation           %llu inconsistent edges\n",
+              static_cast<unsigned long long>(t.inconsistently_oriented_edges));
+  std::printf("euler / components    %lld / %llu\n", static_cast<long long>(t.euler),
+              static_cast<unsigned long long>(t.components));
+  std::printf("closed                %s\n", t.closed ? "yes" : "no");
+  if (crossing)
+    std::printf("self-intersections    %llu triangle pairs\n",
+                static_cast<unsigned long long>(*crossing));
+  return 0;
+}
+
+extern "C" void on_signal(int sig) {
+  remove_pending_temporaries();
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+
+  CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "isotile 0.1.0");
+  int threads = 0;
+  app.add_option("--threads", threads, "Worker threads (default: all cores)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--quiet,-q", g_quiet, "No progress messages on stderr");
+
+  ExtractArgs ex;
+  auto* extract_cmd = app.add_subcommand("extract", "Extract an isosurface mesh from a volume");
+  ex.in.add_to(*extract_cmd);
+  extract_cmd->add_option("-o,--output", ex.output, "Output mesh: .ply, .obj, .stl or .off")
+      ->required();
+  extract_cmd->add_option("--iso", ex.iso,
+                          "Isovalue; samples >= iso are inside (default for fields: their own)");
+  extract_cmd->add_option("--method", ex.method, "Extraction method")
+      ->check(CLI::IsMember({"mc", "macet", "dc"}));
+  extract_cmd->add_option("--backend", ex.backend, "Where to run it")
+      ->check(CLI::IsMember({"cpu", "gs", "hp", "auto"}));
+  extract_cmd->add_option("--stats", ex.stats,
+                          "Write statistics as JSON to this file ('-': stdout)");
+  extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
+  extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
+  extract_cmd
+      ->add_option("--dc-solver", ex.dc_solver,
+                   "Dual Contouring vertex placement: mass (mass point, best triangles), "
+                   "particle (the paper's minimizer, 10 steps), qef (truncated SVD)")
+      ->check(CLI::IsMember({"mass", "particle", "qef"}));
+  extract_cmd
+      ->add_option("--quality", ex.quality,
+                   "Macet: fast (closed-form end-point push, default) or max (adds a local "
+                   "search for the worst triangles; much slower)")
+      ->check(CLI::IsMember({"fast", "max"}));
+  extract_cmd->add_flag("--quads", ex.quads,
+                        "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
+  extract_cmd->add_flag("--check-intersections", ex.check_intersections,
+                        "Count self-intersecting triangle pairs (stats key self_intersections)");
+  extract_cmd->add_option("--memory", ex.memory,
+                          "Out of core: extract brick by brick, each brick's working set within "
+                          "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
+                          "file identical to an in-core run");
+
+  InputArgs info_in;
+  bool info_json = false;
+  auto* info_cmd =
+      app.add_subcommand("info", "Describe a volume: dims, type, value range, histogram");
+  info_in.add_to(*info_cmd);
+  info_cmd->add_flag("--json", info_json, "Print JSON");
+
+  std::string quality_path;
+  bool quality_json_flag = false;
+  auto* quality_cmd = app.add_subcommand(
+      "quality", "Measure a mesh: radius ratios, boundary, manifoldness, Euler characteristic");
+  quality_cmd->add_option("MESH", quality_path, "Mesh file (.ply, .obj, .stl, .off)")->required();
+  quality_cmd->add_flag("--json", quality_json_flag, "Print JSON");
+  bool quality_intersections = false;
+  quality_cmd->add_flag("--check-intersections", quality_intersections,
+                        "Count self-intersecting triangle pairs");
+
+  std::string demo_output = "isotile-demo.ply";
+  auto* demo_cmd = app.add_subcommand(
+      "demo", "Extract the built-in demo (a 128^3 gyroid) and print its statistics");
+  demo_cmd->add_option("-o,--output", demo_output, "Where to write the demo mesh");
+
+  // Subcommand options may also come before the subcommand name.
+  for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, demo_cmd}) cmd->fallthrough();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help and --version exit 0; every usage error exits 2, whatever CLI11's own code is.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  std::optional<tbb::global_control> limit;
+  if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
+
+  try {
+    if (*extract_cmd) return run_extract(ex);
+    if (*info_cmd) return run_info(info_in, info_json);
+    if (*quality_cmd) return run_quality(quality_path, quality_json_flag, quality_intersections);
+    if (*demo_cmd) {
+      ExtractArgs d;
+      d.in.input = "field:gyroid:128";
+      d.output = demo_output;
+      d.stats = "-";
+      const int rc = run_extract(d);
+      if (rc == 0 && !g_quiet)
+        std::fprintf(stderr, "isotile: demo mesh written to %s\n",
+                     std::filesystem::absolute(demo_output).c_str());
+      return rc;
+    }
+  } catch (const isotile::Error& e) {
+    std::fprintf(stderr, "isotile: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "isotile: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "isotile: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
