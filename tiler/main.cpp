@@ -33,6 +33,10 @@
 #include "core/procedural_fields.h"
 #include "core/self_intersections.h"
 #include "core/volume_io.h"
+#ifdef ISOTILE_HAVE_GL
+#include "shaders/gl_backends.h"
+#include "shaders/gl_context.h"
+#endif
 #include "tiler/tiled_extract.h"
 
 namespace {
@@ -486,6 +490,47 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections)
   return 0;
 }
 
+// --- gl-info -------------------------------------------------------------------------------
+
+int run_gl_info(bool as_json) {
+#ifdef ISOTILE_HAVE_GL
+  const isotile::gl::DeviceInfo& d = isotile::gl::device();  // InputError when there is none
+  json j;
+  j["platform"] = d.platform;
+  j["vendor"] = d.vendor;
+  j["renderer"] = d.renderer;
+  j["version"] = d.version;
+  j["glsl_version"] = d.glsl_version;
+  j["software"] = d.software;
+  j["memory_total_kib"] = d.memory_total_kib;
+  j["memory_free_kib"] = d.memory_free_kib;
+  j["max_shader_storage_block_bytes"] = d.max_ssbo_bytes;
+  j["max_compute_work_group_count"] = d.max_compute_groups;
+  j["max_geometry_output_vertices"] = d.max_gs_output_vertices;
+  j["max_transform_feedback_interleaved_components"] = d.max_tf_interleaved;
+  j["max_vertex_shader_storage_blocks"] = d.max_vertex_ssbo_blocks;
+  j["max_geometry_shader_storage_blocks"] = d.max_geometry_ssbo_blocks;
+  j["max_3d_texture_size"] = d.max_3d_texture;
+  json backends = json::object();
+  for (const BackendCaps& c : capabilities())
+    backends[std::string(backend_name(c.backend))] =
+        c.available ? (c.hardware ? "available (GPU)" : "available") : c.why_unavailable;
+  j["backends"] = backends;
+  j["auto"] = backend_name(resolve_backend({}));
+  if (as_json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  for (const auto& [key, value] : j.items())
+    std::printf("%-46s %s\n", key.c_str(),
+                value.is_string() ? value.get<std::string>().c_str() : value.dump().c_str());
+  return 0;
+#else
+  (void)as_json;
+  throw InputError("this isotile was built without OpenGL (ISOTILE_GL=OFF)");
+#endif
+}
+
 extern "C" void on_signal(int sig) {
   remove_pending_temporaries();
   std::signal(sig, SIG_DFL);
@@ -497,6 +542,9 @@ extern "C" void on_signal(int sig) {
 int main(int argc, char** argv) {
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
+#ifdef ISOTILE_HAVE_GL
+  isotile::gl::register_gl_backends();
+#endif
 
   CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids"};
   app.require_subcommand(1);
@@ -563,6 +611,11 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("-o,--output", demo_output, "Where to write the demo mesh");
 
   // Subcommand options may also come before the subcommand name.
+  bool gl_info_json = false;
+  auto* gl_info_cmd = app.add_subcommand(
+      "gl-info", "Describe the OpenGL device the gs and hp backends would use, and its limits");
+  gl_info_cmd->add_flag("--json", gl_info_json, "Print JSON");
+
   for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, demo_cmd}) cmd->fallthrough();
 
   try {
@@ -578,6 +631,7 @@ int main(int argc, char** argv) {
   try {
     if (*extract_cmd) return run_extract(ex);
     if (*info_cmd) return run_info(info_in, info_json);
+    if (*gl_info_cmd) return run_gl_info(gl_info_json);
     if (*quality_cmd) return run_quality(quality_path, quality_json_flag, quality_intersections);
     if (*demo_cmd) {
       ExtractArgs d;
