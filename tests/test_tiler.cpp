@@ -1,0 +1,293 @@
+// The out-of-core tiler: the planner keeps to its budget, and a bricked, streamed extraction
+// writes exactly the bytes an in-core extraction writes, for every method, budget and input kind.
+#include <gtest/gtest.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/extract.h"
+#include "core/mesh_io.h"
+#include "core/procedural_fields.h"
+#include "core/volume_io.h"
+#include "test_support.h"
+#include "tiler/brick_plan.h"
+#include "tiler/tiled_extract.h"
+#include "tiler/volume_source.h"
+
+namespace isotile {
+namespace {
+
+namespace fs = std::filesystem;
+
+class Tiler : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("isotile-tiler-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  static std::string slurp(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  }
+
+  // In core: read whole, extract, write_mesh. Returns the file's bytes.
+  std::string whole(const std::string& input, const ExtractOptions& o, MeshFormat format,
+                    const RawOptions& raw = {}) {
+    const Volume v = read_volume(input, raw);
+    const fs::path out = dir_ / (format == MeshFormat::Ply ? "whole.ply" : "whole.stl");
+    write_mesh(extract(v.view(), o), out, {.format = format});
+    return slurp(out);
+  }
+
+  // Out of core within `memory`. Returns the file's bytes.
+  std::string tiled(const std::string& input, const ExtractOptions& o, MeshFormat format,
+                    std::uint64_t memory, TiledResult* result = nullptr,
+                    const RawOptions& raw = {}) {
+    auto source = open_volume_source(input, raw);
+    const fs::path out = dir_ / (format == MeshFormat::Ply ? "tiled.ply" : "tiled.stl");
+    TiledOptions to;
+    to.extract = o;
+    to.memory = memory;
+    to.format = format;
+    const TiledResult r = extract_tiled(*source, to, out);
+    if (result) *result = r;
+    return slurp(out);
+  }
+
+  fs::path dir_;
+};
+
+ExtractOptions options(Method m, bool normals = false) {
+  ExtractOptions o;
+  o.method = m;
+  o.backend = Backend::Cpu;
+  o.normals = normals;
+  return o;
+}
+
+TEST(BrickPlan, BricksFitTheBudgetAndCoverTheVolumeEvenly) {
+  const Index3 dims{301, 77, 1000};
+  for (std::uint64_t memory :
+       {std::uint64_t{4096}, std::uint64_t{1} << 20, std::uint64_t{1} << 26}) {
+    BrickPlanOptions o;
+    o.memory = memory;
+    o.halo = 2;
+    o.sample_bytes = 2;
+    const BrickPlan p = plan_bricks(dims, o);
+    EXPECT_LE(brick_bytes(p.brick, o), memory);
+    for (int a = 0; a < 3; ++a) {
+      // Every cell is covered, and no brick is empty.
+      EXPECT_GE(p.count[a] * p.brick[a], dims[a] - 1);
+      EXPECT_LT((p.count[a] - 1) * p.brick[a], dims[a] - 1);
+    }
+    // Near-cubic: no axis is cut much finer than another unless the volume ends first.
+    const std::int64_t mx = std::max({p.brick[0], p.brick[1], p.brick[2]});
+    for (int a = 0; a < 3; ++a)
+      if (p.brick[a] < dims[a] - 1) EXPECT_GE(2 * p.brick[a] + 2, mx) << "axis " << a;
+    // The last brick's cells end at the volume's last cell.
+    EXPECT_EQ(p.cells(p.total() - 1).hi, (Index3{300, 76, 999}));
+  }
+}
+
+TEST(BrickPlan, SlabsSpanWholeLayersAndTinyBudgetsAreRejected) {
+  BrickPlanOptions o;
+  o.memory = 16 << 20;
+  o.sample_bytes = 1;
+  o.slabs = true;
+  const BrickPlan p = plan_bricks({512, 512, 64}, o);
+  EXPECT_EQ(p.brick[0], 511);
+  EXPECT_EQ(p.brick[1], 511);
+  EXPECT_EQ(p.count[0] * p.count[1], 1);
+  EXPECT_LE(brick_bytes(p.brick, o), o.memory);
+  o.memory = 3 << 20;  // less than one cell layer of 512x512 with its halo and output
+  EXPECT_THROW(plan_bricks({512, 512, 64}, o), InputError);
+  o.slabs = false;
+  o.memory = 50;  // less than one cell with its halo
+  EXPECT_THROW(plan_bricks({512, 512, 64}, o), InputError);
+}
+
+TEST(BrickPlan, MemorySizesParseWithUnits) {
+  EXPECT_EQ(parse_memory_size("256MiB"), 256ull << 20);
+  EXPECT_EQ(parse_memory_size("2GB"), 2000000000ull);
+  EXPECT_EQ(parse_memory_size("1.5g"), 3ull << 29);
+  EXPECT_EQ(parse_memory_size("4096"), 4096ull);
+  for (const char* bad : {"", "MiB", "-5MiB", "0", "12XB", "1e30GB", "nan"})
+    EXPECT_THROW(parse_memory_size(bad), InputError) << bad;
+}
+
+// Every method and output format, budgets from a few cells per brick to the whole volume.
+TEST_F(Tiler, StreamedFileEqualsTheInCoreFile) {
+  const std::string field = "field:torus:33";
+  for (Method m : {Method::MarchingCubes, Method::Macet, Method::DualContouring})
+    for (bool normals : {false, true})
+      for (MeshFormat f : {MeshFormat::Ply, MeshFormat::Stl}) {
+        const ExtractOptions o = options(m, normals);
+        const std::string want = whole(field, o, f);
+        ASSERT_GT(want.size(), 10000u);
+        for (std::uint64_t memory :
+             {std::uint64_t{6000}, std::uint64_t{90000}, std::uint64_t{1} << 30}) {
+          TiledResult r;
+          EXPECT_EQ(tiled(field, o, f, memory, &r), want)
+              << method_name(m) << " normals " << normals << " memory " << memory << " bricks "
+              << r.plan.total();
+          if (memory == 6000) EXPECT_GT(r.plan.total(), 100);
+          if (memory == std::uint64_t{1} << 30) EXPECT_EQ(r.plan.total(), 1);
+        }
+      }
+}
+
+TEST_F(Tiler, QuadsAndParticleSolverStreamExactly) {
+  ExtractOptions o = options(Method::DualContouring);
+  o.keep_quads = true;
+  o.dc_solver = DcSolver::Particle;
+  const std::string field = "field:gyroid:37";
+  EXPECT_EQ(tiled(field, o, MeshFormat::Ply, 20000), whole(field, o, MeshFormat::Ply));
+  EXPECT_EQ(tiled(field, o, MeshFormat::Stl, 20000), whole(field, o, MeshFormat::Stl));
+}
+
+TEST_F(Tiler, StatsMatchTheInCoreMesh) {
+  const std::string field = "field:gyroid:40";
+  const ExtractOptions o = options(Method::MarchingCubes);
+  const Volume v = read_volume(field);
+  const Mesh m = extract(v.view(), o);
+  const QualityStats q = triangle_quality(m);
+  TiledResult r;
+  tiled(field, o, MeshFormat::Ply, 30000, &r);
+  EXPECT_EQ(r.vertices, m.positions.size());
+  EXPECT_EQ(r.triangles, m.triangles.size());
+  EXPECT_EQ(r.quality.triangles, q.triangles);
+  EXPECT_EQ(r.quality.degenerate, q.degenerate);
+  EXPECT_DOUBLE_EQ(r.quality.min, q.min);
+  EXPECT_NEAR(r.quality.mean, q.mean, 1e-12);
+  EXPECT_NEAR(r.quality.q001, q.q001, 2e-5);
+  EXPECT_NEAR(r.quality.q01, q.q01, 2e-5);
+  EXPECT_EQ(r.quality.histogram, q.histogram);
+}
+
+// Raw files of odd shape in every sample type and byte order, plain and gzip'd (slabs).
+TEST_F(Tiler, RawAndGzipInputsStreamExactly) {
+  const Index3 dims{37, 23, 41};
+  const Volume f = make_field_volume({FieldKind::Gyroid, 41});
+  for (ScalarType type : {ScalarType::UInt8, ScalarType::Int16, ScalarType::Float64}) {
+    std::vector<char> bytes;
+    for (std::int64_t k = 0; k < dims[2]; ++k)
+      for (std::int64_t j = 0; j < dims[1]; ++j)
+        for (std::int64_t i = 0; i < dims[0]; ++i) {
+          const double v = f.view().value(i, j, k);
+          visit_scalar(type, [&](auto tag) {
+            using T = decltype(tag);
+            const T x = std::is_integral_v<T> ? static_cast<T>(std::lround(v * 100 + 100))
+                                              : static_cast<T>(v);
+            char b[sizeof(T)];
+            std::memcpy(b, &x, sizeof(T));
+            std::reverse(b, b + sizeof(T));  // big-endian on disk
+            bytes.insert(bytes.end(), b, b + sizeof(T));
+          });
+        }
+    const std::string name = "vol_37x23x41_" + std::string(scalar_name(type)) + ".raw";
+    const fs::path plain = dir_ / name;
+    std::ofstream(plain, std::ios::binary)
+        .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    const fs::path gz = dir_ / (name + ".gz");
+    gzFile g = gzopen(gz.c_str(), "wb");
+    gzwrite(g, bytes.data(), static_cast<unsigned>(bytes.size()));
+    gzclose(g);
+    RawOptions raw;
+    raw.endian = Endian::Big;
+    raw.spacing = Vec3d{0.5, 1.0, 1.5};
+    const double iso = is_floating(type) ? 0.0 : 100.5;
+    for (Method m : {Method::MarchingCubes, Method::DualContouring}) {
+      ExtractOptions o = options(m, true);
+      o.iso = iso;
+      const std::string want = whole(plain.string(), o, MeshFormat::Ply, raw);
+      ASSERT_GT(want.size(), 1000u);
+      TiledResult r;
+      EXPECT_EQ(tiled(plain.string(), o, MeshFormat::Ply, 4000, &r, raw), want)
+          << name << " " << method_name(m);
+      EXPECT_GT(r.plan.total(), 20);
+      EXPECT_EQ(tiled(gz.string(), o, MeshFormat::Ply, 100000, &r, raw), want)
+          << name << ".gz " << method_name(m);
+      EXPECT_GE(r.plan.count[2], 2);  // slabs
+      EXPECT_EQ(r.plan.count[0] * r.plan.count[1], 1);
+    }
+  }
+}
+
+// A brick whose real output overflows the budget is cut into z-slices; the file is unchanged.
+TEST_F(Tiler, OverfullBricksAreSlicedWithoutChangingTheFile) {
+  const std::string field = "field:gyroid:64";
+  const ExtractOptions o = options(Method::MarchingCubes, true);
+  TiledResult r;
+  const std::string got = tiled(field, o, MeshFormat::Ply, 150000, &r);
+  EXPECT_GT(r.bricks_extracted, r.plan.total());
+  EXPECT_EQ(got, whole(field, o, MeshFormat::Ply));
+}
+
+TEST_F(Tiler, RealVolumeWithASmallBudget) {
+  const fs::path engine = testing::shared_volume("engine_256x256x128_uint8.raw.gz");
+  if (!fs::exists(engine)) GTEST_SKIP() << engine << " not found";
+  // A plain copy, so bricks are true 3D bricks (a .gz source is read in slabs).
+  const Volume v = read_volume(engine.string());
+  const fs::path raw = dir_ / "engine_256x256x128_uint8.raw";
+  std::ofstream(raw, std::ios::binary)
+      .write(reinterpret_cast<const char*>(v.bytes()), static_cast<std::streamsize>(v.byte_size()));
+  ExtractOptions o = options(Method::MarchingCubes);
+  o.iso = 49.5;
+  TiledResult r;
+  EXPECT_EQ(tiled(raw.string(), o, MeshFormat::Ply, 1 << 20, &r),
+            whole(raw.string(), o, MeshFormat::Ply));
+  EXPECT_GT(r.plan.total(), 8);
+  EXPECT_GT(r.plan.count[0], 1);
+  EXPECT_GT(r.plan.count[2], 1);
+}
+
+TEST_F(Tiler, FailuresLeaveNoOutput) {
+  // A gzip stream cut short: the error surfaces mid-extraction.
+  const fs::path gz = dir_ / "cut_32x32x32_uint8.raw.gz";
+  std::vector<unsigned char> bytes(32 * 32 * 32);
+  for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<unsigned char>(i * 7);
+  gzFile g = gzopen(gz.c_str(), "wb");
+  gzwrite(g, bytes.data(), static_cast<unsigned>(bytes.size() / 2));
+  gzclose(g);
+  auto source = open_volume_source(gz.string(), {});
+  TiledOptions to;
+  to.extract = options(Method::MarchingCubes);
+  to.extract.iso = 100;
+  to.memory = 1 << 16;
+  const fs::path out = dir_ / "out.ply";
+  EXPECT_THROW(extract_tiled(*source, to, out), InputError);
+  EXPECT_FALSE(fs::exists(out));
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().extension(), ".gz") << "left behind: " << e.path();
+  // Budgets and formats that cannot work are refused before anything is written.
+  to.memory = 10;
+  EXPECT_THROW(extract_tiled(*open_volume_source("field:sphere:16", {}), to, out), InputError);
+  to.memory = 1 << 20;
+  to.format = MeshFormat::Obj;
+  EXPECT_THROW(extract_tiled(*open_volume_source("field:sphere:16", {}), to, out), InputError);
+  EXPECT_FALSE(fs::exists(out));
+  // A raw file whose size disagrees with its name.
+  const fs::path bad = dir_ / "bad_8x8x8_uint16.raw";
+  std::ofstream(bad, std::ios::binary).write("abc", 3);
+  EXPECT_THROW(open_volume_source(bad.string(), {}), InputError);
+}
+
+}  // namespace
+}  // namespace isotile
