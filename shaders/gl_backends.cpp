@@ -80,8 +80,7 @@ McOptions mc_options(const ExtractOptions& o) {
   McOptions m;
   m.iso = o.iso;
   m.normals = o.normals;
-  // Brick mode, once ExtractOptions carries a cell box (the tiler's addition).
-  if constexpr (requires { o.cells; }) m.cells = o.cells;
+  m.cells = o.cells;
   return m;
 }
 

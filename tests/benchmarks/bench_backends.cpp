@@ -1,0 +1,110 @@
+// Marching Cubes on the three backends (CPU, GL geometry shader, GL HistoPyramid), side by side in
+// one run on the same in-memory volumes, after checking that all three give the same mesh.
+//
+//   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
+//   cmake --build build-bench --target bench_backends
+//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R]
+//
+// Times are wall-clock medians of R runs (default 5) of the whole extraction call as a user sees
+// it: upload, passes, read-back, (GS) weld. Each GL path runs once before timing, so shader
+// compilation is not counted. --threads sets TBB's and llvmpipe's threads (LP_NUM_THREADS, read
+// at context creation). Real volumes from ../shared/data are skipped, with a message, when absent.
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/marching_cubes.h"
+#include "core/procedural_fields.h"
+#include "core/volume_io.h"
+#include "shaders/gl_backends.h"
+#include "shaders/gl_context.h"
+
+namespace {
+
+using namespace isotile;
+
+struct Case {
+  std::string name;
+  std::shared_ptr<Volume> volume;
+  double iso;
+};
+
+double median_seconds(int repeat, const std::function<Mesh()>& run, Mesh& out) {
+  std::vector<double> t;
+  for (int r = 0; r < repeat; ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    out = run();
+    t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+bool same(const Mesh& a, const Mesh& b) {
+  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int threads = 2, repeat = 5;
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
+    if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
+  }
+  setenv("LP_NUM_THREADS", std::to_string(threads).c_str(), 1);
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+  std::string why;
+  if (!gl::available(&why)) {
+    std::printf("no GL context: %s\n", why.c_str());
+    return 1;
+  }
+  const gl::DeviceInfo& dev = gl::device();
+  std::printf("device: %s (%s, %s), threads %d, median of %d runs\n", dev.renderer.c_str(),
+              dev.platform.c_str(), dev.version.c_str(), threads, repeat);
+
+  std::vector<Case> cases;
+  for (auto [kind, n] : {std::pair{FieldKind::Sphere, 128}, std::pair{FieldKind::Gyroid, 128},
+                         std::pair{FieldKind::Gyroid, 256}}) {
+    const FieldSpec spec{kind, n};
+    cases.push_back({std::string(field_name(kind)) + "-" + std::to_string(n),
+                     std::make_shared<Volume>(make_field_volume(spec)), field_default_iso(kind)});
+  }
+  const std::filesystem::path shared(ISOTILE_SHARED_DATA);
+  for (auto [file, name] : {std::pair{"engine_256x256x128_uint8.raw.gz", "engine"},
+                            std::pair{"bonsai_256x256x256_uint8.raw.gz", "bonsai"}}) {
+    if (std::filesystem::exists(shared / file))
+      cases.push_back(
+          {name, std::make_shared<Volume>(read_volume((shared / file).string())), 49.5});
+    else
+      std::printf("skipping %s: %s not found\n", name, (shared / file).c_str());
+  }
+
+  std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
+              "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  for (const Case& c : cases) {
+    const VolumeView v = c.volume->view();
+    Mesh cpu, gs, hp;
+    const double t_cpu = median_seconds(
+        repeat, [&] { return marching_cubes(v, {.iso = c.iso}); }, cpu);
+    gl::mc_geometry_shader(v, {.iso = c.iso});  // compile the shaders outside the timing
+    const double t_gs = median_seconds(
+        repeat, [&] { return gl::mc_geometry_shader(v, {.iso = c.iso}); }, gs);
+    gl::mc_histopyramid(v, {.iso = c.iso});
+    const double t_hp = median_seconds(
+        repeat, [&] { return gl::mc_histopyramid(v, {.iso = c.iso}); }, hp);
+    std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
+                cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
+                t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+  }
+  return 0;
+}
