@@ -13,6 +13,8 @@
 // (cannot open or read) with a message naming the file and the problem.
 #pragma once
 
+#include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -51,6 +53,34 @@ Volume read_volume(const std::string& input, const RawOptions& raw = {});
 Volume read_raw(const std::string& path, const RawOptions& options);  // plain or .gz
 Volume read_nrrd(const std::string& path);
 Volume read_vdb(const std::string& path);
+
+// An OpenVDB grid kept as its sparse tree and densified box by box (the out-of-core tiler reads
+// .vdb input this way). Its volume is the grid's active bounding box; boxes are in that volume's
+// sample indices. read_box writes box-extent samples of `type`, x fastest.
+class VdbVolume {
+ public:
+  virtual ~VdbVolume();
+  virtual void read_box(const Box3& box, void* out) const = 0;
+  ScalarType type = ScalarType::Float32;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+};
+std::unique_ptr<VdbVolume> open_vdb(const std::string& path);
+
+// Where a NRRD file keeps its samples, when that is one file of raw or gzip'd samples that can be
+// read box by box; nullopt otherwise (several data files, other encodings, line skips).
+struct NrrdDataLayout {
+  std::string data_file;     // the file holding the samples (the NRRD itself when attached)
+  std::uint64_t offset = 0;  // byte offset of the first sample (raw encoding)
+  bool gzip = false;
+  Endian endian = Endian::Little;
+  ScalarType type = ScalarType::UInt8;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+};
+std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
 
 // Throws InputError when a floating-point volume holds NaN or Inf samples, saying how many and
 // where the first one is (x, y, z). Integer volumes always pass.

@@ -1,6 +1,7 @@
 // The out-of-core tiler: the planner keeps to its budget, and a bricked, streamed extraction
 // writes exactly the bytes an in-core extraction writes, for every method, budget and input kind.
 #include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -256,6 +257,68 @@ TEST_F(Tiler, RealVolumeWithASmallBudget) {
   EXPECT_GT(r.plan.total(), 8);
   EXPECT_GT(r.plan.count[0], 1);
   EXPECT_GT(r.plan.count[2], 1);
+}
+
+// NRRD with raw data attached, detached, after skipped bytes, and gzip'd: read box by box.
+TEST_F(Tiler, NrrdInputsStreamExactly) {
+  const Volume f = make_field_volume({FieldKind::Torus, 29});
+  std::string bytes;
+  for (std::int64_t k = 0; k < 29; ++k)
+    for (std::int64_t j = 0; j < 29; ++j)
+      for (std::int64_t i = 0; i < 23; ++i) {
+        const auto v = static_cast<std::int16_t>(std::lround(f.view().value(i, j, k) * 1000));
+        bytes += static_cast<char>((v >> 8) & 0xff);  // big-endian
+        bytes += static_cast<char>(v & 0xff);
+      }
+  const std::string head =
+      "NRRD0004\ntype: int16\ndimension: 3\nsizes: 23 29 29\nendian: big\nspacings: 0.5 1 "
+      "1.5\n";
+  auto put = [&](const fs::path& p, const std::string& text) {
+    std::ofstream(p, std::ios::binary)
+        .write(text.data(), static_cast<std::streamsize>(text.size()));
+  };
+  put(dir_ / "attached.nrrd", head + "encoding: raw\n\n" + bytes);
+  put(dir_ / "data.raw", bytes);
+  put(dir_ / "detached.nhdr", head + "encoding: raw\ndata file: data.raw\n");
+  put(dir_ / "skipped.bin", "0123456789" + bytes);
+  put(dir_ / "skipped.nhdr", head + "encoding: raw\nbyte skip: -1\ndata file: skipped.bin\n");
+  gzFile g = gzopen((dir_ / "data.raw.gz").c_str(), "wb");
+  gzwrite(g, bytes.data(), static_cast<unsigned>(bytes.size()));
+  gzclose(g);
+  put(dir_ / "gzip.nhdr", head + "encoding: gzip\ndata file: data.raw.gz\n");
+  ExtractOptions o = options(Method::MarchingCubes, true);
+  o.iso = 50;
+  for (const char* name : {"attached.nrrd", "detached.nhdr", "skipped.nhdr", "gzip.nhdr"}) {
+    const std::string input = (dir_ / name).string();
+    EXPECT_FALSE(open_volume_source(input, {})->in_memory()) << name;
+    const std::string want = whole(input, o, MeshFormat::Ply);
+    ASSERT_GT(want.size(), 1000u) << name;
+    TiledResult r;
+    EXPECT_EQ(tiled(input, o, MeshFormat::Ply, 40000, &r), want) << name;
+    EXPECT_GT(r.plan.total(), 3) << name;
+  }
+}
+
+TEST_F(Tiler, VdbInputStreamsExactly) {
+  openvdb::initialize();
+  auto grid = openvdb::FloatGrid::create(1.0f);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(0.25));
+  auto acc = grid->getAccessor();
+  const Volume f = make_field_volume({FieldKind::Sphere, 27});
+  for (int k = 0; k < 27; ++k)
+    for (int j = 0; j < 27; ++j)
+      for (int i = 0; i < 27; ++i)
+        acc.setValueOn(openvdb::Coord(i - 9, j + 4, k - 30),
+                       static_cast<float>(f.view().value(i, j, k)));
+  const fs::path file = dir_ / "sphere.vdb";
+  openvdb::io::File out(file.string());
+  out.write({grid});
+  out.close();
+  const ExtractOptions o = options(Method::DualContouring, true);
+  TiledResult r;
+  EXPECT_EQ(tiled(file.string(), o, MeshFormat::Ply, 12000, &r),
+            whole(file.string(), o, MeshFormat::Ply));
+  EXPECT_GT(r.plan.total(), 3);
 }
 
 TEST_F(Tiler, FailuresLeaveNoOutput) {

@@ -38,24 +38,32 @@ class FieldSource final : public VolumeSource {
   FieldSpec spec_;
 };
 
+// Samples stored plainly in one file from byte `offset` on (raw files, NRRD's raw data).
+struct PlainLayout {
+  std::string file;
+  std::uint64_t offset = 0;
+  ScalarType type = ScalarType::UInt8;
+  Index3 dims{0, 0, 0};
+  bool swap = false;  // stored in the other byte order
+};
+
 class RawFileSource final : public VolumeSource {
  public:
-  RawFileSource(const std::string& path, const RawOptions& options) {
-    name = path;
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd_ < 0) throw IoError("cannot open " + path + ": " + std::strerror(errno));
-    const RawLayout layout = resolve_raw_layout(path, options);
+  explicit RawFileSource(const PlainLayout& layout) : offset_(layout.offset), swap_(layout.swap) {
+    name = layout.file;
     type = layout.type;
     dims = layout.dims;
+    fd_ = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw IoError("cannot open " + name + ": " + std::strerror(errno));
     const std::size_t need = checked_volume_bytes(type, dims);
     struct stat st {};
     if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode) &&
-        static_cast<std::uint64_t>(st.st_size) != need)
-      throw InputError(path + ": file holds " + std::to_string(st.st_size) + " bytes but " +
+        static_cast<std::uint64_t>(st.st_size) != need + offset_)
+      throw InputError(name + ": file holds " + std::to_string(st.st_size) + " bytes but " +
                        std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
                        std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
-                       " samples need " + std::to_string(need));
-    swap_ = (options.endian == Endian::Big) != (std::endian::native == std::endian::big);
+                       " samples need " + std::to_string(need) +
+                       (offset_ ? " after " + std::to_string(offset_) + " header bytes" : ""));
   }
   ~RawFileSource() override {
     if (fd_ >= 0) ::close(fd_);
@@ -67,7 +75,8 @@ class RawFileSource final : public VolumeSource {
     auto* dst = static_cast<char*>(out);
     for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k)
       for (std::int64_t j = box.lo[1]; j < box.hi[1]; ++j, dst += row_bytes) {
-        const std::int64_t offset = ((k * dims[1] + j) * dims[0] + box.lo[0]) * size;
+        const std::int64_t offset =
+            static_cast<std::int64_t>(offset_) + ((k * dims[1] + j) * dims[0] + box.lo[0]) * size;
         std::int64_t done = 0;
         while (done < row_bytes) {
           const ssize_t n = ::pread(fd_, dst + done, static_cast<std::size_t>(row_bytes - done),
@@ -88,6 +97,7 @@ class RawFileSource final : public VolumeSource {
 
  private:
   int fd_ = -1;
+  std::uint64_t offset_ = 0;
   bool swap_ = false;
 };
 
@@ -96,22 +106,16 @@ class RawFileSource final : public VolumeSource {
 // planes read are kept for the next box.
 class GzipRawSource final : public VolumeSource {
  public:
-  GzipRawSource(const std::string& path, const RawOptions& options) {
-    name = path;
-    {
-      // Read once so that a bad name, a non-gzip file or a size mismatch are reported up front
-      // exactly as the in-core reader reports them.
-      const RawLayout layout = resolve_raw_layout(path, options);
-      type = layout.type;
-      dims = layout.dims;
-      checked_volume_bytes(type, dims);
-    }
-    file_ = gzopen(path.c_str(), "rb");
-    if (!file_) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  explicit GzipRawSource(const PlainLayout& layout) : swap_(layout.swap) {
+    name = layout.file;
+    type = layout.type;
+    dims = layout.dims;
+    checked_volume_bytes(type, dims);
+    file_ = gzopen(name.c_str(), "rb");
+    if (!file_) throw IoError("cannot open " + name + ": " + std::strerror(errno));
     if (gzdirect(file_))
-      throw InputError(path + ": not gzip data (the name ends in .gz); rename it or recompress it");
+      throw InputError(name + ": not gzip data (the name ends in .gz); rename it or recompress it");
     gzbuffer(file_, 1 << 20);
-    swap_ = (options.endian == Endian::Big) != (std::endian::native == std::endian::big);
     plane_bytes_ = static_cast<std::size_t>(dims[0] * dims[1]) * scalar_size(type);
   }
   ~GzipRawSource() override {
@@ -184,7 +188,23 @@ class GzipRawSource final : public VolumeSource {
   std::int64_t kept_lo_ = 0;
 };
 
-// Formats read whole by their libraries (NRRD, VDB): served from memory.
+// OpenVDB: the grid's sparse tree stays in memory (that is the format); boxes are densified from
+// it.
+class VdbSource final : public VolumeSource {
+ public:
+  explicit VdbSource(std::unique_ptr<VdbVolume> vdb) : vdb_(std::move(vdb)) {
+    type = vdb_->type;
+    dims = vdb_->dims;
+    spacing = vdb_->spacing;
+    origin = vdb_->origin;
+  }
+  void read(const Box3& box, void* out) override { vdb_->read_box(box, out); }
+
+ private:
+  std::unique_ptr<VdbVolume> vdb_;
+};
+
+// NRRD data teem cannot hand out box by box (several files, other encodings): read whole.
 class InMemorySource final : public VolumeSource {
  public:
   explicit InMemorySource(Volume v) : volume_(std::move(v)) {
@@ -221,25 +241,44 @@ bool ends_with(const std::string& s, const char* suffix) {
 }  // namespace
 
 std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw) {
+  const bool native_big = std::endian::native == std::endian::big;
   std::unique_ptr<VolumeSource> source;
-  if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
+  const bool nrrd = ends_with(input, ".nrrd") || ends_with(input, ".nhdr");
+  const bool vdb = ends_with(input, ".vdb");
+  if (parse_field_spec(input) || nrrd || vdb) {
     if (raw.dims || raw.type || raw.endian == Endian::Big)
       throw InputError(input + ": --dims, --type and big-endian apply only to raw files");
+  }
+  if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
     source = std::make_unique<FieldSource>(*spec);
-    source->name = input;
-  } else if (ends_with(input, ".nrrd") || ends_with(input, ".nhdr") || ends_with(input, ".vdb")) {
-    source = std::make_unique<InMemorySource>(read_volume(input, raw));
-    source->name = input;
+  } else if (vdb) {
+    source = std::make_unique<VdbSource>(open_vdb(input));
+  } else if (nrrd) {
+    if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(input)) {
+      const PlainLayout layout{d->data_file, d->offset, d->type, d->dims,
+                               (d->endian == Endian::Big) != native_big};
+      if (d->gzip)
+        source = std::make_unique<GzipRawSource>(layout);
+      else
+        source = std::make_unique<RawFileSource>(layout);
+      source->spacing = d->spacing;
+      source->origin = d->origin;
+    } else {
+      source = std::make_unique<InMemorySource>(read_nrrd(input));
+    }
   } else {
     struct stat st {};
     if (::stat(input.c_str(), &st) != 0)
       throw IoError("cannot open " + input + ": " + std::strerror(errno));
     if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + input + ": " + std::strerror(EISDIR));
+    const RawLayout r = resolve_raw_layout(input, raw);
+    const PlainLayout layout{input, 0, r.type, r.dims, (raw.endian == Endian::Big) != native_big};
     if (ends_with(input, ".gz"))
-      source = std::make_unique<GzipRawSource>(input, raw);
+      source = std::make_unique<GzipRawSource>(layout);
     else
-      source = std::make_unique<RawFileSource>(input, raw);
+      source = std::make_unique<RawFileSource>(layout);
   }
+  source->name = input;
   if (raw.spacing) source->spacing = *raw.spacing;
   if (raw.origin) source->origin = *raw.origin;
   return source;

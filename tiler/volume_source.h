@@ -6,7 +6,9 @@
 //   raw .gz            decompressed in order: boxes must come in ascending z and span whole x-y
 //                      slabs (the planner is told so by sequential()); each pass restarts the
 //                      stream
-//   NRRD, VDB          read whole by their libraries, then served box by box (not out of core)
+//   NRRD               the header through teem; one raw data file (attached or detached) by
+//                      positioned reads, one gzip data file in slabs; anything else read whole
+//   VDB                the sparse tree in memory, each box densified from it
 #pragma once
 
 #include <memory>
