@@ -2,6 +2,7 @@
 // the accuracy table of docs/quality.md.
 //
 //   bench_quality [N ...]      (default: 32 64 128)
+//   bench_quality --speed [--threads T]   (DC's cost against MC's on bonsai and engine)
 //
 // For each field (sphere, torus, gyroid, csg-box), grid size N and method, it prints one
 // markdown row: the vertex distance to the exact surface (mean, max; in voxels), a sampled
@@ -9,6 +10,9 @@
 // triangles measured against the exact surface, and points sampled on the exact surface measured
 // against the mesh), the radius ratio (mean, min) and the extraction time (one run, indicative).
 // Samples use fixed seeds, so the table is the same on every run.
+//
+// --speed times MC and each DC variant side by side in one run, on the same in-memory samples and
+// thread count (default 2): the median of 9 extractions each, and its ratio to MC's median.
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
@@ -28,6 +32,11 @@
 #include "core/marching_cubes.h"
 #include "core/mesh_quality.h"
 #include "core/procedural_fields.h"
+#include "core/volume_io.h"
+
+#include <tbb/global_control.h>
+#include <algorithm>
+#include <filesystem>
 
 using namespace isotile;
 
@@ -195,8 +204,41 @@ Row measure(const FieldSpec& spec, const Mesh& mesh, const std::vector<Vec3d>& o
 
 }  // namespace
 
+int speed(int threads) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+  std::printf("| volume | method | median ms (%d threads) | x MC |\n| --- | --- | --- | --- |\n",
+              threads);
+  for (const char* file : {"bonsai_256x256x256_uint8.raw.gz", "engine_256x256x128_uint8.raw.gz"}) {
+    const std::filesystem::path path = std::filesystem::path(ISOTILE_SHARED_DATA) / file;
+    if (!std::filesystem::exists(path)) {
+      std::fprintf(stderr, "skipping %s: not found\n", path.c_str());
+      continue;
+    }
+    const Volume vol = read_volume(path.string());
+    double mc_ms = 0;
+    for (const Method& m : methods()) {
+      std::vector<double> ms;
+      for (int rep = 0; rep < 9; ++rep) {
+        const auto t0 = std::chrono::steady_clock::now();
+        const Mesh mesh = m.run(vol.view(), 49.5);
+        ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count());
+      }
+      std::sort(ms.begin(), ms.end());
+      if (m.name == "MC") mc_ms = ms[4];
+      std::printf("| %s | %s | %.1f | %.2f |\n", path.stem().stem().c_str(), m.name.c_str(), ms[4],
+                  ms[4] / mc_ms);
+      std::fflush(stdout);
+    }
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   std::vector<std::int64_t> sizes;
+  if (argc > 1 && std::string(argv[1]) == "--speed")
+    return speed(argc > 3 && std::string(argv[2]) == "--threads" ? std::atoi(argv[3]) : 2);
   for (int i = 1; i < argc; ++i) sizes.push_back(std::atoll(argv[i]));
   if (sizes.empty()) sizes = {32, 64, 128};
   std::printf(
