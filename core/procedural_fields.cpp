@@ -462,6 +462,26 @@ void fill_field_box(const FieldSpec& spec, const Box3& box, float* out) {
   const double denom = static_cast<double>(n - 1);
   auto coord = [denom](std::int64_t g) { return 2.0 * static_cast<double>(g) / denom - 1.0; };
   const std::int64_t nx = box.extent(0), ny = box.extent(1);
+  if (spec.kind == FieldKind::Gyroid) {
+    // Separable: the sines and cosines of each coordinate once per axis, then gyroid_value's
+    // products and sums in its order, so the samples are the same bits at a fraction of the cost.
+    std::array<std::vector<double>, 3> sn, cs;
+    for (int a = 0; a < 3; ++a)
+      for (std::int64_t g = box.lo[a]; g < box.hi[a]; ++g) {
+        sn[a].push_back(std::sin(kGyroidW * coord(g)));
+        cs[a].push_back(std::cos(kGyroidW * coord(g)));
+      }
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, box.extent(2)), [&](const auto& range) {
+      for (std::int64_t k = range.begin(); k != range.end(); ++k)
+        for (std::int64_t j = 0; j < ny; ++j) {
+          float* row = out + (k * ny + j) * nx;
+          for (std::int64_t i = 0; i < nx; ++i)
+            row[i] =
+                static_cast<float>(sn[0][i] * cs[1][j] + sn[1][j] * cs[2][k] + sn[2][k] * cs[0][i]);
+        }
+    });
+    return;
+  }
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(box.lo[2], box.hi[2]), [&](const auto& range) {
     for (std::int64_t k = range.begin(); k != range.end(); ++k) {
       const double z = coord(k);

@@ -512,3 +512,30 @@ TEST(FieldDistance, GyroidAtACriticalPoint) {
 
 }  // namespace
 }  // namespace isotile
+
+namespace isotile {
+namespace {
+
+// Bricks of a field must be the same bits as the whole volume (the tiler relies on it), and the
+// separable fast paths must agree with field_value exactly.
+TEST(ProceduralFields, BoxesAreBitIdenticalToTheWholeVolumeAndToFieldValue) {
+  for (std::string_view name : field_names()) {
+    const FieldSpec spec = *parse_field_spec("field:" + std::string(name) + ":23");
+    const Volume whole = make_field_volume(spec);
+    const Box3 box{{3, 0, 7}, {20, 11, 23}};
+    std::vector<float> part(static_cast<std::size_t>(17 * 11 * 16));
+    fill_field_box(spec, box, part.data());
+    std::size_t n = 0;
+    for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k)
+      for (std::int64_t j = box.lo[1]; j < box.hi[1]; ++j)
+        for (std::int64_t i = box.lo[0]; i < box.hi[0]; ++i, ++n) {
+          const float w = whole.data<float>()[(k * 23 + j) * 23 + i];
+          ASSERT_EQ(part[n], w) << name << " at " << i << "," << j << "," << k;
+          const auto c = [](std::int64_t g) { return 2.0 * static_cast<double>(g) / 22.0 - 1.0; };
+          ASSERT_EQ(w, static_cast<float>(field_value(spec.kind, {c(i), c(j), c(k)}))) << name;
+        }
+  }
+}
+
+}  // namespace
+}  // namespace isotile
