@@ -6,6 +6,7 @@
 
 #include "core/dual_contouring.h"
 #include "core/errors.h"
+#include "core/macet.h"
 #include "core/marching_cubes.h"
 
 namespace isotile {
@@ -25,6 +26,11 @@ Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
   return dual_contouring(view, dc);
 }
 
+Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet(view,
+               {.iso = o.iso, .normals = o.normals, .quality = o.quality, .cells = o.cells});
+}
+
 struct BackendEntry {
   Backend backend;
   std::string_view name;
@@ -40,7 +46,7 @@ struct BackendEntry {
 // then they say they are not built in, and selecting them is a clear error rather than a silent
 // fallback.
 std::array<BackendEntry, kBackendCount - 1> kBackends = {{
-    {Backend::Cpu, "cpu", {cpu_marching_cubes, nullptr, cpu_dual_contouring}, ""},
+    {Backend::Cpu, "cpu", {cpu_marching_cubes, cpu_macet, cpu_dual_contouring}, ""},
     {Backend::GeometryShader,
      "gs",
      {nullptr, nullptr, nullptr},
@@ -142,6 +148,8 @@ int extract_halo(const ExtractOptions& options) {
     case Method::MarchingCubes:
       return marching_cubes_halo({.iso = options.iso, .normals = options.normals});
     case Method::Macet:
+      return macet_halo(
+          {.iso = options.iso, .normals = options.normals, .quality = options.quality});
     case Method::DualContouring:
       break;
   }

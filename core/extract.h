@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/dual_contouring.h"
+#include "core/macet.h"
 #include "core/mesh.h"
 #include "core/volume.h"
 
@@ -33,6 +34,8 @@ struct ExtractOptions {
   // Dual Contouring only.
   DcSolver dc_solver = DcSolver::MassPoint;
   bool keep_quads = false;
+  // Macet only: Fast (default) or Max (see core/macet.h).
+  MacetQuality quality = MacetQuality::Fast;
   // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one
   // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
   // core/marching_cubes.h and core/brick_sites.h.

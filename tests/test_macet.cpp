@@ -226,11 +226,11 @@ TEST(Macet, BricksEqualTheWholeVolume) {
 
 TEST(Macet, RejectsAViewWithoutTheHaloAndBadOptions) {
   const Volume vol = make_field_volume({FieldKind::Sphere, 16});
-  const VolumeView part = subview(vol.view(), {{4, 4, 4}, {12, 12, 12}});
+  const VolumeView part = subview(vol.view(), {{4, 4, 4}, {13, 13, 13}});
   MacetOptions o{.iso = 0.0};
-  o.cells = {{6, 6, 6}, {9, 9, 9}};  // needs samples 4..11 without normals
+  o.cells = {{7, 7, 7}, {9, 9, 9}};  // needs samples 4..12
   EXPECT_NO_THROW(macet(part, o));
-  o.normals = true;  // needs samples 3..12
+  o.cells = {{6, 6, 6}, {9, 9, 9}};  // needs samples 3..12
   EXPECT_THROW(macet(part, o), InputError);
   o = {.iso = 0.0, .max_sweeps = -1};
   EXPECT_THROW(macet(vol.view(), o), InputError);

@@ -1,0 +1,271 @@
+// Macet's Max mode: a local search per grid vertex that raises the worst triangles around it.
+// Internal to core/.
+//
+// Moving grid vertex v changes only the crossings on its own (up to six) crossed edges, and those
+// only appear in triangles of the eight cells around v. For every grid vertex whose affected
+// triangles include one worse than kGoal, the search tries displacements around the current one
+// (26 directions at a few radii, then a finer round around the best) and keeps the one that raises
+// the minimum radius ratio of the affected triangles, subject to
+//   * the vertex keeps its side of the surface (so every edge still brackets a crossing and the
+//     topology stays MC's),
+//   * it stays within kMaxMove voxels of its grid position,
+//   * no affected triangle turns over (its normal keeps a positive dot product with the current
+//     one).
+// Determinism: vertices are swept in eight colours by the parity of their GLOBAL coordinates.
+// Two vertices of one colour differ by two samples along some axis, so they share no cell and no
+// crossed edge: a colour's vertices move in parallel without seeing each other, and the result is
+// the same for any thread count and any brick cut. Each colour step lets a change travel one
+// sample, which is why macet_halo grows by 8 per sweep.
+#pragma once
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/inside_bits.h"
+#include "core/macet_field.h"
+#include "core/macet_table.h"
+#include "core/marching_cubes_tables.h"
+
+namespace isotile::detail {
+
+struct MacetSearchParams {
+  double goal = 0.6;      // vertices whose affected triangles are all at least this good stay
+  double max_move = 0.6;  // voxels from the grid position
+};
+
+inline double radius_ratio_d(const P3& a, const P3& b, const P3& c) {
+  auto dist = [](const P3& p, const P3& q) {
+    const double x = p[0] - q[0], y = p[1] - q[1], z = p[2] - q[2];
+    return std::sqrt(x * x + y * y + z * z);
+  };
+  const double la = dist(b, c), lb = dist(c, a), lc = dist(a, b);
+  const double den = la * lb * lc;
+  if (den <= 0) return 0;
+  return std::max(0.0, (lb + lc - la) * (lc + la - lb) * (la + lb - lc) / den);
+}
+
+inline P3 tri_normal(const P3& a, const P3& b, const P3& c) {
+  const P3 u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+  return {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+}
+
+template <class T>
+class LocalSearch {
+ public:
+  LocalSearch(const Field<T>& field, const BitGrid& grid, GridVertices& gv,
+              const MacetCaseTable& table, MacetSearchParams params)
+      : field_(field), grid_(grid), gv_(gv), table_(table), params_(params) {
+    // 26 unit directions.
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (!dx && !dy && !dz) continue;
+          const double n = std::sqrt(double(dx * dx + dy * dy + dz * dz));
+          dirs_.push_back({dx / n, dy / n, dz / n});
+        }
+  }
+
+  void sweep() {
+    for (int colour = 0; colour < 8; ++colour) colour_step(colour);
+  }
+
+ private:
+  bool inside(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return (grid_.row(j, k)[i >> 6] >> (i & 63)) & 1;
+  }
+
+  void colour_step(int colour) {
+    const Box3& b = gv_.box;
+    const VolumeView& view = field_.view;
+    const int px = colour & 1, py = (colour >> 1) & 1, pz = (colour >> 2) & 1;
+    // Local x with the wanted global parity sit at every other bit.
+    const std::uint64_t even = 0x5555555555555555ull;
+    const std::uint64_t parity_mask = ((view.box.lo[0] & 1) ^ px) ? ~even : even;
+    const std::int64_t rows = b.extent(1) * b.extent(2);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, rows), [&](const auto& range) {
+      for (std::int64_t r = range.begin(); r != range.end(); ++r) {
+        const std::int64_t j = b.lo[1] + r % gv_.ny, k = b.lo[2] + r / gv_.ny;
+        if (((view.box.lo[1] + j) & 1) != py || ((view.box.lo[2] + k) & 1) != pz) continue;
+        for (std::int64_t w = b.lo[0] >> 6; w <= (b.hi[0] - 1) >> 6; ++w) {
+          const std::size_t word = static_cast<std::size_t>(r * gv_.words + w);
+          for (std::uint64_t m = gv_.bits[word] & parity_mask; m; m &= m - 1)
+            improve(w * 64 + std::countr_zero(m), j, k);
+        }
+      }
+    });
+  }
+
+  // The crossing on edge (s, axis a) with the current displacements, except that grid vertex
+  // `moved` uses (d, f) instead.
+  P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f) const {
+    std::int64_t q[3] = {s[0], s[1], s[2]};
+    ++q[a];
+    const std::uint32_t i0 = gv_.index(s[0], s[1], s[2]), i1 = gv_.index(q[0], q[1], q[2]);
+    const P3& d0 = i0 == moved ? d : gv_.disp[i0];
+    const P3& d1 = i1 == moved ? d : gv_.disp[i1];
+    const double f0 = i0 == moved ? f : gv_.value[i0], f1 = i1 == moved ? f : gv_.value[i1];
+    const P3 p0 = field_.global(s[0], s[1], s[2], d0);
+    const P3 p1 = field_.global(q[0], q[1], q[2], d1);
+    const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
+    const double t = straight ? f0 / (f0 - f1) : find_root(field_, p0, p1, f0, f1);
+    return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
+  }
+
+  void improve(std::int64_t i, std::int64_t j, std::int64_t k) {
+    const VolumeView& view = field_.view;
+    const std::int64_t v[3] = {i, j, k};
+    const std::uint32_t self = gv_.index(i, j, k);
+    const bool in = inside(i, j, k);
+
+    // The affected triangles: those of the eight cells around v that use a crossing on one of
+    // v's edges. Crossings are slots: fixed ones computed once, moving ones per candidate.
+    struct Slot {
+      std::int64_t s[3];
+      int axis;
+    };
+    std::array<Slot, 6> moving{};
+    int n_moving = 0;
+    std::array<P3, 8 * 12> fixed{};
+    int n_fixed = 0;
+    struct TriRef {
+      std::int16_t v[3];  // >= 0: fixed slot; < 0: moving slot -1 - m
+    };
+    std::array<TriRef, 8 * mc::kMaxTrianglesPerCase> tris{};
+    int n_tris = 0;
+    const P3 zero{0, 0, 0};
+
+    for (int c = 0; c < 8; ++c) {
+      std::int64_t o[3];
+      bool ok = true;
+      for (int a = 0; a < 3; ++a) {
+        o[a] = v[a] - 1 + ((c >> a) & 1);
+        ok = ok && o[a] >= 0 && o[a] + 1 < view.dims[a];
+      }
+      if (!ok) continue;
+      int cs = 0;
+      for (int corner = 0; corner < 8; ++corner)
+        cs |=
+            int(inside(o[0] + (corner & 1), o[1] + ((corner >> 1) & 1), o[2] + ((corner >> 2) & 1)))
+            << corner;
+      const int nt = table_.triangle_count[cs];
+      if (nt == 0) continue;
+      std::int16_t slot[12];
+      bool any_moving_edge = false;
+      for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
+        const int e = std::countr_zero(em);
+        const int c0 = mc::kEdgeCorners[e][0];
+        const std::int64_t s[3] = {o[0] + (c0 & 1), o[1] + ((c0 >> 1) & 1), o[2] + ((c0 >> 2) & 1)};
+        const int a = e / 4;
+        std::int64_t q[3] = {s[0], s[1], s[2]};
+        ++q[a];
+        const bool touches = (s[0] == v[0] && s[1] == v[1] && s[2] == v[2]) ||
+                             (q[0] == v[0] && q[1] == v[1] && q[2] == v[2]);
+        if (touches) {
+          int m = 0;
+          while (m < n_moving && !(moving[m].axis == a && moving[m].s[0] == s[0] &&
+                                   moving[m].s[1] == s[1] && moving[m].s[2] == s[2]))
+            ++m;
+          if (m == n_moving) moving[n_moving++] = {{s[0], s[1], s[2]}, a};
+          slot[e] = static_cast<std::int16_t>(-1 - m);
+          any_moving_edge = true;
+        } else {
+          slot[e] = static_cast<std::int16_t>(n_fixed);
+          fixed[n_fixed++] = crossing(s, a, ~0u, zero, 0);
+        }
+      }
+      if (!any_moving_edge) continue;
+      const auto& tt = table_.triangles[cs];
+      for (int t = 0; t < nt; ++t) {
+        const TriRef ref{{slot[tt[3 * t]], slot[tt[3 * t + 1]], slot[tt[3 * t + 2]]}};
+        if (ref.v[0] < 0 || ref.v[1] < 0 || ref.v[2] < 0) tris[n_tris++] = ref;
+      }
+    }
+    if (n_tris == 0) return;
+
+    std::array<P3, 6> mpos{};
+    auto place = [&](const P3& d, double f) {
+      for (int m = 0; m < n_moving; ++m)
+        mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f);
+    };
+    auto pos = [&](std::int16_t s) -> const P3& { return s >= 0 ? fixed[s] : mpos[-1 - s]; };
+    std::array<P3, 8 * mc::kMaxTrianglesPerCase> normal0{};
+    auto score = [&](bool record) {
+      double worst = 1.0;
+      for (int t = 0; t < n_tris; ++t) {
+        const P3 &a = pos(tris[t].v[0]), &b = pos(tris[t].v[1]), &c = pos(tris[t].v[2]);
+        if (record) {
+          normal0[t] = tri_normal(a, b, c);
+        } else {
+          const P3 n = tri_normal(a, b, c);
+          const P3& n0 = normal0[t];
+          const double len0 = n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2];
+          if (len0 > 1e-20 && n[0] * n0[0] + n[1] * n0[1] + n[2] * n0[2] <= 0) return -1.0;
+        }
+        worst = std::min(worst, radius_ratio_d(a, b, c));
+      }
+      return worst;
+    };
+
+    P3 best_d = gv_.disp[self];
+    double best_f = gv_.value[self];
+    place(best_d, best_f);
+    double best = score(true);
+    if (best >= params_.goal) return;
+    const double start = best;
+
+    auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
+      P3 round_d = best_d;
+      double round_f = best_f;
+      for (double r : radii)
+        for (const P3& dir : dirs_) {
+          P3 d{centre[0] + r * dir[0], centre[1] + r * dir[1], centre[2] + r * dir[2]};
+          const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+          if (len > params_.max_move) continue;
+          const P3 p = field_.displaced(v, d);
+          const P3 g = field_.global(v[0], v[1], v[2]);
+          for (int a = 0; a < 3; ++a) d[a] = p[a] - g[a];
+          const double f = field_.value(p);
+          if ((f >= 0) != in) continue;
+          place(d, f);
+          const double s = score(false);
+          if (s > best) {
+            best = s;
+            round_d = d;
+            round_f = f;
+          }
+        }
+      best_d = round_d;
+      best_f = round_f;
+    };
+    const P3 centre = best_d;
+    try_round(centre, {0.08, 0.16, 0.3, 0.45});
+    const P3 centre2 = best_d;
+    try_round(centre2, {0.02, 0.04});
+    if (best > start) {
+      gv_.disp[self] = best_d;
+      gv_.value[self] = best_f;
+    }
+  }
+
+  const Field<T>& field_;
+  const BitGrid& grid_;
+  GridVertices& gv_;
+  const MacetCaseTable& table_;
+  MacetSearchParams params_;
+  std::vector<P3> dirs_;
+};
+
+template <class T>
+void macet_local_search(const Field<T>& field, const BitGrid& grid, GridVertices& gv,
+                        const MacetCaseTable& table, int sweeps) {
+  LocalSearch<T> search(field, grid, gv, table, MacetSearchParams{});
+  for (int s = 0; s < sweeps; ++s) search.sweep();
+}
+
+}  // namespace isotile::detail
