@@ -34,31 +34,47 @@ std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& o) {
   return bytes >= 1.8e19 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 
+namespace {
+// Thinnest y-z extent of a brick spanning whole rows before cubes are preferred: with a halo of
+// 2 samples, 64 cells keep the halo overhead under about 15%.
+constexpr std::int64_t kMinRowBrick = 64;
+}  // namespace
+
 BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
   BrickPlan plan;
   plan.dims = dims;
   Index3 cells;
   for (int a = 0; a < 3; ++a) cells[a] = std::max<std::int64_t>(dims[a] - 1, 1);
-  // Largest side s with per-axis clamping that fits; brick_bytes grows with s.
-  auto shape = [&](std::int64_t s) {
+  // Largest side s with per-axis clamping that fits; brick_bytes grows with s. `full_x` keeps
+  // whole rows: the output file orders records x fastest, so a brick spanning x writes the rows
+  // of each z-plane as one contiguous run instead of one write per row.
+  auto shape = [&](std::int64_t s, bool full_x) {
     Index3 c;
-    for (int a = 0; a < 3; ++a) c[a] = options.slabs && a < 2 ? cells[a] : std::min(s, cells[a]);
+    for (int a = 0; a < 3; ++a)
+      c[a] = (options.slabs && a < 2) || (full_x && a == 0) ? cells[a] : std::min(s, cells[a]);
     return c;
   };
-  if (brick_bytes(shape(1), options) > options.memory)
+  auto largest = [&](bool full_x) {
+    std::int64_t lo = 0, hi = *std::max_element(cells.begin(), cells.end());
+    while (lo < hi) {
+      const std::int64_t mid = lo + (hi - lo + 1) / 2;
+      if (brick_bytes(shape(mid, full_x), options) <= options.memory)
+        lo = mid;
+      else
+        hi = mid - 1;
+    }
+    return lo;  // 0: not even one cell fits
+  };
+  if (largest(false) == 0)
     throw InputError("memory budget of " + std::to_string(options.memory) +
                      " bytes is too small: one " +
                      (options.slabs ? "slab of one cell layer" : "brick of one cell") + " needs " +
-                     std::to_string(brick_bytes(shape(1), options)) + " bytes");
-  std::int64_t lo = 1, hi = *std::max_element(cells.begin(), cells.end());
-  while (lo < hi) {
-    const std::int64_t mid = lo + (hi - lo + 1) / 2;
-    if (brick_bytes(shape(mid), options) <= options.memory)
-      lo = mid;
-    else
-      hi = mid - 1;
-  }
-  const Index3 c = shape(lo);
+                     std::to_string(brick_bytes(shape(1, false), options)) + " bytes");
+  // Whole rows when that still leaves bricks thick enough for a small halo overhead (or whole
+  // y-z extents); cubes otherwise, which have the least halo per cell.
+  const std::int64_t rows = largest(true);
+  const bool full_x = rows >= std::min<std::int64_t>(kMinRowBrick, std::min(cells[1], cells[2]));
+  const Index3 c = shape(full_x ? rows : largest(false), full_x);
   for (int a = 0; a < 3; ++a) {
     plan.count[a] = (cells[a] + c[a] - 1) / c[a];
     // Even out: the same number of bricks, each as equal as possible (never larger than c).

@@ -1,10 +1,12 @@
 // The brick planner: cuts a volume's cells into a regular 3D grid of bricks whose working set
 // (samples with halo, classification bits, expected output) fits a memory budget.
 //
-// Bricks are as close to cubes as the volume allows (a cube has the least halo per cell), sized
-// to the budget and then evened out so that the last brick along an axis is not a sliver; no
-// dimension is rounded up to a power of two or padded. A source that can only be read in order
-// (gzip) gets whole x-y slabs instead.
+// Bricks span whole grid rows (x) and are square in y-z when that leaves them at least 64 cells
+// thick: the output orders records x fastest, so such a brick writes each z-plane's rows in one
+// run. Otherwise (very wide volumes, small budgets) they are as close to cubes as the volume
+// allows, which has the least halo per cell. Sizes are then evened out so that the last brick
+// along an axis is not a sliver; nothing is rounded up to a power of two or padded. A source that
+// can only be read in order (gzip) gets whole x-y slabs.
 #pragma once
 
 #include <cstdint>

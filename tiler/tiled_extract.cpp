@@ -1,9 +1,10 @@
 #include "tiler/tiled_extract.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -98,19 +99,6 @@ struct QualityAccumulator {
     sum += q;
     ++bins[std::min(kQualityBins - 1, static_cast<int>(q * kQualityBins))];
   }
-  // Two triangles of a quad, along the diagonal whose worse triangle is better (0-2 on ties), as
-  // core/mesh_quality.h counts them.
-  void add_quad(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
-    const double a0 = radius_ratio(a, b, c), a1 = radius_ratio(a, c, d);
-    const double b0 = radius_ratio(a, b, d), b1 = radius_ratio(b, c, d);
-    if (std::min(b0, b1) > std::min(a0, a1)) {
-      add(b0);
-      add(b1);
-    } else {
-      add(a0);
-      add(a1);
-    }
-  }
   // Lower-tail quantile p, at the upper edge of the bin that reaches it.
   double quantile(double p) const {
     const auto need = static_cast<std::uint64_t>(std::ceil(p * static_cast<double>(triangles)));
@@ -139,6 +127,15 @@ struct QualityAccumulator {
     return s;
   }
 };
+
+// The two triangles of a quad along the diagonal whose worse triangle is better (0-2 on ties), as
+// core/mesh_quality.h counts them.
+std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
+  const double a0 = radius_ratio(a, b, c), a1 = radius_ratio(a, c, d);
+  const double b0 = radius_ratio(a, b, d), b1 = radius_ratio(b, c, d);
+  if (std::min(b0, b1) > std::min(a0, a1)) return {b0, b1};
+  return {a0, a1};
+}
 
 class TiledExtraction {
  public:
@@ -346,69 +343,89 @@ class TiledExtraction {
     write_faces(cells, mesh, index, fseg, file, quality);
   }
 
+  // Writes [begin, end) of `records` (fixed-size) whose file offsets are offset(i); consecutive
+  // records that are also consecutive in the file go out in one write.
+  template <class Offset>
+  void write_runs(AtomicFile& file, const std::vector<char>& records, std::size_t record_bytes,
+                  std::size_t count, Offset&& offset) {
+    std::size_t i = 0;
+    while (i < count) {
+      std::size_t j = i + 1;
+      const std::uint64_t first = offset(i);
+      while (j < count && offset(j) == first + (j - i) * record_bytes) ++j;
+      file.write_at(first, records.data() + i * record_bytes, (j - i) * record_bytes);
+      i = j;
+    }
+  }
+
   void write_vertices(const Mesh& mesh, const std::vector<std::uint64_t>& index,
                       const std::vector<char>& is_owned, AtomicFile& file) {
-    std::vector<char> run;
-    std::uint64_t run_first = 0, run_next = 0;
-    auto flush = [&] {
-      if (!run.empty())
-        file.write_at(vertex_base_ + run_first * vertex_bytes_, run.data(), run.size());
-      run.clear();
-    };
-    for (std::size_t i = 0; i < index.size(); ++i) {
-      if (!is_owned[i]) continue;
-      if (run.empty() || index[i] != run_next || run.size() >= (8u << 20)) {
-        flush();
-        run_first = index[i];
+    std::vector<std::size_t> owned;
+    owned.reserve(index.size());
+    for (std::size_t i = 0; i < index.size(); ++i)
+      if (is_owned[i]) owned.push_back(i);
+    std::vector<char> records(owned.size() * vertex_bytes_);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, owned.size()), [&](const auto& r) {
+      for (std::size_t o = r.begin(); o != r.end(); ++o) {
+        char* p = records.data() + o * vertex_bytes_;
+        for (float c : mesh.positions[owned[o]]) p = put_le(p, c);
+        if (ex_.normals)
+          for (float c : mesh.normals[owned[o]]) p = put_le(p, c);
       }
-      char rec[24];
-      char* p = rec;
-      for (float c : mesh.positions[i]) p = put_le(p, c);
-      if (ex_.normals)
-        for (float c : mesh.normals[i]) p = put_le(p, c);
-      run.insert(run.end(), rec, p);
-      run_next = index[i] + 1;
-    }
-    flush();
+    });
+    write_runs(file, records, vertex_bytes_, owned.size(),
+               [&](std::size_t o) { return vertex_base_ + index[owned[o]] * vertex_bytes_; });
   }
 
   void write_faces(const Box3& cells, const Mesh& mesh, const std::vector<std::uint64_t>& index,
                    const SegmentTable& fseg, AtomicFile& file, QualityAccumulator& quality) {
     const std::int64_t column = plan_.owner(0, cells.lo[0]);
     const std::size_t total = quads_ ? mesh.quads.size() : mesh.triangles.size();
-    std::size_t next = 0;
-    std::vector<char> buf;
+    // Faces come row by row; each row's faces start at its segment's offset.
+    std::vector<std::uint64_t> first;  // file index of each face
+    first.reserve(total);
     for (std::int64_t z = cells.lo[2]; z < cells.hi[2]; ++z)
       for (std::int64_t y = cells.lo[1]; y < cells.hi[1]; ++y) {
         const std::size_t seg = fseg.index(y, z, column);
         const std::uint64_t n = fseg.count(seg);
-        if (n == 0) continue;
-        if (next + n > total)
+        if (first.size() + n > total)
           throw Error("brick contract broken: the extractor made fewer faces than counted");
-        buf.resize(static_cast<std::size_t>(n) * face_bytes_);
-        char* p = buf.data();
-        for (std::uint64_t f = 0; f < n; ++f, ++next) {
-          if (quads_) {
-            const Quad& q = mesh.quads[next];
-            const auto& P = mesh.positions;
-            if (opt_.quality) quality.add_quad(P[q[0]], P[q[1]], P[q[2]], P[q[3]]);
-            p = opt_.format == MeshFormat::Ply
-                    ? put_face(p, q.data(), 4, index)
-                    : put_stl_triangle(put_stl_triangle(p, P[q[0]], P[q[1]], P[q[2]]), P[q[0]],
-                                       P[q[2]], P[q[3]]);
-          } else {
-            const Tri& t = mesh.triangles[next];
-            const auto& P = mesh.positions;
-            if (opt_.quality) quality.add(radius_ratio(P[t[0]], P[t[1]], P[t[2]]));
-            p = opt_.format == MeshFormat::Ply ? put_face(p, t.data(), 3, index)
-                                               : put_stl_triangle(p, P[t[0]], P[t[1]], P[t[2]]);
-          }
-        }
-        file.write_at(face_base_ + fseg.offset(seg) * face_bytes_, buf.data(), buf.size());
+        for (std::uint64_t f = 0; f < n; ++f) first.push_back(fseg.offset(seg) + f);
       }
-    if (next != total)
+    if (first.size() != total)
       throw Error("brick contract broken: the extractor made " + std::to_string(total) +
-                  " faces where " + std::to_string(next) + " were counted");
+                  " faces where " + std::to_string(first.size()) + " were counted");
+    const auto& P = mesh.positions;
+    std::vector<char> records(total * face_bytes_);
+    std::vector<double> q(opt_.quality ? total * (quads_ ? 2 : 1) : 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, total), [&](const auto& r) {
+      for (std::size_t f = r.begin(); f != r.end(); ++f) {
+        char* p = records.data() + f * face_bytes_;
+        if (quads_) {
+          const Quad& v = mesh.quads[f];
+          if (!q.empty()) {
+            const auto pair = quad_quality(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
+            q[2 * f] = pair[0];
+            q[2 * f + 1] = pair[1];
+          }
+          if (opt_.format == MeshFormat::Ply)
+            put_face(p, v.data(), 4, index);
+          else
+            put_stl_triangle(put_stl_triangle(p, P[v[0]], P[v[1]], P[v[2]]), P[v[0]], P[v[2]],
+                             P[v[3]]);
+        } else {
+          const Tri& t = mesh.triangles[f];
+          if (!q.empty()) q[f] = radius_ratio(P[t[0]], P[t[1]], P[t[2]]);
+          if (opt_.format == MeshFormat::Ply)
+            put_face(p, t.data(), 3, index);
+          else
+            put_stl_triangle(p, P[t[0]], P[t[1]], P[t[2]]);
+        }
+      }
+    });
+    for (double x : q) quality.add(x);
+    write_runs(file, records, face_bytes_, total,
+               [&](std::size_t f) { return face_base_ + first[f] * face_bytes_; });
     written_faces_ += total;
   }
 
