@@ -17,13 +17,18 @@ Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
   return marching_cubes(view, {.iso = o.iso, .normals = o.normals, .cells = o.cells});
 }
 
-Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
+DualContouringOptions dc_options(const ExtractOptions& o) {
   DualContouringOptions dc;
   dc.iso = o.iso;
   dc.solver = o.dc_solver;
   dc.keep_quads = o.keep_quads;
   dc.normals = o.normals;
-  return dual_contouring(view, dc);
+  dc.cells = o.cells;
+  return dc;
+}
+
+Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
+  return dual_contouring(view, dc_options(o));
 }
 
 Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
@@ -151,9 +156,8 @@ int extract_halo(const ExtractOptions& options) {
       return macet_halo(
           {.iso = options.iso, .normals = options.normals, .quality = options.quality});
     case Method::DualContouring:
-      break;
+      return dual_contouring_halo(dc_options(options));
   }
-  // Central-difference gradients at the samples of the cells one beyond a brick.
   return 2;
 }
 
