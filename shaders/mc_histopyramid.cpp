@@ -4,13 +4,15 @@
 // Per slab: (1) classify: one 16-bit code per element (sample of the slab's closed box: the case
 // of the cell whose lower corner it is and its crossed +x/+y/+z edges); (2) reduce: a count
 // pyramid of (vertices, triangles) whose nodes sum eight consecutive nodes of the level below,
-// padded only to a multiple of eight per level, up to one node holding the totals; (3) read the
-// totals back and allocate exactly; (4) one invocation per vertex and one per triangle descend
-// from the top to their element. Summing consecutive runs makes the descent's order the element
-// order (z, y, x), which is the CPU's output order, so no sort or weld is needed: a vertex's index
-// is the pyramid's prefix sum at its edge's element plus its rank among that element's edges.
-// (A 2x2x2 Morton pyramid would visit elements in Morton order, not in the CPU's order; gl.md
-// measured Morton buffers against 3D-texture mip chains only for counting.)
+// padded only to a multiple of eight per level, up to one node holding the totals; then a
+// down-sweep stores each node's vertex offset; (3) read the totals back and allocate exactly;
+// (4) one invocation per vertex and one per triangle descend from the top to their element.
+// Summing consecutive runs makes the descent's order the element order (z, y, x), which is the
+// CPU's output order, so no sort or weld is needed: a triangle corner's vertex index is its
+// element's level-1 offset, plus the counts of at most seven elements before it, plus the rank of
+// its axis among its element's edges. (A 2x2x2 Morton pyramid would visit elements in Morton
+// order, not in the CPU's order; gl.md measured Morton buffers against 3D-texture mip chains only
+// for counting.)
 #include <tbb/parallel_for.h>
 
 #include <array>
@@ -118,6 +120,17 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
       set_u(prog, "u_src_offset", l >= 2 ? pyr.offset[l - 1] : 0);
       set_u(prog, "u_dst_offset", pyr.offset[l]);
       glUseProgram(prog);
+      dispatch(pyr.count[l]);
+    }
+    // (2b) vertex offsets per node, top-down
+    const Buffer offsets(pyr.nodes * 4);
+    offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+    prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, defines);
+    set_grid_uniforms(prog, grid);
+    pyr.set_uniforms(prog);
+    glUseProgram(prog);
+    for (int l = pyr.levels; l >= 1; --l) {
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_level"), l);
       dispatch(pyr.count[l]);
     }
     check("building the HistoPyramid");

@@ -1,6 +1,8 @@
 // HistoPyramid traversal, shared by the output passes (after mc_common.glsl).
 layout(std430, binding = 1) readonly buffer Codes { uint codes[]; };
 layout(std430, binding = 2) readonly buffer Pyramid { uvec2 pyramid[]; };
+// Vertices before each node's first element, per node of levels 1..L (hp_downsweep.comp).
+layout(std430, binding = 5) buffer Offsets { uint vertex_offset[]; };
 
 uniform int u_levels;             // L: level L is one node holding the totals
 uniform uint u_level_offset[16];  // level l >= 1 starts at pyramid[u_level_offset[l]]
@@ -40,14 +42,10 @@ uint find_element(inout uint k, int which) {
   return base;
 }
 
-// Number of vertices of the elements before e: the left siblings' counts at every level.
+// Number of vertices of the elements before e: its level-1 node's offset plus its left
+// siblings' counts.
 uint vertex_prefix(uint e) {
-  uint sum = 0u;
+  uint sum = vertex_offset[u_level_offset[1] + (e >> 3)];
   for (uint q = e & ~7u; q < e; ++q) sum += vertex_count_of(code_of(q));
-  uint idx = e >> 3;
-  for (int l = 1; l < u_levels; ++l) {
-    for (uint q = idx & ~7u; q < idx; ++q) sum += pyramid[u_level_offset[l] + q].x;
-    idx >>= 3;
-  }
   return sum;
 }

@@ -1,0 +1,106 @@
+// The GL backends through the `isotile` command line: --backend gs|hp write the CPU's file byte for
+// byte, gl-info describes the device, and without a context (ISOTILE_GL=off) an explicit GL backend
+// is one error line while auto runs on the CPU.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class GlCli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("isotile-glcli-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  Result run(const std::string& args, const std::string& env = "") {
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    const std::string cmd = std::string("cd '") + dir_.string() + "' && " + env + " '" +
+                            ISOTILE_CLI + "' " + args + " >'" + out.string() + "' 2>'" +
+                            err.string() + "'";
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+  }
+
+  bool have_gl() { return run("gl-info").code == 0; }
+
+  fs::path dir_;
+};
+
+TEST_F(GlCli, GlBackendsWriteTheCpuFile) {
+  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  for (const char* b : {"cpu", "gs", "hp"}) {
+    const Result r = run(std::string("extract field:gyroid:40 --normals -q --backend ") + b +
+                         " -o " + b + ".ply --stats " + b + ".json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / (std::string(b) + ".json")))["backend"], b);
+  }
+  const std::string cpu = slurp(dir_ / "cpu.ply");
+  EXPECT_GT(cpu.size(), 10000u);
+  EXPECT_TRUE(slurp(dir_ / "gs.ply") == cpu);
+  EXPECT_TRUE(slurp(dir_ / "hp.ply") == cpu);
+}
+
+TEST_F(GlCli, GlInfoDescribesTheDevice) {
+  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  const Result r = run("gl-info --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_FALSE(j["renderer"].get<std::string>().empty());
+  EXPECT_EQ(j["version"].get<std::string>().rfind("4.", 0), 0u);
+  EXPECT_EQ(j["backends"]["hp"].get<std::string>().rfind("available", 0), 0u);
+  // auto takes a GPU path only on a real GPU.
+  EXPECT_EQ(j["auto"] == "cpu", j["software"].get<bool>());
+}
+
+TEST_F(GlCli, NoContextIsOneErrorLine) {
+  for (const char* b : {"gs", "hp"}) {
+    const Result r =
+        run(std::string("extract field:sphere:16 --backend ") + b + " -o m.ply", "ISOTILE_GL=off");
+    EXPECT_EQ(r.code, 1);
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(r.err.rfind(std::string("isotile: error: backend '") + b + "': no OpenGL context", 0),
+              0u)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
+  }
+  const Result a = run("extract field:sphere:16 -q -o m.ply --stats s.json", "ISOTILE_GL=off");
+  ASSERT_EQ(a.code, 0) << a.err;
+  EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "s.json"))["backend"], "cpu");
+  const Result info = run("gl-info", "ISOTILE_GL=off");
+  EXPECT_EQ(info.code, 1);
+  EXPECT_NE(info.err.find("ISOTILE_GL=off"), std::string::npos) << info.err;
+}
+
+}  // namespace
