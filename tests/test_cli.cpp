@@ -246,3 +246,38 @@ TEST_F(Cli, DemoRunsWithoutArguments) {
 }
 
 }  // namespace
+
+namespace {
+
+// --memory: bricked and streamed, the same bytes as an in-core run, at any thread count.
+TEST_F(Cli, MemoryBudgetStreamsTheSameFile) {
+  ASSERT_EQ(run("extract field:torus:48 -o whole.ply --normals -q").code, 0);
+  for (const char* threads : {"1", "3"}) {
+    const Result r = run(std::string("--threads ") + threads +
+                         " extract field:torus:48 -o part.ply --normals --memory 60KiB "
+                         "--stats s.json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("bricks"), std::string::npos) << "no progress by bricks: " << r.err;
+    EXPECT_EQ(slurp(dir_ / "part.ply"), slurp(dir_ / "whole.ply")) << threads << " threads";
+    const auto j = nlohmann::json::parse(slurp(dir_ / "s.json"));
+    EXPECT_GT(j["bricks"].get<int>(), 8);
+    EXPECT_TRUE(j["watertight"].is_null());
+    for (const char* key : {"triangles", "vertices", "radius_ratio_min", "radius_ratio_mean",
+                            "radius_ratio_q001", "radius_ratio_q01", "brick_cells", "peak_rss_mb"})
+      EXPECT_TRUE(j.contains(key)) << key;
+  }
+}
+
+TEST_F(Cli, BadMemoryBudgetsAreOneLineErrors) {
+  for (const char* args :
+       {"--memory 12XB -o a.ply", "--memory 100B -o a.ply", "--memory 1MiB -o a.obj",
+        "--memory 1MiB --ascii -o a.ply", "--memory 1MiB --check-intersections -o a.ply"}) {
+    const Result r = run(std::string("extract field:sphere:32 ") + args);
+    EXPECT_EQ(r.code, 1) << args;
+    EXPECT_EQ(count_of(r.err, "isotile: error:"), 1) << args << ": " << r.err;
+    EXPECT_EQ(last_line(r.err).rfind("isotile: error:", 0), 0u) << args << ": " << r.err;
+    EXPECT_TRUE(stray_files().empty()) << args;
+  }
+}
+
+}  // namespace
