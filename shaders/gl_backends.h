@@ -36,6 +36,10 @@ struct McOptions {
 struct McStats {
   int bricks = 0;
   int capture_passes = 0;  // geometry-shader draws, resumed ones included
+  // Wall time per stage (glFinish between stages, only when stats are asked for): samples
+  // converted and uploaded; counting (HP: classify, pyramid, totals; GS: draws and captures);
+  // output (HP: vertex and triangle passes and read-back; GS: read-back and weld).
+  double seconds_upload = 0, seconds_count = 0, seconds_output = 0;
 };
 
 // Throw InputError when no OpenGL 4.5 context can be created, CapacityError when the mesh needs

@@ -3,7 +3,10 @@
 #include <tbb/parallel_for.h>
 
 #include <array>
+#include <chrono>
+#include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <memory>
 
@@ -63,7 +66,10 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   // Programs live as long as the context (the process), like the context itself.
   static std::map<std::string, GLuint> cache;
   std::string key = defines;
-  for (const Stage& s : stages) key += "|" + std::string(s.file);
+  for (const Stage& s : stages) {
+    key += '|';  // appended piecewise: GCC 12 warns (-Wrestrict) on "|" + std::string
+    key += s.file;
+  }
   if (auto it = cache.find(key); it != cache.end()) return it->second;
   const GLuint prog = glCreateProgram();
   std::vector<GLuint> shaders;
@@ -187,7 +193,7 @@ Samples upload_samples(const VolumeView& view, const Box3& region) {
   };
   if (exact_in_float) {
     convert(float{});
-    out.defines = "#define SAMPLE_T float\n";
+    out.defines = "#define SAMPLE_T float\n#define SAMPLE_IS_FLOAT\n";
   } else {
     convert(double{});
     out.defines = "#define SAMPLE_T double\n";
@@ -209,9 +215,26 @@ void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   i3("u_box_lo", u.cells.lo);
   i3("u_box_hi", u.cells.hi);
   glProgramUniform1d(prog, glGetUniformLocation(prog, "u_iso"), u.iso);
+  // As core/inside_bits.h: iso rounded up to a float, so that v >= it <=> double(v) >= iso.
+  float iso_float = static_cast<float>(u.iso);
+  if (static_cast<double>(iso_float) < u.iso)
+    iso_float = std::nextafter(iso_float, std::numeric_limits<float>::infinity());
+  glProgramUniform1f(prog, glGetUniformLocation(prog, "u_iso_float"), iso_float);
   d3("u_origin", u.origin);
   d3("u_spacing", u.spacing);
   check("setting the grid uniforms");
+}
+
+double StageTimer::now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void StageTimer::lap(double* into) {
+  if (!into) return;
+  glFinish();
+  const double t = now();
+  *into += t - last_;
+  last_ = t;
 }
 
 }  // namespace isotile::gl

@@ -101,4 +101,14 @@ std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double b
 // its closed box, plus `halo` samples around (gradients), clipped to the view.
 Box3 slab_region(const VolumeView& view, const Box3& cells, int halo);
 
+// Adds the seconds since the last lap to *into (after glFinish), when into is not null.
+class StageTimer {
+ public:
+  void lap(double* into);
+
+ private:
+  double last_ = now();
+  static double now();
+};
+
 }  // namespace isotile::gl

@@ -91,7 +91,9 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
       for (int a = 0; a < 3; ++a)
         if (slab.hi[a] == box.hi[a]) cells.hi[a] = std::min(box.hi[a] + 1, view.global_dims[a] - 1);
       const Box3 region = slab_region(view, cells, halo);
+      StageTimer timer;
       const Samples samples = upload_samples(view, region);
+      timer.lap(stats ? &stats->seconds_upload : nullptr);
       const std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
       const GLuint prog =
           program({{GL_VERTEX_SHADER, "gs_mc.vert"}, {GL_GEOMETRY_SHADER, "gs_mc.geom"}}, defines,
@@ -118,6 +120,7 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
         glGetQueryObjectui64v(queries[1], GL_QUERY_RESULT, &written);
         check("capturing triangles");
         ++passes;
+        timer.lap(stats ? &stats->seconds_count : nullptr);
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
         auto cell_of = [&](std::uint64_t t) { return staging[t * 3 * words + 1]; };
@@ -160,6 +163,7 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
           if (o.normals) std::memcpy(soup.normals[base + c].data(), w + 5, 12);
         }
         first = resume;
+        timer.lap(stats ? &stats->seconds_output : nullptr);
       }
     }
   } catch (...) {
@@ -171,6 +175,7 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
   glDeleteQueries(2, queries);
   glUseProgram(0);
 
+  StageTimer weld_timer;
   // Weld: corners sorted by (key, position in the soup); one vertex per distinct key whose lower
   // sample lies in the closed box, in key order. Every such crossed edge borders a drawn cell, so
   // these are exactly the CPU's vertices.
@@ -206,6 +211,7 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
   for (std::size_t t = 0; t < n / 3; ++t)
     if (soup.in_box[t])
       mesh.triangles.push_back({vertex_of[3 * t], vertex_of[3 * t + 1], vertex_of[3 * t + 2]});
+  weld_timer.lap(stats ? &stats->seconds_output : nullptr);
   if (stats) {
     stats->bricks = static_cast<int>(slabs.size());
     stats->capture_passes = passes;

@@ -89,8 +89,11 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
   for (std::size_t si = 0; si < slabs.size(); ++si) {
     const Box3& cells = slabs[si];
     const Box3 region = slab_region(view, cells, halo);
+    StageTimer timer;
     const Samples samples = upload_samples(view, region);
     const std::string defines = samples.defines + normals;
+    std::string base_defines = defines;  // appended, not concatenated: GCC 12's -Wrestrict
+    base_defines += "#define BASE\n";
     const GridUniforms grid{region, cells, view.global_dims, o.iso, view.origin, view.spacing};
     const Index3 d = {cells.extent(0) + 1, cells.extent(1) + 1, cells.extent(2) + 1};
     const std::uint64_t elements = static_cast<std::uint64_t>(d[0] * d[1] * d[2]);
@@ -102,6 +105,8 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
     codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
     levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
 
+    timer.lap(stats ? &stats->seconds_upload : nullptr);
+
     // (1) classify
     GLuint prog = program({{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
     set_grid_uniforms(prog, grid);
@@ -109,8 +114,7 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
     dispatch((elements + 1) / 2);
 
     // (2) reduce, level by level
-    const GLuint base =
-        program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines + "#define BASE\n");
+    const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, base_defines);
     const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
     for (int l = 1; l <= pyr.levels; ++l) {
       prog = l == 1 ? base : upper;
@@ -160,6 +164,8 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
           "the mesh would have more than 2^32 - 1 vertices, more than an "
           "in-memory mesh can index");
 
+    timer.lap(stats ? &stats->seconds_count : nullptr);
+
     // (4) vertices, then triangles, in chunks that fit one storage-buffer binding.
     const std::size_t v0 = mesh.positions.size(), t0 = mesh.triangles.size();
     mesh.positions.resize(v0 + n_vertices);
@@ -208,6 +214,7 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
       }
     }
     check("writing the HistoPyramid mesh");
+    timer.lap(stats ? &stats->seconds_output : nullptr);
     mesh.positions.resize(v0 + n_vertices - shared);
     if (o.normals) mesh.normals.resize(v0 + n_vertices - shared);
     vertex_base += n_vertices - shared;

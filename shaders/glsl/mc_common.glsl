@@ -22,6 +22,7 @@ uniform ivec3 u_global_dims;  // samples of the whole volume
 uniform ivec3 u_box_lo;       // cells extracted: [u_box_lo, u_box_hi), global;
 uniform ivec3 u_box_hi;       // their vertices: samples in the closed box [u_box_lo, u_box_hi]
 uniform double u_iso;
+uniform float u_iso_float;  // the smallest float >= u_iso (core/inside_bits.h's InsideTest)
 uniform dvec3 u_origin;
 uniform dvec3 u_spacing;
 
@@ -42,7 +43,16 @@ double sample_at(ivec3 g) {
   return double(samples[l.x + d.x * (l.y + d.y * l.z)]);
 }
 
-bool inside(ivec3 g) { return sample_at(g) >= u_iso; }
+// double(v) >= iso; for float samples the same answer as v >= u_iso_float, which is cheaper.
+bool inside(ivec3 g) {
+#ifdef SAMPLE_IS_FLOAT
+  uvec3 l = uvec3(clamp(g - u_region_lo, ivec3(0), u_region_dims - 1));
+  uvec3 d = uvec3(u_region_dims);
+  return samples[l.x + d.x * (l.y + d.y * l.z)] >= u_iso_float;
+#else
+  return sample_at(g) >= u_iso;
+#endif
+}
 
 uint cell_case(ivec3 c) {
   uint cs = 0u;
@@ -74,6 +84,13 @@ uint element_index(ivec3 s) {
   return l.x + d.x * (l.y + d.y * l.z);
 }
 uint element_code(ivec3 s) {
+  if (all(lessThan(s, u_box_hi))) {
+    // A cell's lower corner: its three edges are cell edges 0, 4, 8 (all inside the volume).
+    uint cs = cell_case(s);
+    uint bits = ((cs ^ (cs >> 1)) & 1u) | (((cs ^ (cs >> 2)) & 1u) << 1) |
+                (((cs ^ (cs >> 4)) & 1u) << 2);
+    return cs | (bits << 8);
+  }
   bool in0 = inside(s);
   uint bits = 0u;
   for (int a = 0; a < 3; ++a) {
@@ -81,8 +98,7 @@ uint element_code(ivec3 s) {
     t[a] += 1;
     if (t[a] < u_global_dims[a] && inside(t) != in0) bits |= 1u << a;
   }
-  uint cs = all(lessThan(s, u_box_hi)) ? cell_case(s) : 0u;
-  return cs | (bits << 8);
+  return bits << 8;
 }
 
 #ifdef NORMALS

@@ -91,6 +91,11 @@ int main(int argc, char** argv) {
 
   std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
               "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  struct Stages {
+    std::string name;
+    gl::McStats gs, hp;
+  };
+  std::vector<Stages> stages;
   for (const Case& c : cases) {
     const VolumeView v = c.volume->view();
     Mesh cpu, gs, hp;
@@ -105,6 +110,17 @@ int main(int argc, char** argv) {
     std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
                 cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
                 t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+    gl::McStats sg, sh;
+    gl::mc_geometry_shader(v, {.iso = c.iso}, &sg);
+    gl::mc_histopyramid(v, {.iso = c.iso}, &sh);
+    stages.push_back({c.name, sg, sh});
   }
+  // Where the GL time goes: one more run of each with glFinish between stages.
+  std::printf("\nstages in ms (upload / count / output), one run each\n");
+  std::printf("%-12s %26s %26s\n", "volume", "gs", "hp");
+  for (const auto& [name, sg, sh] : stages)
+    std::printf("%-12s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
+                1e3 * sg.seconds_upload, 1e3 * sg.seconds_count, 1e3 * sg.seconds_output,
+                1e3 * sh.seconds_upload, 1e3 * sh.seconds_count, 1e3 * sh.seconds_output);
   return 0;
 }
