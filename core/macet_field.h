@@ -141,14 +141,14 @@ template <class T>
 double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, double f1) {
   if (p0 == p1) return 0.5;
   double lo = 0, hi = 1, flo = f0, fhi = f1;
-  const double tol = 1e-7 * std::abs(f0 - f1);
+  const double tol = 1e-5 * std::abs(f0 - f1);
   int side = 0;
   double t = 0.5;
   for (int it = 0; it < 24; ++it) {
     const double denom = flo - fhi;
     t = denom != 0 ? lo + (hi - lo) * flo / denom : 0.5 * (lo + hi);
     if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
-    if (hi - lo < 1e-6) break;
+    if (hi - lo < 1e-5) break;
     const P3 p{p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]),
                p0[2] + t * (p1[2] - p0[2])};
     const double f = field.value(p);

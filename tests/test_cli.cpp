@@ -145,6 +145,22 @@ TEST_F(Cli, DualContouringKeepsOrSplitsQuads) {
   EXPECT_EQ(j["triangles"].get<std::size_t>(), split.triangles.size());
 }
 
+TEST_F(Cli, MacetReportsItsQualityMode) {
+  for (const char* mode : {"fast", "max"}) {
+    Result r = run(std::string("extract field:torus:32 --method macet --quality ") + mode +
+                   " -q -o t.ply --stats -");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["method"], "macet");
+    EXPECT_EQ(j["quality"], mode);
+    EXPECT_EQ(j["euler"], 0);
+    EXPECT_EQ(j["closed"], true);
+  }
+  const Result r = run("extract field:torus:32 -q -o t.ply --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(nlohmann::json::parse(r.out).contains("quality"));
+}
+
 TEST_F(Cli, EveryFormatIsWritten) {
   for (const char* name : {"m.ply", "m.obj", "m.stl", "m.off"}) {
     ASSERT_EQ(run(std::string("extract field:csg-box:20 -q -o ") + name).code, 0) << name;
@@ -177,7 +193,6 @@ TEST_F(Cli, ErrorsAreOneLineAndLeaveNoFiles) {
       {"extract short.raw --iso 1 -o out.ply", "--dims"},
       {"extract short.raw --iso 1 --dims 4,4 --type uint8 -o out.ply", "--dims"},
       {"extract short.raw --iso 1 --dims 4,4,4 --type uint9 -o out.ply", "uint9"},
-      {"extract field:sphere:16 --method macet -o out.ply", "macet"},
       {"extract field:sphere:16 --method dc --backend hp -o out.ply", "hp"},
       {"extract field:sphere:16 --backend gs -o out.ply", "gs"},
       {"quality missing.ply", "missing.ply"},
