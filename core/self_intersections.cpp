@@ -99,6 +99,12 @@ SelfIntersections self_intersections(const Mesh& mesh, const SelfIntersectionOpt
   if (n_tri >= std::numeric_limits<std::uint32_t>::max())
     throw CapacityError("self-intersection test: more than 2^32 - 1 triangles");
   const std::size_t n_vert = mesh.positions.size();
+  // NaN would break the ordering below and the predicates; meshes read from files may hold them.
+  for (std::size_t i = 0; i < n_vert; ++i)
+    for (float c : mesh.positions[i])
+      if (!std::isfinite(c))
+        throw InputError("self-intersection test: vertex " + std::to_string(i) +
+                         " has a non-finite coordinate");
 
   // Vertex identity by position: sort indices by (position, index); the first of each run of
   // equal positions names them all.

@@ -46,7 +46,8 @@ struct SelfIntersections {
   std::vector<std::array<std::uint64_t, 2>> examples;
 };
 
-// Throws InputError when a face references a vertex past the end of positions.
+// Throws InputError when a face references a vertex past the end of positions or a position is
+// not finite.
 SelfIntersections self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options = {});
 
 // The narrow-phase rule above for one pair of triangles given by corner positions and vertex

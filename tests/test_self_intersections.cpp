@@ -4,6 +4,7 @@
 #include <tbb/global_control.h>
 
 #include <cstdint>
+#include <limits>
 
 #include "core/dual_contouring.h"
 #include "core/errors.h"
@@ -112,6 +113,9 @@ TEST(SelfIntersections, BadIndexThrows) {
   Mesh m;
   m.positions = {{0, 0, 0}};
   m.triangles = {{0, 0, 1}};
+  EXPECT_THROW(self_intersections(m), InputError);
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, std::numeric_limits<float>::quiet_NaN(), 0}};
+  m.triangles = {{0, 1, 2}};
   EXPECT_THROW(self_intersections(m), InputError);
 }
 
