@@ -32,8 +32,7 @@ Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
 }
 
 Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet(view,
-               {.iso = o.iso, .normals = o.normals, .quality = o.quality, .cells = o.cells});
+  return macet(view, {.iso = o.iso, .normals = o.normals, .quality = o.quality, .cells = o.cells});
 }
 
 struct BackendEntry {
@@ -76,13 +75,14 @@ constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::G
                                                Backend::Cpu};
 
 // Whether `e` can run here; `why` says why not, `hardware` whether it runs on a real GPU.
-bool usable(const BackendEntry& e, std::string* why, bool* hardware) {
+// `hardware_only`: only a real GPU matters (Auto), which the probe may rule out cheaply.
+bool usable(const BackendEntry& e, std::string* why, bool* hardware, bool hardware_only = false) {
   *hardware = false;
   if (!e.missing.empty()) {
     *why = e.missing;
     return false;
   }
-  *why = e.probe ? e.probe(hardware) : "";
+  *why = e.probe ? e.probe(hardware, hardware_only) : "";
   return why->empty();
 }
 
@@ -130,7 +130,9 @@ Backend resolve_backend(const ExtractOptions& options) {
       if (!e.run[m]) continue;
       std::string why;
       bool hardware = false;
-      if (usable(e, &why, &hardware) && (b == Backend::Cpu || hardware)) return b;
+      if (b == Backend::Cpu ? usable(e, &why, &hardware)
+                            : usable(e, &why, &hardware, true) && hardware)
+        return b;
     }
     throw InputError("method '" + std::string(method_name(options.method)) +
                      "' is not implemented by any backend of this build");

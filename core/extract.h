@@ -48,7 +48,7 @@ int extract_halo(const ExtractOptions& options);
 struct BackendCaps {
   Backend backend;
   bool available = false;
-  bool hardware = false;  // runs on a real GPU (not the CPU, not a software rasteriser)
+  bool hardware = false;        // runs on a real GPU (not the CPU, not a software rasteriser)
   std::vector<Method> methods;  // methods this backend implements
   std::string why_unavailable;  // empty when available
 };
@@ -65,9 +65,10 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options);
 // Optional backends live in their own targets (the GL ones in shaders/, isotile_gl) so that core
 // does not depend on them; the program installs them at startup, before any extract(). `probe`
 // returns "" when the backend can run on this machine, setting *hardware when it runs on a real
-// GPU (Auto picks a GPU backend only then), else why it cannot.
+// GPU (Auto picks a GPU backend only then), else why it cannot; with `hardware_only` (Auto's
+// question) it may answer "cannot" cheaply for anything but a real GPU.
 using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
-using ProbeFn = std::string (*)(bool* hardware);
+using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
                       ProbeFn probe);
 

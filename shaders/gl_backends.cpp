@@ -93,8 +93,10 @@ Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
 }
 
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
-// only prefers the GPU paths on a real GPU.
-std::string probe(bool* hardware) {
+// only prefers the GPU paths on a real GPU. For `auto` (hardware_only) a machine without a GPU is
+// told apart without making a context (starting llvmpipe costs about 0.3 s).
+std::string probe(bool* hardware, bool hardware_only) {
+  if (hardware_only && !hardware_device_present()) return "no GPU (hardware EGL device) found";
   std::string why;
   if (!available(&why)) return why;
   *hardware = !device().software;

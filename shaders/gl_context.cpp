@@ -281,7 +281,32 @@ void create() {
   g_failure = "no usable OpenGL 4.5 context (" + reasons + ")";
 }
 
+// Hardware EGL devices (not EGL_MESA_device_software).
+int count_hardware_devices() {
+  auto query_devices =
+      reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+  auto device_string = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(
+      eglGetProcAddress("eglQueryDeviceStringEXT"));
+  if (!query_devices || !device_string) return 0;
+  EGLDeviceEXT devices[16];
+  EGLint n = 0;
+  if (!query_devices(16, devices, &n)) return 0;
+  int hw = 0;
+  for (EGLint i = 0; i < n; ++i)
+    hw += !has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software");
+  return hw;
+}
+
 }  // namespace
+
+bool hardware_device_present() {
+  std::lock_guard lock(g_mutex);
+  if (g_context) return g_context->info.platform == "egl-device" && !g_context->info.software;
+  if (!g_failure.empty()) return false;
+  const char* env = std::getenv("ISOTILE_GL");
+  if (env && std::string_view(env) != "device") return false;
+  return count_hardware_devices() > 0;
+}
 
 const DeviceInfo& device() {
   Scope scope;

@@ -41,6 +41,10 @@ const DeviceInfo& device();
 // True when a context can be (or was) created; never throws. `why` gets the reason when not.
 bool available(std::string* why = nullptr);
 
+// True when EGL lists a hardware device (a GPU) that the context would use; cheap (no context is
+// made), so that `--backend auto` on a machine without a GPU does not pay for starting llvmpipe.
+bool hardware_device_present();
+
 // Holds the context current on the calling thread, and every other thread's GL work off it, for
 // its lifetime. Creates the context when needed (throws like device()).
 class Scope {
