@@ -4,6 +4,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -293,6 +295,36 @@ TEST_F(Cli, BadMemoryBudgetsAreOneLineErrors) {
     EXPECT_EQ(last_line(r.err).rfind("isotile: error:", 0), 0u) << args << ": " << r.err;
     EXPECT_TRUE(stray_files().empty()) << args;
   }
+}
+
+}  // namespace
+
+namespace {
+
+// Ctrl-C in the middle of a long bricked run leaves neither the output nor a temporary behind.
+TEST_F(Cli, InterruptedBrickedRunLeavesNoFiles) {
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    if (::chdir(dir_.c_str()) != 0) ::_exit(127);
+    std::freopen("err.txt", "w", stderr);
+    ::execl(ISOTILE_CLI, ISOTILE_CLI, "extract", "field:gyroid:400", "--memory", "1MiB", "-o",
+            "g.ply", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Wait until the second pass has begun writing (its temporary exists), then interrupt.
+  bool writing = false;
+  for (int i = 0; i < 600 && !writing; ++i) {
+    ::usleep(50000);
+    for (const auto& e : fs::directory_iterator(dir_))
+      if (e.path().filename().string().find(".g.ply.tmp") == 0) writing = true;
+  }
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(writing) << "no temporary output appeared";
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGINT) << "the run was not interrupted";
+  EXPECT_EQ(stray_files({"err.txt"}), std::vector<std::string>{});
 }
 
 }  // namespace
