@@ -23,6 +23,7 @@ DualContouringOptions dc_options(const ExtractOptions& o) {
   dc.solver = o.dc_solver;
   dc.keep_quads = o.keep_quads;
   dc.normals = o.normals;
+  dc.hermite = o.dc_hermite;
   dc.cells = o.cells;
   return dc;
 }

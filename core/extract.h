@@ -34,6 +34,7 @@ struct ExtractOptions {
   // Dual Contouring only.
   DcSolver dc_solver = DcSolver::MassPoint;
   bool keep_quads = false;
+  DcHermite dc_hermite = DcHermite::Central;  // Eno: sharper features, see dual_contouring.h
   // Macet only: Fast (default) or Max (see core/macet.h).
   MacetQuality quality = MacetQuality::Fast;
   // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one

@@ -222,6 +222,7 @@ struct ExtractArgs {
   bool normals = false;
   bool ascii = false;
   std::string dc_solver = "mass";
+  std::string dc_hermite = "central";
   std::string quality = "fast";  // Macet
   bool quads = false;
   bool check_intersections = false;
@@ -315,6 +316,7 @@ int run_extract(const ExtractArgs& args) {
                       : args.dc_solver == "qef"    ? DcSolver::Qef
                                                    : DcSolver::MassPoint;
   options.keep_quads = args.quads;
+  options.dc_hermite = args.dc_hermite == "eno" ? DcHermite::Eno : DcHermite::Central;
   options.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
   const Backend backend = resolve_backend(options);
 
@@ -574,6 +576,13 @@ int main(int argc, char** argv) {
                    "Dual Contouring vertex placement: mass (mass point, best triangles), "
                    "particle (the paper's minimizer, 10 steps), qef (truncated SVD)")
       ->check(CLI::IsMember({"mass", "particle", "qef"}));
+  extract_cmd
+      ->add_option(
+          "--dc-hermite", ex.dc_hermite,
+          "Dual Contouring's Hermite data: central (central-difference normals, linear "
+          "crossings; default) or eno (kink-aware crossings and one-sided normals: sharper "
+          "edges and corners)")
+      ->check(CLI::IsMember({"central", "eno"}));
   extract_cmd
       ->add_option("--quality", ex.quality,
                    "Macet: fast (closed-form end-point push, default) or max (adds a local "
