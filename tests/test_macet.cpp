@@ -160,7 +160,7 @@ TEST(Macet, VerticesAreRootsNearTheirEdgesAndTrianglesFaceOut) {
 }
 
 TEST(Macet, RaisesTheWorstTrianglesOverMarchingCubes) {
-  const Volume vol = make_field_volume({FieldKind::Gyroid, 64});
+  const Volume vol = make_field_volume({FieldKind::Gyroid, 40});
   const QualityStats ref = triangle_quality(marching_cubes(vol.view(), {.iso = 0.0}));
   const QualityStats fast = triangle_quality(run(vol.view(), 0.0, MacetQuality::Fast));
   const QualityStats max = triangle_quality(run(vol.view(), 0.0, MacetQuality::Max));
@@ -210,8 +210,9 @@ TEST(Macet, BricksEqualTheWholeVolume) {
   const std::vector<Mode> modes = {
       {{.iso = 0.0}, {{1, 1, 1}, {3, 5, 2}, {7, 7, 7}, {22, 4, 9}, {64, 64, 64}}},
       {{.iso = 0.0, .normals = true}, {{1, 1, 1}, {4, 3, 5}, {9, 9, 9}}},
-      {{.iso = 0.0, .quality = MacetQuality::Max, .max_sweeps = 1}, {{3, 5, 2}, {8, 8, 8}}},
-      {{.iso = 0.0, .normals = true, .quality = MacetQuality::Max, .max_sweeps = 2}, {{7, 6, 5}}},
+      {{.iso = 0.0, .quality = MacetQuality::Max, .max_sweeps = 1}, {{5, 9, 4}}},
+      {{.iso = 0.0, .normals = true, .quality = MacetQuality::Max, .max_sweeps = 2},
+       {{12, 12, 12}}},
   };
   for (const Mode& mode : modes) {
     const testing::KeyedExtract extract = [&](const VolumeView& v, const Box3& cells) {
