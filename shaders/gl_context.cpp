@@ -5,6 +5,7 @@
 #include <dlfcn.h>
 #include <glad/gl.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
