@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -223,6 +224,11 @@ TEST(GlContext, DescribesTheDevice) {
   EXPECT_EQ(d.version.rfind("4.", 0), 0u) << d.version;
   EXPECT_GE(d.max_gs_output_vertices, 15);
   EXPECT_GT(d.max_ssbo_bytes, 0);
+  // ISOTILE_GL=device|surfaceless|osmesa forces one way (the GlOsmesa ctest uses it).
+  if (const char* way = std::getenv("ISOTILE_GL")) {
+    const std::string w = way;
+    EXPECT_EQ(d.platform, w == "osmesa" ? w : "egl-" + w);
+  }
 }
 
 }  // namespace
