@@ -72,6 +72,21 @@ TEST_F(GlCli, GlBackendsWriteTheCpuFile) {
   EXPECT_TRUE(slurp(dir_ / "hp.ply") == cpu);
 }
 
+// The tiler drives the GL backends brick by brick; the streamed file is the in-core CPU file.
+TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
+  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  ASSERT_EQ(run("extract field:torus:40 --normals -q --backend cpu -o cpu.ply").code, 0);
+  for (const char* b : {"gs", "hp"}) {
+    const Result r = run(std::string("extract field:torus:40 --normals -q --memory 60KiB ") +
+                         "--backend " + b + " -o " + b + ".ply --stats " + b + ".json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto j = nlohmann::json::parse(slurp(dir_ / (std::string(b) + ".json")));
+    EXPECT_EQ(j["backend"], b);
+    EXPECT_GT(j["bricks"].get<int>(), 8);
+    EXPECT_TRUE(slurp(dir_ / (std::string(b) + ".ply")) == slurp(dir_ / "cpu.ply")) << b;
+  }
+}
+
 TEST_F(GlCli, GlInfoDescribesTheDevice) {
   if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
   const Result r = run("gl-info --json");

@@ -280,7 +280,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["iso"] = options.iso;
     j["method"] = method_name(options.method);
     if (options.method == Method::Macet) j["quality"] = args.quality;
-    j["backend"] = "cpu";
+    j["backend"] = backend_name(r.backend);
     j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
     j["triangles"] = r.triangles;
     j["vertices"] = r.vertices;

@@ -142,16 +142,14 @@ class TiledExtraction {
   TiledExtraction(VolumeSource& source, const TiledOptions& options)
       : src_(source), opt_(options), n_(source.dims) {
     const ExtractOptions& ex = options.extract;
-    if (ex.backend != Backend::Cpu && ex.backend != Backend::Auto)
-      throw InputError("--memory runs the CPU backend; drop --backend " +
-                       std::string(backend_name(ex.backend)) + " or --memory");
     if (options.format != MeshFormat::Ply && options.format != MeshFormat::Stl)
       throw InputError(
           "streamed (--memory) output is binary PLY or STL: their records have a "
           "fixed size, so each brick can be written in place");
     ex_ = ex;
-    ex_.backend = Backend::Cpu;
-    resolve_backend(ex_);  // the method must exist on the CPU
+    // Every backend keeps the brick contract (the GL paths were checked against the CPU's brick
+    // output), so bricks may run anywhere; resolve once, so all bricks run on the same one.
+    ex_.backend = resolve_backend(ex_);
     layout_ =
         ex.method == Method::DualContouring ? SiteLayout::CellVertices : SiteLayout::EdgeVertices;
     quads_ = ex.method == Method::DualContouring && ex.keep_quads;
@@ -171,6 +169,7 @@ class TiledExtraction {
     po.slabs = src_.sequential();
     plan_ = plan_bricks(n_, po);
     result.plan = plan_;
+    result.backend = ex_.backend;
     const std::int64_t bricks = plan_.total();
     SegmentTable vseg(n_, plan_.count[0]), fseg(n_, plan_.count[0]);
     std::vector<std::uint64_t> brick_vertices(static_cast<std::size_t>(bricks)),

@@ -36,6 +36,7 @@ struct TiledOptions {
 
 struct TiledResult {
   BrickPlan plan;
+  Backend backend = Backend::Cpu;     // where the bricks ran
   std::int64_t bricks_extracted = 0;  // plan.total() plus extra z-slices of bricks that were cut
   std::uint64_t vertices = 0, faces = 0, triangles = 0;
   std::uint64_t largest_brick_bytes = 0;  // estimated working set of the largest brick run
