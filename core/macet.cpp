@@ -80,26 +80,6 @@ constexpr std::array<EdgeHome, 12> kEdgeHome = [] {
   return h;
 }();
 
-// For each case and crossed cell edge, the cell edges joined to it by a triangle side: the
-// crossing's neighbours within this cell, counted once per triangle they share with it (`once`:
-// at least one triangle, `twice`: two). Summed over the cells around the edge this weights a
-// neighbour by the triangles it shares, which smoothed better than counting each once.
-struct NeighbourTable {
-  std::array<std::array<std::uint16_t, 12>, 256> once{}, twice{};
-  explicit NeighbourTable(const MacetCaseTable& t) {
-    for (int c = 0; c < 256; ++c)
-      for (int i = 0; i < t.triangle_count[c]; ++i)
-        for (int v = 0; v < 3; ++v) {
-          const int e = t.triangles[c][3 * i + v];
-          for (int o = 1; o < 3; ++o) {
-            const std::uint16_t bit = std::uint16_t(1u << t.triangles[c][3 * i + (v + o) % 3]);
-            if (once[c][e] & bit) twice[c][e] |= bit;
-            once[c][e] |= bit;
-          }
-        }
-  }
-};
-
 template <class T>
 class Extractor {
  public:
@@ -282,7 +262,7 @@ class Extractor {
     });
     for (int64_t r = 0; r < rows; ++r) ei.offset[r + 1] += ei.offset[r];
     const size_t n_edges = ei.offset[rows];
-    std::vector<P3> x(n_edges), lap(n_edges);
+    std::vector<P3> x(n_edges);
     std::vector<double> t(n_edges);
     auto for_edges = [&](auto&& fn) {
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
@@ -312,40 +292,23 @@ class Extractor {
         x[idx][c] = a0 + t[idx] * (a1 - a0);
       }
     });
-    static const NeighbourTable neighbours(table_);
     const int64_t dims[3] = {grid_.nx, ny, nz};
-    for_edges([&](int64_t i, int64_t j, int64_t k, int a, uint64_t idx) {
-      // The (up to) four cells around the edge; the edge is cell edge a*4 + m there.
-      const int u = a == 0 ? 1 : 0, v = a == 2 ? 1 : 2;
-      P3 sum{0, 0, 0};
-      int n = 0;
-      for (int du = 0; du < 2; ++du)
-        for (int dv = 0; dv < 2; ++dv) {
-          int64_t c[3] = {i, j, k};
-          c[u] -= du;
-          c[v] -= dv;
-          if (c[u] < 0 || c[v] < 0 || c[u] + 1 >= dims[u] || c[v] + 1 >= dims[v]) continue;
-          int cs = 0;
-          for (int corner = 0; corner < 8; ++corner)
-            cs |= int(inside(c[0] + (corner & 1), c[1] + ((corner >> 1) & 1),
-                             c[2] + ((corner >> 2) & 1)))
-                  << corner;
-          const int le = a * 4 + (du | (dv << 1));
-          const unsigned twice = neighbours.twice[cs][le];
-          for (unsigned nb = neighbours.once[cs][le]; nb; nb &= nb - 1) {
-            const int oe = std::countr_zero(nb);
-            const int c0 = mc::kEdgeCorners[oe][0];
-            const uint64_t o =
-                ei(c[0] + (c0 & 1), c[1] + ((c0 >> 1) & 1), c[2] + ((c0 >> 2) & 1), oe / 4);
-            const int times = (twice >> oe) & 1 ? 2 : 1;
-            for (int z = 0; z < 3; ++z) sum[z] += times * x[o][z];
-            n += times;
-          }
-        }
-      for (int z = 0; z < 3; ++z) lap[idx][z] = n ? sum[z] / n - x[idx][z] : 0.0;
-    });
-    std::vector<P3> new_disp(gv_.disp);
-    std::vector<double> new_value(gv_.value);
+    // Umbrella sums, cell by cell: each triangle adds its other two crossings to each of its
+    // corners (so a neighbour counts once per shared triangle). Cell slabs k and k + 2 touch
+    // disjoint point slabs, so the slabs of one global parity run in parallel, each slab in
+    // (j, i, triangle) order: every crossing's sum is added up in the same order in any view and
+    // for any thread count.
+    std::vector<P3> sum(n_edges, P3{0, 0, 0});
+    std::vector<std::uint16_t> count(n_edges, 0);
+    for (int phase = 0; phase < 2; ++phase) {
+      const int64_t k0 = (phase + view_.box.lo[2]) & 1;
+      const int64_t slabs = nz - 1 > k0 ? (nz - 1 - k0 + 1) / 2 : 0;
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, slabs), [&](const auto& range) {
+        for (int64_t m = range.begin(); m != range.end(); ++m)
+          for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j) sum_cells(j, k, ei, x, sum, count);
+      });
+    }
+    // Each move reads only its own displacement and the sums above: updated in place.
     for_grid_vertices([&](int64_t i, int64_t j, int64_t k, uint32_t idx) {
       const bool in = inside(i, j, k);
       P3 acc{0, 0, 0};
@@ -358,7 +321,8 @@ class Extractor {
           const uint64_t e = dir > 0 ? ei(i, j, k, a) : ei(q[0], q[1], q[2], a);
           // How far the crossing follows this end point.
           const double wt = std::clamp(dir > 0 ? 1 - t[e] : t[e], 0.0, 1.0);
-          for (int c = 0; c < 3; ++c) acc[c] += wt * lap[e][c];
+          const double n = count[e];
+          for (int c = 0; c < 3; ++c) acc[c] += wt * (n > 0 ? sum[e][c] / n - x[e][c] : 0.0);
           weight += wt;
         }
       if (weight <= 0) return;
@@ -369,16 +333,46 @@ class Extractor {
         const double along = (acc[0] * g[0] + acc[1] * g[1] + acc[2] * g[2]) / g2;
         for (int c = 0; c < 3; ++c) acc[c] -= along * g[c];
       }
-      const P3& from = gv_.disp[idx];
+      const P3 from = gv_.disp[idx];
       P3 d{from[0] + acc[0], from[1] + acc[1], from[2] + acc[2]};
       const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       if (len > kSmoothCap)
         for (double& c : d) c *= kSmoothCap / len;
       try_move(i, j, k, from, {d[0] - from[0], d[1] - from[1], d[2] - from[2]}, kSmoothGuard,
-               new_disp[idx], new_value[idx]);
+               gv_.disp[idx], gv_.value[idx]);
     });
-    gv_.disp.swap(new_disp);
-    gv_.value.swap(new_value);
+  }
+
+  // The umbrella sums of the crossings in the mixed cells of cell row (j, k) (see smooth_all).
+  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const std::vector<P3>& x,
+                 std::vector<P3>& sum, std::vector<std::uint16_t>& count) const {
+    const uint64_t* rows[4] = {grid_.row(j, k), grid_.row(j + 1, k), grid_.row(j, k + 1),
+                               grid_.row(j + 1, k + 1)};
+    const int64_t r0 = k * ei.ny + j;
+    const int64_t pr[4] = {r0, r0 + 1, r0 + ei.ny, r0 + ei.ny + 1};
+    for (int64_t w = 0; w <= (grid_.nx - 2) >> 6; ++w) {
+      const CellWord cw(rows, w, grid_.words, grid_.nx);
+      for (uint64_t m = cw.mixed; m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const int64_t i = w * 64 + b;
+        const int cs = cw.cell_case(b);
+        uint64_t id[12];
+        for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
+          const int ed = std::countr_zero(em);
+          const EdgeHome h = kEdgeHome[ed];
+          id[ed] = ei.offset[pr[h.row]] +
+                   local_index(ei.bits.data() + pr[h.row] * ei.words, h.axis, i + h.dx);
+        }
+        const auto& tris = table_.triangles[cs];
+        for (int t = 0; t < table_.triangle_count[cs]; ++t)
+          for (int v = 0; v < 3; ++v) {
+            const uint64_t self = id[tris[3 * t + v]], o1 = id[tris[3 * t + (v + 1) % 3]],
+                           o2 = id[tris[3 * t + (v + 2) % 3]];
+            for (int c = 0; c < 3; ++c) sum[self][c] += x[o1][c] + x[o2][c];
+            count[self] += 2;
+          }
+      }
+    }
   }
 
   // Crossed edges owned by points x in [x0, x1] of row (j, k) whose far end is in the view.

@@ -29,6 +29,13 @@ struct Field {
     for (int a = 0; a < 3; ++a) {
       lo_clamp[a] = 0.0;
       hi_clamp[a] = static_cast<double>(v.global_dims[a] - 1);
+      // cell_of's two clamps (to the whole volume's cells, then to the view's) in one: the view's
+      // cells lie inside the volume's, so clamping to the view's global range is the same.
+      const std::int64_t g_hi = std::max<std::int64_t>(v.global_dims[a] - 2, 0);
+      const std::int64_t l_hi = std::max<std::int64_t>(v.dims[a] - 2, 0);
+      cell_lo[a] = v.box.lo[a];
+      cell_hi[a] = std::max(cell_lo[a], std::min(g_hi, v.box.lo[a] + l_hi));
+      step[a] = v.dims[a] > 1 ? v.strides[a] : 0;
     }
   }
 
@@ -39,23 +46,26 @@ struct Field {
   // f - iso of the trilinear interpolant at local point p. The cell is clamped to the view, which
   // only matters for points the halo keeps away from emitted results.
   double value(const P3& p) const {
-    std::int64_t c[3];
     double u[3];
+    std::int64_t off = 0;
     for (int a = 0; a < 3; ++a) {
-      const std::int64_t ci = cell_of(p[a], a);
-      c[a] = ci;
-      u[a] = p[a] - static_cast<double>(ci + view.box.lo[a]);
+      const std::int64_t gc = global_cell(p[a], a);
+      u[a] = p[a] - static_cast<double>(gc);
+      off += (gc - view.box.lo[a]) * view.strides[a];
     }
-    const std::int64_t sx = view.dims[0] > 1 ? view.strides[0] : 0;
-    const std::int64_t sy = view.dims[1] > 1 ? view.strides[1] : 0;
-    const std::int64_t sz = view.dims[2] > 1 ? view.strides[2] : 0;
-    const T* b = data + view.offset(c[0], c[1], c[2]);
+    const std::int64_t sx = step[0], sy = step[1], sz = step[2];
+    const T* b = data + off;
     const double s000 = b[0], s100 = b[sx], s010 = b[sy], s110 = b[sx + sy];
     const double s001 = b[sz], s101 = b[sx + sz], s011 = b[sy + sz], s111 = b[sx + sy + sz];
     const double x00 = s000 + u[0] * (s100 - s000), x10 = s010 + u[0] * (s110 - s010);
     const double x01 = s001 + u[0] * (s101 - s001), x11 = s011 + u[0] * (s111 - s011);
     const double y0 = x00 + u[1] * (x10 - x00), y1 = x01 + u[1] * (x11 - x01);
     return y0 + u[2] * (y1 - y0) - iso;
+  }
+
+  // The global index of the cell holding coordinate x along axis a (see cell_of).
+  std::int64_t global_cell(double x, int a) const {
+    return std::clamp(static_cast<std::int64_t>(std::floor(x)), cell_lo[a], cell_hi[a]);
   }
 
   // Global coordinates of local sample (i, j, k) moved by d.
@@ -104,15 +114,10 @@ struct Field {
     return g;
   }
 
-  // The cell holding coordinate x along axis a: clamped to the whole volume's cells first, so the
-  // choice (and the arithmetic) is the same in every view holding that cell, then to the view's
-  // (which only matters for points the halo keeps away from emitted results).
-  std::int64_t cell_of(double x, int a) const {
-    std::int64_t ci = static_cast<std::int64_t>(std::floor(x));
-    ci = std::clamp<std::int64_t>(ci, 0, std::max<std::int64_t>(view.global_dims[a] - 2, 0)) -
-         view.box.lo[a];
-    return std::clamp<std::int64_t>(ci, 0, std::max<std::int64_t>(view.dims[a] - 2, 0));
-  }
+  // The cell holding coordinate x along axis a, local to the view: clamped to the whole volume's
+  // cells first, so the choice (and the arithmetic) is the same in every view holding that cell,
+  // then to the view's (which only matters for points the halo keeps away from emitted results).
+  std::int64_t cell_of(double x, int a) const { return global_cell(x, a) - view.box.lo[a]; }
 
   // Where grid vertex v displaced by d lands: inside the whole volume, and on the volume's border
   // plane when v is (so the mesh keeps ending exactly on the border, as MC's does).
@@ -132,6 +137,8 @@ struct Field {
   const T* data;
   double iso;
   double lo_clamp[3], hi_clamp[3];
+  std::int64_t cell_lo[3], cell_hi[3];  // global cell range value() and cell_of() clamp to
+  std::int64_t step[3];                 // stride to the next sample, 0 along a 1-sample axis
 };
 
 // The crossing of f = iso on the segment p0 -> p1 whose ends have f - iso = f0 >= 0 > f1 or
