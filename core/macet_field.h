@@ -46,19 +46,37 @@ struct Field {
   // f - iso of the trilinear interpolant at local point p. The cell is clamped to the view, which
   // only matters for points the halo keeps away from emitted results.
   double value(const P3& p) const {
+    Corners c;
+    return value(p, c);
+  }
+
+  // The eight samples of the cell last looked up, so that a search converging inside one cell
+  // reads them once.
+  struct Corners {
+    std::int64_t cell[3] = {-1, -1, -1};
+    double s[8] = {};
+  };
+
+  // value(p), reusing `c` when p lies in the same cell (same samples, same arithmetic).
+  double value(const P3& p, Corners& c) const {
     double u[3];
-    std::int64_t off = 0;
+    std::int64_t gc[3];
     for (int a = 0; a < 3; ++a) {
-      const std::int64_t gc = global_cell(p[a], a);
-      u[a] = p[a] - static_cast<double>(gc);
-      off += (gc - view.box.lo[a]) * view.strides[a];
+      gc[a] = global_cell(p[a], a);
+      u[a] = p[a] - static_cast<double>(gc[a]);
     }
-    const std::int64_t sx = step[0], sy = step[1], sz = step[2];
-    const T* b = data + off;
-    const double s000 = b[0], s100 = b[sx], s010 = b[sy], s110 = b[sx + sy];
-    const double s001 = b[sz], s101 = b[sx + sz], s011 = b[sy + sz], s111 = b[sx + sy + sz];
-    const double x00 = s000 + u[0] * (s100 - s000), x10 = s010 + u[0] * (s110 - s010);
-    const double x01 = s001 + u[0] * (s101 - s001), x11 = s011 + u[0] * (s111 - s011);
+    if (gc[0] != c.cell[0] || gc[1] != c.cell[1] || gc[2] != c.cell[2]) {
+      const std::int64_t sx = step[0], sy = step[1], sz = step[2];
+      const T* b = data + (gc[0] - view.box.lo[0]) * view.strides[0] +
+                   (gc[1] - view.box.lo[1]) * view.strides[1] +
+                   (gc[2] - view.box.lo[2]) * view.strides[2];
+      c.s[0] = b[0], c.s[1] = b[sx], c.s[2] = b[sy], c.s[3] = b[sx + sy];
+      c.s[4] = b[sz], c.s[5] = b[sx + sz], c.s[6] = b[sy + sz], c.s[7] = b[sx + sy + sz];
+      for (int a = 0; a < 3; ++a) c.cell[a] = gc[a];
+    }
+    const double* q = c.s;
+    const double x00 = q[0] + u[0] * (q[1] - q[0]), x10 = q[2] + u[0] * (q[3] - q[2]);
+    const double x01 = q[4] + u[0] * (q[5] - q[4]), x11 = q[6] + u[0] * (q[7] - q[6]);
     const double y0 = x00 + u[1] * (x10 - x00), y1 = x01 + u[1] * (x11 - x01);
     return y0 + u[2] * (y1 - y0) - iso;
   }
@@ -80,6 +98,16 @@ struct Field {
   P3 gradient(std::int64_t i, std::int64_t j, std::int64_t k) const {
     const std::int64_t p[3] = {i, j, k};
     P3 g{};
+    if (i > 0 && j > 0 && k > 0 && i + 1 < view.dims[0] && j + 1 < view.dims[1] &&
+        k + 1 < view.dims[2]) {
+      // Inside the view (so inside the volume): central differences, as below with h = 2.
+      const T* c = data + view.offset(i, j, k);
+      for (int a = 0; a < 3; ++a)
+        g[a] =
+            (static_cast<double>(c[view.strides[a]]) - static_cast<double>(c[-view.strides[a]])) /
+            2.0;
+      return g;
+    }
     for (int a = 0; a < 3; ++a) {
       const std::int64_t global = view.box.lo[a] + p[a];
       std::int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
@@ -151,6 +179,7 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
   const double tol = 1e-5 * std::abs(f0 - f1);
   int side = 0;
   double t = 0.5;
+  typename Field<T>::Corners corners;
   for (int it = 0; it < 24; ++it) {
     const double denom = flo - fhi;
     t = denom != 0 ? lo + (hi - lo) * flo / denom : 0.5 * (lo + hi);
@@ -158,7 +187,7 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
     if (hi - lo < 1e-5) break;
     const P3 p{p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]),
                p0[2] + t * (p1[2] - p0[2])};
-    const double f = field.value(p);
+    const double f = field.value(p, corners);
     if (std::abs(f) <= tol) break;
     // Inside is f >= 0, as in the classification.
     if ((f >= 0) == (flo >= 0)) {
