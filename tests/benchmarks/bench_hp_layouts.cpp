@@ -53,6 +53,7 @@ struct Case {
 };
 
 [[noreturn]] void fail(const std::string& what) {
+  std::fflush(stdout);  // the rows so far first, then the failure
   std::fprintf(stderr, "FAILED: %s\n", what.c_str());
   std::exit(2);
 }
