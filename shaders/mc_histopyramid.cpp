@@ -10,9 +10,9 @@
 // Summing consecutive runs makes the descent's order the element order (z, y, x), which is the
 // CPU's output order, so no sort or weld is needed: a triangle corner's vertex index is its
 // element's level-1 offset, plus the counts of at most seven elements before it, plus the rank of
-// its axis among its element's edges. (A 2x2x2 Morton pyramid would visit elements in Morton
-// order, not in the CPU's order; gl.md measured Morton buffers against 3D-texture mip chains only
-// for counting.)
+// its axis among its element's edges. A 2x2x2-block pyramid would visit elements in block order,
+// not the CPU's; measured on llvmpipe it was also no faster, and 3D textures were slower
+// (docs/gl.md, "HistoPyramid layout: measured"; tests/benchmarks/bench_hp_layouts.cpp).
 #include <tbb/parallel_for.h>
 
 #include <array>
