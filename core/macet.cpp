@@ -160,8 +160,9 @@ class Extractor {
         }
       }
     });
-    gv_.disp.assign(count[rows], P3{0, 0, 0});
-    gv_.value.assign(count[rows], 0.0);
+    // Every entry is written by push_all before anything reads it.
+    gv_.disp.resize(count[rows]);
+    gv_.value.resize(count[rows]);
   }
 
   // Accepts the move of grid vertex (i, j, k) from `from` by `step` (halving the step while it
@@ -262,8 +263,10 @@ class Extractor {
     });
     for (int64_t r = 0; r < rows; ++r) ei.offset[r + 1] += ei.offset[r];
     const size_t n_edges = ei.offset[rows];
-    std::vector<P3> x(n_edges);
-    std::vector<double> t(n_edges);
+    // Written in full by the next pass (sum and count included), so left uninitialised here.
+    UninitVector<P3> x(n_edges), sum(n_edges);
+    UninitVector<double> t(n_edges);
+    UninitVector<std::uint16_t> count(n_edges);
     auto for_edges = [&](auto&& fn) {
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
         for (int64_t r = range.begin(); r != range.end(); ++r) {
@@ -291,6 +294,8 @@ class Extractor {
         const double a1 = static_cast<double>(view_.box.lo[c] + q[c]) + gv_.disp[i1][c];
         x[idx][c] = a0 + t[idx] * (a1 - a0);
       }
+      sum[idx] = {0, 0, 0};
+      count[idx] = 0;
     });
     const int64_t dims[3] = {grid_.nx, ny, nz};
     // Umbrella sums, cell by cell: each triangle adds its other two crossings to each of its
@@ -298,8 +303,6 @@ class Extractor {
     // disjoint point slabs, so the slabs of one global parity run in parallel, each slab in
     // (j, i, triangle) order: every crossing's sum is added up in the same order in any view and
     // for any thread count.
-    std::vector<P3> sum(n_edges, P3{0, 0, 0});
-    std::vector<std::uint16_t> count(n_edges, 0);
     for (int phase = 0; phase < 2; ++phase) {
       const int64_t k0 = (phase + view_.box.lo[2]) & 1;
       const int64_t slabs = nz - 1 > k0 ? (nz - 1 - k0 + 1) / 2 : 0;
@@ -344,8 +347,8 @@ class Extractor {
   }
 
   // The umbrella sums of the crossings in the mixed cells of cell row (j, k) (see smooth_all).
-  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const std::vector<P3>& x,
-                 std::vector<P3>& sum, std::vector<std::uint16_t>& count) const {
+  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const UninitVector<P3>& x,
+                 UninitVector<P3>& sum, UninitVector<std::uint16_t>& count) const {
     const uint64_t* rows[4] = {grid_.row(j, k), grid_.row(j + 1, k), grid_.row(j, k + 1),
                                grid_.row(j + 1, k + 1)};
     const int64_t r0 = k * ei.ny + j;
