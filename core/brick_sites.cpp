@@ -19,10 +19,6 @@ using std::int64_t;
 using std::uint32_t;
 using std::uint64_t;
 
-uint64_t range_bits(int64_t w, int64_t lo, int64_t hi) {
-  return valid_bits(w, hi) & ~valid_bits(w, lo);
-}
-
 // The view's samples classified, with the bookkeeping to address them by global index.
 struct Classified {
   BitGrid grid;

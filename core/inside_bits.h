@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -140,6 +141,32 @@ void classify(const VolumeView& view, double iso, BitGrid& grid) {
       }
     }
   });
+}
+
+// Bits [lo, hi) of word w of a row.
+inline uint64_t range_bits(int64_t w, int64_t lo, int64_t hi) {
+  return valid_bits(w, hi) & ~valid_bits(w, lo);
+}
+
+// Crossed edges owned by one row of grid points, one entry per 64 points: a mask per axis and the
+// number of crossed edges (all axes) in earlier words. Vertices are numbered in key order, by point
+// and then axis, so a vertex's rank in its row is the prefix plus popcounts.
+struct EdgeWord {
+  uint64_t mask[3];
+  std::uint32_t prefix;
+};
+
+// Rank of the edge of axis a at x index i among its row's vertices.
+inline std::uint32_t edge_rank(const EdgeWord* row, int a, int64_t i) {
+  const EdgeWord& wd = row[i >> 6];
+  const int b = static_cast<int>(i & 63);
+  const uint64_t below = (uint64_t{1} << b) - 1;
+  std::uint32_t r = wd.prefix;
+  for (int c = 0; c < 3; ++c) {
+    r += static_cast<std::uint32_t>(std::popcount(wd.mask[c] & below));
+    if (c < a) r += static_cast<std::uint32_t>((wd.mask[c] >> b) & 1);
+  }
+  return r;
 }
 
 // Words of bit i+1 aligned to bit i ("the sample to the right").

@@ -42,44 +42,6 @@ constexpr double kGuard = 1.0;
 constexpr double kSmoothGuard = 0.7;
 constexpr int kHalvings = 4;
 
-inline uint64_t range_bits(int64_t w, int64_t lo, int64_t hi) {
-  return valid_bits(w, hi) & ~valid_bits(w, lo);
-}
-
-// Crossed edges owned by one row of points (as in marching_cubes.cpp): per word, a mask per axis
-// and the number of crossed edges in earlier words, so a vertex's rank in its row is a popcount.
-struct EdgeWord {
-  uint64_t mask[3];
-  uint32_t prefix;
-};
-
-inline uint32_t local_index(const EdgeWord* row, int a, int64_t i) {
-  const EdgeWord& wd = row[i >> 6];
-  const int b = static_cast<int>(i & 63);
-  const uint64_t below = (uint64_t{1} << b) - 1;
-  uint32_t r = wd.prefix;
-  for (int c = 0; c < 3; ++c) {
-    r += static_cast<uint32_t>(std::popcount(wd.mask[c] & below));
-    if (c < a) r += static_cast<uint32_t>((wd.mask[c] >> b) & 1);
-  }
-  return r;
-}
-
-// Where the vertex of cell edge e lives: point row (0 = (j,k), 1 = (j+1,k), 2 = (j,k+1),
-// 3 = (j+1,k+1)), axis, and x offset of its owner from the cell.
-struct EdgeHome {
-  std::uint8_t row, axis, dx;
-};
-constexpr std::array<EdgeHome, 12> kEdgeHome = [] {
-  std::array<EdgeHome, 12> h{};
-  for (int e = 0; e < 12; ++e) {
-    const int lo = mc::kEdgeCorners[e][0];
-    h[e] = {static_cast<std::uint8_t>(((lo >> 1) & 1) | (((lo >> 2) & 1) << 1)),
-            static_cast<std::uint8_t>(e / 4), static_cast<std::uint8_t>(lo & 1)};
-  }
-  return h;
-}();
-
 template <class T>
 class Extractor {
  public:
@@ -240,7 +202,7 @@ class Extractor {
     std::vector<uint64_t> offset;  // per point row
     uint64_t operator()(int64_t i, int64_t j, int64_t k, int a) const {
       const int64_t r = k * ny + j;
-      return offset[r] + local_index(bits.data() + r * words, a, i);
+      return offset[r] + edge_rank(bits.data() + r * words, a, i);
     }
   };
 
@@ -362,9 +324,9 @@ class Extractor {
         uint64_t id[12];
         for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
           const int ed = std::countr_zero(em);
-          const EdgeHome h = kEdgeHome[ed];
+          const mc::EdgeHome h = mc::kEdgeHome[ed];
           id[ed] = ei.offset[pr[h.row]] +
-                   local_index(ei.bits.data() + pr[h.row] * ei.words, h.axis, i + h.dx);
+                   edge_rank(ei.bits.data() + pr[h.row] * ei.words, h.axis, i + h.dx);
         }
         const auto& tris = table_.triangles[cs];
         for (int t = 0; t < table_.triangle_count[cs]; ++t)
@@ -503,8 +465,8 @@ class Extractor {
         uint32_t id[12];
         for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
           const int ed = std::countr_zero(em);
-          const EdgeHome h = kEdgeHome[ed];
-          id[ed] = static_cast<uint32_t>(base[h.row] + local_index(e[h.row], h.axis, i + h.dx));
+          const mc::EdgeHome h = mc::kEdgeHome[ed];
+          id[ed] = static_cast<uint32_t>(base[h.row] + edge_rank(e[h.row], h.axis, i + h.dx));
         }
         const auto& tris = table_.triangles[cs];
         for (int t = 0; t < table_.triangle_count[cs]; ++t)

@@ -22,38 +22,20 @@ using std::int64_t;
 using std::uint32_t;
 using std::uint64_t;
 
-// Bits [lo, hi) of word w of a row.
-inline uint64_t range_bits(int64_t w, int64_t lo, int64_t hi) {
-  return valid_bits(w, hi) & ~valid_bits(w, lo);
-}
-
 // Masks of the crossed edges owned by one row of grid points: the edge from (i, j, k) to
 // (i+1, j, k), (i, j+1, k) and (i, j, k+1) is owned by point (i, j, k). Vertices are numbered in
 // key order, by point and then axis, so a vertex's rank in the row is the number of crossed edges
 // of earlier points plus those of lower axes at its own point: `prefix[w]` counts the crossed edges
 // of words before w, popcounts do the rest.
+// The crossed edges of one row of grid points (core/inside_bits.h's EdgeWord per 64 points).
 struct RowEdges {
-  struct Word {
-    uint64_t mask[3];  // crossed edges among these 64 points, per axis
-    uint32_t prefix;   // crossed edges (all axes) in earlier words
-  };
-  std::vector<Word> bits;
+  std::vector<EdgeWord> bits;
   uint32_t count = 0;
 
   explicit RowEdges(int64_t n_words) : bits(static_cast<size_t>(n_words)) {}
 
   // Rank of the edge of axis a at x index i among this row's vertices.
-  uint32_t local_index(int a, int64_t i) const {
-    const Word& wd = bits[i >> 6];
-    const int b = static_cast<int>(i & 63);
-    const uint64_t below = (uint64_t{1} << b) - 1;
-    uint32_t r = wd.prefix;
-    for (int c = 0; c < 3; ++c) {
-      r += static_cast<uint32_t>(std::popcount(wd.mask[c] & below));
-      if (c < a) r += static_cast<uint32_t>((wd.mask[c] >> b) & 1);
-    }
-    return r;
-  }
+  uint32_t local_index(int a, int64_t i) const { return edge_rank(bits.data(), a, i); }
 };
 
 // The crossed edges owned by points x in [x0, x1] of row (j, k) whose far end is in the grid.
@@ -89,21 +71,6 @@ uint32_t row_edge_count(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int6
   });
   return n;
 }
-
-// Where the vertex of cell edge e lives: the point row that owns it (0 = (j,k), 1 = (j+1,k),
-// 2 = (j,k+1), 3 = (j+1,k+1)), the edge's axis, and the x offset of its owner from the cell.
-struct EdgeHome {
-  std::uint8_t row, axis, dx;
-};
-constexpr std::array<EdgeHome, 12> kEdgeHome = [] {
-  std::array<EdgeHome, 12> h{};
-  for (int e = 0; e < 12; ++e) {
-    const int lo = mc::kEdgeCorners[e][0];  // corner x + 2y + 4z of the owning point
-    h[e] = {static_cast<std::uint8_t>(((lo >> 1) & 1) | (((lo >> 2) & 1) << 1)),
-            static_cast<std::uint8_t>(e / 4), static_cast<std::uint8_t>(lo & 1)};
-  }
-  return h;
-}();
 
 template <class T>
 class Extractor {
@@ -316,7 +283,7 @@ class Extractor {
         uint32_t id[12];
         for (unsigned em = mc::kCaseTable.edge_mask[cs]; em; em &= em - 1) {
           const int e = std::countr_zero(em);
-          const EdgeHome h = kEdgeHome[e];
+          const mc::EdgeHome h = mc::kEdgeHome[e];
           id[e] = base[h.row] + edges[h.row]->local_index(h.axis, i + h.dx);
         }
         const auto& tris = mc::kCaseTable.triangles[cs];

@@ -37,6 +37,22 @@ inline constexpr std::array<std::array<std::uint8_t, 2>, 12> kEdgeCorners = [] {
   return e;
 }();
 
+// Where the vertex of cell edge e lives, seen from cell row (j, k): the point row that owns it
+// (0 = (j,k), 1 = (j+1,k), 2 = (j,k+1), 3 = (j+1,k+1)), the edge's axis, and the x offset of its
+// owning point from the cell.
+struct EdgeHome {
+  std::uint8_t row, axis, dx;
+};
+inline constexpr std::array<EdgeHome, 12> kEdgeHome = [] {
+  std::array<EdgeHome, 12> h{};
+  for (int e = 0; e < 12; ++e) {
+    const int lo = kEdgeCorners[e][0];  // corner x + 2y + 4z of the owning point
+    h[e] = {static_cast<std::uint8_t>(((lo >> 1) & 1) | (((lo >> 2) & 1) << 1)),
+            static_cast<std::uint8_t>(e / 4), static_cast<std::uint8_t>(lo & 1)};
+  }
+  return h;
+}();
+
 struct CaseTable {
   std::array<std::uint8_t, 256> triangle_count{};
   std::array<std::uint16_t, 256> edge_mask{};  // bit e set when edge e is crossed
