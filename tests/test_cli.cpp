@@ -13,61 +13,17 @@
 #include <sstream>
 #include <string>
 
+#include "cli_support.h"
 #include "core/mesh_io.h"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string out, err;
-};
+using Result = isotile::testing::CliResult;
+using isotile::testing::slurp;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-class Cli : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("isotile-cli-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  Result run(const std::string& args) {
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    const std::string cmd = std::string("cd '") + dir_.string() + "' && '" + ISOTILE_CLI + "' " +
-                            args + " >'" + out.string() + "' 2>'" + err.string() + "'";
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = slurp(out);
-    r.err = slurp(err);
-    fs::remove(out);
-    fs::remove(err);
-    return r;
-  }
-
-  // Files in the work directory other than `keep` (to catch leftover temporaries).
-  std::vector<std::string> stray_files(std::initializer_list<std::string> keep = {}) {
-    std::vector<std::string> names;
-    for (const auto& e : fs::directory_iterator(dir_)) {
-      const std::string n = e.path().filename().string();
-      if (std::find(keep.begin(), keep.end(), n) == keep.end()) names.push_back(n);
-    }
-    return names;
-  }
-
-  fs::path dir_;
-};
+class Cli : public isotile::testing::CliTest {};
 
 int count_of(const std::string& s, const std::string& what) {
   int n = 0;
