@@ -490,8 +490,10 @@ int macet_halo(const MacetOptions& options) {
   // An emitted edge ends at most one sample past the cells. Its end point's smoothing reads the
   // crossings of the cells around its edges (end points one sample further), whose pushes read
   // one sample more: 3. Its root search and normal stay within that. Max: a vertex's search reads
-  // the displacements one sample around it and samples two around it; each colour step of a sweep
-  // carries a change one sample further.
+  // the displacements one sample around it, and its root searches run between neighbours moved up
+  // to one voxel, reading samples up to three around it; each colour step of a sweep carries a
+  // change one sample further. The first step's vertices that matter lie 24 samples (3 sweeps)
+  // past the emitted end points, which lie one past the cells: 1 + 23 + 3 = 27 = 3 + 8 * 3.
   if (options.quality == MacetQuality::Max) return 3 + 8 * std::max(options.max_sweeps, 0);
   return 3;
 }

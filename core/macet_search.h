@@ -8,9 +8,10 @@
 // the minimum radius ratio of the affected triangles, subject to
 //   * the vertex keeps its side of the surface (so every edge still brackets a crossing and the
 //     topology stays MC's),
-//   * it stays within kMaxMove voxels of its grid position,
+//   * it stays within max_move voxels of its grid position,
 //   * no affected triangle turns over (its normal keeps a positive dot product with the current
-//     one).
+//     one),
+//   * the triangles of the eight cells intersect each other in no more pairs than before.
 // Determinism: vertices are swept in eight colours by the parity of their GLOBAL coordinates.
 // Two vertices of one colour differ by two samples along some axis, so they share no cell and no
 // crossed edge: a colour's vertices move in parallel without seeing each other, and the result is
@@ -31,12 +32,16 @@
 #include "core/macet_field.h"
 #include "core/macet_table.h"
 #include "core/marching_cubes_tables.h"
+#include "core/self_intersections.h"
 
 namespace isotile::detail {
 
 struct MacetSearchParams {
-  double goal = 0.6;      // vertices whose affected triangles are all at least this good stay
-  double max_move = 0.6;  // voxels from the grid position
+  double goal = 0.6;  // vertices whose affected triangles are all at least this good stay
+  // Voxels from the grid position. 1.0 rather than 0.6 frees the neighbours of grid vertices
+  // pinned by their sign in one-voxel-thin features (bonsai's minimum 0.088 -> 0.107); the
+  // intersection guard keeps the longer moves from folding sheets into each other.
+  double max_move = 1.0;
 };
 
 inline double radius_ratio_d(const P3& a, const P3& b, const P3& c) {
@@ -138,6 +143,9 @@ class LocalSearch {
     };
     std::array<TriRef, 8 * mc::kMaxTrianglesPerCase> tris{};
     int n_tris = 0;
+    // The other triangles of the eight cells (all corners fixed), for the intersection guard.
+    std::array<TriRef, 8 * mc::kMaxTrianglesPerCase> statics{};
+    int n_statics = 0;
     const P3 zero{0, 0, 0};
 
     for (int c = 0; c < 8; ++c) {
@@ -156,7 +164,6 @@ class LocalSearch {
       const int nt = table_.triangle_count[cs];
       if (nt == 0) continue;
       std::int16_t slot[12];
-      bool any_moving_edge = false;
       for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
         const int e = std::countr_zero(em);
         const int c0 = mc::kEdgeCorners[e][0];
@@ -173,17 +180,18 @@ class LocalSearch {
             ++m;
           if (m == n_moving) moving[n_moving++] = {{s[0], s[1], s[2]}, a};
           slot[e] = static_cast<std::int16_t>(-1 - m);
-          any_moving_edge = true;
         } else {
           slot[e] = static_cast<std::int16_t>(n_fixed);
           fixed[n_fixed++] = crossing(s, a, ~0u, zero, 0);
         }
       }
-      if (!any_moving_edge) continue;
       const auto& tt = table_.triangles[cs];
       for (int t = 0; t < nt; ++t) {
         const TriRef ref{{slot[tt[3 * t]], slot[tt[3 * t + 1]], slot[tt[3 * t + 2]]}};
-        if (ref.v[0] < 0 || ref.v[1] < 0 || ref.v[2] < 0) tris[n_tris++] = ref;
+        if (ref.v[0] < 0 || ref.v[1] < 0 || ref.v[2] < 0)
+          tris[n_tris++] = ref;
+        else
+          statics[n_statics++] = ref;
       }
     }
     if (n_tris == 0) return;
@@ -212,12 +220,56 @@ class LocalSearch {
       return worst;
     };
 
+    // Intersection guard: the number of intersecting pairs among the eight cells' triangles that
+    // involve a moving crossing (rule of core/self_intersections.h, on the float coordinates) may
+    // not grow. Without it the search folds neighbouring sheets of thin features through each
+    // other (bonsai: 42 intersecting pairs against MC's 28 and Fast's 0).
+    struct Corners {
+      std::array<Vec3f, 3> p;
+      std::array<std::uint32_t, 3> id;
+      Vec3f lo, hi;
+      bool live;
+    };
+    auto corners = [&](const TriRef& t) {
+      Corners c;
+      for (int k = 0; k < 3; ++k) {
+        const P3& x = pos(t.v[k]);
+        c.p[k] = {static_cast<float>(x[0]), static_cast<float>(x[1]), static_cast<float>(x[2])};
+        c.id[k] = static_cast<std::uint32_t>(t.v[k] + 16);  // slots are >= -6
+      }
+      for (int a = 0; a < 3; ++a) {
+        c.lo[a] = std::min({c.p[0][a], c.p[1][a], c.p[2][a]});
+        c.hi[a] = std::max({c.p[0][a], c.p[1][a], c.p[2][a]});
+      }
+      c.live =
+          c.id[0] != c.id[1] && c.id[1] != c.id[2] && c.id[0] != c.id[2] && triangle_has_area(c.p);
+      return c;
+    };
+    auto meet = [](const Corners& a, const Corners& b) {
+      for (int k = 0; k < 3; ++k)
+        if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
+      return a.live && b.live && triangles_intersect(a.p, a.id, b.p, b.id);
+    };
+    std::array<Corners, 8 * mc::kMaxTrianglesPerCase> fixed_corners, moving_corners;
+    for (int t = 0; t < n_statics; ++t) fixed_corners[t] = corners(statics[t]);
+    auto intersecting_pairs = [&]() {
+      int n = 0;
+      for (int t = 0; t < n_tris; ++t) {
+        moving_corners[t] = corners(tris[t]);
+        if (!moving_corners[t].live) continue;
+        for (int u = 0; u < n_statics; ++u) n += meet(moving_corners[t], fixed_corners[u]);
+        for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
+      }
+      return n;
+    };
+
     P3 best_d = gv_.disp[self];
     double best_f = gv_.value[self];
     place(best_d, best_f);
     double best = score(true);
     if (best >= params_.goal) return;
     const double start = best;
+    const int allowed_pairs = intersecting_pairs();
 
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
       P3 round_d = best_d;
@@ -234,7 +286,7 @@ class LocalSearch {
           if ((f >= 0) != in) continue;
           place(d, f);
           const double s = score(false);
-          if (s > best) {
+          if (s > best && intersecting_pairs() <= allowed_pairs) {
             best = s;
             round_d = d;
             round_f = f;

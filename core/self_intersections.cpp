@@ -56,6 +56,10 @@ struct Box {
 
 }  // namespace
 
+bool triangle_has_area(const std::array<Vec3f, 3>& t) {
+  return !CGAL::collinear(point(t[0]), point(t[1]), point(t[2]));
+}
+
 bool triangles_intersect(const std::array<Vec3f, 3>& a, const std::array<std::uint32_t, 3>& ia,
                          const std::array<Vec3f, 3>& b, const std::array<std::uint32_t, 3>& ib) {
   // Which corners are shared: ja[k] = the corner of b equal to corner k of a, or -1.

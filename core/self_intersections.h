@@ -50,6 +50,10 @@ struct SelfIntersections {
 // not finite.
 SelfIntersections self_intersections(const Mesh& mesh, const SelfIntersectionOptions& options = {});
 
+// True when the triangle's corners are not collinear (exactly, on the float coordinates): the
+// triangles the rule above applies to.
+bool triangle_has_area(const std::array<Vec3f, 3>& t);
+
 // The narrow-phase rule above for one pair of triangles given by corner positions and vertex
 // identities (equal ids mean the same vertex; ids must be equal exactly when positions are).
 // Exposed for tests. Both triangles must have non-zero area.
