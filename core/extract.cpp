@@ -33,7 +33,11 @@ Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
 }
 
 Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet(view, {.iso = o.iso, .normals = o.normals, .quality = o.quality, .cells = o.cells});
+  return macet(view, {.iso = o.iso,
+                      .normals = o.normals,
+                      .quality = o.quality,
+                      .relax = o.macet_relax,
+                      .cells = o.cells});
 }
 
 struct BackendEntry {
@@ -156,8 +160,10 @@ int extract_halo(const ExtractOptions& options) {
     case Method::MarchingCubes:
       return marching_cubes_halo({.iso = options.iso, .normals = options.normals});
     case Method::Macet:
-      return macet_halo(
-          {.iso = options.iso, .normals = options.normals, .quality = options.quality});
+      return macet_halo({.iso = options.iso,
+                         .normals = options.normals,
+                         .quality = options.quality,
+                         .relax = options.macet_relax});
     case Method::DualContouring:
       return dual_contouring_halo(dc_options(options));
   }

@@ -37,6 +37,7 @@ struct ExtractOptions {
   DcHermite dc_hermite = DcHermite::Central;  // Eno: sharper features, see dual_contouring.h
   // Macet only: Fast (default) or Max (see core/macet.h).
   MacetQuality quality = MacetQuality::Fast;
+  double macet_relax = 0.0;  // MacetOptions::relax: 0 keeps vertices on the trilinear surface
   // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one
   // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
   // core/marching_cubes.h and core/brick_sites.h.

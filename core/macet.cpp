@@ -13,6 +13,7 @@
 #include "core/errors.h"
 #include "core/inside_bits.h"
 #include "core/macet_field.h"
+#include "core/macet_relax.h"
 #include "core/macet_search.h"
 #include "core/macet_table.h"
 #include "core/marching_cubes_tables.h"
@@ -494,14 +495,28 @@ int macet_halo(const MacetOptions& options) {
   // to one voxel, reading samples up to three around it; each colour step of a sweep carries a
   // change one sample further. The first step's vertices that matter lie 24 samples (3 sweeps)
   // past the emitted end points, which lie one past the cells: 1 + 23 + 3 = 27 = 3 + 8 * 3.
-  if (options.quality == MacetQuality::Max) return 3 + 8 * std::max(options.max_sweeps, 0);
-  return 3;
+  const int relax = options.relax > 0 ? 1 : 0;
+  if (options.quality == MacetQuality::Max) return 3 + 8 * std::max(options.max_sweeps, 0) + relax;
+  return 3 + relax;
 }
 
 Mesh macet(const VolumeView& view, const MacetOptions& options) {
   if (options.max_sweeps < 0)
     throw InputError("macet: max_sweeps must not be negative, got " +
                      std::to_string(options.max_sweeps));
+  if (!(options.relax >= 0 && options.relax < 0.5))
+    throw InputError("macet: relax must lie in [0, 0.5) edge lengths, got " +
+                     std::to_string(options.relax));
+  if (options.relax > 0) {
+    // The relaxed samples are doubles; the Field converts every sample to double anyway, so the
+    // arithmetic on unrelaxed samples is unchanged.
+    const std::vector<double> samples = relax_pinned_samples(view, options.iso, options.relax);
+    VolumeView relaxed = view;
+    relaxed.data = samples.data();
+    relaxed.type = ScalarType::Float64;
+    relaxed.strides = {1, view.dims[0], view.dims[0] * view.dims[1]};
+    return Extractor<double>(relaxed, options).run();
+  }
   return visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
     return Extractor<T>(view, options).run();

@@ -114,9 +114,13 @@ TEST_F(Cli, MacetReportsItsQualityMode) {
     EXPECT_EQ(j["euler"], 0);
     EXPECT_EQ(j["closed"], true);
   }
-  const Result r = run("extract field:torus:32 -q -o t.ply --stats -");
+  Result r = run("extract field:torus:32 --method macet --macet-relax 0.3 -q -o t.ply --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["macet_relax"], 0.3);
+  r = run("extract field:torus:32 -q -o t.ply --stats -");
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_FALSE(nlohmann::json::parse(r.out).contains("quality"));
+  EXPECT_FALSE(nlohmann::json::parse(r.out).contains("macet_relax"));
 }
 
 TEST_F(Cli, EveryFormatIsWritten) {
@@ -153,6 +157,7 @@ TEST_F(Cli, ErrorsAreOneLineAndLeaveNoFiles) {
       {"extract short.raw --iso 1 --dims 4,4,4 --type uint9 -o out.ply", "uint9"},
       {"extract field:sphere:16 --method dc --backend hp -o out.ply", "hp"},
       {"extract field:sphere:16 --method macet --backend gs -o out.ply", "gs"},
+      {"extract field:sphere:16 --macet-relax 0.2 -o out.ply", "--macet-relax"},
       {"quality missing.ply", "missing.ply"},
       {"info missing.nrrd", "missing.nrrd"},
   };
@@ -175,6 +180,8 @@ TEST_F(Cli, UsageErrorsExitWithTwo) {
   EXPECT_EQ(run("").code, 2);
   EXPECT_EQ(run("frobnicate").code, 2);
   EXPECT_EQ(run("extract field:sphere:16").code, 2);  // no -o
+  EXPECT_EQ(run("extract field:sphere:16 --method macet --macet-relax 0.5 -o a.ply").code, 2);
+  EXPECT_EQ(run("extract field:sphere:16 --method macet --macet-relax x -o a.ply").code, 2);
   EXPECT_EQ(run("extract field:sphere:16 -o a.ply --method nope").code, 2);
 }
 

@@ -6,11 +6,13 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "core/errors.h"
 #include "core/macet.h"
+#include "core/macet_relax.h"
 #include "core/macet_table.h"
 #include "core/marching_cubes.h"
 #include "core/marching_cubes_tables.h"
@@ -235,7 +237,88 @@ TEST(Macet, RejectsAViewWithoutTheHaloAndBadOptions) {
   EXPECT_THROW(macet(part, o), InputError);
   o = {.iso = 0.0, .max_sweeps = -1};
   EXPECT_THROW(macet(vol.view(), o), InputError);
+  for (double relax : {-0.1, 0.5, std::nan("")}) {
+    o = {.iso = 0.0, .relax = relax};
+    EXPECT_THROW(macet(vol.view(), o), InputError) << relax;
+  }
+  EXPECT_EQ(macet_halo({.relax = 0.2}), 4);
   EXPECT_EQ(macet_halo({.quality = MacetQuality::Max, .max_sweeps = 2}), 19);
+}
+
+// Relaxation of pinned samples (core/macet_relax.h).
+
+std::vector<float> random_samples(Index3 n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> v(static_cast<std::size_t>(n[0] * n[1] * n[2]));
+  for (float& x : v) x = u(rng);
+  return v;
+}
+
+TEST(MacetRelax, ThinSheetSampleMovesSoItsCrossingsLieRelaxAway) {
+  // Inside (10) everywhere but the plane z = 3 (-0.1): that plane is a one-sample-thin outside
+  // sheet whose crossings lie 0.1 / 10.1 from it on both sides.
+  const Index3 n{5, 5, 7};
+  std::vector<float> v(5 * 5 * 7, 10.0f);
+  for (int i = 0; i < 25; ++i) v[3 * 25 + i] = -0.1f;
+  const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
+  const std::vector<double> r = detail::relax_pinned_samples(view, 0.0, 0.3);
+  for (std::size_t s = 0; s < v.size(); ++s) {
+    if (s / 25 == 3)
+      EXPECT_NEAR(r[s], -0.3 * 10.0 / 0.7, 1e-12) << s;  // crossing at 0.3 after
+    else
+      EXPECT_EQ(r[s], v[s]) << s;
+  }
+}
+
+TEST(MacetRelax, KeepsEverySideAndMovesNoCrossingByMoreThanRelax) {
+  const Index3 n{17, 13, 11};
+  const std::vector<float> v = random_samples(n, 99);
+  const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
+  for (double relax : {0.1, 0.3, 0.45}) {
+    const std::vector<double> r = detail::relax_pinned_samples(view, 0.05, relax);
+    int changed = 0;
+    for (std::int64_t k = 0; k < n[2]; ++k)
+      for (std::int64_t j = 0; j < n[1]; ++j)
+        for (std::int64_t i = 0; i < n[0]; ++i) {
+          const std::int64_t s = i + n[0] * (j + n[1] * k);
+          ASSERT_EQ(r[s] >= 0.05, v[s] >= 0.05) << s;
+          changed += r[s] != v[s];
+          const std::int64_t p[3] = {i, j, k}, stride[3] = {1, n[0], n[0] * n[1]};
+          for (int a = 0; a < 3; ++a) {
+            if (p[a] + 1 >= n[a]) continue;
+            const std::int64_t q = s + stride[a];
+            const double f0 = v[s] - 0.05, f1 = v[q] - 0.05;
+            if ((f0 >= 0) == (f1 >= 0)) continue;
+            const double g0 = r[s] - 0.05, g1 = r[q] - 0.05;
+            EXPECT_LE(std::abs(g0 / (g0 - g1) - f0 / (f0 - f1)), relax + 1e-12) << s << " " << a;
+          }
+        }
+    EXPECT_GT(changed, 10) << relax;  // random samples hold many one-sample features
+  }
+}
+
+TEST(MacetRelax, BricksEqualTheWholeVolume) {
+  const Index3 n{19, 17, 15};
+  const std::vector<float> v = random_samples(n, 5);
+  const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
+  struct Mode {
+    MacetOptions options;
+    Index3 brick;
+  };
+  // Max searches nearly every vertex of random samples: one sweep, few bricks.
+  for (const Mode& mode :
+       {Mode{{.iso = 0.1, .relax = 0.3}, {4, 5, 3}}, Mode{{.iso = 0.1, .relax = 0.3}, {7, 7, 7}},
+        Mode{{.iso = 0.1, .quality = MacetQuality::Max, .max_sweeps = 1, .relax = 0.35},
+             {10, 9, 8}}}) {
+    const testing::KeyedExtract extract = [&](const VolumeView& part, const Box3& cells) {
+      MacetOptions o = mode.options;
+      o.cells = cells;
+      return testing::KeyedMesh{macet(part, o),
+                                marching_cubes_vertex_keys(part, {.iso = 0.1, .cells = cells})};
+    };
+    testing::expect_bricks_equal_whole(view, extract, macet_halo(mode.options), mode.brick);
+  }
 }
 
 // Quality on the paper's volumes. The bounds sit a margin below what docs/macet.md measured.
@@ -273,12 +356,12 @@ TEST(MacetRealData, EngineFast) {
 // one-voxel-thin feature), a corner of bonsai where the search without its intersection guard
 // folds sheets through each other (6 pairs), and a block of engine with its thin fins. Max may
 // not add self-intersections to MC's.
-void check_max(const char* file, const Box3& crop, double min_q, double q001) {
+void check_max(const char* file, const Box3& crop, double min_q, double q001, double relax = 0) {
   const auto path = shared_volume(file);
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data at " << path;
   const Volume vol = read_volume(path.string());
   const VolumeView v = subview(vol.view(), crop);
-  const Mesh m = macet(v, {.iso = 49.5, .quality = MacetQuality::Max});
+  const Mesh m = macet(v, {.iso = 49.5, .quality = MacetQuality::Max, .relax = relax});
   ASSERT_GT(m.triangles.size(), 5000u);
   const QualityStats q = triangle_quality(m);
   EXPECT_GT(q.min, min_q);
@@ -293,6 +376,9 @@ TEST(MacetRealData, BonsaiMaxOnACrop) {
 }
 TEST(MacetRealData, BonsaiMaxOnPinnedThinFeatures) {
   check_max("bonsai_256x256x256_uint8.raw.gz", {{110, 0, 130}, {180, 60, 200}}, 0.1, 0.3);
+}
+TEST(MacetRealData, BonsaiMaxRelaxedLiftsThePinnedSlivers) {
+  check_max("bonsai_256x256x256_uint8.raw.gz", {{110, 0, 130}, {180, 60, 200}}, 0.4, 0.55, 0.35);
 }
 TEST(MacetRealData, BonsaiMaxAddsNoSelfIntersections) {
   check_max("bonsai_256x256x256_uint8.raw.gz", {{200, 0, 0}, {256, 40, 60}}, 0.5, 0.55);

@@ -16,6 +16,7 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -224,6 +225,7 @@ struct ExtractArgs {
   std::string dc_solver = "mass";
   std::string dc_hermite = "central";
   std::string quality = "fast";  // Macet
+  double macet_relax = 0.0;
   bool quads = false;
   bool check_intersections = false;
   std::string memory;  // empty: in core
@@ -279,7 +281,10 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["type"] = scalar_name(source->type);
     j["iso"] = options.iso;
     j["method"] = method_name(options.method);
-    if (options.method == Method::Macet) j["quality"] = args.quality;
+    if (options.method == Method::Macet) {
+      j["quality"] = args.quality;
+      j["macet_relax"] = options.macet_relax;
+    }
     j["backend"] = backend_name(r.backend);
     j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
     j["triangles"] = r.triangles;
@@ -318,6 +323,9 @@ int run_extract(const ExtractArgs& args) {
   options.keep_quads = args.quads;
   options.dc_hermite = args.dc_hermite == "eno" ? DcHermite::Eno : DcHermite::Central;
   options.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
+  options.macet_relax = args.macet_relax;
+  if (options.macet_relax > 0 && options.method != Method::Macet)
+    throw InputError("--macet-relax applies to --method macet only");
   const Backend backend = resolve_backend(options);
 
   const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
@@ -368,7 +376,10 @@ int run_extract(const ExtractArgs& args) {
   j["type"] = scalar_name(view.type);
   j["iso"] = options.iso;
   j["method"] = method_name(options.method);
-  if (options.method == Method::Macet) j["quality"] = args.quality;
+  if (options.method == Method::Macet) {
+    j["quality"] = args.quality;
+    j["macet_relax"] = options.macet_relax;
+  }
   j["backend"] = backend_name(backend);
   j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
   j["triangles"] = mesh.triangles.size() + 2 * mesh.quads.size();
@@ -588,6 +599,20 @@ int main(int argc, char** argv) {
                    "Macet: fast (closed-form end-point push, default) or max (adds a local "
                    "search for the worst triangles; much slower)")
       ->check(CLI::IsMember({"fast", "max"}));
+  extract_cmd
+      ->add_option("--macet-relax", ex.macet_relax,
+                   "Macet: move samples pinned in one-sample-thin features away from the "
+                   "isovalue so that their crossings lie at least this far (edge lengths, "
+                   "0 to 0.5, default 0: off); the surface moves by at most as much there and "
+                   "their slivers go (docs/macet.md)")
+      ->check(CLI::Validator(
+          [](std::string& s) {
+            char* end = nullptr;
+            const double v = std::strtod(s.c_str(), &end);
+            const bool ok = end != s.c_str() && *end == '\0' && v >= 0 && v < 0.5;
+            return ok ? std::string() : "must be a number in [0, 0.5), got '" + s + "'";
+          },
+          "in [0, 0.5)"));
   extract_cmd->add_flag("--quads", ex.quads,
                         "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
   extract_cmd->add_flag("--check-intersections", ex.check_intersections,

@@ -165,7 +165,7 @@ class TiledExtraction {
     BrickPlanOptions po;
     po.memory = opt_.memory;
     po.halo = halo_;
-    po.sample_bytes = scalar_size(src_.type);
+    po.sample_bytes = sample_bytes();
     po.slabs = src_.sequential();
     plan_ = plan_bricks(n_, po);
     result.plan = plan_;
@@ -283,6 +283,11 @@ class TiledExtraction {
     return sum;
   }
 
+  // Bytes per sample of a brick's view: the samples, and Macet's relaxed copy (doubles).
+  std::size_t sample_bytes() const {
+    return scalar_size(src_.type) + (ex_.method == Method::Macet && ex_.macet_relax > 0 ? 8 : 0);
+  }
+
   // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
   // and the records being written.
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces) const {
@@ -291,9 +296,9 @@ class TiledExtraction {
                            static_cast<double>(r.extent(2));
     const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
     const double per_face = 16.0 + 4 * 8;
-    return static_cast<std::uint64_t>(
-        samples * (static_cast<double>(scalar_size(src_.type)) + 0.125) +
-        static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face);
+    return static_cast<std::uint64_t>(samples * (static_cast<double>(sample_bytes()) + 0.125) +
+                                      static_cast<double>(vertices) * per_vertex * 1.25 +
+                                      static_cast<double>(faces) * per_face);
   }
 
   void extract_brick(const Box3& cells, const SegmentTable& vseg, const SegmentTable& fseg,
