@@ -490,13 +490,13 @@ class Extractor {
 int macet_halo(const MacetOptions& options) {
   // An emitted edge ends at most one sample past the cells. Its end point's smoothing reads the
   // crossings of the cells around its edges (end points one sample further), whose pushes read
-  // one sample more: 3. Its root search and normal stay within that. Max: a vertex's search reads
-  // the displacements one sample around it, and its root searches run between neighbours moved up
-  // to one voxel, reading samples up to three around it; each colour step of a sweep carries a
-  // change one sample further. The first step's vertices that matter lie 24 samples (3 sweeps)
-  // past the emitted end points, which lie one past the cells: 1 + 23 + 3 = 27 = 3 + 8 * 3.
+  // one sample more: 3. Its root search and normal stay within that. Max: a colour step at vertex
+  // v reads the displacements up to two samples around it (the intersection guard's 4x4x4
+  // cells), and through root searches between vertices moved up to one voxel, samples up to four
+  // around it. The last of a sweep's 8 steps decides the emitted end points, one past the cells;
+  // each earlier step reaches two samples further: 1 + 2 * (8 * sweeps - 1) + 4 = 3 + 16 * sweeps.
   const int relax = options.relax > 0 ? 1 : 0;
-  if (options.quality == MacetQuality::Max) return 3 + 8 * std::max(options.max_sweeps, 0) + relax;
+  if (options.quality == MacetQuality::Max) return 3 + 16 * std::max(options.max_sweeps, 0) + relax;
   return 3 + relax;
 }
 

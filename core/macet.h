@@ -47,9 +47,10 @@ struct MacetOptions {
   Box3 cells{};
 };
 
-// Samples beyond the cells that brick mode reads: 3 for Fast; 3 + 8 per sweep for Max, since
-// each of a sweep's eight colour steps can carry a change one sample further; one more with
-// relax (a relaxed sample depends on its neighbours).
+// Samples beyond the cells that brick mode reads: 3 for Fast; 3 + 16 per sweep for Max, since
+// each of a sweep's eight colour steps can carry a change two samples further (its intersection
+// guard looks two samples around a vertex); one more with relax (a relaxed sample depends on its
+// neighbours).
 int macet_halo(const MacetOptions& options);
 
 // Throws InputError for a negative max_sweeps or a relax outside [0, 0.5), and CapacityError when

@@ -11,12 +11,15 @@
 //   * it stays within max_move voxels of its grid position,
 //   * no affected triangle turns over (its normal keeps a positive dot product with the current
 //     one),
-//   * the triangles of the eight cells intersect each other in no more pairs than before.
+//   * the affected triangles intersect each other and the triangles of the 4x4x4 cells around v
+//     in no more pairs than before.
 // Determinism: vertices are swept in eight colours by the parity of their GLOBAL coordinates.
 // Two vertices of one colour differ by two samples along some axis, so they share no cell and no
-// crossed edge: a colour's vertices move in parallel without seeing each other, and the result is
-// the same for any thread count and any brick cut. Each colour step lets a change travel one
-// sample, which is why macet_halo grows by 8 per sweep.
+// crossed edge: a colour's vertices move in parallel without seeing each other's moves (the
+// guard's outer cells, which may hold another moving vertex of the colour, are read from a
+// snapshot taken when the step began), and the result is the same for any thread count and any
+// brick cut. Each colour step lets a change travel two samples (the guard's reach), which is why
+// macet_halo grows by 16 per sweep.
 #pragma once
 
 #include <tbb/parallel_for.h>
@@ -86,6 +89,17 @@ class LocalSearch {
   }
 
   void colour_step(int colour) {
+    // The guard reads crossings two samples away, where other vertices of this colour may be
+    // moving: it reads them as they were when the step began.
+    const std::size_t nv = gv_.disp.size();
+    snap_disp_.resize(nv);
+    snap_value_.resize(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv), [&](const auto& range) {
+      for (std::size_t n = range.begin(); n != range.end(); ++n) {
+        snap_disp_[n] = gv_.disp[n];
+        snap_value_[n] = gv_.value[n];
+      }
+    });
     const Box3& b = gv_.box;
     const VolumeView& view = field_.view;
     const int px = colour & 1, py = (colour >> 1) & 1, pz = (colour >> 2) & 1;
@@ -122,6 +136,27 @@ class LocalSearch {
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
+  // The crossing on edge (s, axis a) with the displacements of the step's snapshot.
+  P3 snapshot_crossing(const std::int64_t s[3], int a) const {
+    std::int64_t q[3] = {s[0], s[1], s[2]};
+    ++q[a];
+    const std::uint32_t i0 = gv_.index(s[0], s[1], s[2]), i1 = gv_.index(q[0], q[1], q[2]);
+    const P3 p0 = field_.global(s[0], s[1], s[2], snap_disp_[i0]);
+    const P3 p1 = field_.global(q[0], q[1], q[2], snap_disp_[i1]);
+    const double f0 = snap_value_[i0], f1 = snap_value_[i1];
+    const bool straight = snap_disp_[i0] == P3{0, 0, 0} && snap_disp_[i1] == P3{0, 0, 0};
+    const double t = straight ? f0 / (f0 - f1) : find_root(field_, p0, p1, f0, f1);
+    return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
+  }
+
+  int cell_case(const std::int64_t o[3]) const {
+    int cs = 0;
+    for (int corner = 0; corner < 8; ++corner)
+      cs |= int(inside(o[0] + (corner & 1), o[1] + ((corner >> 1) & 1), o[2] + ((corner >> 2) & 1)))
+            << corner;
+    return cs;
+  }
+
   void improve(std::int64_t i, std::int64_t j, std::int64_t k) {
     const VolumeView& view = field_.view;
     const std::int64_t v[3] = {i, j, k};
@@ -147,6 +182,13 @@ class LocalSearch {
     std::array<TriRef, 8 * mc::kMaxTrianglesPerCase> statics{};
     int n_statics = 0;
     const P3 zero{0, 0, 0};
+    // Crossings by edge, for the guard's vertex identities: edges with both ends in v +- 2.
+    auto edge_code = [&](const std::int64_t s[3], int a) {
+      return static_cast<std::uint32_t>(
+          (((s[2] - v[2] + 2) * 5 + (s[1] - v[1] + 2)) * 5 + (s[0] - v[0] + 2)) * 3 + a);
+    };
+    std::array<std::uint32_t, 8 * 12> fixed_code{};
+    std::array<std::uint32_t, 6> moving_code{};
 
     for (int c = 0; c < 8; ++c) {
       std::int64_t o[3];
@@ -156,11 +198,7 @@ class LocalSearch {
         ok = ok && o[a] >= 0 && o[a] + 1 < view.dims[a];
       }
       if (!ok) continue;
-      int cs = 0;
-      for (int corner = 0; corner < 8; ++corner)
-        cs |=
-            int(inside(o[0] + (corner & 1), o[1] + ((corner >> 1) & 1), o[2] + ((corner >> 2) & 1)))
-            << corner;
+      const int cs = cell_case(o);
       const int nt = table_.triangle_count[cs];
       if (nt == 0) continue;
       std::int16_t slot[12];
@@ -178,10 +216,14 @@ class LocalSearch {
           while (m < n_moving && !(moving[m].axis == a && moving[m].s[0] == s[0] &&
                                    moving[m].s[1] == s[1] && moving[m].s[2] == s[2]))
             ++m;
-          if (m == n_moving) moving[n_moving++] = {{s[0], s[1], s[2]}, a};
+          if (m == n_moving) {
+            moving_code[n_moving] = edge_code(s, a);
+            moving[n_moving++] = {{s[0], s[1], s[2]}, a};
+          }
           slot[e] = static_cast<std::int16_t>(-1 - m);
         } else {
           slot[e] = static_cast<std::int16_t>(n_fixed);
+          fixed_code[n_fixed] = edge_code(s, a);
           fixed[n_fixed++] = crossing(s, a, ~0u, zero, 0);
         }
       }
@@ -220,44 +262,93 @@ class LocalSearch {
       return worst;
     };
 
-    // Intersection guard: the number of intersecting pairs among the eight cells' triangles that
-    // involve a moving crossing (rule of core/self_intersections.h, on the float coordinates) may
-    // not grow. Without it the search folds neighbouring sheets of thin features through each
-    // other (bonsai: 42 intersecting pairs against MC's 28 and Fast's 0).
+    // Intersection guard: a move may not raise the number of intersecting pairs (rule of
+    // core/self_intersections.h, on the float coordinates) between a triangle that involves a
+    // moving crossing and any triangle of the 4x4x4 cells around v, read as they were when the
+    // colour step began. Without it the search folds neighbouring sheets of thin features
+    // through each other (bonsai: 42 intersecting pairs against MC's 28 and Fast's 0; lobster:
+    // 16 when the guard saw the eight cells around v only). Vertices are identified by edge.
     struct Corners {
       std::array<Vec3f, 3> p;
       std::array<std::uint32_t, 3> id;
       Vec3f lo, hi;
       bool live;
     };
-    auto corners = [&](const TriRef& t) {
+    auto make_corners = [](const P3* x[3], const std::uint32_t id[3]) {
       Corners c;
       for (int k = 0; k < 3; ++k) {
-        const P3& x = pos(t.v[k]);
-        c.p[k] = {static_cast<float>(x[0]), static_cast<float>(x[1]), static_cast<float>(x[2])};
-        c.id[k] = static_cast<std::uint32_t>(t.v[k] + 16);  // slots are >= -6
+        c.p[k] = {static_cast<float>((*x[k])[0]), static_cast<float>((*x[k])[1]),
+                  static_cast<float>((*x[k])[2])};
+        c.id[k] = id[k];
       }
       for (int a = 0; a < 3; ++a) {
         c.lo[a] = std::min({c.p[0][a], c.p[1][a], c.p[2][a]});
         c.hi[a] = std::max({c.p[0][a], c.p[1][a], c.p[2][a]});
       }
-      c.live =
-          c.id[0] != c.id[1] && c.id[1] != c.id[2] && c.id[0] != c.id[2] && triangle_has_area(c.p);
+      c.live = triangle_has_area(c.p);
       return c;
+    };
+    auto corners = [&](const TriRef& t) {
+      const P3* x[3];
+      std::uint32_t id[3];
+      for (int k = 0; k < 3; ++k) {
+        x[k] = &pos(t.v[k]);
+        id[k] = t.v[k] >= 0 ? fixed_code[t.v[k]] : moving_code[-1 - t.v[k]];
+      }
+      return make_corners(x, id);
     };
     auto meet = [](const Corners& a, const Corners& b) {
       for (int k = 0; k < 3; ++k)
         if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
       return a.live && b.live && triangles_intersect(a.p, a.id, b.p, b.id);
     };
-    std::array<Corners, 8 * mc::kMaxTrianglesPerCase> fixed_corners, moving_corners;
-    for (int t = 0; t < n_statics; ++t) fixed_corners[t] = corners(statics[t]);
+    // The other triangles: the eight cells' fixed ones, then the 56 cells around them (built on
+    // the first candidate that needs the guard: most vertices never get that far).
+    std::array<Corners, 64 * mc::kMaxTrianglesPerCase> others;
+    int n_others = 0;
+    for (int t = 0; t < n_statics; ++t) others[n_others++] = corners(statics[t]);
+    bool ring_built = false;
+    auto build_ring = [&]() {
+      ring_built = true;
+      for (int c = 0; c < 64; ++c) {
+        const int d[3] = {c % 4 - 2, (c / 4) % 4 - 2, c / 16 - 2};
+        if (d[0] >= -1 && d[0] <= 0 && d[1] >= -1 && d[1] <= 0 && d[2] >= -1 && d[2] <= 0)
+          continue;  // one of the eight cells
+        std::int64_t o[3];
+        bool ok = true;
+        for (int a = 0; a < 3; ++a) {
+          o[a] = v[a] + d[a];
+          ok = ok && o[a] >= 0 && o[a] + 1 < view.dims[a];
+        }
+        if (!ok) continue;
+        const int cs = cell_case(o);
+        const int nt = table_.triangle_count[cs];
+        if (nt == 0) continue;
+        P3 x[12];
+        std::uint32_t id[12];
+        for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
+          const int e = std::countr_zero(em);
+          const int c0 = mc::kEdgeCorners[e][0];
+          const std::int64_t s[3] = {o[0] + (c0 & 1), o[1] + ((c0 >> 1) & 1),
+                                     o[2] + ((c0 >> 2) & 1)};
+          x[e] = snapshot_crossing(s, e / 4);
+          id[e] = edge_code(s, e / 4);
+        }
+        const auto& tt = table_.triangles[cs];
+        for (int t = 0; t < nt; ++t) {
+          const P3* px[3] = {&x[tt[3 * t]], &x[tt[3 * t + 1]], &x[tt[3 * t + 2]]};
+          const std::uint32_t pid[3] = {id[tt[3 * t]], id[tt[3 * t + 1]], id[tt[3 * t + 2]]};
+          others[n_others++] = make_corners(px, pid);
+        }
+      }
+    };
+    std::array<Corners, 8 * mc::kMaxTrianglesPerCase> moving_corners;
     auto intersecting_pairs = [&]() {
       int n = 0;
       for (int t = 0; t < n_tris; ++t) {
         moving_corners[t] = corners(tris[t]);
         if (!moving_corners[t].live) continue;
-        for (int u = 0; u < n_statics; ++u) n += meet(moving_corners[t], fixed_corners[u]);
+        for (int u = 0; u < n_others; ++u) n += meet(moving_corners[t], others[u]);
         for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
       }
       return n;
@@ -269,7 +360,19 @@ class LocalSearch {
     double best = score(true);
     if (best >= params_.goal) return;
     const double start = best;
-    const int allowed_pairs = intersecting_pairs();
+    const P3 start_d = best_d;
+    const double start_f = best_f;
+    int allowed_pairs = -1;
+    // Called with candidate (d, f) placed; leaves it placed.
+    auto guard_passes = [&](const P3& d, double f) {
+      if (!ring_built) {
+        build_ring();
+        place(start_d, start_f);
+        allowed_pairs = intersecting_pairs();
+        place(d, f);
+      }
+      return intersecting_pairs() <= allowed_pairs;
+    };
 
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
       P3 round_d = best_d;
@@ -286,7 +389,7 @@ class LocalSearch {
           if ((f >= 0) != in) continue;
           place(d, f);
           const double s = score(false);
-          if (s > best && intersecting_pairs() <= allowed_pairs) {
+          if (s > best && guard_passes(d, f)) {
             best = s;
             round_d = d;
             round_f = f;
@@ -311,6 +414,8 @@ class LocalSearch {
   const MacetCaseTable& table_;
   MacetSearchParams params_;
   std::vector<P3> dirs_;
+  std::vector<P3> snap_disp_;  // the displacements and values when the colour step began
+  std::vector<double> snap_value_;
 };
 
 template <class T>

@@ -242,7 +242,7 @@ TEST(Macet, RejectsAViewWithoutTheHaloAndBadOptions) {
     EXPECT_THROW(macet(vol.view(), o), InputError) << relax;
   }
   EXPECT_EQ(macet_halo({.relax = 0.2}), 4);
-  EXPECT_EQ(macet_halo({.quality = MacetQuality::Max, .max_sweeps = 2}), 19);
+  EXPECT_EQ(macet_halo({.quality = MacetQuality::Max, .max_sweeps = 2}), 35);
 }
 
 // Relaxation of pinned samples (core/macet_relax.h).

@@ -1,18 +1,23 @@
 // Macet against Marching Cubes, side by side in one run: speed and triangle quality.
 //
 //   cmake -S . -B build -DISOTILE_BUILD_BENCHMARKS=ON && cmake --build build --target bench_macet
-//   build/tests/benchmarks/bench_macet [--threads N] [--no-max] [--intersections]
+//   build/tests/benchmarks/bench_macet [--threads N] [--no-max] [--intersections] [--relax R]...
 //
 // Google Benchmark times marching_cubes and macet(Fast) with the same number of threads (default
 // 2) on the same in-memory samples, five repetitions each, no normals; then prints the ratio of
 // the median wall times. Afterwards one run of each method (MC, Macet Fast, Macet Max unless
 // --no-max) is measured: triangles, radius ratio min / mean / 0.1% / 1% quantiles, the wall time
 // of that single run, and with --intersections the self-intersecting triangle pairs. Volumes:
-// bonsai and engine from ../shared/data at 49.5 (skipped with a message when absent).
+// bonsai and engine from ../shared/data at 49.5 (skipped with a message when absent). Each
+// --relax R adds Fast and Max rows with MacetOptions::relax = R, after a line saying how many
+// samples the relaxation moved and how far the crossings of the grid edges moved along their
+// edges (mean over all crossings, and max; voxels): the accuracy it costs.
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -23,6 +28,7 @@
 #include <vector>
 
 #include "core/macet.h"
+#include "core/macet_relax.h"
 #include "core/marching_cubes.h"
 #include "core/mesh_quality.h"
 #include "core/self_intersections.h"
@@ -63,6 +69,7 @@ Mesh timed(F&& f, double& ms) {
 int main(int argc, char** argv) {
   int threads = 2;
   bool run_max = true, intersections = false;
+  std::vector<double> relaxes;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
@@ -71,6 +78,10 @@ int main(int argc, char** argv) {
     }
     if (std::strcmp(argv[i], "--no-max") == 0) {
       run_max = false;
+      continue;
+    }
+    if (std::strcmp(argv[i], "--relax") == 0 && i + 1 < argc) {
+      relaxes.push_back(std::atof(argv[++i]));
       continue;
     }
     if (std::strcmp(argv[i], "--intersections") == 0) {
@@ -137,8 +148,37 @@ int main(int argc, char** argv) {
               "mean", "q0.1%", "q1%", "ms (1x)", intersections ? "  self-intersecting pairs" : "");
   for (const Case& c : cases) {
     const VolumeView view = c.volume->view();
+    for (double relax : relaxes) {
+      const std::vector<double> r = detail::relax_pinned_samples(view, c.iso, relax);
+      const Index3& n = view.dims;
+      std::uint64_t moved = 0, crossings = 0;
+      double sum = 0, most = 0;
+      for (std::int64_t k = 0; k < n[2]; ++k)
+        for (std::int64_t j = 0; j < n[1]; ++j)
+          for (std::int64_t i = 0; i < n[0]; ++i) {
+            const std::int64_t s = i + n[0] * (j + n[1] * k);
+            const double f0 = view.value(i, j, k) - c.iso, g0 = r[s] - c.iso;
+            moved += g0 != f0;
+            const std::int64_t p[3] = {i, j, k}, stride[3] = {1, n[0], n[0] * n[1]};
+            for (int a = 0; a < 3; ++a) {
+              if (p[a] + 1 >= n[a]) continue;
+              std::int64_t q[3] = {i, j, k};
+              ++q[a];
+              const double f1 = view.value(q[0], q[1], q[2]) - c.iso, g1 = r[s + stride[a]] - c.iso;
+              if ((f0 >= 0) == (f1 >= 0)) continue;
+              const double d = std::abs(g0 / (g0 - g1) - f0 / (f0 - f1));
+              ++crossings;
+              sum += d;
+              most = std::max(most, d);
+            }
+          }
+      std::printf(
+          "%-8s relax %.2f moves %llu samples; crossings move %.4f on average, %.3f at most\n",
+          c.name.c_str(), relax, static_cast<unsigned long long>(moved),
+          sum / static_cast<double>(crossings), most);
+    }
     struct Row {
-      const char* name;
+      std::string name;
       std::function<Mesh()> run;
     };
     std::vector<Row> rows = {
@@ -148,11 +188,21 @@ int main(int argc, char** argv) {
     if (run_max)
       rows.push_back(
           {"macet-max", [&] { return macet(view, {.iso = c.iso, .quality = MacetQuality::Max}); }});
+    for (double relax : relaxes) {
+      const std::string tag = " r" + std::to_string(relax).substr(0, 4);
+      rows.push_back({"macet-fast" + tag,
+                      [&c, view, relax] { return macet(view, {.iso = c.iso, .relax = relax}); }});
+      if (run_max)
+        rows.push_back({"macet-max" + tag, [&c, view, relax] {
+                          return macet(
+                              view, {.iso = c.iso, .quality = MacetQuality::Max, .relax = relax});
+                        }});
+    }
     for (const Row& r : rows) {
       double ms = 0;
       const Mesh m = timed(r.run, ms);
       const QualityStats q = triangle_quality(m);
-      std::printf("%-8s %-11s %9llu %10.3g %7.4f %9.4f %8.4f %9.1f", c.name.c_str(), r.name,
+      std::printf("%-8s %-11s %9llu %10.3g %7.4f %9.4f %8.4f %9.1f", c.name.c_str(), r.name.c_str(),
                   static_cast<unsigned long long>(q.triangles), q.min, q.mean, q.q001, q.q01, ms);
       if (intersections)
         std::printf("  %llu", static_cast<unsigned long long>(self_intersections(m).pairs));

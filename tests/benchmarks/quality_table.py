@@ -37,6 +37,7 @@ METHODS = [
     ("DC QEF", ["--method", "dc", "--dc-solver", "qef"]),
     ("Macet fast", ["--method", "macet", "--quality", "fast"]),
     ("Macet max", ["--method", "macet", "--quality", "max"]),
+    ("Macet max, relax 0.35", ["--method", "macet", "--quality", "max", "--macet-relax", "0.35"]),
 ]
 
 
