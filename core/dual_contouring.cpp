@@ -415,43 +415,72 @@ class Extractor {
 
   // DcHermite::Eno: the crossing and normal of the edge from corner c0 of cell (i, j, k) along
   // `axis`. A sharp feature puts a kink in the field between the edge's samples, where the chord
-  // misplaces the root (csg-box: by up to 0.13 voxel). When the second differences one and two
-  // samples beyond the edge vanish but those at its ends do not, the field is taken as two lines
-  // (through samples -1, 0 and 1, 2) meeting at a kink, and the root is that of the line on its
-  // side of the kink. The normal then uses that side's slope along the edge and that end's ENO
-  // gradient across it (the other end lies beyond the kink); otherwise the chord slope and ENO
-  // gradients interpolated along the edge.
+  // misplaces the root (csg-box: by up to half a voxel where a curved face meets a flat one).
+  // Near a kink the field is taken as two smooth pieces: p0, the quadratic through samples -2,
+  // -1, 0 (the edge's lower end and the two before it), and p1, the quadratic through 1, 2, 3.
+  // Where the field is smooth across the edge, each piece extrapolated to the other end misses
+  // that sample by about the third difference, with opposite signs (e0 = -e1 for a cubic). A
+  // kink at or between the edge's samples makes both misses the same sign, large: the field is
+  // then min(p0, p1) (both misses >= 0) or max(p0, p1) (both <= 0), and the crossing is the first
+  // root of that in [0, 1]; it lies on one piece, whose derivative gives the slope along the edge.
+  // The normal across the edge is that side's end sample's ENO gradient: the other end lies
+  // beyond, or on, the kink. The pieces need not be straight: where a curved face meets a flat one
+  // (csg-box's ball and box) the curved side bends, and lines through two samples miss the root.
+  // Otherwise: the chord, and ENO gradients interpolated along the edge.
   void eno_plane(int64_t i, int64_t j, int64_t k, int c0, int axis, double f0, double f1,
                  bool with_normals, dc::HermitePlane& h) const {
     const int64_t s0[3] = {i + (c0 & 1), j + ((c0 >> 1) & 1), k + ((c0 >> 2) & 1)};
     int64_t s1[3] = {s0[0], s0[1], s0[2]};
     ++s1[axis];
-    double t = (options_.iso - f0) / (f1 - f0), slope = f1 - f0;
-    int side = -1;  // 0: the root is on s0's line, 1: on s1's, -1: the chord's
+    const double iso = options_.iso;
+    double t = (iso - f0) / (f1 - f0), slope = f1 - f0;
+    int side = -1;  // 0: the root is on p0, 1: on p1, -1: the chord's
     if (line_inside(s0, axis, -2, 3)) {
       const double fm2 = at(s0, axis, -2), fm = at(s0, axis, -1);
       const double f2 = at(s0, axis, 2), f3 = at(s0, axis, 3);
-      const double bend0 = fm - 2 * f0 + f1, bend1 = f0 - 2 * f1 + f2;
-      const double before = fm2 - 2 * fm + f0, after = f1 - 2 * f2 + f3;
-      const double big = std::max(std::fabs(bend0), std::fabs(bend1));
-      if (big > 1e-3 * std::fabs(f1 - f0) && std::fabs(before) < 0.05 * big &&
-          std::fabs(after) < 0.05 * big) {
-        const double ma = f0 - fm, mb = f2 - f1;  // lines f0 + ma t and f1 + mb (t - 1)
-        if (ma != mb) {
-          const double kink = (f1 - mb - f0) / (ma - mb);
-          if (kink >= 0 && kink <= 1) {
-            const double ta = ma != 0 ? (options_.iso - f0) / ma : -1.0;
-            const double tb = mb != 0 ? 1 + (options_.iso - f1) / mb : -1.0;
-            if (ta >= 0 && ta <= kink) {
-              t = ta;
-              slope = ma;
-              side = 0;
-            } else if (tb >= kink && tb <= 1) {
-              t = tb;
-              slope = mb;
-              side = 1;
+      // p0(t) = f0 + b0 t + a0 t^2, p1(t) = f1 + b1 s + a1 s^2 with s = t - 1.
+      const double a0 = 0.5 * (f0 - 2 * fm + fm2), b0 = (f0 - fm) + a0;
+      const double a1 = 0.5 * (f3 - 2 * f2 + f1), b1 = (f2 - f1) - a1;
+      const double e0 = (f0 + b0 + a0) - f1, e1 = (f1 - b1 + a1) - f0;
+      // Large: 0.4 of the edge's rise. A smaller threshold also catches smooth but tightly
+      // curved stretches (torus N = 32, the tube 3 voxels across): their piece roots are better
+      // than the chord, yet the QEF vertex, which sits on the tangent planes' intersection, then
+      // strays further from a convex surface (docs/quality.md). csg-box's kinks are far above it.
+      if (!(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * std::fabs(f1 - f0)) {
+        const bool is_min = e0 + e1 > 0;
+        const double a[2] = {a0, a1}, b[2] = {b0, b1}, c[2] = {f0 - iso, f1 - iso};
+        double best = 2;
+        for (int piece = 0; piece < 2; ++piece) {
+          // The roots in s = t - piece of a s^2 + b s + c, in the form that does not cancel.
+          double roots[2];
+          int count = 0;
+          if (a[piece] == 0) {
+            if (b[piece] != 0) roots[count++] = -c[piece] / b[piece];
+          } else {
+            const double disc = b[piece] * b[piece] - 4 * a[piece] * c[piece];
+            if (disc >= 0) {
+              const double q = -0.5 * (b[piece] + std::copysign(std::sqrt(disc), b[piece]));
+              roots[count++] = q / a[piece];
+              if (q != 0) roots[count++] = c[piece] / q;
             }
           }
+          const int other = 1 - piece;
+          for (int r = 0; r < count; ++r) {
+            const double tt = roots[r] + piece;
+            if (!(tt >= 0 && tt <= 1) || tt >= best) continue;
+            // A root of min(p0, p1) (max) where the other piece is above (below) the iso.
+            const double so = tt - other;
+            const double v = c[other] + so * (b[other] + so * a[other]);
+            if (is_min ? v >= 0 : v <= 0) {
+              best = tt;
+              side = piece;
+            }
+          }
+        }
+        if (side >= 0) {
+          t = best;
+          const double s = t - side;
+          slope = b[side] + 2 * a[side] * s;
         }
       }
     }
