@@ -413,6 +413,16 @@ class Extractor {
     return 0.5 * (fp - fm);
   }
 
+  // The root in [lo, hi] of a x^2 + b x + c, which changes sign there, from the form of the
+  // quadratic formula that does not cancel, clamped against rounding. a = 0 makes q = -b and
+  // c / q the linear root (q / a is then infinite); a NaN ends at lo.
+  static double bracketed_root(double a, double b, double c, double lo, double hi) {
+    const double q = -0.5 * (b + std::copysign(std::sqrt(std::max(b * b - 4 * a * c, 0.0)), b));
+    const double ra = q / a, rc = c / q;
+    const double r = ra >= lo && ra <= hi ? ra : rc;
+    return std::min(hi, std::max(lo, r));
+  }
+
   // DcHermite::Eno: the crossing and normal of the edge from corner c0 of cell (i, j, k) along
   // `axis`. A sharp feature puts a kink in the field between the edge's samples, where the chord
   // misplaces the root (csg-box: by up to half a voxel where a curved face meets a flat one).
@@ -443,45 +453,29 @@ class Extractor {
       const double a1 = 0.5 * (f3 - 2 * f2 + f1), b1 = (f2 - f1) - a1;
       const double e0 = (f0 + b0 + a0) - f1, e1 = (f1 - b1 + a1) - f0;
       // Large: 0.4 of the edge's rise. A smaller threshold also catches smooth but tightly
-      // curved stretches (torus N = 32, the tube 3 voxels across): their piece roots are better
+      // curved stretches (torus N = 32, tube radius 3 voxels): their piece roots are better
       // than the chord, yet the QEF vertex, which sits on the tangent planes' intersection, then
-      // strays further from a convex surface (docs/quality.md). csg-box's kinks are far above it.
+      // strays further from a convex surface (docs/quality.md). csg-box keeps its accuracy up to
+      // 0.7, not at 1.0 (a kink exactly at a sample between slopes 1 and 0 misses by the rise).
       if (!(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * std::fabs(f1 - f0)) {
-        const bool is_min = e0 + e1 > 0;
-        const double a[2] = {a0, a1}, b[2] = {b0, b1}, c[2] = {f0 - iso, f1 - iso};
-        double best = 2;
-        for (int piece = 0; piece < 2; ++piece) {
-          // The roots in s = t - piece of a s^2 + b s + c, in the form that does not cancel.
-          double roots[2];
-          int count = 0;
-          if (a[piece] == 0) {
-            if (b[piece] != 0) roots[count++] = -c[piece] / b[piece];
-          } else {
-            const double disc = b[piece] * b[piece] - 4 * a[piece] * c[piece];
-            if (disc >= 0) {
-              const double q = -0.5 * (b[piece] + std::copysign(std::sqrt(disc), b[piece]));
-              roots[count++] = q / a[piece];
-              if (q != 0) roots[count++] = c[piece] / q;
-            }
-          }
-          const int other = 1 - piece;
-          for (int r = 0; r < count; ++r) {
-            const double tt = roots[r] + piece;
-            if (!(tt >= 0 && tt <= 1) || tt >= best) continue;
-            // A root of min(p0, p1) (max) where the other piece is above (below) the iso.
-            const double so = tt - other;
-            const double v = c[other] + so * (b[other] + so * a[other]);
-            if (is_min ? v >= 0 : v <= 0) {
-              best = tt;
-              side = piece;
-            }
-          }
-        }
-        if (side >= 0) {
-          t = best;
-          const double s = t - side;
-          slope = b[side] + 2 * a[side] * s;
-        }
+        // In g = sign (f - iso), sign chosen so the field is min(p0, p1) there: both pieces
+        // then lie above g at the other end, so the piece ending below zero changes sign on the
+        // edge and has exactly one root in it.
+        const double sign = e0 + e1 > 0 ? 1.0 : -1.0;
+        const double g0 = sign * (f0 - iso), g1 = sign * (f1 - iso);
+        const double ga0 = sign * a0, gb0 = sign * b0, ga1 = sign * a1, gb1 = sign * b1;
+        // Falling (g0 > g1): the first root of min(p0, p1). p1 falls from >= g0 >= 0 to g1 <=
+        // 0; p0 ends at p0(1) >= g1 and has a root only when it ends below zero. Rising: min(p0,
+        // p1) turns positive where the later of the two does; p0 rises from g0 <= 0 to >= g1,
+        // and p1 has a root only when it starts below zero.
+        const bool falling = g0 > g1;
+        const double t0 = bracketed_root(ga0, gb0, g0, 0, 1);
+        const double t1 = 1 + bracketed_root(ga1, gb1, g1, -1, 0);
+        const bool on_p1 =
+            falling ? !(g1 + sign * e0 < 0 && t0 < t1) : (g0 + sign * e1 < 0 && t1 > t0);
+        side = on_p1 ? 1 : 0;
+        t = side == 0 ? t0 : t1;
+        slope = side == 0 ? b0 + 2 * a0 * t : b1 + 2 * a1 * (t - 1);
       }
     }
     for (int a = 0; a < 3; ++a) h.p[a] = static_cast<double>((c0 >> a) & 1);
@@ -616,9 +610,9 @@ class Extractor {
 
   // The rule of triangle_quality's quad measure (0-2 unless 1-3 leaves a strictly better worst
   // triangle), so splitting here and measuring kept quads agree. The four triangles share six
-  // edge lengths; each is computed once, exactly as radius_ratio() computes it (mesh_quality.cpp),
-  // and combined in radius_ratio's order, which gives its values bit for bit at half the square
-  // roots (a test compares the two).
+  // edge lengths; each is computed once, exactly as radius_ratio() computes it
+  // (mesh_quality.cpp), and combined in radius_ratio's order, which gives its values bit for bit
+  // at half the square roots (a test compares the two).
   static double length(const Vec3f& p, const Vec3f& q) {
     const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
     return std::sqrt(dx * dx + dy * dy + dz * dz);
