@@ -413,46 +413,69 @@ class Extractor {
     return 0.5 * (fp - fm);
   }
 
+  // The root in [lo, hi] of a x^2 + b x + c, which changes sign there, from the form of the
+  // quadratic formula that does not cancel, clamped against rounding. a = 0 makes q = -b and
+  // c / q the linear root (q / a is then infinite); a NaN ends at lo.
+  static double bracketed_root(double a, double b, double c, double lo, double hi) {
+    const double q = -0.5 * (b + std::copysign(std::sqrt(std::max(b * b - 4 * a * c, 0.0)), b));
+    const double ra = q / a, rc = c / q;
+    const double r = ra >= lo && ra <= hi ? ra : rc;
+    return std::min(hi, std::max(lo, r));
+  }
+
   // DcHermite::Eno: the crossing and normal of the edge from corner c0 of cell (i, j, k) along
   // `axis`. A sharp feature puts a kink in the field between the edge's samples, where the chord
-  // misplaces the root (csg-box: by up to 0.13 voxel). When the second differences one and two
-  // samples beyond the edge vanish but those at its ends do not, the field is taken as two lines
-  // (through samples -1, 0 and 1, 2) meeting at a kink, and the root is that of the line on its
-  // side of the kink. The normal then uses that side's slope along the edge and that end's ENO
-  // gradient across it (the other end lies beyond the kink); otherwise the chord slope and ENO
-  // gradients interpolated along the edge.
+  // misplaces the root (csg-box: by up to half a voxel where a curved face meets a flat one).
+  // Near a kink the field is taken as two smooth pieces: p0, the quadratic through samples -2,
+  // -1, 0 (the edge's lower end and the two before it), and p1, the quadratic through 1, 2, 3.
+  // Where the field is smooth across the edge, each piece extrapolated to the other end misses
+  // that sample by about the third difference, with opposite signs (e0 = -e1 for a cubic). A
+  // kink at or between the edge's samples makes both misses the same sign, large: the field is
+  // then min(p0, p1) (both misses >= 0) or max(p0, p1) (both <= 0), and the crossing is the first
+  // root of that in [0, 1]; it lies on one piece, whose derivative gives the slope along the edge.
+  // The normal across the edge is that side's end sample's ENO gradient: the other end lies
+  // beyond, or on, the kink. The pieces need not be straight: where a curved face meets a flat one
+  // (csg-box's ball and box) the curved side bends, and lines through two samples miss the root.
+  // Otherwise: the chord, and ENO gradients interpolated along the edge.
   void eno_plane(int64_t i, int64_t j, int64_t k, int c0, int axis, double f0, double f1,
                  bool with_normals, dc::HermitePlane& h) const {
     const int64_t s0[3] = {i + (c0 & 1), j + ((c0 >> 1) & 1), k + ((c0 >> 2) & 1)};
     int64_t s1[3] = {s0[0], s0[1], s0[2]};
     ++s1[axis];
-    double t = (options_.iso - f0) / (f1 - f0), slope = f1 - f0;
-    int side = -1;  // 0: the root is on s0's line, 1: on s1's, -1: the chord's
+    const double iso = options_.iso;
+    double t = (iso - f0) / (f1 - f0), slope = f1 - f0;
+    int side = -1;  // 0: the root is on p0, 1: on p1, -1: the chord's
     if (line_inside(s0, axis, -2, 3)) {
       const double fm2 = at(s0, axis, -2), fm = at(s0, axis, -1);
       const double f2 = at(s0, axis, 2), f3 = at(s0, axis, 3);
-      const double bend0 = fm - 2 * f0 + f1, bend1 = f0 - 2 * f1 + f2;
-      const double before = fm2 - 2 * fm + f0, after = f1 - 2 * f2 + f3;
-      const double big = std::max(std::fabs(bend0), std::fabs(bend1));
-      if (big > 1e-3 * std::fabs(f1 - f0) && std::fabs(before) < 0.05 * big &&
-          std::fabs(after) < 0.05 * big) {
-        const double ma = f0 - fm, mb = f2 - f1;  // lines f0 + ma t and f1 + mb (t - 1)
-        if (ma != mb) {
-          const double kink = (f1 - mb - f0) / (ma - mb);
-          if (kink >= 0 && kink <= 1) {
-            const double ta = ma != 0 ? (options_.iso - f0) / ma : -1.0;
-            const double tb = mb != 0 ? 1 + (options_.iso - f1) / mb : -1.0;
-            if (ta >= 0 && ta <= kink) {
-              t = ta;
-              slope = ma;
-              side = 0;
-            } else if (tb >= kink && tb <= 1) {
-              t = tb;
-              slope = mb;
-              side = 1;
-            }
-          }
-        }
+      // p0(t) = f0 + b0 t + a0 t^2, p1(t) = f1 + b1 s + a1 s^2 with s = t - 1.
+      const double a0 = 0.5 * (f0 - 2 * fm + fm2), b0 = (f0 - fm) + a0;
+      const double a1 = 0.5 * (f3 - 2 * f2 + f1), b1 = (f2 - f1) - a1;
+      const double e0 = (f0 + b0 + a0) - f1, e1 = (f1 - b1 + a1) - f0;
+      // Large: 0.4 of the edge's rise. A smaller threshold also catches smooth but tightly
+      // curved stretches (torus N = 32, tube radius 3 voxels): their piece roots are better
+      // than the chord, yet the QEF vertex, which sits on the tangent planes' intersection, then
+      // strays further from a convex surface (docs/quality.md). csg-box keeps its accuracy up to
+      // 0.7, not at 1.0 (a kink exactly at a sample between slopes 1 and 0 misses by the rise).
+      if (!(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * std::fabs(f1 - f0)) {
+        // In g = sign (f - iso), sign chosen so the field is min(p0, p1) there: both pieces
+        // then lie above g at the other end, so the piece ending below zero changes sign on the
+        // edge and has exactly one root in it.
+        const double sign = e0 + e1 > 0 ? 1.0 : -1.0;
+        const double g0 = sign * (f0 - iso), g1 = sign * (f1 - iso);
+        const double ga0 = sign * a0, gb0 = sign * b0, ga1 = sign * a1, gb1 = sign * b1;
+        // Falling (g0 > g1): the first root of min(p0, p1). p1 falls from >= g0 >= 0 to g1 <=
+        // 0; p0 ends at p0(1) >= g1 and has a root only when it ends below zero. Rising: min(p0,
+        // p1) turns positive where the later of the two does; p0 rises from g0 <= 0 to >= g1,
+        // and p1 has a root only when it starts below zero.
+        const bool falling = g0 > g1;
+        const double t0 = bracketed_root(ga0, gb0, g0, 0, 1);
+        const double t1 = 1 + bracketed_root(ga1, gb1, g1, -1, 0);
+        const bool on_p1 =
+            falling ? !(g1 + sign * e0 < 0 && t0 < t1) : (g0 + sign * e1 < 0 && t1 > t0);
+        side = on_p1 ? 1 : 0;
+        t = side == 0 ? t0 : t1;
+        slope = side == 0 ? b0 + 2 * a0 * t : b1 + 2 * a1 * (t - 1);
       }
     }
     for (int a = 0; a < 3; ++a) h.p[a] = static_cast<double>((c0 >> a) & 1);
@@ -587,9 +610,9 @@ class Extractor {
 
   // The rule of triangle_quality's quad measure (0-2 unless 1-3 leaves a strictly better worst
   // triangle), so splitting here and measuring kept quads agree. The four triangles share six
-  // edge lengths; each is computed once, exactly as radius_ratio() computes it (mesh_quality.cpp),
-  // and combined in radius_ratio's order, which gives its values bit for bit at half the square
-  // roots (a test compares the two).
+  // edge lengths; each is computed once, exactly as radius_ratio() computes it
+  // (mesh_quality.cpp), and combined in radius_ratio's order, which gives its values bit for bit
+  // at half the square roots (a test compares the two).
   static double length(const Vec3f& p, const Vec3f& q) {
     const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
     return std::sqrt(dx * dx + dy * dy + dz * dz);

@@ -50,11 +50,14 @@ enum class DcSolver { Particle, Qef, MassPoint };
 // Where the Hermite data (crossings, normals) come from.
 //   Central: crossings by linear interpolation along the edge, normals from central-difference
 //            gradients at the edge's ends interpolated to the crossing (the paper's choice).
-//   Eno:     crossings and normals that respect sharp features: a kink detected between an
-//            edge's samples moves the root onto the line of its side, and normals use one-sided
-//            (ENO) differences where one side of a sample bends much less than the other. On
-//            csg-box (N = 64) it cuts DC's worst vertex error from 0.21 to 0.07-0.09 voxel (MC:
-//            0.13); on smooth fields it is as accurate or better (docs/quality.md). Halo 3.
+//   Eno:     crossings and normals that respect sharp features: near a kink at or between an
+//            edge's samples (two quadratic pieces, through the three samples beyond each end,
+//            that miss the other end on the same side) the root is that of min or max of the
+//            pieces, and the normal takes its piece's slope and its end's gradient; normals use
+//            one-sided (ENO) differences where one side of a sample bends much less than the
+//            other. With the QEF on csg-box it cuts DC's worst vertex error to 0.030 / 0.018 /
+//            0.009 voxel at N = 32 / 64 / 128 (central: 0.18-0.23; MC: 0.20 / 0.13 / 0.22), under
+//            a quarter of MC's; smooth fields change by at most 2% (docs/quality.md). Halo 3.
 enum class DcHermite { Central, Eno };
 
 struct DualContouringOptions {
@@ -63,11 +66,10 @@ struct DualContouringOptions {
   // 0.809 against particle-10 0.0002 / 0.806 and QEF 0 / 0.796; engine 0.012 / 0.836 against
   // 0.007 / 0.836 and 0.001 / 0.836. It is also the fastest: 1.6-1.8x MC's time against 3.4-4.1x
   // (particle-10) and 5-6x (QEF). The Hermite solvers gain accuracy, less than hoped at sharp
-  // features because normals estimated from samples blur within a voxel of a sharp edge: on
+  // features with the paper's Hermite data, which blur within a voxel of a sharp edge: on
   // csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21 voxels (MC: 0.13), to
-  // 0.09 with DcHermite::Eno. On
-  // smooth surfaces three particle steps cut the mean error 5x, to MC's (sphere N = 64: 0.010
-  // to 0.002 voxels).
+  // 0.018 with DcHermite::Eno. On smooth surfaces three particle steps cut the mean error 5x, to
+  // MC's (sphere N = 64: 0.010 to 0.002 voxels).
   DcSolver solver = DcSolver::MassPoint;
   int particle_steps = 10;           // at most this many steps...
   double particle_rate = 0.05;       // c in x <- clamp(x + c F(x)); stable below 2 / 12

@@ -630,10 +630,11 @@ TEST(DualContouring, BrickModeRejectsAViewWithoutTheHalo) {
 }
 
 // What holds on csg-box: the Hermite solvers move the worst vertices (at the sharp edges and
-// corners) closer to the surface than the mass point does. The target, a quarter of MC's
-// worst error, is not reached: normals from central differences blur within a voxel of a sharp
-// edge, and MC's vertices sit on grid edges where the distance field interpolates almost exactly
-// (N = 64: MC 0.13, QEF 0.21, mass point 0.27 voxels).
+// corners) closer to the surface than the mass point does. With central differences
+// (DcHermite::Central) the target, a quarter of MC's worst error, is not reached: normals
+// blur within a voxel of a sharp edge, and MC's vertices sit on grid edges where the distance
+// field interpolates almost exactly (N = 64: MC 0.13, QEF 0.21, mass point 0.27 voxels).
+// DcHermite::Eno reaches it (below).
 TEST(DualContouring, CsgBoxHermiteSolversBeatTheMassPointAtSharpFeatures) {
   for (std::int64_t n : {32, 64, 128}) {
     const FieldSpec spec{FieldKind::CsgBox, n};
@@ -650,20 +651,27 @@ TEST(DualContouring, CsgBoxHermiteSolversBeatTheMassPointAtSharpFeatures) {
 }
 
 // DcHermite::Eno puts the crossings and normals of edges beside sharp features on the right side
-// of the kink: the worst vertex error drops below MC's and well below central differences'.
-// (Measured, QEF: N = 32 / 64 / 128: 0.13 / 0.09 / 0.10 voxel; central 0.21-0.27; MC 0.20 / 0.13
-// / 0.22. The target, a quarter of MC's, is not met; see docs/quality.md.)
-TEST(DualContouring, EnoHermiteDataBeatMarchingCubesOnCsgBox) {
-  for (std::int64_t n : {32, 64, 128}) {
+// of the kink, where a curved face meets a flat one too: the worst vertex error falls below a
+// quarter of MC's (the target), here checked with a margin (0.3) for QEF and particles.
+// (Measured, QEF: N = 32 / 64 / 128: 0.030 / 0.018 / 0.009 voxel; MC 0.20 / 0.13 / 0.22; central
+// differences 0.21-0.27. Straight-line kink pieces reached only 0.13 / 0.09 / 0.10.)
+TEST(DualContouring, EnoHermiteDataKeepCsgBoxEdgesWithinAQuarterOfMarchingCubesError) {
+  for (std::int64_t n : {32, 64}) {
     const FieldSpec spec{FieldKind::CsgBox, n};
     const Volume vol = make_field_volume(spec);
     const double mc = max_distance(spec, marching_cubes(vol.view(), {}));
     const double central =
         max_distance(spec, dual_contouring(vol.view(), {.solver = DcSolver::Qef}));
-    const double eno = max_distance(
+    const double qef = max_distance(
         spec, dual_contouring(vol.view(), {.solver = DcSolver::Qef, .hermite = DcHermite::Eno}));
-    EXPECT_LT(eno, mc) << "N=" << n;
-    EXPECT_LT(eno, 0.75 * central) << "N=" << n;
+    const double particle =
+        max_distance(spec, dual_contouring(vol.view(), {.solver = DcSolver::Particle,
+                                                        .particle_steps = 100,
+                                                        .particle_tolerance = 1e-6,
+                                                        .hermite = DcHermite::Eno}));
+    EXPECT_LE(qef, 0.3 * mc) << "N=" << n;
+    EXPECT_LE(particle, 0.3 * mc) << "N=" << n;
+    EXPECT_LT(qef, 0.25 * central) << "N=" << n;
   }
   // On a smooth surface it is no worse than central differences.
   const FieldSpec torus{FieldKind::Torus, 64};
