@@ -80,7 +80,10 @@ class LocalSearch {
   }
 
   void sweep() {
-    for (int colour = 0; colour < 8; ++colour) colour_step(colour);
+    for (int colour = 0; colour < 8; ++colour) {
+      colour_step(colour);
+      ++step_;
+    }
   }
 
  private:
@@ -94,6 +97,8 @@ class LocalSearch {
     const std::size_t nv = gv_.disp.size();
     snap_disp_.resize(nv);
     snap_value_.resize(nv);
+    last_moved_.resize(nv, -1);
+    settled_at_.resize(nv, -1);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv), [&](const auto& range) {
       for (std::size_t n = range.begin(); n != range.end(); ++n) {
         snap_disp_[n] = gv_.disp[n];
@@ -157,10 +162,29 @@ class LocalSearch {
     return cs;
   }
 
+  // Whether a grid vertex of the 3x3x3 block around v moved at or after `step`.
+  bool block_moved_since(const std::int64_t v[3], int step) const {
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const std::int64_t q[3] = {v[0] + dx, v[1] + dy, v[2] + dz};
+          if (gv_.contains(q[0], q[1], q[2]) && last_moved_[gv_.index(q[0], q[1], q[2])] >= step)
+            return true;
+        }
+    return false;
+  }
+
   void improve(std::int64_t i, std::int64_t j, std::int64_t k) {
     const VolumeView& view = field_.view;
     const std::int64_t v[3] = {i, j, k};
     const std::uint32_t self = gv_.index(i, j, k);
+    // A vertex whose last visit left it in place without consulting the guard (its triangles
+    // good enough, or no candidate better) would do the same again until a vertex of its block
+    // moves (its eight cells' crossings depend on that block only): skipping it then gives
+    // exactly what a visit would. Vertices of one colour are never in each other's
+    // blocks, so the test reads nothing that moves during this step.
+    if (settled_at_[self] >= 0 && !block_moved_since(v, settled_at_[self])) return;
+    settled_at_[self] = -1;
     const bool in = inside(i, j, k);
 
     // The affected triangles: those of the eight cells around v that use a crossing on one of
@@ -236,18 +260,48 @@ class LocalSearch {
           statics[n_statics++] = ref;
       }
     }
-    if (n_tris == 0) return;
+    if (n_tris == 0) {
+      settled_at_[self] = step_;
+      return;
+    }
 
+    // Moving crossings for the candidate (cand_d, cand_f), computed when first needed: most
+    // candidates are rejected after a crossing or two (see score).
     std::array<P3, 6> mpos{};
+    P3 cand_d{};
+    double cand_f = 0;
+    unsigned placed = 0;  // bit m: mpos[m] holds the candidate's crossing
+    auto stage = [&](const P3& d, double f) {
+      cand_d = d;
+      cand_f = f;
+      placed = 0;
+    };
     auto place = [&](const P3& d, double f) {
+      stage(d, f);
       for (int m = 0; m < n_moving; ++m)
         mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f);
+      placed = (1u << n_moving) - 1;
     };
-    auto pos = [&](std::int16_t s) -> const P3& { return s >= 0 ? fixed[s] : mpos[-1 - s]; };
+    auto pos = [&](std::int16_t s) -> const P3& {
+      if (s >= 0) return fixed[s];
+      const int m = -1 - s;
+      if (!((placed >> m) & 1)) {
+        mpos[m] = crossing(moving[m].s, moving[m].axis, self, cand_d, cand_f);
+        placed |= 1u << m;
+      }
+      return mpos[m];
+    };
     std::array<P3, 8 * mc::kMaxTrianglesPerCase> normal0{};
-    auto score = [&](bool record) {
+    std::array<double, 8 * mc::kMaxTrianglesPerCase> q0{};
+    std::array<int, 8 * mc::kMaxTrianglesPerCase> order{};
+    for (int t = 0; t < n_tris; ++t) order[t] = t;
+    // The minimum radius ratio of the affected triangles, -1 when one turns over, and with a
+    // `bar`, -1 as soon as one is no better than it: such a candidate can never be chosen, and
+    // visiting the worst triangles first stops most candidates early.
+    auto score = [&](bool record, double bar = -1.0) {
       double worst = 1.0;
-      for (int t = 0; t < n_tris; ++t) {
+      for (int o = 0; o < n_tris; ++o) {
+        const int t = order[o];
         const P3 &a = pos(tris[t].v[0]), &b = pos(tris[t].v[1]), &c = pos(tris[t].v[2]);
         if (record) {
           normal0[t] = tri_normal(a, b, c);
@@ -257,7 +311,10 @@ class LocalSearch {
           const double len0 = n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2];
           if (len0 > 1e-20 && n[0] * n0[0] + n[1] * n0[1] + n[2] * n0[2] <= 0) return -1.0;
         }
-        worst = std::min(worst, radius_ratio_d(a, b, c));
+        const double q = radius_ratio_d(a, b, c);
+        if (record) q0[t] = q;
+        if (q <= bar) return -1.0;
+        worst = std::min(worst, q);
       }
       return worst;
     };
@@ -358,7 +415,12 @@ class LocalSearch {
     double best_f = gv_.value[self];
     place(best_d, best_f);
     double best = score(true);
-    if (best >= params_.goal) return;
+    if (best >= params_.goal) {
+      settled_at_[self] = step_;
+      return;
+    }
+    std::stable_sort(order.begin(), order.begin() + n_tris,
+                     [&](int x, int y) { return q0[x] < q0[y]; });
     const double start = best;
     const P3 start_d = best_d;
     const double start_f = best_f;
@@ -374,9 +436,18 @@ class LocalSearch {
       return intersecting_pairs() <= allowed_pairs;
     };
 
+    // A round keeps the best-scoring candidate that passes the guard (the first in scan order
+    // among equal scores). The guard is the costly test, so it runs only on the candidates that
+    // beat the round's starting score, best first, until one passes.
+    struct Candidate {
+      double score;
+      P3 d;
+      double f;
+    };
+    std::array<Candidate, 26 * 4> candidates;
+    bool any_candidate = false;
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
-      P3 round_d = best_d;
-      double round_f = best_f;
+      int n = 0;
       for (double r : radii)
         for (const P3& dir : dirs_) {
           P3 d{centre[0] + r * dir[0], centre[1] + r * dir[1], centre[2] + r * dir[2]};
@@ -387,16 +458,21 @@ class LocalSearch {
           for (int a = 0; a < 3; ++a) d[a] = p[a] - g[a];
           const double f = field_.value(p);
           if ((f >= 0) != in) continue;
-          place(d, f);
-          const double s = score(false);
-          if (s > best && guard_passes(d, f)) {
-            best = s;
-            round_d = d;
-            round_f = f;
-          }
+          stage(d, f);
+          const double sc = score(false, best);
+          if (sc > best) candidates[n++] = {sc, d, f};
         }
-      best_d = round_d;
-      best_f = round_f;
+      any_candidate = any_candidate || n > 0;
+      std::stable_sort(candidates.begin(), candidates.begin() + n,
+                       [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
+      for (int c = 0; c < n; ++c) {
+        place(candidates[c].d, candidates[c].f);
+        if (!guard_passes(candidates[c].d, candidates[c].f)) continue;
+        best = candidates[c].score;
+        best_d = candidates[c].d;
+        best_f = candidates[c].f;
+        break;
+      }
     };
     const P3 centre = best_d;
     try_round(centre, {0.08, 0.16, 0.3, 0.45});
@@ -405,6 +481,10 @@ class LocalSearch {
     if (best > start) {
       gv_.disp[self] = best_d;
       gv_.value[self] = best_f;
+      last_moved_[self] = step_;
+    } else if (!any_candidate) {
+      // Nothing beat the start, which depends on the block only (the guard never ran).
+      settled_at_[self] = step_;
     }
   }
 
@@ -416,6 +496,10 @@ class LocalSearch {
   std::vector<P3> dirs_;
   std::vector<P3> snap_disp_;  // the displacements and values when the colour step began
   std::vector<double> snap_value_;
+  // Per grid vertex: the colour step (counted over all sweeps) that last moved it, and the step
+  // at which it was last found good enough to leave (-1: never, or visited since).
+  std::vector<int> last_moved_, settled_at_;
+  int step_ = 0;
 };
 
 template <class T>
