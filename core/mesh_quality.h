@@ -17,7 +17,7 @@ struct QualityStats {
   std::uint64_t triangles = 0;   // quads count as their two triangles (better diagonal)
   std::uint64_t degenerate = 0;  // q < 1e-6 (zero area or collinear)
   double min = 0, mean = 0, max = 0;
-  double q001 = 0, q01 = 0;      // 0.1% and 1% quantiles (lower tail)
+  double q001 = 0, q01 = 0;  // 0.1% and 1% quantiles (lower tail)
   double median = 0;
   std::array<std::uint64_t, 20> histogram{};  // 20 bins of width 0.05 over [0, 1]
 };

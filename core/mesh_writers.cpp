@@ -145,9 +145,9 @@ bool use_normals(const Mesh& mesh, const MeshWriteOptions& options) {
 
 void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options) {
   const bool normals = use_normals(mesh, options);
-  const std::string header = ply_header(mesh.positions.size(),
-                                        mesh.triangles.size() + mesh.quads.size(), normals,
-                                        options.ascii, false);
+  const std::string header =
+      ply_header(mesh.positions.size(), mesh.triangles.size() + mesh.quads.size(), normals,
+                 options.ascii, false);
   file.write(header.data(), header.size());
 
   const auto& pos = mesh.positions;

@@ -7,8 +7,8 @@
 // the one the shape is defined at.
 //
 //   sphere          radius 0.75; value = -(signed distance) in normalised units, iso 0
-//   torus           around z, major radius 0.5, minor 0.2; value = -(signed distance), iso 0; genus 1
-//   gyroid          sin(wx)cos(wy) + sin(wy)cos(wz) + sin(wz)cos(wx), w = 2*pi (2 periods), iso 0
+//   torus           around z, major radius 0.5, minor 0.2; value = -(signed distance), iso 0; genus
+//   1 gyroid          sin(wx)cos(wy) + sin(wy)cos(wz) + sin(wz)cos(wx), w = 2*pi (2 periods), iso 0
 //   csg-box         cube of half-size 0.6 minus a ball of radius 0.5 centred on its corner
 //                   (0.6, 0.6, 0.6): sharp edges and corners; value = -max(d_box, -d_ball), iso 0
 //   marschner-lobb  Marschner & Lobb (1994), fM = 6, alpha = 0.25, iso 0.5
