@@ -510,7 +510,7 @@ Mesh macet(const VolumeView& view, const MacetOptions& options) {
   if (options.relax > 0) {
     // The relaxed samples are doubles; the Field converts every sample to double anyway, so the
     // arithmetic on unrelaxed samples is unchanged.
-    const std::vector<double> samples = relax_pinned_samples(view, options.iso, options.relax);
+    const UninitVector<double> samples = relax_pinned_samples(view, options.iso, options.relax);
     VolumeView relaxed = view;
     relaxed.data = samples.data();
     relaxed.type = ScalarType::Float64;

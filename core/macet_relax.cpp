@@ -13,7 +13,7 @@ namespace isotile::detail {
 namespace {
 
 template <class T>
-void relax_typed(const VolumeView& view, double iso, double relax, std::vector<double>& out) {
+void relax_typed(const VolumeView& view, double iso, double relax, UninitVector<double>& out) {
   const T* data = view.typed<T>();
   const std::int64_t nx = view.dims[0], ny = view.dims[1], nz = view.dims[2];
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& range) {
@@ -26,6 +26,15 @@ void relax_typed(const VolumeView& view, double iso, double relax, std::vector<d
         result = s;
         const double f = s - iso;
         const bool in = f >= 0;
+        // Quick rejection (nearly every sample): pinned needs an axis whose two neighbours are
+        // both in the view and both on the other side.
+        const T* c = data + view.offset(i, j, k);
+        bool candidate = false;
+        for (int a = 0; a < 3 && !candidate; ++a)
+          candidate = p[a] > 0 && p[a] + 1 < view.dims[a] &&
+                      (static_cast<double>(c[-view.strides[a]]) >= iso) != in &&
+                      (static_cast<double>(c[view.strides[a]]) >= iso) != in;
+        if (!candidate) continue;
         const double af = std::abs(f);
         bool complete = true, pinned = false;
         double need = 0, limit = INFINITY;
@@ -65,8 +74,9 @@ void relax_typed(const VolumeView& view, double iso, double relax, std::vector<d
 
 }  // namespace
 
-std::vector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax) {
-  std::vector<double> out(static_cast<std::size_t>(view.sample_count()));
+UninitVector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax) {
+  // Every entry is written by the parallel pass, which also first-touches the pages.
+  UninitVector<double> out(static_cast<std::size_t>(view.sample_count()));
   visit_scalar(view.type, [&](auto tag) { relax_typed<decltype(tag)>(view, iso, relax, out); });
   return out;
 }

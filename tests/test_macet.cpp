@@ -263,7 +263,7 @@ TEST(MacetRelax, ThinSheetSampleMovesSoItsCrossingsLieRelaxAway) {
   std::vector<float> v(5 * 5 * 7, 10.0f);
   for (int i = 0; i < 25; ++i) v[3 * 25 + i] = -0.1f;
   const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
-  const std::vector<double> r = detail::relax_pinned_samples(view, 0.0, 0.3);
+  const auto r = detail::relax_pinned_samples(view, 0.0, 0.3);
   for (std::size_t s = 0; s < v.size(); ++s) {
     if (s / 25 == 3)
       EXPECT_NEAR(r[s], -0.3 * 10.0 / 0.7, 1e-12) << s;  // crossing at 0.3 after
@@ -277,7 +277,7 @@ TEST(MacetRelax, KeepsEverySideAndMovesNoCrossingByMoreThanRelax) {
   const std::vector<float> v = random_samples(n, 99);
   const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
   for (double relax : {0.1, 0.3, 0.45}) {
-    const std::vector<double> r = detail::relax_pinned_samples(view, 0.05, relax);
+    const auto r = detail::relax_pinned_samples(view, 0.05, relax);
     int changed = 0;
     for (std::int64_t k = 0; k < n[2]; ++k)
       for (std::int64_t j = 0; j < n[1]; ++j)

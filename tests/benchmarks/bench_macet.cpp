@@ -149,7 +149,7 @@ int main(int argc, char** argv) {
   for (const Case& c : cases) {
     const VolumeView view = c.volume->view();
     for (double relax : relaxes) {
-      const std::vector<double> r = detail::relax_pinned_samples(view, c.iso, relax);
+      const auto r = detail::relax_pinned_samples(view, c.iso, relax);
       const Index3& n = view.dims;
       std::uint64_t moved = 0, crossings = 0;
       double sum = 0, most = 0;
