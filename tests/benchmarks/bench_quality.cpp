@@ -1,7 +1,7 @@
 // Accuracy of the extractors against the exact surfaces of the procedural fields: regenerates
 // the accuracy table of docs/quality.md.
 //
-//   bench_quality [N ...]      (default: 32 64 128)
+//   bench_quality [--field NAME] [N ...]   (default: every smooth field and csg-box; 32 64 128)
 //   bench_quality --speed [--threads T]   (DC's cost against MC's on bonsai and engine)
 //
 // For each field (sphere, torus, gyroid, csg-box), grid size N and method, it prints one
@@ -19,6 +19,7 @@
 #include <CGAL/Simple_cartesian.h>
 #include <tbb/parallel_for.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -235,17 +236,60 @@ int speed(int threads) {
   return 0;
 }
 
+int usage(const char* problem) {
+  std::fprintf(stderr,
+               "bench_quality: %s\n"
+               "usage: bench_quality [--field NAME] [N ...]   (default sizes: 32 64 128)\n"
+               "       bench_quality --speed [--threads T]\n",
+               problem);
+  return 2;
+}
+
+// A whole-string integer >= lo, or nothing.
+bool parse_int(const char* s, long long lo, long long& out) {
+  char* end = nullptr;
+  errno = 0;
+  out = std::strtoll(s, &end, 10);
+  return errno == 0 && end != s && *end == '\0' && out >= lo;
+}
+
 int main(int argc, char** argv) {
   std::vector<std::int64_t> sizes;
-  if (argc > 1 && std::string(argv[1]) == "--speed")
-    return speed(argc > 3 && std::string(argv[2]) == "--threads" ? std::atoi(argv[3]) : 2);
-  for (int i = 1; i < argc; ++i) sizes.push_back(std::atoll(argv[i]));
+  std::vector<FieldKind> kinds;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    long long v = 0;
+    if (arg == "--help" || arg == "-h") {
+      std::printf(
+          "usage: bench_quality [--field NAME] [N ...]   (default sizes: 32 64 128)\n"
+          "       bench_quality --speed [--threads T]\n");
+      return 0;
+    } else if (arg == "--speed") {
+      if (i + 1 == argc) return speed(2);
+      if (i + 3 == argc && std::string(argv[i + 1]) == "--threads" && parse_int(argv[i + 2], 1, v))
+        return speed(static_cast<int>(v));
+      return usage("--speed takes only --threads T (T >= 1)");
+    } else if (arg == "--field") {
+      if (i + 1 == argc) return usage("--field needs a name");
+      try {
+        kinds.push_back(parse_field_spec("field:" + std::string(argv[++i]) + ":2")->kind);
+      } catch (const std::exception& e) {
+        return usage(e.what());
+      }
+    } else if (parse_int(argv[i], 2, v)) {
+      sizes.push_back(v);
+    } else {
+      return usage(("not a grid size (an integer >= 2) or option: '" + arg + "'").c_str());
+    }
+  }
   if (sizes.empty()) sizes = {32, 64, 128};
+  if (kinds.empty())
+    kinds = {FieldKind::Sphere, FieldKind::Torus, FieldKind::Gyroid, FieldKind::CsgBox};
   std::printf(
       "| field | N | method | vertex mean | vertex max | surface mean | surface max | q mean | "
       "q min | ms |\n");
   std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
-  for (FieldKind kind : {FieldKind::Sphere, FieldKind::Torus, FieldKind::Gyroid, FieldKind::CsgBox})
+  for (FieldKind kind : kinds)
     for (std::int64_t n : sizes) {
       const FieldSpec spec{kind, n};
       const Volume vol = make_field_volume(spec);
