@@ -322,6 +322,31 @@ TEST(MacetRelax, BricksEqualTheWholeVolume) {
   }
 }
 
+// Max's halo is large (3 + 16 per sweep), so on the small volumes above every brick's view holds
+// nearly the whole volume and an undersized halo would go unnoticed. A long, thin volume of random
+// samples (where the search moves nearly every vertex, so moves chain from vertex to vertex) cut
+// across its long axis gives views that really end inside the volume. Checked by shrinking
+// macet_halo by hand: this test fails with a Max halo of 3 + 2 per sweep and passes from 3 + 4 per
+// sweep up, so it catches a halo far too small (Fast's 3, say), not one a few samples short of
+// the argued bound.
+TEST(MacetMax, BricksOfALongVolumeEqualTheWholeVolume) {
+  const Index3 n{112, 9, 8};
+  const std::vector<float> v = random_samples(n, 17);
+  const VolumeView view = dense_view(v.data(), ScalarType::Float32, n);
+  for (const int sweeps : {1, 2}) {
+    const MacetOptions options{.iso = 0.05, .quality = MacetQuality::Max, .max_sweeps = sweeps};
+    const testing::KeyedExtract extract = [&](const VolumeView& part, const Box3& cells) {
+      MacetOptions o = options;
+      o.cells = cells;
+      return testing::KeyedMesh{macet(part, o),
+                                marching_cubes_vertex_keys(part, {.iso = 0.05, .cells = cells})};
+    };
+    const int halo = macet_halo(options);
+    ASSERT_LT(2 * halo + 12, n[0]) << "no brick's view would end inside the volume";
+    testing::expect_bricks_equal_whole(view, extract, halo, {12, 64, 64});
+  }
+}
+
 // Quality on the paper's volumes. The bounds sit a margin below what docs/macet.md measured.
 struct RealCase {
   const char* file;
