@@ -106,7 +106,9 @@ TEST(BrickPlan, BricksFitTheBudgetAndCoverTheVolumeEvenly) {
     } else {
       const std::int64_t mx = std::max({p.brick[0], p.brick[1], p.brick[2]});
       for (int a = 0; a < 3; ++a)
-        if (p.brick[a] < dims[a] - 1) EXPECT_GE(2 * p.brick[a] + 2, mx) << "axis " << a;
+        if (p.brick[a] < dims[a] - 1) {
+          EXPECT_GE(2 * p.brick[a] + 2, mx) << "axis " << a;
+        }
     }
     // The last brick's cells end at the volume's last cell.
     EXPECT_EQ(p.cells(p.total() - 1).hi, (Index3{300, 76, 999}));
@@ -154,8 +156,12 @@ TEST_F(Tiler, StreamedFileEqualsTheInCoreFile) {
           EXPECT_EQ(tiled(field, o, f, memory, &r), want)
               << method_name(m) << " normals " << normals << " memory " << memory << " bricks "
               << r.plan.total();
-          if (memory == 6000) EXPECT_GT(r.plan.total(), 100);
-          if (memory == std::uint64_t{1} << 30) EXPECT_EQ(r.plan.total(), 1);
+          if (memory == 6000) {
+            EXPECT_GT(r.plan.total(), 100);
+          }
+          if (memory == std::uint64_t{1} << 30) {
+            EXPECT_EQ(r.plan.total(), 1);
+          }
         }
       }
 }
