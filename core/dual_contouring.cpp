@@ -397,9 +397,14 @@ class Extractor {
   }
 
   // One component of the ENO gradient at sample p: the one-sided difference on the side where
-  // the field bends clearly less (second difference under a quarter of the other side's), else
-  // the central difference. Near a sharp feature the field is often linear on one side and kinked
-  // on the other; the central difference mixes both and tilts the normal by tens of degrees.
+  // the field bends clearly less (second difference under a quarter of the other side's). Near a
+  // sharp feature the field is often linear on one side and kinked on the other; the central
+  // difference mixes both and tilts the normal by tens of degrees. Where both sides bend, a kink
+  // that the two-piece test of eno_plane finds on the edge to one side of p and not on the other
+  // still takes the difference away from it: csg-box N = 50 has samples a fifth of a voxel from a
+  // box face whose values run 0.0085, 0.0028, 0.0004 | -0.033 along the axis, and the central
+  // difference there mixed the face's slope into the ball's normal (23 degrees). Only then the
+  // central difference. Reads three samples either side.
   double eno_component(const int64_t p[3], int axis) const {
     if (!line_inside(p, axis, -2, 2)) {
       const auto g = gradient(p[0], p[1], p[2], false);
@@ -410,8 +415,40 @@ class Extractor {
     const double bend_up = std::fabs(fp2 - 2 * fp + f0), bend_down = std::fabs(f0 - 2 * fm + fm2);
     if (bend_up < 0.25 * bend_down) return fp - f0;
     if (bend_down < 0.25 * bend_up) return f0 - fm;
+    if (line_inside(p, axis, -3, 3)) {
+      // The edge need not be crossed and its rise may vanish (a tangent direction near an
+      // extremum of the line), so "large" is measured against the largest rise of the edge and
+      // its two neighbours.
+      const double rise = std::max(std::fabs(f0 - fm), std::fabs(fp - f0));
+      const bool down =
+          Pieces(at(p, axis, -3), fm2, fm, f0, fp, fp2).kinked(std::max(rise, std::fabs(fm - fm2)));
+      const bool up =
+          Pieces(fm2, fm, f0, fp, fp2, at(p, axis, 3)).kinked(std::max(rise, std::fabs(fp2 - fp)));
+      if (up != down) return up ? f0 - fm : fp - f0;
+    }
     return 0.5 * (fp - fm);
   }
+
+  // The two quadratic pieces of an edge from sample 0 to sample 1, on a line of samples -2..3
+  // (eno_plane): p0(t) = f0 + b0 t + a0 t^2 through -2, -1, 0 and p1(t) = f1 + b1 s + a1 s^2, s =
+  // t - 1, through 1, 2, 3, and how far each misses the other end (e0 = p0(1) - f1, e1 = p1(0) -
+  // f0).
+  struct Pieces {
+    Pieces(double fm2, double fm, double f0, double f1, double f2, double f3)
+        : a0(0.5 * (f0 - 2 * fm + fm2)),
+          b0((f0 - fm) + a0),
+          a1(0.5 * (f3 - 2 * f2 + f1)),
+          b1((f2 - f1) - a1),
+          e0((f0 + b0 + a0) - f1),
+          e1((f1 - b1 + a1) - f0) {}
+    // A kink at or between the edge's samples: where the field is smooth across the edge the
+    // misses are about the third difference with opposite signs (e0 = -e1 for a cubic); a kink
+    // makes them share a sign, and the larger exceed 0.4 of `rise` (see eno_plane).
+    bool kinked(double rise) const {
+      return !(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * rise;
+    }
+    double a0, b0, a1, b1, e0, e1;
+  };
 
   // The root in [lo, hi] of a x^2 + b x + c, which changes sign there, from the form of the
   // quadratic formula that does not cancel, clamped against rounding. a = 0 makes q = -b and
@@ -446,18 +483,14 @@ class Extractor {
     double t = (iso - f0) / (f1 - f0), slope = f1 - f0;
     int side = -1;  // 0: the root is on p0, 1: on p1, -1: the chord's
     if (line_inside(s0, axis, -2, 3)) {
-      const double fm2 = at(s0, axis, -2), fm = at(s0, axis, -1);
-      const double f2 = at(s0, axis, 2), f3 = at(s0, axis, 3);
-      // p0(t) = f0 + b0 t + a0 t^2, p1(t) = f1 + b1 s + a1 s^2 with s = t - 1.
-      const double a0 = 0.5 * (f0 - 2 * fm + fm2), b0 = (f0 - fm) + a0;
-      const double a1 = 0.5 * (f3 - 2 * f2 + f1), b1 = (f2 - f1) - a1;
-      const double e0 = (f0 + b0 + a0) - f1, e1 = (f1 - b1 + a1) - f0;
+      const Pieces q(at(s0, axis, -2), at(s0, axis, -1), f0, f1, at(s0, axis, 2), at(s0, axis, 3));
+      const double a0 = q.a0, b0 = q.b0, a1 = q.a1, b1 = q.b1, e0 = q.e0, e1 = q.e1;
       // Large: 0.4 of the edge's rise. A smaller threshold also catches smooth but tightly
       // curved stretches (torus N = 32, tube radius 3 voxels): their piece roots are better
       // than the chord, yet the QEF vertex, which sits on the tangent planes' intersection, then
       // strays further from a convex surface (docs/quality.md). csg-box keeps its accuracy up to
       // 0.7, not at 1.0 (a kink exactly at a sample between slopes 1 and 0 misses by the rise).
-      if (!(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * std::fabs(f1 - f0)) {
+      if (q.kinked(std::fabs(f1 - f0))) {
         // In g = sign (f - iso), sign chosen so the field is min(p0, p1) there: both pieces
         // then lie above g at the other end, so the piece ending below zero changes sign on the
         // edge and has exactly one root in it.
@@ -650,8 +683,9 @@ class Extractor {
 
 int dual_contouring_halo(const DualContouringOptions& options) {
   // Vertex cells start one below the box; gradients reach one sample beyond their corners.
-  // DcHermite::Eno reads two more samples beyond the lowest corner (ENO and kink stencils).
-  if (options.hermite == DcHermite::Eno) return 3;
+  // DcHermite::Eno's gradients read three samples beyond a corner (their kink tests): four
+  // beyond the box.
+  if (options.hermite == DcHermite::Eno) return 4;
   return options.solver != DcSolver::MassPoint || options.normals ? 2 : 1;
 }
 
