@@ -55,9 +55,10 @@ enum class DcSolver { Particle, Qef, MassPoint };
 //            that miss the other end on the same side) the root is that of min or max of the
 //            pieces, and the normal takes its piece's slope and its end's gradient; normals use
 //            one-sided (ENO) differences where one side of a sample bends much less than the
-//            other. With the QEF on csg-box it cuts DC's worst vertex error to 0.030 / 0.018 /
-//            0.009 voxel at N = 32 / 64 / 128 (central: 0.18-0.23; MC: 0.20 / 0.13 / 0.22), under
-//            a quarter of MC's; smooth fields change by at most 2% (docs/quality.md). Halo 3.
+//            other, or where both bend and only one side's edge holds a kink. With the QEF on
+//            csg-box it cuts DC's worst vertex error to 0.030 / 0.020 / 0.019 / 0.012 voxel at
+//            N = 32 / 50 / 64 / 128 (central: 0.18-0.27; MC: 0.20 / 0.20 / 0.13 / 0.22), under a
+//            quarter of MC's; smooth fields change by at most 2% (docs/quality.md). Halo 4.
 enum class DcHermite { Central, Eno };
 
 struct DualContouringOptions {
@@ -68,7 +69,7 @@ struct DualContouringOptions {
   // (particle-10) and 5-6x (QEF). The Hermite solvers gain accuracy, less than hoped at sharp
   // features with the paper's Hermite data, which blur within a voxel of a sharp edge: on
   // csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21 voxels (MC: 0.13), to
-  // 0.018 with DcHermite::Eno. On smooth surfaces three particle steps cut the mean error 5x, to
+  // 0.019 with DcHermite::Eno. On smooth surfaces three particle steps cut the mean error 5x, to
   // MC's (sphere N = 64: 0.010 to 0.002 voxels).
   DcSolver solver = DcSolver::MassPoint;
   int particle_steps = 10;           // at most this many steps...
