@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <vector>
@@ -76,7 +78,22 @@ inline void expect_bricks_equal_whole(const VolumeView& whole, const KeyedExtrac
           local.lo[a] = std::max<std::int64_t>(box.lo[a] - halo, 0);
           local.hi[a] = std::min<std::int64_t>(box.hi[a] + halo + 1, whole.dims[a]);
         }
-        const KeyedMesh b = extract(subview(whole, local), box);
+        // A copy, not a window into `whole`: a read beyond the view (a halo too small) then
+        // sees other samples, or trips the sanitizers, instead of the right neighbours.
+        const VolumeView part = subview(whole, local);
+        const std::size_t size = scalar_size(part.type);
+        std::vector<std::byte> copy(static_cast<std::size_t>(part.sample_count()) * size);
+        for (std::int64_t k = 0; k < part.dims[2]; ++k)
+          for (std::int64_t j = 0; j < part.dims[1]; ++j)
+            for (std::int64_t i = 0; i < part.dims[0]; ++i)
+              std::memcpy(
+                  copy.data() +
+                      static_cast<std::size_t>(i + part.dims[0] * (j + part.dims[1] * k)) * size,
+                  static_cast<const std::byte*>(part.data) + part.offset(i, j, k) * size, size);
+        VolumeView own = part;
+        own.data = copy.data();
+        own.strides = {1, part.dims[0], part.dims[0] * part.dims[1]};
+        const KeyedMesh b = extract(own, box);
         ASSERT_EQ(b.keys.size(), b.mesh.positions.size());
         ASSERT_TRUE(std::is_sorted(b.keys.begin(), b.keys.end()));
         std::vector<std::uint32_t> to_whole(b.keys.size());
