@@ -17,6 +17,7 @@
 #include "core/dual_contouring_table.h"
 #include "core/errors.h"
 #include "core/inside_bits.h"
+#include "core/isovalue_ties.h"
 #include "core/marching_cubes_tables.h"
 
 namespace isotile {
@@ -365,7 +366,9 @@ class Extractor {
         eno_plane(i, j, k, c0, axis, value[c0], value[c1], with_normals, h);
         continue;
       }
-      const double t = (options_.iso - value[c0]) / (value[c1] - value[c0]);
+      const int64_t s0[3] = {i + (c0 & 1), j + ((c0 >> 1) & 1), k + ((c0 >> 2) & 1)};
+      double t = (options_.iso - value[c0]) / (value[c1] - value[c0]);
+      tie_crossing(s0, axis, value[c0], value[c1], t);
       for (int a = 0; a < 3; ++a) h.p[a] = static_cast<double>((c0 >> a) & 1);
       h.p[axis] = t;
       h.n = {0, 0, 0};
@@ -384,6 +387,30 @@ class Extractor {
       for (double& n : h.n) n *= inv;
     }
     return count;
+  }
+
+  // Whether an end of the edge from sample s0 along `axis` (values f0, f1) is a pinned tie
+  // (core/isovalue_ties.h); if so, t becomes kTieOffset from that end.
+  bool tie_crossing(const int64_t s0[3], int axis, double f0, double f1, double& t) const {
+    const double iso = options_.iso;
+    if (f0 != iso && f1 != iso) return false;
+    int64_t s[3] = {s0[0], s0[1], s0[2]};
+    if (f1 == iso) ++s[axis];
+    for (int a = 0; a < 3; ++a) {
+      int outside = 0;
+      for (int dir = -1; dir <= 1; dir += 2) {
+        const int64_t global = view_.box.lo[a] + s[a] + dir;
+        if (global < 0 || global >= view_.global_dims[a]) continue;
+        int64_t q[3] = {s[0], s[1], s[2]};
+        q[a] += dir;
+        outside += sample(q[0], q[1], q[2]) < iso;
+      }
+      if (outside == 2) {
+        t = f0 == iso ? detail::kTieOffset : 1 - detail::kTieOffset;
+        return true;
+      }
+    }
+    return false;
   }
 
   // Does the line of samples p + d e_axis, d in [lo, hi], lie in the volume and in the view?
@@ -482,7 +509,9 @@ class Extractor {
     const double iso = options_.iso;
     double t = (iso - f0) / (f1 - f0), slope = f1 - f0;
     int side = -1;  // 0: the root is on p0, 1: on p1, -1: the chord's
-    if (line_inside(s0, axis, -2, 3)) {
+    if (tie_crossing(s0, axis, f0, f1, t)) {
+      // The offset crossing, with the chord's slope and normals.
+    } else if (line_inside(s0, axis, -2, 3)) {
       const Pieces q(at(s0, axis, -2), at(s0, axis, -1), f0, f1, at(s0, axis, 2), at(s0, axis, 3));
       const double a0 = q.a0, b0 = q.b0, a1 = q.a1, b1 = q.b1, e0 = q.e0, e1 = q.e1;
       // Large: 0.4 of the edge's rise. A smaller threshold also catches smooth but tightly
@@ -686,7 +715,8 @@ int dual_contouring_halo(const DualContouringOptions& options) {
   // DcHermite::Eno's gradients read three samples beyond a corner (their kink tests): four
   // beyond the box.
   if (options.hermite == DcHermite::Eno) return 4;
-  return options.solver != DcSolver::MassPoint || options.normals ? 2 : 1;
+  // The tie test (core/isovalue_ties.h) reads the corners' neighbours too: 2 in any case.
+  return 2;
 }
 
 namespace {

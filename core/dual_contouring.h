@@ -83,8 +83,8 @@ struct DualContouringOptions {
   Box3 cells{};  // brick mode, in global cell indices; empty: every cell of the view
 };
 
-// Samples beyond `cells` that brick mode reads: 1 for the mass point without normals (vertex cells
-// reach one cell below the box), 2 when gradients are needed (solver or normals), 3 with
+// Samples beyond `cells` that brick mode reads: 2 (vertex cells reach one cell below the box, and
+// gradients and the tie test of core/isovalue_ties.h one sample beyond their corners), 4 with
 // DcHermite::Eno.
 int dual_contouring_halo(const DualContouringOptions& options);
 

@@ -250,8 +250,9 @@ class Extractor {
       ++q[a];
       const uint32_t i0 = gv_.index(i, j, k), i1 = gv_.index(q[0], q[1], q[2]);
       const double f0 = gv_.value[i0], f1 = gv_.value[i1];
-      t[idx] = f0 / (f0 - f1);
       const int64_t s[3] = {i, j, k};
+      // Linear, between the displaced end points (see above).
+      t[idx] = edge_crossing(field_, grid_, s, q, P3{}, P3{}, f0, f1, true);
       for (int c = 0; c < 3; ++c) {
         const double a0 = static_cast<double>(view_.box.lo[c] + s[c]) + gv_.disp[i0][c];
         const double a1 = static_cast<double>(view_.box.lo[c] + q[c]) + gv_.disp[i1][c];
@@ -369,8 +370,8 @@ class Extractor {
     const P3 p0 = field_.global(i, j, k, d0);
     const P3 p1 = field_.global(q[0], q[1], q[2], d1);
     const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
-    // On an undisplaced grid edge the trilinear interpolant is linear: no search needed.
-    const double t = straight ? f0 / (f0 - f1) : find_root(field_, p0, p1, f0, f1);
+    const int64_t s[3] = {i, j, k};
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "core/inside_bits.h"
+#include "core/isovalue_ties.h"
 #include "core/volume.h"
 
 namespace isotile::detail {
@@ -205,6 +206,36 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
     }
   }
   return t;
+}
+
+// Whether inside sample s (local indices) has two or more neighbours outside, i.e. two or more
+// crossed edges (core/isovalue_ties.h). Neighbours beyond the view do not count: the halo keeps
+// emitted results away from there.
+inline bool spreading_tie(const BitGrid& grid, const std::int64_t s[3]) {
+  const std::int64_t dims[3] = {grid.nx, grid.ny, grid.nz};
+  int outside = 0;
+  for (int a = 0; a < 3; ++a)
+    for (int dir = -1; dir <= 1; dir += 2) {
+      std::int64_t q[3] = {s[0], s[1], s[2]};
+      q[a] += dir;
+      if (q[a] >= 0 && q[a] < dims[a])
+        outside += !((grid.row(q[1], q[2])[q[0] >> 6] >> (q[0] & 63)) & 1);
+    }
+  return outside >= 2;
+}
+
+// The parameter of the crossing on the segment p0 -> p1 between the displaced grid vertices at
+// local samples s0 and s1, where f - iso is f0 and f1 (one >= 0, the other < 0). `straight`:
+// both are undisplaced, so the trilinear interpolant is linear along the segment (also used for
+// Fast's linear estimates). An end still exactly at the isovalue whose sample has two or more
+// crossed edges gets its crossing kTieOffset from it (core/isovalue_ties.h).
+template <class T>
+double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int64_t s0[3],
+                     const std::int64_t s1[3], const P3& p0, const P3& p1, double f0, double f1,
+                     bool straight) {
+  if (f0 == 0 && spreading_tie(grid, s0)) return kTieOffset;
+  if (f1 == 0 && spreading_tie(grid, s1)) return 1 - kTieOffset;
+  return straight ? f0 / (f0 - f1) : find_root(field, p0, p1, f0, f1);
 }
 
 // std::allocator that leaves elements default-initialised (trivial types: uninitialised) on

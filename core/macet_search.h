@@ -137,7 +137,7 @@ class LocalSearch {
     const P3 p0 = field_.global(s[0], s[1], s[2], d0);
     const P3 p1 = field_.global(q[0], q[1], q[2], d1);
     const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
-    const double t = straight ? f0 / (f0 - f1) : find_root(field_, p0, p1, f0, f1);
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
@@ -150,7 +150,7 @@ class LocalSearch {
     const P3 p1 = field_.global(q[0], q[1], q[2], snap_disp_[i1]);
     const double f0 = snap_value_[i0], f1 = snap_value_[i1];
     const bool straight = snap_disp_[i0] == P3{0, 0, 0} && snap_disp_[i1] == P3{0, 0, 0};
-    const double t = straight ? f0 / (f0 - f1) : find_root(field_, p0, p1, f0, f1);
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 

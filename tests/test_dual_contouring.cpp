@@ -625,8 +625,8 @@ TEST(DualContouring, BrickModeRejectsAViewWithoutTheHalo) {
   EXPECT_NO_THROW(dual_contouring(part, o));
   o.cells = {{5, 5, 5}, {8, 8, 8}};  // needs samples 3..10
   EXPECT_THROW(dual_contouring(part, o), InputError);
-  o.solver = DcSolver::MassPoint;  // halo 1: needs samples 4..9
-  EXPECT_NO_THROW(dual_contouring(part, o));
+  o.solver = DcSolver::MassPoint;  // halo 2 as well: ties read their corners' neighbours
+  EXPECT_THROW(dual_contouring(part, o), InputError);
 }
 
 // What holds on csg-box: the Hermite solvers move the worst vertices (at the sharp edges and

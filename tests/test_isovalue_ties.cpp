@@ -1,0 +1,148 @@
+// Samples equal to the isovalue (core/isovalue_ties.h): where Marching Cubes' crossings collapse
+// onto such samples, Macet and Dual Contouring give no degenerate triangles, a surface through a
+// plane of samples stays on it, and bricks still equal the whole volume.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "core/dual_contouring.h"
+#include "core/isovalue_ties.h"
+#include "core/macet.h"
+#include "core/marching_cubes.h"
+#include "core/mesh_quality.h"
+#include "test_support.h"
+
+namespace isotile {
+namespace {
+
+constexpr double kIso = 50;
+constexpr std::int64_t kTop = 5;  // the block's top face: the sample plane z = kTop
+
+// uint8 samples at 0 (outside) with shapes made of samples at exactly the isovalue: a speck, a
+// rod along x, a one-sample-thin sheet, and a block of 90 whose top layer (z = kTop) is 50, so
+// that its top face runs through a plane of samples.
+struct TieShapes {
+  Index3 dims{26, 22, 20};
+  std::vector<std::uint8_t> samples;
+  TieShapes() : samples(static_cast<std::size_t>(dims[0] * dims[1] * dims[2]), 0) {
+    set(4, 4, 14);                                         // speck
+    for (std::int64_t i = 3; i < 12; ++i) set(i, 16, 15);  // rod
+    for (std::int64_t i = 14; i < 22; ++i)
+      for (std::int64_t j = 12; j < 19; ++j) set(i, j, 14);  // sheet
+    for (std::int64_t i = 3; i < 23; ++i)
+      for (std::int64_t j = 2; j < 10; ++j)
+        for (std::int64_t k = 2; k <= kTop; ++k) set(i, j, k, k == kTop ? 50 : 90);  // block
+  }
+  void set(std::int64_t i, std::int64_t j, std::int64_t k, std::uint8_t v = 50) {
+    samples[static_cast<std::size_t>(i + dims[0] * (j + dims[1] * k))] = v;
+  }
+  VolumeView view() const { return dense_view(samples.data(), ScalarType::UInt8, dims); }
+};
+
+// Vertices above the block's top face, away from its rim: their crossings are all on the face.
+template <class F>
+void for_top_face_vertices(const Mesh& m, F&& check) {
+  int n = 0;
+  for (const Vec3f& p : m.positions)
+    if (p[0] > 4.5f && p[0] < 20.5f && p[1] > 3.5f && p[1] < 7.5f && p[2] > kTop - 1 &&
+        p[2] < kTop + 1) {
+      check(p);
+      ++n;
+    }
+  EXPECT_GE(n, 40) << "the block's top face should hold vertices";
+}
+
+TEST(IsovalueTies, MarchingCubesCollapsesCrossingsOntoThem) {
+  // The premise: with the textbook crossings these shapes give degenerate triangles.
+  const TieShapes shapes;
+  const QualityStats q = triangle_quality(marching_cubes(shapes.view(), {.iso = kIso}));
+  EXPECT_GT(q.degenerate, 20u);
+}
+
+TEST(IsovalueTies, MacetGivesNoDegenerateTriangles) {
+  const TieShapes shapes;
+  for (MacetQuality quality : {MacetQuality::Fast, MacetQuality::Max}) {
+    const Mesh m = macet(shapes.view(), {.iso = kIso, .quality = quality});
+    const QualityStats q = triangle_quality(m);
+    const std::string mode = quality == MacetQuality::Fast ? "fast" : "max";
+    EXPECT_EQ(q.degenerate, 0u) << mode;
+    EXPECT_GT(q.min, 0.1) << mode;
+    for_top_face_vertices(m, [&](const Vec3f& p) {
+      EXPECT_NEAR(p[2], static_cast<float>(kTop), 1e-4) << mode << " at " << p[0] << ", " << p[1];
+    });
+  }
+}
+
+TEST(IsovalueTies, DualContouringGivesNoDegenerateTriangles) {
+  const TieShapes shapes;
+  for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
+    for (DcHermite hermite : {DcHermite::Central, DcHermite::Eno}) {
+      const Mesh m =
+          dual_contouring(shapes.view(), {.iso = kIso, .solver = solver, .hermite = hermite});
+      const std::string mode = "solver " + std::to_string(static_cast<int>(solver)) + ", hermite " +
+                               std::to_string(static_cast<int>(hermite));
+      const QualityStats q = triangle_quality(m);
+      EXPECT_EQ(q.degenerate, 0u) << mode;
+      EXPECT_GT(q.min, 0.1) << mode;
+      // Ties that are not pinned keep their crossings: the face is exactly where it was.
+      for_top_face_vertices(m, [&](const Vec3f& p) {
+        EXPECT_EQ(p[2], static_cast<float>(kTop)) << mode << " at " << p[0] << ", " << p[1];
+      });
+    }
+}
+
+TEST(IsovalueTies, DualContouringSpeckBecomesASmallCube) {
+  // The speck's eight cells each have their three crossings kTieOffset from it: their mass points
+  // are the corners of a cube of side 2 kTieOffset / 3 around it.
+  const TieShapes shapes;
+  const Mesh m = dual_contouring(shapes.view(), {.iso = kIso, .keep_quads = true});
+  const double h = detail::kTieOffset / 3;
+  std::vector<Vec3f> corners;
+  for (const Vec3f& p : m.positions) {
+    const double d[3] = {p[0] - 4.0, p[1] - 4.0, p[2] - 14.0};
+    if (std::abs(d[0]) > 0.5 || std::abs(d[1]) > 0.5 || std::abs(d[2]) > 0.5) continue;
+    corners.push_back(p);
+    for (double c : d) EXPECT_NEAR(std::abs(c), h, 1e-6);
+  }
+  ASSERT_EQ(corners.size(), 8u);
+  std::sort(corners.begin(), corners.end());
+  EXPECT_EQ(std::unique(corners.begin(), corners.end()), corners.end()) << "corners coincide";
+}
+
+TEST(IsovalueTies, BricksEqualTheWholeVolume) {
+  // Random integers around the isovalue: ties of every kind, pinned or not, at brick borders.
+  const Index3 n{21, 18, 16};
+  std::vector<std::uint8_t> samples(static_cast<std::size_t>(n[0] * n[1] * n[2]));
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> u(47, 53);
+  for (std::uint8_t& s : samples) s = static_cast<std::uint8_t>(u(rng));
+  const VolumeView view = dense_view(samples.data(), ScalarType::UInt8, n);
+  for (const DualContouringOptions& base :
+       {DualContouringOptions{.iso = kIso},
+        DualContouringOptions{.iso = kIso, .solver = DcSolver::Qef, .hermite = DcHermite::Eno}}) {
+    const testing::KeyedExtract run = [&](const VolumeView& v, const Box3& cells) {
+      DualContouringOptions o = base;
+      o.cells = cells;
+      return testing::KeyedMesh{dual_contouring(v, o), dual_contouring_vertex_keys(v, o)};
+    };
+    for (const Index3& brick : {Index3{1, 1, 1}, Index3{4, 3, 5}, Index3{9, 7, 8}})
+      testing::expect_bricks_equal_whole(view, run, dual_contouring_halo(base), brick);
+  }
+  const MacetOptions fast{.iso = kIso};
+  const testing::KeyedExtract run = [&](const VolumeView& v, const Box3& cells) {
+    MacetOptions o = fast;
+    o.cells = cells;
+    return testing::KeyedMesh{macet(v, o),
+                              marching_cubes_vertex_keys(v, {.iso = kIso, .cells = cells})};
+  };
+  for (const Index3& brick : {Index3{1, 1, 1}, Index3{4, 3, 5}, Index3{9, 7, 8}})
+    testing::expect_bricks_equal_whole(view, run, macet_halo(fast), brick);
+}
+
+}  // namespace
+}  // namespace isotile
