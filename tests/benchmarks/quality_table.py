@@ -7,7 +7,7 @@ rejects (e.g. Macet before it is built in) gets a row marked "pending" with the 
 the table fills in by itself once the method lands.
 
   tests/benchmarks/quality_table.py [--isotile build/tiler/isotile] [--data ../shared/data]
-                                    [--threads 2] [--only bonsai,engine]
+                                    [--threads 2] [--only bonsai,engine] [--iso 50]
   tests/benchmarks/quality_table.py --fields [--sizes 32,64,128]
 
 --fields instead measures every CLI method on the procedural fields: vertex distance to the exact
@@ -88,6 +88,9 @@ def main():
         "ISOTILE_SHARED_DATA", os.path.join(root, "..", "shared", "data")))
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--only", default="", help="comma-separated volume names")
+    ap.add_argument("--iso", type=float, default=None,
+                    help="one isovalue for every volume instead of their own (e.g. 50: samples "
+                         "equal to it, docs/quality.md)")
     ap.add_argument("--fields", action="store_true", help="procedural fields instead")
     ap.add_argument("--sizes", default="32,64,128", help="grid sizes for --fields")
     a = ap.parse_args()
@@ -95,11 +98,12 @@ def main():
         return fields_table(a)
     only = set(filter(None, a.only.split(",")))
 
-    print("| volume | iso | method | triangles | min | 0.1% | 1% | mean | self-int. | "
+    print("| volume | iso | method | triangles | degenerate | min | 0.1% | 1% | mean | self-int. | "
           "non-manifold edges | extract s |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     with tempfile.TemporaryDirectory() as tmp:
-        for name, file, iso in VOLUMES:
+        for name, file, own_iso in VOLUMES:
+            iso = own_iso if a.iso is None else a.iso
             if only and name not in only:
                 continue
             path = os.path.join(a.data, file)
@@ -109,10 +113,11 @@ def main():
             for label, args in METHODS:
                 j, err = run(a.isotile, path, iso, args, a.threads, tmp)
                 if j is None:
-                    print("| %s | %g | %s | pending (%s) | | | | | | | |" % (name, iso, label, err))
+                    print("| %s | %g | %s | pending (%s) | | | | | | | | |" % (name, iso, label, err))
                     continue
-                print("| %s | %g | %s | %d | %.3g | %.3f | %.3f | %.3f | %d | %d | %.3f |" % (
-                    name, iso, label, j["triangles"], j["radius_ratio_min"],
+                print("| %s | %g | %s | %d | %d | %.3g | %.3f | %.3f | %.3f | %d | %d | %.3f |" % (
+                    name, iso, label, j["triangles"], j["degenerate_triangles"],
+                    j["radius_ratio_min"],
                     j["radius_ratio_q001"], j["radius_ratio_q01"], j["radius_ratio_mean"],
                     j["self_intersections"], j["nonmanifold_edges"], j["seconds"]["extract"]))
                 sys.stdout.flush()
