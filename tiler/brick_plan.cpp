@@ -29,8 +29,8 @@ std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& o) {
     samples *= static_cast<double>(cells[a] + 1 + 2 * o.halo);
     n_cells *= static_cast<double>(cells[a]);
   }
-  const double bytes =
-      samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8) + n_cells * o.output_bytes_per_cell;
+  const double bytes = samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8) +
+                       n_cells * o.output_bytes_per_cell + static_cast<double>(o.fixed_bytes);
   return bytes >= 1.8e19 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 

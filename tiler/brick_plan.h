@@ -24,6 +24,8 @@ struct BrickPlanOptions {
   // and cuts a brick into thinner z-slices when it would not fit.
   double output_bytes_per_cell = 8;
   bool slabs = false;  // whole x-y slabs (sources read in order)
+  // Held besides any brick, whatever its size (a gzip source's planes kept for the next slab).
+  std::uint64_t fixed_bytes = 0;
 };
 
 struct BrickPlan {

@@ -167,6 +167,8 @@ class TiledExtraction {
     po.halo = halo_;
     po.sample_bytes = sample_bytes();
     po.slabs = src_.sequential();
+    po.fixed_bytes = kept_bytes();
+    src_.set_overlap(2 * static_cast<std::int64_t>(halo_) + 1);
     plan_ = plan_bricks(n_, po);
     result.plan = plan_;
     result.backend = ex_.backend;
@@ -283,6 +285,13 @@ class TiledExtraction {
     return sum;
   }
 
+  // A sequential source keeps the planes that consecutive slabs grown by the halo share.
+  std::uint64_t kept_bytes() const {
+    if (!src_.sequential()) return 0;
+    return static_cast<std::uint64_t>(2 * halo_ + 1) * static_cast<std::uint64_t>(n_[0]) *
+           static_cast<std::uint64_t>(n_[1]) * scalar_size(src_.type);
+  }
+
   // Bytes per sample of a brick's view: the samples, and Macet's relaxed copy (doubles).
   std::size_t sample_bytes() const {
     return scalar_size(src_.type) + (ex_.method == Method::Macet && ex_.macet_relax > 0 ? 8 : 0);
@@ -298,7 +307,8 @@ class TiledExtraction {
     const double per_face = 16.0 + 4 * 8;
     return static_cast<std::uint64_t>(samples * (static_cast<double>(sample_bytes()) + 0.125) +
                                       static_cast<double>(vertices) * per_vertex * 1.25 +
-                                      static_cast<double>(faces) * per_face);
+                                      static_cast<double>(faces) * per_face +
+                                      static_cast<double>(kept_bytes()));
   }
 
   void extract_brick(const Box3& cells, const SegmentTable& vseg, const SegmentTable& fseg,

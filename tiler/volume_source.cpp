@@ -123,6 +123,9 @@ class GzipRawSource final : public VolumeSource {
   }
 
   bool sequential() const override { return true; }
+  void set_overlap(std::int64_t planes) override {
+    keep_planes_ = std::max<std::int64_t>(planes, 1);
+  }
   void rewind() override {
     if (gzrewind(file_) != 0) throw IoError("cannot rewind " + name);
     next_plane_ = 0;
@@ -146,7 +149,7 @@ class GzipRawSource final : public VolumeSource {
       read_plane(dst);
     }
     // Keep the last planes: the next slab's lower halo starts at most this far back.
-    const std::int64_t keep = std::min<std::int64_t>(box.extent(2), kKeepPlanes);
+    const std::int64_t keep = std::min<std::int64_t>(box.extent(2), keep_planes_);
     kept_lo_ = box.hi[2] - keep;
     kept_.assign(
         static_cast<const char*>(out) +
@@ -155,7 +158,9 @@ class GzipRawSource final : public VolumeSource {
   }
 
  private:
-  static constexpr std::int64_t kKeepPlanes = 8;  // more than any method's halo on both sides
+  // Planes the next box may share with this one (set_overlap); 8 was once thought enough for
+  // every method, but DC's Eno Hermite data (halo 4) overlap by 9 and Macet max by 2 * 51 + 1.
+  std::int64_t keep_planes_ = 8;
 
   void read_plane(char* dst) {
     std::size_t done = 0;

@@ -32,6 +32,9 @@ class VolumeSource {
   // a new pass).
   virtual bool sequential() const { return false; }
   virtual void rewind() {}
+  // Sequential sources: consecutive boxes of a pass share up to this many z-planes (2 halo + 1
+  // for bricks grown by their halo), which the source keeps from one box to the next.
+  virtual void set_overlap(std::int64_t /*planes*/) {}
   // Whether the whole volume is held in memory anyway (its bytes count as resident).
   virtual bool in_memory() const { return false; }
   // Reads global box `box` into `out` (box extent samples of `type`, x fastest). Throws IoError
