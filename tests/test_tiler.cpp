@@ -132,6 +132,27 @@ TEST(BrickPlan, SlabsSpanWholeLayersAndTinyBudgetsAreRejected) {
   EXPECT_THROW(plan_bricks({512, 512, 64}, o), InputError);
 }
 
+TEST(BrickPlan, ExtractorStateAndClippedHalosCount) {
+  // A halo of 51 (Macet max) on a 13 x 11 x 150 volume: clipped to the volume, a slab's view is
+  // 13 x 11 samples wide, not 115 x 113.
+  BrickPlanOptions o;
+  o.halo = 51;
+  o.slabs = true;
+  o.memory = 200000;
+  EXPECT_THROW(plan_bricks({13, 11, 150}, o), InputError);
+  o.volume_dims = {13, 11, 150};
+  const BrickPlan clipped = plan_bricks({13, 11, 150}, o);
+  EXPECT_LE(brick_bytes(clipped.brick, o), o.memory);
+  // 4 bytes of state per sample of the view: thinner slabs, and the same budget would be too
+  // small for even one layer of a wider volume.
+  o.state_bytes_per_sample = 4;
+  const BrickPlan with_state = plan_bricks({13, 11, 150}, o);
+  EXPECT_LE(brick_bytes(with_state.brick, o), o.memory);
+  EXPECT_LT(with_state.brick[2], clipped.brick[2]);
+  o.volume_dims = {40, 40, 150};
+  EXPECT_THROW(plan_bricks({40, 40, 150}, o), InputError);
+}
+
 TEST(BrickPlan, MemorySizesParseWithUnits) {
   EXPECT_EQ(parse_memory_size("256MiB"), 256ull << 20);
   EXPECT_EQ(parse_memory_size("2GB"), 2000000000ull);
@@ -290,7 +311,7 @@ TEST_F(Tiler, GzipSlabsOverlapByTheirWholeHalo) {
     ASSERT_GT(want.size(), 1000u);
     TiledResult r;
     // Budgets that cut the volume into a few slabs (Max's halo makes its slabs large).
-    const std::uint64_t memory = o.method == Method::Macet ? 2200000 : 60000;
+    const std::uint64_t memory = o.method == Method::Macet ? 150000 : 60000;
     EXPECT_EQ(tiled(gz.string(), o, MeshFormat::Ply, memory, &r), want) << method_name(o.method);
     EXPECT_GE(r.plan.count[2], 3) << method_name(o.method);
   }

@@ -26,11 +26,14 @@ std::int64_t BrickPlan::owner(int axis, std::int64_t v) const {
 std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& o) {
   double samples = 1, n_cells = 1;
   for (int a = 0; a < 3; ++a) {
-    samples *= static_cast<double>(cells[a] + 1 + 2 * o.halo);
+    std::int64_t extent = cells[a] + 1 + 2 * static_cast<std::int64_t>(o.halo);
+    if (o.volume_dims[a] > 0) extent = std::min(extent, o.volume_dims[a]);
+    samples *= static_cast<double>(extent);
     n_cells *= static_cast<double>(cells[a]);
   }
-  const double bytes = samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8) +
-                       n_cells * o.output_bytes_per_cell + static_cast<double>(o.fixed_bytes);
+  const double bytes =
+      samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8 + o.state_bytes_per_sample) +
+      n_cells * o.output_bytes_per_cell + static_cast<double>(o.fixed_bytes);
   return bytes >= 1.8e19 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 

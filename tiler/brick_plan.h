@@ -26,6 +26,12 @@ struct BrickPlanOptions {
   bool slabs = false;  // whole x-y slabs (sources read in order)
   // Held besides any brick, whatever its size (a gzip source's planes kept for the next slab).
   std::uint64_t fixed_bytes = 0;
+  // The extractor's own state per sample of the view, halo included (Macet displaces every grid
+  // vertex of its view; the halo has state but no output).
+  double state_bytes_per_sample = 0;
+  // The volume's samples: when set, a brick's view is clipped to them (a brick spanning an axis
+  // reads no halo there).
+  Index3 volume_dims{0, 0, 0};
 };
 
 struct BrickPlan {
@@ -41,7 +47,8 @@ struct BrickPlan {
   std::int64_t owner(int axis, std::int64_t v) const;
 };
 
-// Bytes one brick of `cells` cells needs under `options` (samples, bits, expected output).
+// Bytes one brick of `cells` cells needs under `options` (samples, bits, expected output, the
+// extractor's state).
 std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& options);
 
 // Throws InputError when not even a brick of one cell (one cell layer, for slabs) fits.
