@@ -144,6 +144,20 @@ TEST(IsovalueTies, BricksEqualTheWholeVolume) {
   };
   for (const Index3& brick : {Index3{1, 1, 1}, Index3{4, 3, 5}, Index3{9, 7, 8}})
     testing::expect_bricks_equal_whole(view, run, macet_halo(fast), brick);
+
+  // Max's search meets the ties too; a long volume so that brick views end inside it.
+  const Index3 m{64, 8, 7};
+  std::vector<std::uint8_t> long_samples(static_cast<std::size_t>(m[0] * m[1] * m[2]));
+  for (std::uint8_t& s : long_samples) s = static_cast<std::uint8_t>(u(rng));
+  const VolumeView long_view = dense_view(long_samples.data(), ScalarType::UInt8, m);
+  const MacetOptions max{.iso = kIso, .quality = MacetQuality::Max, .max_sweeps = 1};
+  const testing::KeyedExtract run_max = [&](const VolumeView& v, const Box3& cells) {
+    MacetOptions o = max;
+    o.cells = cells;
+    return testing::KeyedMesh{macet(v, o),
+                              marching_cubes_vertex_keys(v, {.iso = kIso, .cells = cells})};
+  };
+  testing::expect_bricks_equal_whole(long_view, run_max, macet_halo(max), Index3{10, 64, 64});
 }
 
 TEST(IsovalueTiesRealData, BonsaiAtAnIntegerIsovalueHasNoDegenerateTriangles) {
