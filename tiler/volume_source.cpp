@@ -158,8 +158,8 @@ class GzipRawSource final : public VolumeSource {
   }
 
  private:
-  // Planes the next box may share with this one (set_overlap); 8 was once thought enough for
-  // every method, but DC's Eno Hermite data (halo 4) overlap by 9 and Macet max by 2 * 51 + 1.
+  // Planes the next box may share with this one (set_overlap: 2 halo + 1, so 9 for DC's Eno
+  // Hermite data and 103 for Macet max).
   std::int64_t keep_planes_ = 8;
 
   void read_plane(char* dst) {
