@@ -15,13 +15,7 @@ double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c) {
     const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
     return std::sqrt(dx * dx + dy * dy + dz * dz);
   };
-  const double la = length(b, c), lb = length(c, a), lc = length(a, b);
-  if (la == 0 || lb == 0 || lc == 0) return 0;
-  const double q = (lb + lc - la) * (lc + la - lb) * (la + lb - lc) / (la * lb * lc);
-  // Rounding can push collinear triangles slightly below 0 and equilateral ones above 1, and
-  // non-finite coordinates give NaN, which would break sorting; all of those clamp into [0, 1].
-  if (!(q > 0)) return 0;
-  return std::min(q, 1.0);
+  return radius_ratio_of_lengths(length(b, c), length(c, a), length(a, b));
 }
 
 namespace {

@@ -13,6 +13,16 @@ namespace isotile {
 // Radius ratio of one triangle, computed in double; 0 when any edge has zero length.
 double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c);
 
+// The same from the three edge lengths.
+inline double radius_ratio_of_lengths(double la, double lb, double lc) {
+  if (la == 0 || lb == 0 || lc == 0) return 0;
+  const double q = (lb + lc - la) * (lc + la - lb) * (la + lb - lc) / (la * lb * lc);
+  // Rounding can push collinear triangles slightly below 0 and equilateral ones above 1, and
+  // non-finite coordinates give NaN, which would break sorting; all of those clamp into [0, 1].
+  if (!(q > 0)) return 0;
+  return q < 1 ? q : 1;
+}
+
 struct QualityStats {
   std::uint64_t triangles = 0;   // quads count as their two triangles (better diagonal)
   std::uint64_t degenerate = 0;  // q < 1e-6 (zero area or collinear)
