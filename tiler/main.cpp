@@ -3,6 +3,7 @@
 //   isotile extract INPUT -o OUT.{ply,obj,stl,off} [--iso V] [--method mc] [--backend ...]
 //   isotile info INPUT [--json]
 //   isotile quality MESH [--json]
+//   isotile simplify IN OUT --ratio R | --faces N | --max-error E
 //   isotile demo [-o OUT]
 //
 // Errors are one line on stderr and a non-zero exit status (1 for failures, 2 for bad usage).
@@ -33,6 +34,8 @@
 #include "core/mesh_topology.h"
 #include "core/procedural_fields.h"
 #include "core/self_intersections.h"
+#include "core/simplify.h"
+#include "core/surface_distance.h"
 #include "core/volume_io.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/gl_backends.h"
@@ -228,7 +231,8 @@ struct ExtractArgs {
   double macet_relax = 0.0;
   bool quads = false;
   bool check_intersections = false;
-  std::string memory;  // empty: in core
+  std::string memory;   // empty: in core
+  double simplify = 1;  // fraction of faces kept; 1: off
 };
 
 Method parse_method(const std::string& s) {
@@ -242,6 +246,51 @@ Backend parse_backend(const std::string& s) {
   if (s == "gs") return Backend::GeometryShader;
   if (s == "hp") return Backend::HistoPyramid;
   return Backend::Auto;
+}
+
+// --- simplification shared by `extract --simplify` and `simplify` -----------------------------
+
+SimplifyOptions simplify_options(double ratio, std::uint64_t faces, double max_error,
+                                 double min_quality, bool relax) {
+  SimplifyOptions o;
+  o.ratio = ratio;
+  o.faces = faces;
+  o.max_error = max_error;
+  o.min_quality = min_quality;
+  o.relax = relax;
+  o.progress = [](std::string_view pass, std::int64_t done, std::int64_t total) {
+    const std::int64_t step = std::max<std::int64_t>(1, total / 10);
+    if (done != total && done % step != 0) return;
+    progress("simplify " + std::string(pass) + ": " + std::to_string(done) + "/" +
+             std::to_string(total) + " regions");
+  };
+  return o;
+}
+
+// Stats keys of a simplification; `scale` turns mesh units into voxels where known.
+json simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& after,
+                   const Vec3d& scale) {
+  json j;
+  j["triangles_before"] = s.faces_before;
+  j["simplify_target_faces"] = s.target_faces;
+  j["simplify_regions"] = s.regions;
+  j["simplify_seam_regions"] = s.seam_regions;
+  j["simplify_collapses"] = s.collapses;
+  j["simplify_flips"] = s.flips;
+  j["simplify_relaxed"] = s.relaxed;
+  j["simplify_boundary_vertices"] = s.boundary_vertices;
+  j["simplify_split_vertices"] = s.split_vertices;
+  j["simplify_split_copies"] = s.split_copies;
+  j["simplify_unlinked_faces"] = s.unlinked_faces;
+  const SurfaceDistance d = surface_distance(before, after, {.scale = scale});
+  j["simplify_hausdorff_mean"] = d.mean();
+  j["simplify_hausdorff_max"] = d.max();
+  const OneWayDistance& worst = d.a_to_b.max >= d.b_to_a.max ? d.a_to_b : d.b_to_a;
+  j["simplify_hausdorff_max_at"] = {worst.max_at[0] / scale[0], worst.max_at[1] / scale[1],
+                                    worst.max_at[2] / scale[2]};
+  j["simplify_hausdorff_max_direction"] =
+      d.a_to_b.max >= d.b_to_a.max ? "input to result" : "result to input";
+  return j;
 }
 
 // Out of core: brick by brick within --memory, streamed into the output file.
@@ -338,6 +387,9 @@ int run_extract(const ExtractArgs& args) {
                      "` shows its value range)");
   }
   if (!std::isfinite(options.iso)) throw InputError("--iso must be a finite number");
+  const bool simplifying = args.simplify < 1;
+  if (simplifying && options.keep_quads)
+    throw InputError("--simplify gives triangles; drop --quads");
   if (!args.memory.empty()) return run_extract_tiled(args, options, format, t_total);
 
   progress("reading " + args.in.input);
@@ -352,10 +404,25 @@ int run_extract(const ExtractArgs& args) {
   progress("extracting (" + std::string(method_name(options.method)) + ", " +
            std::string(backend_name(backend)) + ", iso " + std::to_string(options.iso) + ")");
   t0 = Clock::now();
-  const Mesh mesh = extract(view, options);
+  Mesh mesh = extract(view, options);
   const double t_extract = seconds_since(t0);
   progress("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
            std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
+
+  // The extracted mesh is kept past simplification only for the stats' distance measure.
+  std::optional<Mesh> extracted;
+  SimplifyStats sstats;
+  double t_simplify = 0;
+  if (simplifying) {
+    progress("simplifying to " + std::to_string(args.simplify) + " of the faces");
+    t0 = Clock::now();
+    Mesh simplified = simplify(mesh, simplify_options(args.simplify, 0, 0, 0.3, true), &sstats);
+    t_simplify = seconds_since(t0);
+    progress("simplified to " + std::to_string(simplified.triangles.size()) + " triangles in " +
+             fmt_seconds(t_simplify));
+    if (!args.stats.empty()) extracted = std::move(mesh);
+    mesh = std::move(simplified);
+  }
 
   progress("writing " + args.output);
   t0 = Clock::now();
@@ -388,6 +455,11 @@ int run_extract(const ExtractArgs& args) {
   j.update(topology_json(topo));
   j["bricks"] = 1;
   if (args.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
+  if (extracted) {
+    j["simplify"] = args.simplify;
+    j.update(simplify_json(sstats, *extracted, mesh,
+                           {1 / view.spacing[0], 1 / view.spacing[1], 1 / view.spacing[2]}));
+  }
   if (field) {
     const auto [mean, max] = field_distances(*field, mesh, view);
     j["distance_mean"] = mean;
@@ -399,9 +471,68 @@ int run_extract(const ExtractArgs& args) {
                   {"write", t_write},
                   {"measure", t_measure},
                   {"total", seconds_since(t_total)}};
+  if (simplifying) j["seconds"]["simplify"] = t_simplify;
   j["peak_rss_mb"] = peak_rss_mb();
   write_text(args.stats, j.dump(2) + "\n");
   progress("done in " + fmt_seconds(seconds_since(t_total)));
+  return 0;
+}
+
+// --- simplify ------------------------------------------------------------------------------
+
+struct SimplifyArgs {
+  std::string input, output, stats;
+  double ratio = 0, max_error = 0, min_quality = 0.3;
+  std::uint64_t faces = 0;
+  bool no_relax = false, ascii = false;
+};
+
+int run_simplify(const SimplifyArgs& args) {
+  const auto t_total = Clock::now();
+  const MeshFormat format = mesh_format_from_path(args.output);
+  if ((args.ratio > 0) + (args.faces > 0) + (args.max_error > 0) != 1)
+    throw InputError("give exactly one of --ratio, --faces and --max-error");
+  progress("reading " + args.input);
+  auto t0 = Clock::now();
+  Mesh mesh = read_mesh(args.input);
+  const double t_read = seconds_since(t0);
+  progress("read " + std::to_string(mesh.triangles.size() + 2 * mesh.quads.size()) +
+           " triangles, " + std::to_string(mesh.positions.size()) + " vertices in " +
+           fmt_seconds(t_read));
+  t0 = Clock::now();
+  SimplifyStats sstats;
+  Mesh out = simplify(
+      mesh,
+      simplify_options(args.ratio, args.faces, args.max_error, args.min_quality, !args.no_relax),
+      &sstats);
+  const double t_simplify = seconds_since(t0);
+  progress("simplified to " + std::to_string(out.triangles.size()) + " triangles in " +
+           fmt_seconds(t_simplify));
+  progress("writing " + args.output);
+  t0 = Clock::now();
+  write_mesh(out, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  const double t_write = seconds_since(t0);
+  const double t_done = seconds_since(t_total);
+  if (!args.stats.empty()) {
+    t0 = Clock::now();
+    json j;
+    j["input"] = args.input;
+    j["output"] = args.output;
+    j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+    j["triangles"] = out.triangles.size();
+    j["vertices"] = out.positions.size();
+    j.update(quality_json(triangle_quality(out)));
+    j.update(topology_json(mesh_topology(out)));
+    j.update(simplify_json(sstats, mesh, out, {1, 1, 1}));
+    j["seconds"] = {{"read", t_read},
+                    {"simplify", t_simplify},
+                    {"write", t_write},
+                    {"total", t_done},
+                    {"measure", seconds_since(t0)}};
+    j["peak_rss_mb"] = peak_rss_mb();
+    write_text(args.stats, j.dump(2) + "\n");
+  }
+  progress("done in " + fmt_seconds(t_done));
   return 0;
 }
 
@@ -464,7 +595,8 @@ int run_info(const InputArgs& in, bool as_json) {
 
 // --- quality -------------------------------------------------------------------------------
 
-int run_quality(const std::string& path, bool as_json, bool check_intersections) {
+int run_quality(const std::string& path, bool as_json, bool check_intersections,
+                const std::string& reference) {
   const Mesh mesh = read_mesh(path);
   const QualityStats q = triangle_quality(mesh);
   const TopologyStats t = mesh_topology(mesh);
@@ -478,6 +610,19 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections)
   j["unreferenced_vertices"] = t.unreferenced_vertices;
   std::optional<std::uint64_t> crossing;
   if (check_intersections) j["self_intersections"] = *(crossing = self_intersections(mesh).pairs);
+  std::optional<SurfaceDistance> distance;
+  if (!reference.empty()) {
+    distance = surface_distance(read_mesh(reference), mesh);
+    j["reference"] = reference;
+    j["hausdorff_mean"] = distance->mean();
+    j["hausdorff_max"] = distance->max();
+    j["hausdorff_reference_to_mesh"] = {{"mean", distance->a_to_b.mean},
+                                        {"max", distance->a_to_b.max},
+                                        {"samples", distance->a_to_b.samples}};
+    j["hausdorff_mesh_to_reference"] = {{"mean", distance->b_to_a.mean},
+                                        {"max", distance->b_to_a.max},
+                                        {"samples", distance->b_to_a.samples}};
+  }
   if (as_json) {
     std::cout << j.dump(2) << "\n";
     return 0;
@@ -500,6 +645,12 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections)
   if (crossing)
     std::printf("self-intersections    %llu triangle pairs\n",
                 static_cast<unsigned long long>(*crossing));
+  if (distance)
+    std::printf(
+        "distance to reference mean %.4g  max %.4g (reference to mesh: mean %.4g max %.4g; "
+        "mesh to reference: mean %.4g max %.4g)\n",
+        distance->mean(), distance->max(), distance->a_to_b.mean, distance->a_to_b.max,
+        distance->b_to_a.mean, distance->b_to_a.max);
   return 0;
 }
 
@@ -617,6 +768,13 @@ int main(int argc, char** argv) {
                         "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
   extract_cmd->add_flag("--check-intersections", ex.check_intersections,
                         "Count self-intersecting triangle pairs (stats key self_intersections)");
+  extract_cmd
+      ->add_option("--simplify", ex.simplify,
+                   "Simplify the mesh to this fraction of its faces (0 < R <= 1; 1: off), keeping "
+                   "its topology, its border and well-shaped triangles (see `isotile simplify`)")
+      ->check(
+          CLI::Range(0.0, 1.0).description("in (0, 1]") &
+          CLI::Validator([](std::string& s) { return std::stod(s) > 0 ? "" : "must be > 0"; }, ""));
   extract_cmd->add_option("--memory", ex.memory,
                           "Out of core: extract brick by brick, each brick's working set within "
                           "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
@@ -638,6 +796,37 @@ int main(int argc, char** argv) {
   bool quality_intersections = false;
   quality_cmd->add_flag("--check-intersections", quality_intersections,
                         "Count self-intersecting triangle pairs");
+  std::string quality_reference;
+  quality_cmd->add_option("--reference", quality_reference,
+                          "Also measure the two-way sampled (Hausdorff) distance to this mesh, "
+                          "e.g. the input of a simplification (mesh units)");
+
+  SimplifyArgs sa;
+  auto* simplify_cmd = app.add_subcommand(
+      "simplify",
+      "Simplify a mesh by edge collapses: fewer triangles, same topology and border, good shapes");
+  simplify_cmd->add_option("IN", sa.input, "Mesh file (.ply, .obj, .stl, .off)")->required();
+  simplify_cmd->add_option("OUT", sa.output, "Simplified mesh (.ply, .obj, .stl, .off)")
+      ->required();
+  auto* ratio_opt =
+      simplify_cmd->add_option("--ratio", sa.ratio, "Fraction of faces kept, in (0, 1]");
+  auto* faces_opt =
+      simplify_cmd->add_option("--faces", sa.faces, "Number of faces to keep (at least 1)");
+  auto* error_opt = simplify_cmd->add_option(
+      "--max-error", sa.max_error,
+      "Simplify as far as no vertex strays more than E (mesh units) from the planes of the "
+      "faces it replaces");
+  ratio_opt->excludes(faces_opt)->excludes(error_opt);
+  faces_opt->excludes(error_opt);
+  simplify_cmd
+      ->add_option("--min-quality", sa.min_quality,
+                   "Radius ratio (0..1) below which collapses may not create triangles (default "
+                   "0.3)")
+      ->check(CLI::Range(0.0, 1.0));
+  simplify_cmd->add_flag("--no-relax", sa.no_relax, "Skip the flips and tangential relaxation");
+  simplify_cmd->add_flag("--ascii", sa.ascii, "ASCII PLY instead of binary");
+  simplify_cmd->add_option("--stats", sa.stats,
+                           "Write statistics as JSON to this file ('-': stdout)");
 
   std::string demo_output = "isotile-demo.ply";
   auto* demo_cmd = app.add_subcommand(
@@ -650,7 +839,7 @@ int main(int argc, char** argv) {
       "gl-info", "Describe the OpenGL device the gs and hp backends would use, and its limits");
   gl_info_cmd->add_flag("--json", gl_info_json, "Print JSON");
 
-  for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, demo_cmd}) cmd->fallthrough();
+  for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, simplify_cmd, demo_cmd}) cmd->fallthrough();
 
   try {
     app.parse(argc, argv);
@@ -666,7 +855,9 @@ int main(int argc, char** argv) {
     if (*extract_cmd) return run_extract(ex);
     if (*info_cmd) return run_info(info_in, info_json);
     if (*gl_info_cmd) return run_gl_info(gl_info_json);
-    if (*quality_cmd) return run_quality(quality_path, quality_json_flag, quality_intersections);
+    if (*quality_cmd)
+      return run_quality(quality_path, quality_json_flag, quality_intersections, quality_reference);
+    if (*simplify_cmd) return run_simplify(sa);
     if (*demo_cmd) {
       ExtractArgs d;
       d.in.input = "field:gyroid:128";
