@@ -33,6 +33,8 @@ struct WorkMesh {
   std::vector<std::uint8_t> locked;  // split copies (the boundary is found in each region)
   std::vector<std::int32_t> group;   // split copies: their input vertex; -1 elsewhere; or empty
   std::vector<Tri> triangles;
+  std::vector<Vec3d> points;  // with an error bound: see Region::points
+  std::vector<std::uint32_t> point_face;
 };
 
 Vec3d sub(const Vec3d& a, const Vec3d& b) {
@@ -199,6 +201,42 @@ void initial_quadrics(WorkMesh& m) {
   });
 }
 
+Vec3d centroid(const WorkMesh& m, const Tri& t) {
+  Vec3d c{0, 0, 0};
+  for (std::uint32_t v : t)
+    for (int a = 0; a < 3; ++a) c[a] += m.positions[v][a] / 3;
+  return c;
+}
+
+// The points the error bound holds the result to: every vertex (on its first face), every
+// edge's midpoint (on the first face that has the edge) and every face's centroid.
+void error_points(WorkMesh& m) {
+  std::vector<std::int64_t> first(m.positions.size(), -1);
+  for (std::size_t f = 0; f < m.triangles.size(); ++f)
+    for (std::uint32_t v : m.triangles[f])
+      if (first[v] < 0) first[v] = static_cast<std::int64_t>(f);
+  for (std::size_t v = 0; v < m.positions.size(); ++v)
+    if (first[v] >= 0) {
+      m.points.push_back(m.positions[v]);
+      m.point_face.push_back(static_cast<std::uint32_t>(first[v]));
+    }
+  for (std::size_t f = 0; f < m.triangles.size(); ++f) {
+    const Tri& t = m.triangles[f];
+    m.points.push_back(centroid(m, t));
+    m.point_face.push_back(static_cast<std::uint32_t>(f));
+    for (int i = 0; i < 3; ++i) {
+      // Each edge once: from the face that runs it from its lower to its higher vertex, or
+      // from both faces where orientations disagree (a harmless duplicate).
+      const std::uint32_t a = t[i], b = t[(i + 1) % 3];
+      if (a > b) continue;
+      const Vec3d& pa = m.positions[a];
+      const Vec3d& pb = m.positions[b];
+      m.points.push_back({(pa[0] + pb[0]) / 2, (pa[1] + pb[1]) / 2, (pa[2] + pb[2]) / 2});
+      m.point_face.push_back(static_cast<std::uint32_t>(f));
+    }
+  }
+}
+
 // A grid of cubic cells over the mesh's box; `shift` moves it by half a cell (one more cell per
 // axis), so that its cells straddle the unshifted grid's seams.
 struct Grid {
@@ -215,13 +253,6 @@ struct Grid {
   }
   std::int64_t total() const { return n[0] * n[1] * n[2]; }
 };
-
-Vec3d centroid(const WorkMesh& m, const Tri& t) {
-  Vec3d c{0, 0, 0};
-  for (std::uint32_t v : t)
-    for (int a = 0; a < 3; ++a) c[a] += m.positions[v][a] / 3;
-  return c;
-}
 
 // Halves the cell size until the occupied cells average at most kRegionFaces faces.
 Grid plan_grid(const WorkMesh& m) {
@@ -318,10 +349,13 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
   for (std::int64_t c : cell_of) ++start[c + 1];
   std::partial_sum(start.begin(), start.end(), start.begin());
   std::vector<std::uint32_t> faces(in.triangles.size());
+  std::vector<std::uint32_t> local_face(in.triangles.size());  // index within its region
   {
     std::vector<std::uint64_t> at(start.begin(), start.end() - 1);
-    for (std::size_t f = 0; f < cell_of.size(); ++f)
+    for (std::size_t f = 0; f < cell_of.size(); ++f) {
+      local_face[f] = static_cast<std::uint32_t>(at[cell_of[f]] - start[cell_of[f]]);
       faces[at[cell_of[f]]++] = static_cast<std::uint32_t>(f);
+    }
   }
   std::vector<std::int64_t> occupied;
   for (std::int64_t c = 0; c < cells; ++c)
@@ -343,10 +377,22 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     for (std::uint32_t x : v)
       regions_of[x] = static_cast<std::uint8_t>(std::min(regions_of[x] + 1, 2));
 
+  // The error bound's points go with their faces (in point order within each region).
+  std::vector<std::int64_t> region_of_cell(cells, -1);
+  for (std::size_t r = 0; r < nr; ++r) region_of_cell[occupied[r]] = static_cast<std::int64_t>(r);
+  std::vector<std::vector<std::uint32_t>> region_points(nr);
+  for (std::size_t i = 0; i < in.points.size(); ++i)
+    region_points[region_of_cell[cell_of[in.point_face[i]]]].push_back(
+        static_cast<std::uint32_t>(i));
+
   std::vector<std::optional<RegionSimplifier>> sims(nr);
   tbb::parallel_for(std::size_t{0}, nr, std::size_t{1}, [&](std::size_t r) {
     const std::int64_t c = occupied[r];
     Region reg;
+    for (std::uint32_t i : region_points[r]) {
+      reg.points.push_back(in.points[i]);
+      reg.point_face.push_back(local_face[in.point_face[i]]);
+    }
     reg.id = std::move(ids[r]);
     reg.positions.reserve(reg.id.size());
     for (std::uint32_t v : reg.id) {
@@ -457,9 +503,15 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     m.locked.push_back(in.locked[v]);
     if (!in.group.empty()) m.group.push_back(in.group[v]);
   }
-  for (const Region& reg : out)
+  for (const Region& reg : out) {
+    const auto base_face = static_cast<std::uint32_t>(m.triangles.size());
     for (const Tri& t : reg.triangles)
       m.triangles.push_back({index[reg.id[t[0]]], index[reg.id[t[1]]], index[reg.id[t[2]]]});
+    for (std::size_t i = 0; i < reg.points.size(); ++i) {
+      m.points.push_back(reg.points[i]);
+      m.point_face.push_back(base_face + reg.point_face[i]);
+    }
+  }
   return res;
 }
 
@@ -553,6 +605,7 @@ Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* s
   if (faces > 0 && (target == 0 || target < faces || options.max_error > 0)) {
     split_fans(m, stats);
     initial_quadrics(m);
+    if (options.max_error > 0) error_points(m);
     RegionOptions ro;
     ro.max_error = options.max_error;
     ro.min_quality = options.min_quality;

@@ -46,7 +46,7 @@ struct SimplifyOptions {
   double min_quality = 0.3;
   bool relax = true;  // flips and tangential relaxation after the collapses
   // Called as regions complete, with the pass ("collapse", "seams") and counts.
-  std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
+  std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress = {};
 };
 
 struct SimplifyStats {

@@ -72,6 +72,31 @@ double segment_gap(const P& a, const P& b, const P& c, const P& d) {
   return ((a + s * u) - (c + t * v)).norm();
 }
 
+// Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection, 5.1.5).
+double point_triangle_distance2(const P& p, const P& a, const P& b, const P& c) {
+  const P ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab | ap, d2 = ac | ap;
+  if (d1 <= 0 && d2 <= 0) return ap.sqrnorm();
+  const P bp = p - b;
+  const double d3 = ab | bp, d4 = ac | bp;
+  if (d3 >= 0 && d4 <= d3) return bp.sqrnorm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return (ap - (d1 / (d1 - d3)) * ab).sqrnorm();
+  const P cp = p - c;
+  const double d5 = ab | cp, d6 = ac | cp;
+  if (d6 >= 0 && d5 <= d6) return cp.sqrnorm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return (ap - (d2 / (d2 - d6)) * ac).sqrnorm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return (bp - w * (c - b)).sqrnorm();
+  }
+  const double denom = 1 / (va + vb + vc);
+  const double v = vb * denom, w = vc * denom;
+  return (ap - v * ab - w * ac).sqrnorm();
+}
+
 // An indexed binary min-heap of edges keyed by (cost, edge index): ties break by index, so the
 // order is deterministic.
 class EdgeHeap {
@@ -173,9 +198,29 @@ struct RegionSimplifier::Impl {
       return true;
     }();
     (void)silenced;
-    for (const Tri& t : region.triangles) {
+    std::vector<int> face_of(region.triangles.size(), -1);  // input triangle -> face, or -1
+    for (std::size_t i = 0; i < region.triangles.size(); ++i) {
+      const Tri& t = region.triangles[i];
       const FH f = mesh.add_face(VH(t[0]), VH(t[1]), VH(t[2]));
-      if (!f.is_valid()) unlinked.push_back(t);
+      if (f.is_valid()) {
+        face_of[i] = f.idx();
+      } else {
+        face_of[i] = -2 - static_cast<int>(unlinked.size());
+        unlinked.push_back(t);
+      }
+    }
+    if (opt.max_error > 0) {
+      face_head.assign(mesh.n_faces(), -1);
+      pt_next.assign(region.points.size(), -1);
+      for (std::size_t i = 0; i < region.points.size(); ++i) {
+        const int f = face_of[region.point_face[i]];
+        if (f >= 0) {
+          pt_next[i] = face_head[f];
+          face_head[f] = static_cast<int>(i);
+        } else {
+          fixed_points.push_back({static_cast<int>(i), -2 - f});  // on a face that never changes
+        }
+      }
     }
     // Faces OpenMesh refuses (a configuration it cannot link) pass through as they are; their
     // corners stay put so that they still fit.
@@ -251,6 +296,21 @@ struct RegionSimplifier::Impl {
   }
 
   // --- checks ----------------------------------------------------------------------------------
+
+  // OpenMesh's link condition lets a tetrahedron collapse into two triangles back to back: every
+  // vertex must keep at least three neighbours. Collapsing edge (from, to) of faces (to, from,
+  // c) and (from, to, d) joins the two ends' neighbours less the two shared, and takes one from c
+  // and from d.
+  bool valences_ok(HH h) const {
+    const HH o = mesh.opposite_halfedge_handle(h);
+    const VH from = mesh.to_vertex_handle(o), to = mesh.to_vertex_handle(h);
+    if (mesh.valence(from) + mesh.valence(to) < 7) return false;
+    for (HH x : {h, o}) {
+      if (mesh.is_boundary(x)) continue;
+      if (mesh.valence(mesh.to_vertex_handle(mesh.next_halfedge_handle(x))) < 4) return false;
+    }
+    return true;
+  }
 
   // Locked vertices may be shared with other regions, which cannot see this one's edges: a new
   // edge between two of them could meet the same new edge made on the other side, and the two
@@ -338,7 +398,8 @@ struct RegionSimplifier::Impl {
   // normals.
   double collapse_worst(const Candidate& c) {
     const VH from = mesh.from_vertex_handle(c.h), to = mesh.to_vertex_handle(c.h);
-    if (!mesh.is_collapse_ok(c.h) || !locked_links_ok(from, to) || !collapse_copies_ok(from, to)) {
+    if (!mesh.is_collapse_ok(c.h) || !valences_ok(c.h) || !locked_links_ok(from, to) ||
+        !collapse_copies_ok(from, to)) {
       ++stats.refused_topology;
       return -1;
     }
@@ -359,6 +420,7 @@ struct RegionSimplifier::Impl {
     for (HH h : mesh.voh_range(from)) heap->remove(mesh.edge_handle(h).idx());
     mesh.collapse(c.h);
     mesh.set_point(to, c.x);
+    if (opt.max_error > 0) reattach(new_faces);  // as collapse_fits left them
     // The edges at `to` have new costs; the edges one ring further keep theirs but have new
     // neighbourhoods, so those that were refused (out of the heap) get another chance.
     for (HH h : mesh.voh_range(to)) update_edge(mesh.edge_handle(h));
@@ -367,6 +429,91 @@ struct RegionSimplifier::Impl {
         const EH e = mesh.edge_handle(h);
         if (!heap->contains(e.idx())) update_edge(e);
       }
+  }
+
+  // --- the error bound --------------------------------------------------------------------------
+
+  struct NewFace {
+    FH f;  // the face that will hold this triangle (for flips: decided after the flip)
+    P a, b, c;
+  };
+
+  // Whether every point attached to `old_faces` lies within the bound of one of `tris`; if so,
+  // `best` gets, per point gathered in `gathered`, the index of its nearest new triangle.
+  bool points_fit(std::initializer_list<VH> fans, const std::vector<NewFace>& tris) {
+    gathered.clear();
+    faces_seen.clear();
+    for (VH v : fans)
+      for (FH f : mesh.vf_range(v)) faces_seen.push_back(f.idx());
+    return points_fit_faces(tris);
+  }
+
+  bool points_fit_faces(const std::vector<NewFace>& tris) {
+    std::sort(faces_seen.begin(), faces_seen.end());
+    faces_seen.erase(std::unique(faces_seen.begin(), faces_seen.end()), faces_seen.end());
+    gathered.clear();
+    for (int f : faces_seen)
+      for (int i = face_head[f]; i >= 0; i = pt_next[i]) gathered.push_back(i);
+    best.resize(gathered.size());
+    const double bound = opt.max_error * opt.max_error;
+    for (std::size_t k = 0; k < gathered.size(); ++k) {
+      const P pt = vec(region.points[gathered[k]]);
+      double d = HUGE_VAL;
+      for (std::size_t t = 0; t < tris.size(); ++t) {
+        const double dt = point_triangle_distance2(pt, tris[t].a, tris[t].b, tris[t].c);
+        if (dt < d) {
+          d = dt;
+          best[k] = static_cast<int>(t);
+        }
+      }
+      if (d > bound) return false;
+    }
+    return true;
+  }
+
+  // After the change: the gathered points move to the faces points_fit chose.
+  void reattach(const std::vector<NewFace>& tris) {
+    for (int f : faces_seen) face_head[f] = -1;
+    for (std::size_t k = 0; k < gathered.size(); ++k) {
+      const int f = tris[best[k]].f.idx();
+      pt_next[gathered[k]] = face_head[f];
+      face_head[f] = gathered[k];
+    }
+  }
+
+  // The faces around v (and `other`) after both move to x, skipping f0 and f1.
+  void faces_after_move(VH v, VH other, const P& x, FH f0, FH f1, std::vector<NewFace>& out) {
+    for (VH w : {v, other})
+      for (FH f : mesh.vf_range(w)) {
+        if (f == f0 || f == f1) continue;
+        if (w == other && face_has(f, v)) continue;  // listed from v already
+        P p[3];
+        int k = 0;
+        for (VH u : mesh.fv_range(f)) p[k++] = (u == v || u == other) ? x : mesh.point(u);
+        out.push_back({f, p[0], p[1], p[2]});
+      }
+  }
+
+  bool face_has(FH f, VH v) const {
+    for (VH u : mesh.fv_range(f))
+      if (u == v) return true;
+    return false;
+  }
+
+  bool collapse_fits(const Candidate& c) {
+    if (opt.max_error <= 0) return true;
+    const VH from = mesh.from_vertex_handle(c.h), to = mesh.to_vertex_handle(c.h);
+    new_faces.clear();
+    faces_after_move(from, to, c.x, mesh.face_handle(c.h), mesh.opposite_face_handle(c.h),
+                     new_faces);
+    return !new_faces.empty() && points_fit({from, to}, new_faces);
+  }
+
+  bool move_fits(VH v, const P& x) {
+    if (opt.max_error <= 0) return true;
+    new_faces.clear();
+    faces_after_move(v, v, x, FH(), FH(), new_faces);
+    return points_fit({v}, new_faces);
   }
 
   // --- 1. collapses ----------------------------------------------------------------------------
@@ -387,6 +534,10 @@ struct RegionSimplifier::Impl {
           ++stats.refused_shape;
           continue;
         }
+      }
+      if (!collapse_fits(c)) {
+        ++stats.refused_error;
+        continue;
       }
       apply_collapse(c);
       ++stats.collapses;
@@ -420,11 +571,20 @@ struct RegionSimplifier::Impl {
     const double after = std::min(quality(pc, pd, pa), quality(pd, pc, pb));
     if (after <= before + margin) return false;
     const bool flat = (n0 | n1) >= opt.flip_max_angle * l0 * l1;
-    const double gap = (!flat || opt.max_error > 0) ? segment_gap(pa, pb, pc, pd) : 0.0;
-    if (!flat && !(reach > 0 && gap <= reach)) return false;
-    if (opt.max_error > 0 && gap > opt.max_error) return false;
+    if (!flat && !(reach > 0 && segment_gap(pa, pb, pc, pd) <= reach)) return false;
     if (!copies_ok(c, d)) return false;
+    const FH fa = mesh.face_handle(h0), fb = mesh.face_handle(h1);
+    if (opt.max_error > 0) {
+      new_faces.assign({{fa, pc, pd, pa}, {fb, pd, pc, pb}});
+      faces_seen.assign({fa.idx(), fb.idx()});
+      if (!points_fit_faces(new_faces)) return false;
+    }
     mesh.flip(e);
+    if (opt.max_error > 0) {
+      // OpenMesh keeps both face handles; find which now holds (c, d, a).
+      if (!face_has(fa, a)) std::swap(new_faces[0].f, new_faces[1].f);
+      reattach(new_faces);
+    }
     ++stats.flips;
     return true;
   }
@@ -480,7 +640,9 @@ struct RegionSimplifier::Impl {
       if (qx > q(arr(p)) + opt.relax_tolerance * q.trace() * edge2) continue;
       const double after = worst_after_move(v, v, x);
       if (after < 0 || after < worst_around(v)) continue;
+      if (!move_fits(v, x)) continue;
       mesh.set_point(v, x);
+      if (opt.max_error > 0) reattach(new_faces);
       ++stats.relaxed;
     }
   }
@@ -521,8 +683,9 @@ struct RegionSimplifier::Impl {
         }
       }
     }
-    if (best_worst <= initial) return false;
+    if (best_worst <= initial || !move_fits(v, best)) return false;
     mesh.set_point(v, best);
+    if (opt.max_error > 0) reattach(new_faces);
     return true;
   }
 
@@ -548,7 +711,7 @@ struct RegionSimplifier::Impl {
     if (candidate(shortest, c) && within_error(c)) {
       const VH from = mesh.from_vertex_handle(c.h), to = mesh.to_vertex_handle(c.h);
       const double before = std::min(worst_around(from), worst_around(to));
-      if (collapse_worst(c) > before) {
+      if (collapse_worst(c) > before && collapse_fits(c)) {
         apply_collapse(c);
         ++stats.collapses;
         return true;
@@ -598,14 +761,30 @@ struct RegionSimplifier::Impl {
       }
       return static_cast<std::uint32_t>(index[v]);
     };
+    std::vector<std::uint32_t> face_index(mesh.n_faces(), 0);
     for (FH f : mesh.faces()) {
       if (mesh.status(f).deleted()) continue;
+      face_index[f.idx()] = static_cast<std::uint32_t>(out.triangles.size());
       Tri t;
       int k = 0;
       for (VH v : mesh.fv_range(f)) t[k++] = keep(v.idx());
       out.triangles.push_back(t);
     }
+    const auto linked = static_cast<std::uint32_t>(out.triangles.size());
     for (const Tri& t : unlinked) out.triangles.push_back({keep(t[0]), keep(t[1]), keep(t[2])});
+    if (opt.max_error > 0) {
+      for (FH f : mesh.faces()) {
+        if (mesh.status(f).deleted()) continue;
+        for (int i = face_head[f.idx()]; i >= 0; i = pt_next[i]) {
+          out.points.push_back(region.points[i]);
+          out.point_face.push_back(face_index[f.idx()]);
+        }
+      }
+      for (const auto& [i, u] : fixed_points) {
+        out.points.push_back(region.points[i]);
+        out.point_face.push_back(linked + static_cast<std::uint32_t>(u));
+      }
+    }
     return out;
   }
 
@@ -618,6 +797,12 @@ struct RegionSimplifier::Impl {
   std::uint64_t live_faces = 0;
   RegionStats stats;
   mutable std::vector<std::pair<std::int32_t, int>> pairs;
+  // The error bound: per face the first of its points, per point the next; points on unlinked
+  // faces (index into `unlinked`) never move. Scratch for a change being checked.
+  std::vector<int> face_head, pt_next;
+  std::vector<std::pair<int, int>> fixed_points;
+  std::vector<NewFace> new_faces;
+  std::vector<int> faces_seen, gathered, best;
 };
 
 RegionSimplifier::RegionSimplifier(Region region, const RegionOptions& options) {

@@ -5,6 +5,12 @@
 // and the copies made to pass non-manifold input are locked: they neither move nor disappear, so
 // regions fit back together exactly. A region's work is sequential and deterministic.
 //
+// With an error bound, every change (collapse, flip, move) is checked against points of the input
+// surface: each is attached to a face, and a change must leave every point of the faces it
+// replaces within the bound of one of the faces that replace them (it is then attached there).
+// So every input vertex and face centroid stays within the bound of the result, and every result
+// vertex within the bound of the planes it stands for.
+//
 // Algorithm (on an OpenMesh triangle mesh; OpenMesh's link-condition check decides which
 // collapses keep the surface a manifold of the same topology):
 //   1. Collapse. An indexed heap orders edges by the plane-quadric error of their best position
@@ -75,11 +81,15 @@ struct Region {
                                      // group >= 0 (never neighbours); -1 elsewhere
   std::vector<std::uint32_t> id;     // the caller's identity of each vertex, handed back
   std::vector<Tri> triangles;
+  // With an error bound: points of the input surface (its vertices and face centroids), each
+  // with the index of the face it is attached to, which it must stay within max_error of.
+  std::vector<Vec3d> points;
+  std::vector<std::uint32_t> point_face;
 };
 
 struct RegionStats {
   std::uint64_t collapses = 0, flips = 0, relaxed = 0, cleanup = 0;
-  std::uint64_t refused_topology = 0, refused_shape = 0, refused_normal = 0;
+  std::uint64_t refused_topology = 0, refused_shape = 0, refused_normal = 0, refused_error = 0;
   std::uint64_t unlinked_faces = 0;  // faces OpenMesh could not link, passed through unchanged
 };
 

@@ -1,0 +1,126 @@
+// `isotile simplify`, `extract --simplify` and `quality --reference` as scripts use them: the
+// stats keys, exit codes and one-line errors, and no output left behind by a failure.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "cli_support.h"
+#include "core/mesh_io.h"
+#include "core/mesh_topology.h"
+
+namespace {
+
+using Result = isotile::testing::CliResult;
+using isotile::testing::slurp;
+
+class CliSimplify : public isotile::testing::CliTest {};
+
+TEST_F(CliSimplify, SimplifyWritesTheMeshAndItsStats) {
+  ASSERT_EQ(run("extract field:torus:48 --method macet -q -o t.ply").code, 0);
+  const Result r = run("simplify t.ply s.ply --ratio 0.2 --stats - -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(r.err.empty()) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  for (const char* key :
+       {"triangles", "vertices", "triangles_before", "radius_ratio_min", "radius_ratio_mean",
+        "radius_ratio_q001", "radius_ratio_q01", "boundary_edges", "nonmanifold_edges", "euler",
+        "watertight", "simplify_hausdorff_mean", "simplify_hausdorff_max", "seconds",
+        "peak_rss_mb"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  for (const char* key : {"read", "simplify", "write", "total"})
+    EXPECT_TRUE(j["seconds"].contains(key)) << key;
+  const isotile::Mesh in = isotile::read_mesh(dir_ / "t.ply");
+  const isotile::Mesh out = isotile::read_mesh(dir_ / "s.ply");
+  EXPECT_EQ(j["triangles_before"].get<std::size_t>(), in.triangles.size());
+  EXPECT_EQ(j["triangles"].get<std::size_t>(), out.triangles.size());
+  EXPECT_NEAR(j["triangles"].get<double>(), 0.2 * in.triangles.size(),
+              0.02 * 0.2 * in.triangles.size());
+  EXPECT_EQ(j["euler"], 0);
+  EXPECT_EQ(j["closed"], true);
+  EXPECT_GT(j["simplify_hausdorff_max"].get<double>(), 0.0);
+  EXPECT_LT(j["simplify_hausdorff_max"].get<double>(), 1.0);
+  EXPECT_GE(j["radius_ratio_min"].get<double>(), 0.2);
+}
+
+TEST_F(CliSimplify, FacesAndMaxErrorTargets) {
+  ASSERT_EQ(run("extract field:sphere:40 -q -o s.ply").code, 0);
+  Result r = run("simplify s.ply f.obj --faces 500 --stats - -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NEAR(nlohmann::json::parse(r.out)["triangles"].get<double>(), 500, 10);
+  r = run("simplify s.ply e.off --max-error 0.3 --stats - -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_LE(j["simplify_hausdorff_max"].get<double>(), 0.3);
+  EXPECT_LT(j["triangles"].get<double>(), j["triangles_before"].get<double>() / 2);
+}
+
+TEST_F(CliSimplify, BadArgumentsFailWithOneLineAndNoOutput) {
+  ASSERT_EQ(run("extract field:sphere:20 -q -o s.ply").code, 0);
+  struct Case {
+    const char* args;
+    int code;
+    const char* says;
+  };
+  for (const Case& c : {
+           Case{"simplify s.ply o.ply", 1, "exactly one of --ratio, --faces and --max-error"},
+           Case{"simplify s.ply o.ply --ratio 0.5 --faces 10", 2, "excludes"},
+           Case{"simplify s.ply o.ply --ratio 1.5", 1, "ratio must be in (0, 1]"},
+           Case{"simplify s.ply o.ply --max-error -1", 1, "exactly one of"},
+           Case{"simplify missing.ply o.ply --ratio 0.5", 1, "missing.ply"},
+           Case{"simplify s.ply o.xyz --ratio 0.5", 1, ".xyz"},
+           Case{"simplify s.ply --ratio 0.5", 2, "OUT"},
+           Case{"extract field:sphere:20 -o o.ply --simplify 0", 2, "simplify"},
+           Case{"extract field:sphere:20 -o o.ply --simplify 2", 2, "simplify"},
+           Case{"extract field:sphere:20 -o o.ply --method dc --quads --simplify 0.5", 1,
+                "drop --quads"},
+       }) {
+    const Result r = run(std::string(c.args) + " -q");
+    EXPECT_EQ(r.code, c.code) << c.args << ": " << r.err;
+    EXPECT_NE(r.err.find(c.says), std::string::npos) << c.args << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "o.ply")) << c.args;
+  }
+  EXPECT_EQ(stray_files({"s.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(CliSimplify, ExtractSimplifyReportsBothMeshesInVoxels) {
+  // Spacing 2 along z: the distances in the stats are in voxels, the mesh in world units.
+  const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+  const Result r = run("extract " + nucleon +
+                       " --iso 60.5 --method macet --spacing 1,1,2 --simplify 0.1 -o g.ply "
+                       "--stats - -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["simplify"], 0.1);
+  const double before = j["triangles_before"].get<double>();
+  EXPECT_NEAR(j["triangles"].get<double>(), 0.1 * before, 0.02 * 0.1 * before);
+  EXPECT_EQ(j["watertight"], true);
+  EXPECT_EQ(j["nonmanifold_edges"], 0);
+  EXPECT_TRUE(j["seconds"].contains("simplify"));
+  EXPECT_LT(j["simplify_hausdorff_max"].get<double>(), 1.5);
+  EXPECT_GT(j["simplify_hausdorff_mean"].get<double>(), 0.0);
+  const isotile::Mesh m = isotile::read_mesh(dir_ / "g.ply");
+  EXPECT_EQ(m.triangles.size(), j["triangles"].get<std::size_t>());
+  float zmax = 0;
+  for (const auto& p : m.positions) zmax = std::max(zmax, p[2]);
+  EXPECT_GT(zmax, 41.0f);  // world units: past the 41 voxels along z
+}
+
+TEST_F(CliSimplify, QualityMeasuresTheDistanceToAReference) {
+  ASSERT_EQ(run("extract field:sphere:40 -q -o a.ply").code, 0);
+  ASSERT_EQ(run("simplify a.ply b.ply --ratio 0.1 -q").code, 0);
+  Result r = run("quality b.ply --reference a.ply --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_GT(j["hausdorff_max"].get<double>(), 0.0);
+  EXPECT_GE(j["hausdorff_max"].get<double>(), j["hausdorff_mean"].get<double>());
+  EXPECT_EQ(j["hausdorff_reference_to_mesh"]["samples"].get<std::uint64_t>(),
+            isotile::read_mesh(dir_ / "a.ply").positions.size() + 200000);
+  r = run("quality a.ply --reference a.ply --json");
+  EXPECT_LT(nlohmann::json::parse(r.out)["hausdorff_max"].get<double>(), 1e-9);
+  r = run("quality a.ply --reference nothere.ply");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("nothere.ply"), std::string::npos);
+}
+
+}  // namespace
