@@ -17,6 +17,7 @@
 #include "core/brick_sites.h"
 #include "core/errors.h"
 #include "core/volume_io.h"
+#include "tiler/brick_reader.h"
 
 namespace isotile {
 
@@ -25,27 +26,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
-}
-
-constexpr int kQualityBins = 1 << 16;
-
-// Samples a brick reads: its cells' samples grown by `halo`, clipped to the volume.
-Box3 grow(const Box3& cells, int halo, const Index3& n) {
-  Box3 r;
-  for (int a = 0; a < 3; ++a) {
-    r.lo[a] = std::max<std::int64_t>(cells.lo[a] - halo, 0);
-    r.hi[a] = std::min<std::int64_t>(cells.hi[a] + 1 + halo, n[a]);
-  }
-  return r;
-}
-
-// The samples a brick owns: its cells' lower corners, plus the volume's last sample plane for the
-// last brick along an axis.
-Box3 owned_samples(const Box3& cells, const Index3& n) {
-  Box3 s = cells;
-  for (int a = 0; a < 3; ++a)
-    if (cells.hi[a] == n[a] - 1) s.hi[a] = n[a];
-  return s;
 }
 
 bool contains(const Box3& b, std::int64_t x, std::int64_t y, std::int64_t z) {
@@ -86,48 +66,6 @@ char* put_le(char* p, T v) {
   return p + sizeof(T);
 }
 
-struct QualityAccumulator {
-  std::uint64_t triangles = 0, degenerate = 0;
-  double min = 1, max = 0, sum = 0;
-  std::vector<std::uint64_t> bins = std::vector<std::uint64_t>(kQualityBins);
-
-  void add(double q) {
-    ++triangles;
-    if (q < 1e-6) ++degenerate;
-    min = std::min(min, q);
-    max = std::max(max, q);
-    sum += q;
-    ++bins[std::min(kQualityBins - 1, static_cast<int>(q * kQualityBins))];
-  }
-  // Lower-tail quantile p, at the upper edge of the bin that reaches it.
-  double quantile(double p) const {
-    const auto need = static_cast<std::uint64_t>(std::ceil(p * static_cast<double>(triangles)));
-    std::uint64_t seen = 0;
-    for (int i = 0; i < kQualityBins; ++i) {
-      seen += bins[i];
-      if (seen >= std::max<std::uint64_t>(need, 1))
-        return std::min(max, static_cast<double>(i + 1) / kQualityBins);
-    }
-    return max;
-  }
-  QualityStats stats() const {
-    QualityStats s;
-    s.triangles = triangles;
-    s.degenerate = degenerate;
-    if (triangles == 0) return s;
-    s.min = min;
-    s.max = max;
-    s.mean = sum / static_cast<double>(triangles);
-    s.q001 = quantile(0.001);
-    s.q01 = quantile(0.01);
-    s.median = quantile(0.5);
-    for (int i = 0; i < kQualityBins; ++i)
-      s.histogram[std::min<std::size_t>(19, static_cast<std::size_t>(i) * 20 / kQualityBins)] +=
-          bins[i];
-    return s;
-  }
-};
-
 // The two triangles of a quad along the diagonal whose worse triangle is better (0-2 on ties), as
 // core/mesh_quality.h counts them.
 std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
@@ -140,21 +78,16 @@ std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& 
 class TiledExtraction {
  public:
   TiledExtraction(VolumeSource& source, const TiledOptions& options)
-      : src_(source), opt_(options), n_(source.dims) {
-    const ExtractOptions& ex = options.extract;
+      : src_(source), opt_(options), n_(source.dims), reader_(source, options.extract) {
     if (options.format != MeshFormat::Ply && options.format != MeshFormat::Stl)
       throw InputError(
           "streamed (--memory) output is binary PLY or STL: their records have a "
           "fixed size, so each brick can be written in place");
-    ex_ = ex;
-    // Every backend keeps the brick contract (the GL paths were checked against the CPU's brick
-    // output), so bricks may run anywhere; resolve once, so all bricks run on the same one.
-    ex_.backend = resolve_backend(ex_);
-    layout_ =
-        ex.method == Method::DualContouring ? SiteLayout::CellVertices : SiteLayout::EdgeVertices;
-    quads_ = ex.method == Method::DualContouring && ex.keep_quads;
-    face_mult_ = ex.method == Method::DualContouring && !ex.keep_quads ? 2 : 1;
-    halo_ = extract_halo(ex_);
+    ex_ = reader_.extract();
+    layout_ = reader_.layout();
+    quads_ = ex_.method == Method::DualContouring && ex_.keep_quads;
+    face_mult_ = ex_.method == Method::DualContouring && !ex_.keep_quads ? 2 : 1;
+    halo_ = reader_.halo();
   }
 
   TiledResult run(const std::filesystem::path& output) {
@@ -162,16 +95,7 @@ class TiledExtraction {
     for (int a = 0; a < 3; ++a)
       if (n_[a] < 2) return write_empty(output, result);
 
-    BrickPlanOptions po;
-    po.memory = opt_.memory;
-    po.halo = halo_;
-    po.sample_bytes = sample_bytes();
-    po.slabs = src_.sequential();
-    po.fixed_bytes = kept_bytes();
-    po.state_bytes_per_sample = state_bytes_per_sample();
-    po.volume_dims = n_;
-    src_.set_overlap(2 * static_cast<std::int64_t>(halo_) + 1);
-    plan_ = plan_bricks(n_, po);
+    plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
     result.plan = plan_;
     result.backend = ex_.backend;
     const std::int64_t bricks = plan_.total();
@@ -232,7 +156,7 @@ class TiledExtraction {
       const Box3 cells = plan_.cells(b);
       // The real output is known now: cut a brick whose output would overflow the budget into
       // thinner z-slices (same columns, so the segment tables still apply).
-      std::uint64_t bytes = estimate(cells, brick_vertices[b], brick_faces[b]);
+      std::uint64_t bytes = reader_.estimate(cells, brick_vertices[b], brick_faces[b]);
       std::int64_t slices = 1;
       if (bytes > opt_.memory && !src_.sequential()) {
         slices = std::min<std::int64_t>(
@@ -245,8 +169,8 @@ class TiledExtraction {
         extract_brick(part, vseg, fseg, file, quality);
         ++result.bricks_extracted;
       }
-      bytes = estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
-                       brick_faces[b] / static_cast<std::uint64_t>(slices));
+      bytes = reader_.estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
+                               brick_faces[b] / static_cast<std::uint64_t>(slices));
       result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
       if (opt_.progress) opt_.progress("extract", b + 1, bricks);
     }
@@ -265,13 +189,7 @@ class TiledExtraction {
     return result;
   }
 
-  VolumeView read(const Box3& box) {
-    const std::size_t bytes =
-        checked_volume_bytes(src_.type, {box.extent(0), box.extent(1), box.extent(2)});
-    if (buffer_.size() < bytes) buffer_.resize(bytes);
-    src_.read(box, buffer_.data());
-    return brick_view(src_, box, buffer_.data());
-  }
+  VolumeView read(const Box3& box) { return reader_.read(box); }
 
   // Copies one brick's row counts into the table; returns their sum.
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
@@ -285,38 +203,6 @@ class TiledExtraction {
       sum += rc.count[r] * mult;
     }
     return sum;
-  }
-
-  // A sequential source keeps the planes that consecutive slabs grown by the halo share.
-  std::uint64_t kept_bytes() const {
-    if (!src_.sequential()) return 0;
-    return static_cast<std::uint64_t>(2 * halo_ + 1) * static_cast<std::uint64_t>(n_[0]) *
-           static_cast<std::uint64_t>(n_[1]) * scalar_size(src_.type);
-  }
-
-  // Macet displaces every grid vertex of its view, halo included, and keeps about 70 bytes per
-  // crossing for it (peak RSS in core over MC's: bonsai +24 MB for 335k crossings, engine +18.5
-  // MB for 293k). 4 bytes per sample allows for a crossing at 5.7% of the samples (engine 3.5%,
-  // bonsai 2%). The other extractors' state is per cell with output, in output_bytes_per_cell.
-  double state_bytes_per_sample() const { return ex_.method == Method::Macet ? 4.0 : 0.0; }
-
-  // Bytes per sample of a brick's view: the samples, and Macet's relaxed copy (doubles).
-  std::size_t sample_bytes() const {
-    return scalar_size(src_.type) + (ex_.method == Method::Macet && ex_.macet_relax > 0 ? 8 : 0);
-  }
-
-  // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
-  // and the records being written.
-  std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces) const {
-    const Box3 r = grow(cells, halo_, n_);
-    const double samples = static_cast<double>(r.extent(0)) * static_cast<double>(r.extent(1)) *
-                           static_cast<double>(r.extent(2));
-    const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
-    const double per_face = 16.0 + 4 * 8;
-    return static_cast<std::uint64_t>(
-        samples * (static_cast<double>(sample_bytes()) + 0.125 + state_bytes_per_sample()) +
-        static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face +
-        static_cast<double>(kept_bytes()));
   }
 
   void extract_brick(const Box3& cells, const SegmentTable& vseg, const SegmentTable& fseg,
@@ -471,8 +357,8 @@ class TiledExtraction {
   bool quads_ = false;
   std::uint64_t face_mult_ = 1;
   int halo_ = 2;
+  BrickReader reader_;
   BrickPlan plan_;
-  std::vector<char> buffer_;
   bool index64_ = false;
   std::uint64_t vertex_base_ = 0, vertex_bytes_ = 12, face_base_ = 0, face_bytes_ = 13;
   std::uint64_t written_faces_ = 0;

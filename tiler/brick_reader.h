@@ -1,0 +1,72 @@
+// What the tiler's passes share: the halo and the bytes a method needs per brick, the planner's
+// options for them, a buffer the bricks' samples are read into, and a streamed radius-ratio
+// accumulator. Internal to the tiler (tiled_extract.cpp, tiled_simplify.cpp).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/brick_sites.h"
+#include "core/extract.h"
+#include "core/mesh_quality.h"
+#include "tiler/brick_plan.h"
+#include "tiler/volume_source.h"
+
+namespace isotile {
+
+// Samples a brick reads: its cells' samples grown by `halo`, clipped to the volume.
+Box3 grow(const Box3& cells, int halo, const Index3& n);
+
+// The samples a brick owns: its cells' lower corners, plus the volume's last sample plane for the
+// last brick along an axis.
+Box3 owned_samples(const Box3& cells, const Index3& n);
+
+class BrickReader {
+ public:
+  // Resolves the backend once, so that every brick runs on the same one.
+  BrickReader(VolumeSource& source, const ExtractOptions& extract);
+
+  const ExtractOptions& extract() const { return ex_; }
+  SiteLayout layout() const { return layout_; }
+  int halo() const { return halo_; }
+  const Index3& dims() const { return n_; }
+  VolumeSource& source() { return src_; }
+
+  // The planner's options for `memory` bytes a brick; tells the source how much consecutive
+  // bricks overlap.
+  BrickPlanOptions plan_options(std::uint64_t memory);
+  // A view of global box `box`, read into the shared buffer (valid until the next read).
+  VolumeView read(const Box3& box);
+  // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
+  // the records being written, and `extra_per_face` bytes for each face (a later stage's).
+  std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
+                         double extra_per_face = 0) const;
+
+ private:
+  std::uint64_t kept_bytes() const;
+  double state_bytes_per_sample() const;
+  std::size_t sample_bytes() const;
+
+  VolumeSource& src_;
+  ExtractOptions ex_;
+  Index3 n_;
+  SiteLayout layout_ = SiteLayout::EdgeVertices;
+  int halo_ = 2;
+  std::vector<char> buffer_;
+};
+
+// Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
+// exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5).
+class QualityAccumulator {
+ public:
+  void add(double q);
+  QualityStats stats() const;
+
+ private:
+  double quantile(double p) const;
+  std::uint64_t triangles_ = 0, degenerate_ = 0;
+  double min_ = 1, max_ = 0, sum_ = 0;
+  std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(1 << 16);
+};
+
+}  // namespace isotile
