@@ -33,7 +33,8 @@ struct WorkMesh {
   std::vector<std::uint8_t> locked;  // split copies (the boundary is found in each region)
   std::vector<std::int32_t> group;   // split copies: their input vertex; -1 elsewhere; or empty
   std::vector<Tri> triangles;
-  std::vector<Vec3d> points;  // with an error bound: see Region::points
+  std::vector<std::uint32_t> origin;  // the input vertex each vertex is (copies: their original)
+  std::vector<Vec3d> points;          // with an error bound: see Region::points
   std::vector<std::uint32_t> point_face;
 };
 
@@ -160,6 +161,7 @@ void split_fans(WorkMesh& m, SimplifyStats& stats) {
   m.group.assign(nv + copies, -1);
   m.locked.resize(nv + copies, 0);
   m.positions.resize(nv + copies);
+  m.origin.resize(nv + copies);
   for (std::size_t v = 0; v < nv; ++v) {
     if (fans[v] <= 1) continue;
     ++stats.split_vertices;
@@ -168,6 +170,7 @@ void split_fans(WorkMesh& m, SimplifyStats& stats) {
     for (std::uint32_t k = 1; k < fans[v]; ++k) {
       const std::size_t c = nv + first_copy[v] + k - 1;
       m.positions[c] = m.positions[v];
+      m.origin[c] = m.origin[v];
       m.group[c] = static_cast<std::int32_t>(v);
       m.locked[c] = 1;
     }
@@ -501,6 +504,7 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     m.positions.push_back(pos[v]);
     m.quadrics.push_back(quad[v]);
     m.locked.push_back(in.locked[v]);
+    m.origin.push_back(in.origin[v]);
     if (!in.group.empty()) m.group.push_back(in.group[v]);
   }
   for (const Region& reg : out) {
@@ -515,8 +519,16 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
   return res;
 }
 
+// The simplified mesh: surviving vertices with the input vertex each one is, and their quadrics.
+struct Welded {
+  std::vector<Vec3d> positions;
+  std::vector<Quadric> quadrics;
+  std::vector<std::uint32_t> origin;
+  std::vector<Tri> triangles;
+};
+
 // Copies of a split vertex become one vertex again (they never moved); unreferenced vertices go.
-Mesh weld(const WorkMesh& m) {
+Welded weld(const WorkMesh& m) {
   const std::size_t nv = m.positions.size();
   std::vector<std::uint32_t> rep(nv);
   std::iota(rep.begin(), rep.end(), 0u);
@@ -535,14 +547,18 @@ Mesh weld(const WorkMesh& m) {
   for (const Tri& t : m.triangles)
     for (std::uint32_t v : t) used[rep[v]] = 1;
   std::vector<std::uint32_t> index(nv, 0);
-  Mesh out;
+  Welded out;
   for (std::size_t v = 0; v < nv; ++v)
     if (used[v]) {
       index[v] = static_cast<std::uint32_t>(out.positions.size());
-      const Vec3d& p = m.positions[v];
-      out.positions.push_back(
-          {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])});
+      out.positions.push_back(m.positions[v]);
+      out.origin.push_back(m.origin[v]);
+      out.quadrics.push_back(m.quadrics.empty() ? Quadric{} : m.quadrics[v]);
     }
+  // A welded vertex's quadric: the copies' planes together.
+  if (!m.group.empty() && !m.quadrics.empty())
+    for (std::size_t v = 0; v < nv; ++v)
+      if (rep[v] != v && used[rep[v]]) out.quadrics[index[rep[v]]] += m.quadrics[v];
   out.triangles.reserve(m.triangles.size());
   for (const Tri& t : m.triangles)
     out.triangles.push_back({index[rep[t[0]]], index[rep[t[1]]], index[rep[t[2]]]});
@@ -567,13 +583,62 @@ void area_weighted_normals(Mesh& mesh) {
   }
 }
 
-}  // namespace
+// Splits, computes quadrics (unless the caller gave them) and error points, and runs the two
+// passes toward `target` faces (0: the error bound alone).
+Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& options,
+                     SimplifyStats& stats) {
+  const std::uint64_t faces = m.triangles.size();
+  const bool carried = !m.quadrics.empty();
+  if (m.origin.empty()) {
+    m.origin.resize(m.positions.size());
+    std::iota(m.origin.begin(), m.origin.end(), 0u);
+  }
+  if (faces == 0 || (target >= faces && options.max_error == 0)) {
+    if (!carried) initial_quadrics(m);
+    return weld(m);
+  }
+  split_fans(m, stats);
+  if (carried) {
+    // Copies made by the split start with no planes; weld() adds theirs to the original's.
+    m.quadrics.resize(m.positions.size());
+  } else {
+    initial_quadrics(m);
+  }
+  if (options.max_error > 0) error_points(m);
+  RegionOptions ro;
+  ro.max_error = options.max_error;
+  ro.min_quality = options.min_quality;
+  ro.relax_passes = options.relax ? ro.relax_passes : 0;
+  const Grid grid = plan_grid(m);
+  // The first pass leaves its seams (vertices shared by regions) for the second, whose regions
+  // straddle them; it stops short of the target by what those seams are expected to hold, so
+  // that the region interiors are not simplified past where the whole mesh would be.
+  std::uint64_t target1 = target;
+  if (target > 0) {
+    const double keep = static_cast<double>(target) / static_cast<double>(faces);
+    const double held = kSeamFaces * static_cast<double>(count_shared(m, grid)) * (1 - keep);
+    target1 = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
+  }
+  PassResult p1 = run_pass(m, grid, target1, ro, "collapse", options, stats);
+  stats.regions += p1.regions;
+  PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, "seams", options, stats);
+  stats.seam_regions += p2.regions;
+  return weld(p2.mesh);
+}
 
-Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* stats_out) {
+void check_options(const SimplifyOptions& options) {
   if (!(options.ratio >= 0) || options.ratio > 1)
     throw InputError("simplify: the ratio must be in (0, 1], got " + std::to_string(options.ratio));
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw InputError("simplify: the maximum error must be a finite number >= 0");
+  if (!(options.min_quality >= 0) || options.min_quality > 1)
+    throw InputError("simplify: the quality floor must be in [0, 1]");
+}
+
+}  // namespace
+
+Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* stats_out) {
+  check_options(options);
   if (options.ratio == 0 && options.faces == 0 && options.max_error == 0)
     throw InputError("simplify: give a ratio, a face count or a maximum error");
   check_face_indices(mesh);
@@ -601,38 +666,59 @@ Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* s
   if (options.faces > 0 || options.ratio > 0) target = std::max<std::uint64_t>(target, 1);
   stats.target_faces = target;
 
+  const Welded w = simplify_work(std::move(m), target, options, stats);
   Mesh result;
-  if (faces > 0 && (target == 0 || target < faces || options.max_error > 0)) {
-    split_fans(m, stats);
-    initial_quadrics(m);
-    if (options.max_error > 0) error_points(m);
-    RegionOptions ro;
-    ro.max_error = options.max_error;
-    ro.min_quality = options.min_quality;
-    ro.relax_passes = options.relax ? ro.relax_passes : 0;
-    const Grid grid = plan_grid(m);
-    // The first pass leaves its seams (vertices shared by regions) for the second, whose regions
-    // straddle them; it stops short of the target by what those seams are expected to hold, so
-    // that the region interiors are not simplified past where the whole mesh would be.
-    std::uint64_t target1 = target;
-    if (target > 0) {
-      const double keep = static_cast<double>(target) / static_cast<double>(faces);
-      const double held = kSeamFaces * static_cast<double>(count_shared(m, grid)) * (1 - keep);
-      target1 = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
-    }
-    PassResult p1 = run_pass(m, grid, target1, ro, "collapse", options, stats);
-    stats.regions = p1.regions;
-    PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, "seams", options, stats);
-    stats.seam_regions = p2.regions;
-    result = weld(p2.mesh);
-  } else {
-    result = weld(m);
-  }
+  result.positions.reserve(w.positions.size());
+  for (const Vec3d& p : w.positions)
+    result.positions.push_back(
+        {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])});
+  result.triangles = w.triangles;
   if (!mesh.normals.empty()) area_weighted_normals(result);
   stats.faces_after = result.triangles.size();
   stats.vertices_after = result.positions.size();
   if (stats_out) *stats_out = stats;
   return result;
+}
+
+MeshPiece simplify_piece(MeshPiece piece, std::uint64_t target_faces,
+                         const SimplifyOptions& options, SimplifyStats* stats) {
+  check_options(options);
+  if (piece.keys.size() != piece.positions.size() ||
+      (!piece.quadrics.empty() && piece.quadrics.size() != piece.positions.size()))
+    throw InputError("simplify_piece: keys and quadrics must match the vertices");
+  for (const Tri& t : piece.triangles)
+    for (std::uint32_t v : t)
+      if (v >= piece.positions.size())
+        throw InputError("simplify_piece: a face references a vertex past the end");
+  SimplifyStats local;
+  WorkMesh m;
+  m.positions = std::move(piece.positions);
+  m.quadrics = std::move(piece.quadrics);
+  m.triangles = std::move(piece.triangles);
+  m.locked.assign(m.positions.size(), 0);
+  local.faces_before = m.triangles.size();
+  const Welded w = simplify_work(std::move(m), target_faces, options, local);
+  MeshPiece out;
+  out.positions = w.positions;
+  out.quadrics = w.quadrics;
+  out.triangles = w.triangles;
+  out.keys.reserve(w.origin.size());
+  for (std::uint32_t o : w.origin) out.keys.push_back(piece.keys[o]);
+  if (stats) {
+    stats->faces_before += local.faces_before;
+    stats->faces_after += out.triangles.size();
+    stats->regions += local.regions;
+    stats->seam_regions += local.seam_regions;
+    stats->boundary_vertices += local.boundary_vertices;
+    stats->split_vertices += local.split_vertices;
+    stats->split_copies += local.split_copies;
+    stats->unlinked_faces += local.unlinked_faces;
+    stats->collapses += local.collapses;
+    stats->flips += local.flips;
+    stats->relaxed += local.relaxed;
+    stats->cleanup += local.cleanup;
+  }
+  return out;
 }
 
 }  // namespace isotile

@@ -26,8 +26,10 @@
 #include <cstdint>
 #include <functional>
 #include <string_view>
+#include <vector>
 
 #include "core/mesh.h"
+#include "core/quadric.h"
 
 namespace isotile {
 
@@ -64,5 +66,21 @@ struct SimplifyStats {
 // Throws InputError for options without a target, a ratio outside (0, 1], or invalid face
 // indices.
 Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* stats = nullptr);
+
+// Piece by piece, for meshes that are never whole in memory (the out-of-core tiler). A piece's
+// boundary vertices are locked (its boundary is where it meets other pieces, or the mesh's own
+// border), vertices keep the caller's keys, and each carries its quadric, so that a later pass
+// over pieces joined at their seams (vertices with equal keys) goes on where this one stopped.
+struct MeshPiece {
+  std::vector<Vec3d> positions;
+  std::vector<Quadric> quadrics;    // per vertex; empty: computed from the faces
+  std::vector<std::uint64_t> keys;  // per vertex: the caller's identity, handed back
+  std::vector<Tri> triangles;
+};
+
+// Simplifies toward `target_faces` (0: only options.max_error stops it; options.ratio and
+// options.faces are not used). Adds to *stats. Throws InputError for inconsistent arrays.
+MeshPiece simplify_piece(MeshPiece piece, std::uint64_t target_faces,
+                         const SimplifyOptions& options, SimplifyStats* stats = nullptr);
 
 }  // namespace isotile

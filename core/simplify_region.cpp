@@ -11,23 +11,6 @@
 
 namespace isotile {
 
-Quadric Quadric::plane(const Vec3d& n, double d) {
-  Quadric q;
-  q.m = {n[0] * n[0], n[0] * n[1], n[0] * n[2], n[1] * n[1], n[1] * n[2],
-         n[2] * n[2], n[0] * d,    n[1] * d,    n[2] * d,    d * d};
-  return q;
-}
-
-double Quadric::operator()(const Vec3d& x) const {
-  const auto& a = m;
-  const double ax0 = a[0] * x[0] + a[1] * x[1] + a[2] * x[2];
-  const double ax1 = a[1] * x[0] + a[3] * x[1] + a[4] * x[2];
-  const double ax2 = a[2] * x[0] + a[4] * x[1] + a[5] * x[2];
-  const double e =
-      x[0] * ax0 + x[1] * ax1 + x[2] * ax2 + 2 * (a[6] * x[0] + a[7] * x[1] + a[8] * x[2]) + a[9];
-  return std::max(e, 0.0);  // rounding can take a sum of squares slightly below zero
-}
-
 namespace {
 
 struct Traits : OpenMesh::DefaultTraits {

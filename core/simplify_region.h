@@ -42,23 +42,10 @@
 #include <vector>
 
 #include "core/mesh.h"
+#include "core/quadric.h"
 #include "core/volume.h"
 
 namespace isotile {
-
-// A symmetric 4x4 plane quadric, stored as its upper triangle: sum over planes n.x + d = 0 of
-// (n.x + d)^2 = x^T A x + 2 b.x + c.
-struct Quadric {
-  std::array<double, 10> m{};  // a00 a01 a02 a11 a12 a22 b0 b1 b2 c
-
-  static Quadric plane(const Vec3d& n, double d);
-  Quadric& operator+=(const Quadric& o) {
-    for (int i = 0; i < 10; ++i) m[i] += o.m[i];
-    return *this;
-  }
-  double operator()(const Vec3d& x) const;             // sum of squared distances to the planes
-  double trace() const { return m[0] + m[3] + m[5]; }  // planes summed (unit normals)
-};
 
 struct RegionOptions {
   double max_error = 0;            // > 0: no vertex strays further from its planes
