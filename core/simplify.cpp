@@ -586,7 +586,7 @@ void area_weighted_normals(Mesh& mesh) {
 // Splits, computes quadrics (unless the caller gave them) and error points, and runs the two
 // passes toward `target` faces (0: the error bound alone).
 Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& options,
-                     SimplifyStats& stats) {
+                     SimplifyStats& stats, bool boundary_allowance = false) {
   const std::uint64_t faces = m.triangles.size();
   const bool carried = !m.quadrics.empty();
   if (m.origin.empty()) {
@@ -597,7 +597,16 @@ Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& op
     if (!carried) initial_quadrics(m);
     return weld(m);
   }
+  const std::uint64_t boundary_before = stats.boundary_vertices;
   split_fans(m, stats);
+  if (boundary_allowance && target > 0 && target < faces) {
+    // The piece's boundary is locked here and simplified by a later pass: aim above the target
+    // by what it holds, as the first pass below does for its own seams.
+    const double keep = static_cast<double>(target) / static_cast<double>(faces);
+    const double held =
+        kSeamFaces * static_cast<double>(stats.boundary_vertices - boundary_before) * (1 - keep);
+    target = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
+  }
   if (carried) {
     // Copies made by the split start with no planes; weld() adds theirs to the original's.
     m.quadrics.resize(m.positions.size());
@@ -681,7 +690,8 @@ Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* s
 }
 
 MeshPiece simplify_piece(MeshPiece piece, std::uint64_t target_faces,
-                         const SimplifyOptions& options, SimplifyStats* stats) {
+                         const SimplifyOptions& options, SimplifyStats* stats,
+                         bool boundary_allowance) {
   check_options(options);
   if (piece.keys.size() != piece.positions.size() ||
       (!piece.quadrics.empty() && piece.quadrics.size() != piece.positions.size()))
@@ -697,7 +707,7 @@ MeshPiece simplify_piece(MeshPiece piece, std::uint64_t target_faces,
   m.triangles = std::move(piece.triangles);
   m.locked.assign(m.positions.size(), 0);
   local.faces_before = m.triangles.size();
-  const Welded w = simplify_work(std::move(m), target_faces, options, local);
+  const Welded w = simplify_work(std::move(m), target_faces, options, local, boundary_allowance);
   MeshPiece out;
   out.positions = w.positions;
   out.quadrics = w.quadrics;

@@ -79,8 +79,12 @@ struct MeshPiece {
 };
 
 // Simplifies toward `target_faces` (0: only options.max_error stops it; options.ratio and
-// options.faces are not used). Adds to *stats. Throws InputError for inconsistent arrays.
+// options.faces are not used). With `boundary_allowance`, it stops short of the target by what
+// its locked boundary is expected to hold (about 4 faces per boundary vertex, scaled by the
+// reduction), for a later pass over the seams to take. Adds to *stats. Throws InputError for
+// inconsistent arrays.
 MeshPiece simplify_piece(MeshPiece piece, std::uint64_t target_faces,
-                         const SimplifyOptions& options, SimplifyStats* stats = nullptr);
+                         const SimplifyOptions& options, SimplifyStats* stats = nullptr,
+                         bool boundary_allowance = false);
 
 }  // namespace isotile

@@ -106,6 +106,31 @@ TEST_F(CliSimplify, ExtractSimplifyReportsBothMeshesInVoxels) {
   EXPECT_GT(zmax, 41.0f);  // world units: past the 41 voxels along z
 }
 
+TEST_F(CliSimplify, OutOfCoreReportsItsBrickPlan) {
+  const Result r = run(
+      "extract field:torus:64 --method macet --memory 2MiB --simplify 0.1 -o t.ply --stats - -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["simplify"], 0.1);
+  EXPECT_GT(j["bricks"].get<int>(), 1);
+  ASSERT_TRUE(j.contains("simplify_brick_plan"));
+  EXPECT_EQ(j["simplify_brick_plan"]["brick_grid"], j["brick_grid"]);
+  EXPECT_EQ(j["simplify_brick_plan"]["seam_grid"].size(), 3u);
+  const double before = j["triangles_before"].get<double>();
+  EXPECT_NEAR(j["triangles"].get<double>(), 0.1 * before, 0.02 * 0.1 * before);
+  EXPECT_TRUE(j["simplify_hausdorff_max"].is_null());
+  EXPECT_TRUE(j["seconds"].contains("seams"));
+  const isotile::Mesh m = isotile::read_mesh(dir_ / "t.ply");
+  EXPECT_EQ(m.triangles.size(), j["triangles"].get<std::size_t>());
+  EXPECT_TRUE(isotile::mesh_topology(m).closed);
+  // The budget is part of the plan: another budget, another (valid) result.
+  ASSERT_EQ(
+      run("extract field:torus:64 --method macet --memory 64MiB --simplify 0.1 -o u.ply -q").code,
+      0);
+  EXPECT_TRUE(isotile::mesh_topology(isotile::read_mesh(dir_ / "u.ply")).closed);
+  EXPECT_EQ(stray_files({"t.ply", "u.ply"}), std::vector<std::string>{});
+}
+
 TEST_F(CliSimplify, QualityMeasuresTheDistanceToAReference) {
   ASSERT_EQ(run("extract field:sphere:40 -q -o a.ply").code, 0);
   ASSERT_EQ(run("simplify a.ply b.ply --ratio 0.1 -q").code, 0);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/volume_io.h"
+
 namespace isotile {
 
 Box3 grow(const Box3& cells, int halo, const Index3& n) {
@@ -50,6 +52,16 @@ VolumeView BrickReader::read(const Box3& box) {
   if (buffer_.size() < bytes) buffer_.resize(bytes);
   src_.read(box, buffer_.data());
   return brick_view(src_, box, buffer_.data());
+}
+
+BrickCounts BrickReader::count(const Box3& cells) {
+  const Box3 owned = owned_samples(cells, n_);
+  const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
+  Box3 read_box = grow(cells, 0, n_);
+  for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1, n_[a]);
+  const VolumeView view = read(read_box);
+  check_finite(view, src_.name);
+  return count_brick_sites(view, ex_.iso, layout_, vbox, cells);
 }
 
 // A sequential source keeps the planes that consecutive slabs grown by the halo share.

@@ -37,6 +37,9 @@ class BrickReader {
   BrickPlanOptions plan_options(std::uint64_t memory);
   // A view of global box `box`, read into the shared buffer (valid until the next read).
   VolumeView read(const Box3& box);
+  // Reads what counting a brick needs (its owned samples and one more) and counts the vertices
+  // and faces it owns; InputError for NaN or infinite samples.
+  BrickCounts count(const Box3& cells);
   // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
   // the records being written, and `extra_per_face` bytes for each face (a later stage's).
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,

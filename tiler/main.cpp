@@ -300,6 +300,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
   to.extract = options;
   to.memory = parse_memory_size(args.memory);
   to.format = format;
+  to.simplify = args.simplify;
   if (args.ascii) throw InputError("--memory writes binary PLY or STL; drop --ascii");
   if (args.check_intersections)
     throw InputError(
@@ -318,10 +319,13 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
            std::string(scalar_name(source->type)) + ") brick by brick within " + args.memory +
            (source->in_memory() ? " (this format is read whole first)" : ""));
   const TiledResult r = extract_tiled(*source, to, args.output);
-  progress("extracted " + std::to_string(r.triangles) + " triangles, " +
-           std::to_string(r.vertices) + " vertices in " + std::to_string(r.plan.total()) +
-           " bricks of " + std::to_string(r.plan.brick[0]) + "x" + std::to_string(r.plan.brick[1]) +
-           "x" + std::to_string(r.plan.brick[2]) + " cells");
+  progress(
+      (to.simplify < 1
+           ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
+           : std::string("extracted ")) +
+      std::to_string(r.triangles) + " triangles, " + std::to_string(r.vertices) + " vertices in " +
+      std::to_string(r.plan.total()) + " bricks of " + std::to_string(r.plan.brick[0]) + "x" +
+      std::to_string(r.plan.brick[1]) + "x" + std::to_string(r.plan.brick[2]) + " cells");
   if (!args.stats.empty()) {
     json j;
     j["input"] = args.in.input;
@@ -351,6 +355,22 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["seconds"] = {{"count", r.seconds_count},
                     {"extract", r.seconds_extract},
                     {"total", seconds_since(t_total)}};
+    if (to.simplify < 1) {
+      j["simplify"] = to.simplify;
+      j["triangles_before"] = r.triangles_extracted;
+      j["simplify_target_faces"] = r.simplify.target_faces;
+      // Bricks are simplified with their seams locked, then the seams in cells of a grid
+      // shifted by half a brick: the result depends on this plan (docs/simplify.md).
+      j["simplify_brick_plan"] = {
+          {"brick_cells", r.plan.brick}, {"brick_grid", r.plan.count}, {"seam_grid", r.seam_cells}};
+      j["simplify_collapses"] = r.simplify.collapses;
+      j["simplify_split_vertices"] = r.simplify.split_vertices;
+      j["simplify_unlinked_faces"] = r.simplify.unlinked_faces;
+      // The distance needs the extracted and the simplified mesh whole.
+      j["simplify_hausdorff_mean"] = nullptr;
+      j["simplify_hausdorff_max"] = nullptr;
+      j["seconds"]["seams"] = r.seconds_seams;
+    }
     j["peak_rss_mb"] = peak_rss_mb();
     write_text(args.stats, j.dump(2) + "\n");
   }

@@ -18,6 +18,7 @@
 #include "core/errors.h"
 #include "core/volume_io.h"
 #include "tiler/brick_reader.h"
+#include "tiler/tiled_simplify.h"
 
 namespace isotile {
 
@@ -108,13 +109,7 @@ class TiledExtraction {
     src_.rewind();
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
-      const Box3 owned = owned_samples(cells, n_);
-      const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
-      Box3 read_box = grow(cells, 0, n_);
-      for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1, n_[a]);
-      const VolumeView view = read(read_box);
-      check_finite(view, src_.name);
-      const BrickCounts counts = count_brick_sites(view, ex_.iso, layout_, vbox, cells);
+      const BrickCounts counts = reader_.count(cells);
       const std::int64_t xb = plan_.owner(0, cells.lo[0]);
       brick_vertices[b] = scatter(counts.vertices, xb, 1, vseg);
       brick_faces[b] = scatter(counts.faces, xb, face_mult_, fseg);
@@ -368,6 +363,7 @@ class TiledExtraction {
 
 TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
                           const std::filesystem::path& output) {
+  if (options.simplify < 1) return extract_tiled_simplified(source, options, output);
   return TiledExtraction(source, options).run(output);
 }
 

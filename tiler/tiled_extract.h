@@ -20,6 +20,7 @@
 #include "core/extract.h"
 #include "core/mesh_io.h"
 #include "core/mesh_quality.h"
+#include "core/simplify.h"
 #include "tiler/brick_plan.h"
 #include "tiler/volume_source.h"
 
@@ -30,6 +31,9 @@ struct TiledOptions {
   std::uint64_t memory = 0;             // budget for one brick's working set, bytes
   MeshFormat format = MeshFormat::Ply;  // binary PLY or binary STL (fixed-size records)
   bool quality = true;                  // accumulate radius-ratio statistics of the faces
+  // Below 1: simplify to this fraction of the faces, brick by brick (tiler/tiled_simplify.h).
+  double simplify = 1;
+  double simplify_min_quality = 0.3;  // SimplifyOptions::min_quality
   // Called after each brick of each pass ("count", "extract").
   std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
 };
@@ -41,6 +45,12 @@ struct TiledResult {
   std::uint64_t vertices = 0, faces = 0, triangles = 0;
   std::uint64_t largest_brick_bytes = 0;  // estimated working set of the largest brick run
   double seconds_count = 0, seconds_extract = 0;
+  // With simplification: faces as extracted (triangles), the simplifier's counts, the seam
+  // cells (a grid shifted by half a brick) and the time of the seam pass.
+  std::uint64_t triangles_extracted = 0;
+  SimplifyStats simplify;
+  Index3 seam_cells{0, 0, 0};
+  double seconds_seams = 0;
   // Radius ratio over all triangles (quads as their two triangles along the better diagonal).
   // min, mean and degenerate are exact; q001, q01 and median come from a histogram of 2^16 bins
   // (within 1.6e-5).
@@ -48,7 +58,9 @@ struct TiledResult {
 };
 
 // Throws InputError for a budget too small or a format without fixed-size records, and whatever
-// the source, the extractor or the writer throws; the output is then left untouched.
+// the source, the extractor or the writer throws; the output is then left untouched. With
+// options.simplify < 1 the work goes to extract_tiled_simplified (tiler/tiled_simplify.h),
+// whose output is not identical to an in-core run's.
 TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
                           const std::filesystem::path& output);
 

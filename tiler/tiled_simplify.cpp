@@ -1,0 +1,635 @@
+#include "tiler/tiled_simplify.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "core/atomic_file.h"
+#include "core/errors.h"
+#include "tiler/brick_reader.h"
+
+namespace isotile {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// Simplification's working set per face of a piece (OpenMesh's mesh, the heap, quadrics, the
+// copies between passes): `isotile simplify` on bonsai's Macet mesh peaks 235 MB above reading
+// its 670k faces alone (350 bytes a face); a brick also holds its extraction (counted apart).
+constexpr double kSimplifyBytesPerFace = 450;
+// A seam cell also holds its octants as read, the piece built from them and the piece handed
+// back, and its reduction is milder (more faces survive per face read): gyroid 512 at 256 MiB
+// peaked at 750 bytes a face of its largest cell, bonsai at 32 MiB at 560.
+constexpr double kSeamBytesPerFace = 800;
+
+// A file for intermediate data, unlinked from the start: it vanishes however the process ends.
+class ScratchFile {
+ public:
+  explicit ScratchFile(const std::filesystem::path& dir) {
+    const std::string d = dir.empty() ? "." : dir.string();
+    fd_ = ::open(d.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (fd_ < 0) {  // file systems without O_TMPFILE: create, then unlink at once
+      std::string name = d + "/.isotile-scratch-XXXXXX";
+      fd_ = ::mkstemp(name.data());
+      if (fd_ >= 0) ::unlink(name.c_str());
+    }
+    if (fd_ < 0)
+      throw IoError("cannot create a scratch file in " + d + ": " + std::strerror(errno));
+  }
+  ~ScratchFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  ScratchFile(const ScratchFile&) = delete;
+  ScratchFile& operator=(const ScratchFile&) = delete;
+
+  std::uint64_t size() const { return size_; }
+  void append(const void* data, std::size_t n) {
+    const char* p = static_cast<const char*>(data);
+    while (n > 0) {
+      const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(size_));
+      if (w <= 0) {
+        if (w < 0 && errno == EINTR) continue;
+        throw IoError(std::string("cannot write a scratch file beside the output: ") +
+                      std::strerror(errno));
+      }
+      p += w;
+      n -= static_cast<std::size_t>(w);
+      size_ += static_cast<std::uint64_t>(w);
+    }
+  }
+  void read(std::uint64_t offset, void* out, std::size_t n) const {
+    char* p = static_cast<char*>(out);
+    while (n > 0) {
+      const ssize_t r = ::pread(fd_, p, n, static_cast<off_t>(offset));
+      if (r <= 0) {
+        if (r < 0 && errno == EINTR) continue;
+        throw IoError(std::string("cannot read back a scratch file: ") +
+                      (r == 0 ? "it is shorter than written" : std::strerror(errno)));
+      }
+      p += r;
+      n -= static_cast<std::size_t>(r);
+      offset += static_cast<std::uint64_t>(r);
+    }
+  }
+
+ private:
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+};
+
+// One octant of one simplified brick (or slice) in the spill file: its vertices (with keys and
+// quadrics) and its faces in chunk-local indices.
+struct SpillVertex {
+  std::uint64_t key;
+  Vec3d position;
+  Quadric quadric;
+};
+struct Chunk {
+  std::uint64_t offset = 0;
+  std::uint32_t vertices = 0, faces = 0;
+};
+
+template <class T>
+char* put_le(char* p, T v) {
+  static_assert(std::endian::native == std::endian::little, "little-endian hosts only");
+  std::memcpy(p, &v, sizeof(T));
+  return p + sizeof(T);
+}
+
+// The vertices of a piece that lie on its boundary (an edge with one face): the ones it may
+// share with other pieces.
+std::vector<char> boundary_vertices(const MeshPiece& p) {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+  edges.reserve(3 * p.triangles.size());
+  for (const Tri& t : p.triangles)
+    for (int i = 0; i < 3; ++i) edges.emplace_back(std::minmax(t[i], t[(i + 1) % 3]));
+  std::sort(edges.begin(), edges.end());
+  std::vector<char> on(p.positions.size(), 0);
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i + 1;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i == 1) on[edges[i].first] = on[edges[i].second] = 1;
+    i = j;
+  }
+  return on;
+}
+
+class TiledSimplification {
+ public:
+  TiledSimplification(VolumeSource& source, const TiledOptions& options,
+                      const std::filesystem::path& output)
+      : src_(source),
+        opt_(options),
+        n_(source.dims),
+        reader_(source, options.extract),
+        dir_(output.parent_path()),
+        chunks_spill_(dir_),
+        vertices_(dir_),
+        faces_(dir_) {
+    if (options.format != MeshFormat::Ply && options.format != MeshFormat::Stl)
+      throw InputError("streamed (--memory) output is binary PLY or STL");
+    if (!(options.simplify > 0)) throw InputError("the simplification ratio must be in (0, 1]");
+    if (options.extract.method == Method::DualContouring && options.extract.keep_quads)
+      throw InputError("simplification gives triangles; drop --quads");
+    normals_ = options.extract.normals;
+    sopt_.ratio = options.simplify;
+    sopt_.min_quality = options.simplify_min_quality;
+  }
+
+  TiledResult run(const std::filesystem::path& output) {
+    TiledResult result;
+    for (int a = 0; a < 3; ++a)
+      if (n_[a] < 2) {
+        write_mesh(Mesh{}, output, {.format = opt_.format, .ascii = false});
+        return result;
+      }
+    // 1. Count, to know each brick's size before extracting it. Simplifying a brick needs far
+    // more memory per face than extracting it, and faces per cell vary from volume to volume:
+    // plan once, count, and plan again with the densest z-plane's faces per cell (what a slab
+    // of a gzip'd source must hold), counting again if the bricks changed.
+    auto t0 = Clock::now();
+    BrickPlanOptions po = reader_.plan_options(opt_.memory);
+    plan_ = plan_bricks(n_, po);
+    std::vector<std::uint64_t> brick_vertices, brick_faces, plane_faces;
+    count(brick_vertices, brick_faces, plane_faces);
+    const double plane_cells = static_cast<double>(n_[0] - 1) * static_cast<double>(n_[1] - 1);
+    const double densest =
+        static_cast<double>(*std::max_element(plane_faces.begin(), plane_faces.end())) /
+        plane_cells;
+    po.output_bytes_per_cell += densest * kSimplifyBytesPerFace;
+    const BrickPlan replanned = plan_bricks(n_, po);
+    if (replanned.brick != plan_.brick) {
+      plan_ = replanned;
+      count(brick_vertices, brick_faces, plane_faces);
+    }
+    result.plan = plan_;
+    result.backend = reader_.extract().backend;
+    const std::int64_t bricks = plan_.total();
+    result.seconds_count = since(t0);
+
+    // 2. Extract and simplify each brick; spill its octants.
+    t0 = Clock::now();
+    chunks_.assign(static_cast<std::size_t>(bricks) * 8, {});
+    src_.rewind();
+    for (std::int64_t b = 0; b < bricks; ++b) {
+      const Box3 cells = plan_.cells(b);
+      std::uint64_t bytes =
+          reader_.estimate(cells, brick_vertices[b], brick_faces[b], kSimplifyBytesPerFace);
+      std::int64_t slices = 1;
+      if (bytes > opt_.memory && !src_.sequential()) {
+        slices = std::min<std::int64_t>(
+            cells.extent(2), static_cast<std::int64_t>((bytes + opt_.memory - 1) / opt_.memory));
+        // An even count would cut at the brick's middle plane, which is also a seam cell's
+        // boundary: that cut would stay locked in both passes.
+        if (slices % 2 == 0 && slices < cells.extent(2)) ++slices;
+      }
+      for (std::int64_t s = 0; s < slices; ++s) {
+        Box3 part = cells;
+        part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
+        part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
+        if (part.extent(2) == 0) continue;
+        simplify_brick(b, part, result);
+        ++result.bricks_extracted;
+      }
+      bytes = reader_.estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
+                               brick_faces[b] / static_cast<std::uint64_t>(slices),
+                               kSimplifyBytesPerFace);
+      result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
+      if (opt_.progress) opt_.progress("simplify", b + 1, bricks);
+    }
+    result.seconds_extract = since(t0);
+
+    // 3. The seams: cells of the grid shifted by half a brick.
+    t0 = Clock::now();
+    const std::uint64_t target = std::max<std::uint64_t>(
+        1, static_cast<std::uint64_t>(
+               std::llround(opt_.simplify * static_cast<double>(result.triangles_extracted))));
+    plan_seams(result);
+    const std::int64_t cells = result.seam_cells[0] * result.seam_cells[1] * result.seam_cells[2];
+    keep_ = spilled_faces_ > 0
+                ? std::min(1.0, static_cast<double>(target) / static_cast<double>(spilled_faces_))
+                : 1.0;
+    for (std::int64_t c = 0; c < cells; ++c) {
+      seam_cell(c, result);
+      if (opt_.progress) opt_.progress("seams", c + 1, cells);
+    }
+    result.seconds_seams = since(t0);
+
+    // 4. The file.
+    assemble(output, result);
+    result.quality = quality_.stats();
+    result.simplify.target_faces = target;
+    result.simplify.faces_before = result.triangles_extracted;
+    result.simplify.faces_after = result.triangles;
+    return result;
+  }
+
+ private:
+  // Vertices and faces of every brick of the plan, and faces per z-plane of cells.
+  void count(std::vector<std::uint64_t>& vertices, std::vector<std::uint64_t>& faces,
+             std::vector<std::uint64_t>& plane_faces) {
+    const std::int64_t bricks = plan_.total();
+    vertices.assign(static_cast<std::size_t>(bricks), 0);
+    faces.assign(static_cast<std::size_t>(bricks), 0);
+    plane_faces.assign(static_cast<std::size_t>(n_[2] - 1), 0);
+    const std::uint64_t mult = reader_.extract().method == Method::DualContouring ? 2 : 1;
+    src_.rewind();
+    for (std::int64_t b = 0; b < bricks; ++b) {
+      const BrickCounts c = reader_.count(plan_.cells(b));
+      for (std::uint32_t x : c.vertices.count) vertices[b] += x;
+      const std::int64_t ny = c.faces.box.extent(1);
+      for (std::size_t r = 0; r < c.faces.count.size(); ++r) {
+        faces[b] += c.faces.count[r] * mult;
+        plane_faces[c.faces.box.lo[2] + static_cast<std::int64_t>(r) / ny] +=
+            c.faces.count[r] * mult;
+      }
+      if (opt_.progress) opt_.progress("count", b + 1, bricks);
+    }
+  }
+
+  // Index coordinates of a world position (the grid's, where bricks are boxes of cells).
+  double grid_coord(const Vec3d& p, int a) const {
+    return (p[a] - src_.origin[a]) / src_.spacing[a];
+  }
+
+  void simplify_brick(std::int64_t b, const Box3& part, TiledResult& result) {
+    const VolumeView view = reader_.read(grow(part, reader_.halo(), n_));
+    ExtractOptions o = reader_.extract();
+    o.cells = part;
+    o.normals = false;  // the simplified mesh gets area-weighted normals
+    Mesh mesh = extract(view, o);
+    std::vector<std::uint64_t> keys = brick_vertex_keys(view, o.iso, reader_.layout(), part);
+    if (keys.size() != mesh.positions.size())
+      throw Error("brick contract broken: the extractor listed " +
+                  std::to_string(mesh.positions.size()) + " vertices where " +
+                  std::to_string(keys.size()) + " were expected");
+    MeshPiece piece;
+    piece.keys = std::move(keys);
+    piece.positions.reserve(mesh.positions.size());
+    for (const Vec3f& p : mesh.positions) piece.positions.push_back({p[0], p[1], p[2]});
+    piece.triangles = std::move(mesh.triangles);
+    result.triangles_extracted += piece.triangles.size();
+    const auto target = static_cast<std::uint64_t>(
+        std::llround(opt_.simplify * static_cast<double>(piece.triangles.size())));
+    const MeshPiece out = simplify_piece(std::move(piece), std::max<std::uint64_t>(target, 1),
+                                         sopt_, &result.simplify, /*boundary_allowance=*/true);
+    spill(b, out);
+  }
+
+  // Cuts a simplified brick into its octants (by face centroid against the brick's middle
+  // planes) and appends each to the spill file.
+  void spill(std::int64_t b, const MeshPiece& p) {
+    const Box3 cells = plan_.cells(b);
+    std::vector<std::uint8_t> octant(p.triangles.size());
+    for (std::size_t f = 0; f < p.triangles.size(); ++f) {
+      int o = 0;
+      for (int a = 0; a < 3; ++a) {
+        double c = 0;
+        for (std::uint32_t v : p.triangles[f]) c += grid_coord(p.positions[v], a) / 3;
+        if (c >= 0.5 * static_cast<double>(cells.lo[a] + cells.hi[a])) o |= 1 << a;
+      }
+      octant[f] = static_cast<std::uint8_t>(o);
+    }
+    std::vector<std::int64_t> local(p.positions.size());
+    std::vector<SpillVertex> vs;
+    std::vector<Tri> fs;
+    for (int o = 0; o < 8; ++o) {
+      std::fill(local.begin(), local.end(), -1);
+      vs.clear();
+      fs.clear();
+      for (std::size_t f = 0; f < p.triangles.size(); ++f) {
+        if (octant[f] != o) continue;
+        Tri t;
+        for (int i = 0; i < 3; ++i) {
+          const std::uint32_t v = p.triangles[f][i];
+          if (local[v] < 0) {
+            local[v] = static_cast<std::int64_t>(vs.size());
+            vs.push_back({p.keys[v], p.positions[v], p.quadrics[v]});
+          }
+          t[i] = static_cast<std::uint32_t>(local[v]);
+        }
+        fs.push_back(t);
+      }
+      if (fs.empty()) continue;
+      Chunk c;
+      c.offset = chunks_spill_.size();
+      c.vertices = static_cast<std::uint32_t>(vs.size());
+      c.faces = static_cast<std::uint32_t>(fs.size());
+      chunks_spill_.append(vs.data(), vs.size() * sizeof(SpillVertex));
+      chunks_spill_.append(fs.data(), fs.size() * sizeof(Tri));
+      chunks_[static_cast<std::size_t>(b) * 8 + o].push_back(c);
+      spilled_faces_ += fs.size();
+    }
+  }
+
+  // The seam cells. A cell's boundaries are middle planes of bricks (half-brick h of an axis is
+  // the lower half of brick h / 2 when h is even), so every seam between two bricks lies inside
+  // a cell: cell j along an axis grouping k bricks holds half-bricks 2kj - 1 to 2k(j + 1) - 2.
+  // Starting from one brick per cell (the grid shifted by half a brick), cells grow, doubling
+  // along the axis with the most of them, as long as the largest still fits the budget with the
+  // faces the bricks left: fewer locked cell boundaries, fewer faces held back by them.
+  void plan_seams(TiledResult& result) {
+    Index3 k{1, 1, 1};
+    auto along = [&](int a, std::int64_t g) { return 2 * plan_.count[a] / (2 * g) + 1; };
+    auto largest = [&](const Index3& g) {
+      std::unordered_map<std::int64_t, std::uint64_t> faces;
+      for_each_octant(g, [&](std::int64_t cell, std::size_t slot) {
+        for (const Chunk& ch : chunks_[slot]) faces[cell] += ch.faces;
+      });
+      std::uint64_t most = 0;
+      for (const auto& [cell, f] : faces) most = std::max(most, f);
+      return most;
+    };
+    const auto fits = [&](const Index3& g) {
+      return static_cast<double>(largest(g)) * kSeamBytesPerFace <=
+             static_cast<double>(opt_.memory);
+    };
+    for (bool grew = true; grew;) {
+      grew = false;
+      int axes[3] = {0, 1, 2};
+      std::stable_sort(axes, axes + 3,
+                       [&](int x, int y) { return along(x, k[x]) > along(y, k[y]); });
+      for (int a : axes) {
+        if (along(a, k[a]) == 1) continue;
+        Index3 g = k;
+        g[a] *= 2;
+        if (fits(g)) {
+          k = g;
+          grew = true;
+          break;
+        }
+      }
+    }
+    seam_group_ = k;
+    for (int a = 0; a < 3; ++a) result.seam_cells[a] = along(a, k[a]);
+    cell_slots_.assign(static_cast<std::size_t>(result.seam_cells[0] * result.seam_cells[1] *
+                                                result.seam_cells[2]),
+                       {});
+    for_each_octant(k, [&](std::int64_t cell, std::size_t slot) {
+      if (!chunks_[slot].empty()) cell_slots_[static_cast<std::size_t>(cell)].push_back(slot);
+    });
+  }
+
+  // Calls f(cell, slot) for every octant slot (brick * 8 + octant) of the plan, with the seam
+  // cell it falls in when cells group `g` bricks per axis.
+  template <class F>
+  void for_each_octant(const Index3& g, F&& f) const {
+    Index3 cells;
+    for (int a = 0; a < 3; ++a) cells[a] = 2 * plan_.count[a] / (2 * g[a]) + 1;
+    for (std::int64_t b = 0; b < plan_.total(); ++b) {
+      const std::int64_t bi[3] = {b % plan_.count[0], b / plan_.count[0] % plan_.count[1],
+                                  b / plan_.count[0] / plan_.count[1]};
+      for (int o = 0; o < 8; ++o) {
+        std::int64_t j[3];
+        for (int a = 0; a < 3; ++a) j[a] = (2 * bi[a] + ((o >> a) & 1) + 1) / (2 * g[a]);
+        f((j[2] * cells[1] + j[1]) * cells[0] + j[0], static_cast<std::size_t>(b) * 8 + o);
+      }
+    }
+  }
+
+  // Gathers the octants of seam cell c, joins them at equal keys, simplifies and emits.
+  void seam_cell(std::int64_t c, TiledResult& result) {
+    std::vector<SpillVertex> vs;
+    std::vector<Tri> fs;
+    for (std::size_t slot : cell_slots_[static_cast<std::size_t>(c)]) {
+      for (const Chunk& ch : chunks_[slot]) {
+        const auto base = static_cast<std::uint32_t>(vs.size());
+        vs.resize(vs.size() + ch.vertices);
+        chunks_spill_.read(ch.offset, vs.data() + base, ch.vertices * sizeof(SpillVertex));
+        const std::size_t f0 = fs.size();
+        fs.resize(fs.size() + ch.faces);
+        chunks_spill_.read(ch.offset + ch.vertices * sizeof(SpillVertex), fs.data() + f0,
+                           ch.faces * sizeof(Tri));
+        for (std::size_t f = f0; f < fs.size(); ++f)
+          for (std::uint32_t& v : fs[f]) v += base;
+      }
+    }
+    if (fs.empty()) return;
+    // Join at equal keys: a seam vertex comes once from each brick (or slice) around it, each
+    // with the planes of that piece's faces.
+    std::vector<std::uint32_t> order(vs.size());
+    for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+      return vs[x].key < vs[y].key || (vs[x].key == vs[y].key && x < y);
+    });
+    MeshPiece piece;
+    std::vector<std::uint32_t> merged(vs.size());
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      const SpillVertex& v = vs[order[i]];
+      if (i == 0 || v.key != vs[order[i - 1]].key) {
+        piece.keys.push_back(v.key);
+        piece.positions.push_back(v.position);
+        piece.quadrics.push_back(v.quadric);
+      } else {
+        piece.quadrics.back() += v.quadric;
+      }
+      merged[order[i]] = static_cast<std::uint32_t>(piece.keys.size() - 1);
+    }
+    piece.triangles.reserve(fs.size());
+    for (const Tri& t : fs) piece.triangles.push_back({merged[t[0]], merged[t[1]], merged[t[2]]});
+    const std::uint64_t bytes =
+        static_cast<std::uint64_t>(kSeamBytesPerFace * static_cast<double>(fs.size()));
+    result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
+    vs = {};
+    fs = {};
+    // Each cell aims at its share, less what the cells before it kept beyond theirs (a cell
+    // whose locked boundary held faces back): the total lands on the target.
+    const double share = keep_ * static_cast<double>(piece.triangles.size());
+    const double aim = std::clamp(share - (kept_so_far_ - planned_so_far_), 0.8 * share,
+                                  static_cast<double>(piece.triangles.size()));
+    planned_so_far_ += share;
+    const std::uint64_t before = result.triangles;
+    emit(simplify_piece(std::move(piece),
+                        std::max<std::uint64_t>(static_cast<std::uint64_t>(std::llround(aim)), 1),
+                        sopt_, &result.simplify),
+         result);
+    kept_so_far_ += static_cast<double>(result.triangles - before);
+  }
+
+  // Streams a finished piece: vertices only it has go out now; vertices on its boundary (which
+  // other cells may share) are kept by key and written at the end.
+  void emit(const MeshPiece& p, TiledResult& result) {
+    const std::vector<char> shared = boundary_vertices(p);
+    std::vector<Vec3d> normal(normals_ ? p.positions.size() : 0, Vec3d{0, 0, 0});
+    for (const Tri& t : p.triangles) {
+      Vec3f q[3];
+      for (int i = 0; i < 3; ++i)
+        for (int a = 0; a < 3; ++a) q[i][a] = static_cast<float>(p.positions[t[i]][a]);
+      quality_.add(radius_ratio(q[0], q[1], q[2]));
+      if (normals_) {
+        const Vec3d& a = p.positions[t[0]];
+        const Vec3d& b = p.positions[t[1]];
+        const Vec3d& c = p.positions[t[2]];
+        const Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const Vec3d v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const Vec3d n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                      u[0] * v[1] - u[1] * v[0]};
+        for (std::uint32_t x : t)
+          for (int k = 0; k < 3; ++k) normal[x][k] += n[k];
+      }
+    }
+    // Final index of each vertex: interior ones in emission order; shared ones flagged with
+    // their rank among shared vertices, resolved when the file is assembled.
+    constexpr std::uint64_t kShared = std::uint64_t{1} << 63;
+    std::vector<std::uint64_t> index(p.positions.size());
+    std::vector<char> records;
+    const std::size_t vbytes = normals_ ? 24 : 12;
+    for (std::size_t v = 0; v < p.positions.size(); ++v) {
+      if (shared[v]) {
+        auto [it, fresh] = shared_index_.try_emplace(p.keys[v], shared_.size());
+        if (fresh) shared_.push_back({p.positions[v], {0, 0, 0}});
+        if (normals_)
+          for (int k = 0; k < 3; ++k) shared_[it->second].normal[k] += normal[v][k];
+        index[v] = kShared | it->second;
+      } else {
+        index[v] = interior_++;
+        records.resize(records.size() + vbytes);
+        char* r = records.data() + records.size() - vbytes;
+        for (double x : p.positions[v]) r = put_le(r, static_cast<float>(x));
+        if (normals_) {
+          const Vec3f n = unit(normal[v]);
+          for (float x : n) r = put_le(r, x);
+        }
+      }
+    }
+    if (!records.empty()) vertices_.append(records.data(), records.size());
+    if (opt_.format == MeshFormat::Stl) {
+      std::vector<char> tris(p.triangles.size() * kStlTriangleBytes);
+      char* r = tris.data();
+      for (const Tri& t : p.triangles) {
+        Vec3f q[3];
+        for (int i = 0; i < 3; ++i)
+          for (int a = 0; a < 3; ++a) q[i][a] = static_cast<float>(p.positions[t[i]][a]);
+        r = put_stl_triangle(r, q[0], q[1], q[2]);
+      }
+      faces_.append(tris.data(), tris.size());
+    } else {
+      std::vector<std::uint64_t> ids;
+      ids.reserve(3 * p.triangles.size());
+      for (const Tri& t : p.triangles)
+        for (std::uint32_t v : t) ids.push_back(index[v]);
+      faces_.append(ids.data(), ids.size() * sizeof(std::uint64_t));
+    }
+    result.triangles += p.triangles.size();
+  }
+
+  static Vec3f unit(const Vec3d& n) {
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(len > 0)) return {0, 0, 0};
+    return {static_cast<float>(n[0] / len), static_cast<float>(n[1] / len),
+            static_cast<float>(n[2] / len)};
+  }
+
+  // Copies `bytes` of a scratch file into the output, a block at a time.
+  static void copy(const ScratchFile& from, std::uint64_t bytes, AtomicFile& to) {
+    std::vector<char> block(static_cast<std::size_t>(std::min<std::uint64_t>(bytes, 1 << 20)));
+    for (std::uint64_t at = 0; at < bytes;) {
+      const std::size_t n =
+          static_cast<std::size_t>(std::min<std::uint64_t>(block.size(), bytes - at));
+      from.read(at, block.data(), n);
+      to.write(block.data(), n);
+      at += n;
+    }
+  }
+
+  void assemble(const std::filesystem::path& output, TiledResult& result) {
+    result.faces = result.triangles;
+    result.vertices = interior_ + shared_.size();
+    AtomicFile file(output);
+    if (opt_.format == MeshFormat::Stl) {
+      if (result.triangles > std::numeric_limits<std::uint32_t>::max())
+        throw InputError("binary STL holds at most 2^32 - 1 triangles; this mesh has " +
+                         std::to_string(result.triangles) + ": write PLY instead");
+      char header[kStlHeaderBytes];
+      stl_header(header, result.triangles);
+      file.write(header, sizeof(header));
+      copy(faces_, faces_.size(), file);
+      file.commit();
+      return;
+    }
+    const bool index64 = result.vertices > std::numeric_limits<std::uint32_t>::max();
+    const std::string header = ply_header(result.vertices, result.faces, normals_, false, index64);
+    file.write(header.data(), header.size());
+    copy(vertices_, vertices_.size(), file);
+    std::vector<char> records;
+    for (const SharedVertex& v : shared_) {
+      char buf[24];
+      char* r = buf;
+      for (double x : v.position) r = put_le(r, static_cast<float>(x));
+      if (normals_)
+        for (float x : unit(v.normal)) r = put_le(r, x);
+      records.insert(records.end(), buf, r);
+    }
+    if (!records.empty()) file.write(records.data(), records.size());
+    // Faces, with the shared vertices' ranks turned into indices after the interior ones.
+    constexpr std::uint64_t kShared = std::uint64_t{1} << 63;
+    const std::size_t per_block = 1 << 15;  // triangles
+    std::vector<std::uint64_t> ids(3 * per_block);
+    const std::size_t face_bytes = 1 + 3 * (index64 ? 8 : 4);
+    std::vector<char> out(per_block * face_bytes);
+    const std::uint64_t total = faces_.size() / (3 * sizeof(std::uint64_t));
+    for (std::uint64_t f = 0; f < total; f += per_block) {
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(per_block, total - f));
+      faces_.read(f * 3 * sizeof(std::uint64_t), ids.data(), n * 3 * sizeof(std::uint64_t));
+      char* r = out.data();
+      for (std::size_t i = 0; i < n; ++i) {
+        *r++ = 3;
+        for (int k = 0; k < 3; ++k) {
+          std::uint64_t id = ids[3 * i + k];
+          if (id & kShared) id = interior_ + (id & ~kShared);
+          r = index64 ? put_le(r, id) : put_le(r, static_cast<std::uint32_t>(id));
+        }
+      }
+      file.write(out.data(), static_cast<std::size_t>(r - out.data()));
+    }
+    file.commit();
+  }
+
+  struct SharedVertex {
+    Vec3d position;
+    Vec3d normal;
+  };
+
+  VolumeSource& src_;
+  const TiledOptions& opt_;
+  Index3 n_;
+  BrickReader reader_;
+  std::filesystem::path dir_;
+  ScratchFile chunks_spill_, vertices_, faces_;
+  BrickPlan plan_;
+  SimplifyOptions sopt_;
+  bool normals_ = false;
+  std::vector<std::vector<Chunk>> chunks_;            // per brick and octant
+  Index3 seam_group_{1, 1, 1};                        // bricks per seam cell along each axis
+  std::vector<std::vector<std::size_t>> cell_slots_;  // per seam cell: its octant slots
+  std::uint64_t spilled_faces_ = 0;
+  double keep_ = 1;  // fraction of the spilled faces the seam pass keeps
+  double planned_so_far_ = 0, kept_so_far_ = 0;  // the seam cells' shares and what they kept
+  std::unordered_map<std::uint64_t, std::uint64_t> shared_index_;
+  std::vector<SharedVertex> shared_;
+  std::uint64_t interior_ = 0;
+  QualityAccumulator quality_;
+};
+
+}  // namespace
+
+TiledResult extract_tiled_simplified(VolumeSource& source, const TiledOptions& options,
+                                     const std::filesystem::path& output) {
+  return TiledSimplification(source, options, output).run(output);
+}
+
+}  // namespace isotile
