@@ -41,6 +41,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #endif
+#include "tiler/input_options.h"
 #include "tiler/tiled_extract.h"
 
 namespace {
@@ -71,33 +72,6 @@ double peak_rss_mb() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
 }
 
-// "256,256,128" -> three numbers.
-template <class T>
-std::array<T, 3> parse_triple(const std::string& text, const char* what) {
-  std::array<T, 3> out{};
-  std::stringstream ss(text);
-  std::string item;
-  int n = 0;
-  while (std::getline(ss, item, ',')) {
-    if (n == 3) break;
-    std::size_t used = 0;
-    try {
-      if constexpr (std::is_integral_v<T>)
-        out[n] = std::stoll(item, &used);
-      else
-        out[n] = std::stod(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != item.size()) break;
-    ++n;
-  }
-  if (n != 3 || ss.rdbuf()->in_avail() != 0)
-    throw InputError(std::string(what) + " must be three comma-separated numbers, got '" + text +
-                     "'");
-  return out;
-}
-
 // Options describing how to read a raw input, shared by `extract` and `info`.
 struct InputArgs {
   std::string input;
@@ -119,19 +93,8 @@ struct InputArgs {
   }
 
   RawOptions raw_options() const {
-    RawOptions o;
-    if (!dims.empty()) o.dims = parse_triple<std::int64_t>(dims, "--dims");
-    if (!type.empty()) {
-      o.type = parse_scalar_type(type);
-      if (!o.type)
-        throw InputError("unknown --type '" + type +
-                         "' (expected int8, uint8, int16, uint16, int32, uint32, float32 or "
-                         "float64)");
-    }
-    if (!spacing.empty()) o.spacing = parse_triple<double>(spacing, "--spacing");
-    if (!origin.empty()) o.origin = parse_triple<double>(origin, "--origin");
-    o.endian = endian == "big" ? Endian::Big : Endian::Little;
-    return o;
+    return parse_input_text(
+        {.dims = dims, .type = type, .spacing = spacing, .origin = origin, .endian = endian});
   }
 };
 

@@ -1,0 +1,60 @@
+#include "tiler/input_options.h"
+
+#include <array>
+#include <sstream>
+#include <type_traits>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+// "256,256,128" -> three numbers.
+template <class T>
+std::array<T, 3> parse_triple(const std::string& text, const std::string& what) {
+  std::array<T, 3> out{};
+  std::stringstream ss(text);
+  std::string item;
+  int n = 0;
+  while (std::getline(ss, item, ',')) {
+    if (n == 3) break;
+    std::size_t used = 0;
+    try {
+      if constexpr (std::is_integral_v<T>)
+        out[n] = std::stoll(item, &used);
+      else
+        out[n] = std::stod(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size()) break;
+    ++n;
+  }
+  if (n != 3 || ss.rdbuf()->in_avail() != 0)
+    throw InputError(what + " must be three comma-separated numbers, got '" + text + "'");
+  return out;
+}
+
+}  // namespace
+
+RawOptions parse_input_text(const InputText& text, const std::string& flag_prefix) {
+  RawOptions o;
+  if (!text.dims.empty()) o.dims = parse_triple<std::int64_t>(text.dims, flag_prefix + "dims");
+  if (!text.type.empty()) {
+    o.type = parse_scalar_type(text.type);
+    if (!o.type)
+      throw InputError("unknown " + flag_prefix + "type '" + text.type +
+                       "' (expected int8, uint8, int16, uint16, int32, uint32, float32 or "
+                       "float64)");
+  }
+  if (!text.spacing.empty())
+    o.spacing = parse_triple<double>(text.spacing, flag_prefix + "spacing");
+  if (!text.origin.empty()) o.origin = parse_triple<double>(text.origin, flag_prefix + "origin");
+  if (!text.endian.empty() && text.endian != "little" && text.endian != "big")
+    throw InputError(flag_prefix + "endian must be 'little' or 'big', got '" + text.endian + "'");
+  o.endian = text.endian == "big" ? Endian::Big : Endian::Little;
+  return o;
+}
+
+}  // namespace isotile
