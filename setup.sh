@@ -9,6 +9,10 @@
 #                              instrumented, so TSan cannot see its synchronisation)
 #   ./setup.sh --no-install    skip the package step (packages already present)
 #
+# The MeshLab plugin is built against MeshLab 2020.09's own headers, taken from Debian's source
+# package of the installed meshlab (`apt-get source`, which needs a deb-src entry: added when
+# missing) into build-deps/, outside every build folder so that all builds share it.
+#
 # Safe to run again: installed packages are skipped and the build is incremental.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -30,14 +34,15 @@ packages=(
   libteem-dev libopenvdb-dev libboost-iostreams-dev libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev libopenmesh-dev
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgl1-mesa-dev libosmesa6-dev python3-glad
+  meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
 )
-if [ "$tsan" = 1 ]; then
-  packages+=(dpkg-dev)
-fi
 if [ "$bench" = 1 ]; then
   packages+=(libbenchmark-dev libvtk9-dev)
   extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
 fi
+
+sudo=""
+[ "$(id -u)" -ne 0 ] && sudo="sudo"
 
 if [ "$install" = 1 ]; then
   missing=()
@@ -45,24 +50,41 @@ if [ "$install" = 1 ]; then
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   if [ ${#missing[@]} -gt 0 ]; then
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
     echo "setup.sh: installing ${missing[*]}" >&2
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
   fi
 fi
 
+# Debian's source packages (MeshLab's headers, onetbb for TSan) need a deb-src entry.
+ensure_deb_src() {
+  if ! grep -rqs '^Types:.*deb-src' /etc/apt/sources.list.d/ && ! grep -qs '^deb-src' /etc/apt/sources.list; then
+    sed 's/^Types: deb$/Types: deb-src/' /etc/apt/sources.list.d/debian.sources |
+      $sudo tee /etc/apt/sources.list.d/isotile-deb-src.sources >/dev/null
+    $sudo apt-get update -qq
+  fi
+}
+
+# MeshLab's plugin API and vcglib, exactly as Debian built the installed meshlab.
+meshlab_src="$PWD/build-deps/meshlab"
+if [ "$install" = 1 ] && [ ! -f "$meshlab_src/.complete" ]; then
+  ensure_deb_src
+  rm -rf "$meshlab_src" && mkdir -p "$meshlab_src"
+  if ! (cd "$meshlab_src" && apt-get source -qq meshlab >/dev/null 2>&1); then
+    echo "setup.sh: could not fetch MeshLab's source package (apt-get source meshlab)" >&2
+    exit 1
+  fi
+  touch "$meshlab_src/.complete"
+fi
+if [ -f "$meshlab_src/.complete" ]; then
+  tree=$(find "$meshlab_src" -mindepth 1 -maxdepth 1 -type d -name 'meshlab-*' | head -n 1)
+  [ -n "$tree" ] && extra+=(-DISOTILE_MESHLAB_SOURCE="$tree")
+fi
+
 if [ "$tsan" = 1 ]; then
   tbb_prefix="$PWD/$build_dir/tbb-tsan"
   if [ ! -f "$tbb_prefix/lib/cmake/TBB/TBBConfig.cmake" ]; then
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    if ! grep -rqs '^Types:.*deb-src' /etc/apt/sources.list.d/ && ! grep -qs '^deb-src' /etc/apt/sources.list; then
-      sed 's/^Types: deb$/Types: deb-src/' /etc/apt/sources.list.d/debian.sources |
-        $sudo tee /etc/apt/sources.list.d/isotile-deb-src.sources >/dev/null
-      $sudo apt-get update -qq
-    fi
+    ensure_deb_src
     src="$PWD/$build_dir/onetbb-src"
     rm -rf "$src" && mkdir -p "$src"
     (cd "$src" && apt-get source -qq onetbb >/dev/null 2>&1)

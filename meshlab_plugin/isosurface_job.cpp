@@ -1,0 +1,179 @@
+#include "meshlab_plugin/isosurface_job.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "core/errors.h"
+#include "core/extract.h"
+#include "core/mesh_io.h"
+#include "core/volume_io.h"
+#include "tiler/input_options.h"
+#include "tiler/tiled_extract.h"
+#include "tiler/volume_source.h"
+
+namespace isotile::meshlab {
+
+const char* const kMethodNames[3] = {"Marching Cubes", "Macet", "Dual Contouring"};
+const char* const kMacetQualityNames[2] = {"fast", "max"};
+const char* const kDcSolverNames[3] = {"mass point", "particle", "QEF"};
+const char* const kDcHermiteNames[2] = {"central", "ENO"};
+const char* const kDcVerticesNames[2] = {"patch", "cell"};
+const char* const kBackendNames[4] = {"Auto", "CPU", "Geometry shader", "HistoPyramid"};
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+// An enum parameter's index, checked (scripts carry indices).
+template <std::size_t N>
+int checked_choice(int value, const char* const (&names)[N], const char* field) {
+  if (value >= 0 && value < static_cast<int>(N)) return value;
+  std::string list;
+  for (std::size_t i = 0; i < N; ++i) list += (i ? ", " : "") + std::to_string(i) + " " + names[i];
+  throw InputError(std::string(field) + " must be one of " + list + "; got " +
+                   std::to_string(value));
+}
+
+// Removes a file when it goes out of scope (the brick-by-brick extraction's intermediate).
+struct RemoveOnExit {
+  fs::path path;
+  ~RemoveOnExit() {
+    std::error_code ec;
+    fs::remove(path, ec);
+  }
+};
+
+std::string format_iso(double iso) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", iso);
+  return buf;
+}
+
+ExtractOptions extract_options(const IsosurfaceParams& p) {
+  ExtractOptions o;
+  o.method = static_cast<Method>(checked_choice(p.method, kMethodNames, "method"));
+  o.quality = checked_choice(p.macet_quality, kMacetQualityNames, "macet_quality") == 1
+                  ? MacetQuality::Max
+                  : MacetQuality::Fast;
+  if (!(p.macet_relax >= 0 && p.macet_relax < 0.5))
+    throw InputError("macet_relax must be in [0, 0.5), got " + std::to_string(p.macet_relax));
+  if (p.macet_relax > 0 && o.method != Method::Macet)
+    throw InputError("macet_relax applies to the Macet method only; set it to 0");
+  o.macet_relax = p.macet_relax;
+  const int solver = checked_choice(p.dc_solver, kDcSolverNames, "dc_solver");
+  o.dc_solver = solver == 1   ? DcSolver::Particle
+                : solver == 2 ? DcSolver::Qef
+                              : DcSolver::MassPoint;
+  o.dc_hermite = checked_choice(p.dc_hermite, kDcHermiteNames, "dc_hermite") == 1
+                     ? DcHermite::Eno
+                     : DcHermite::Central;
+  if (checked_choice(p.dc_vertices, kDcVerticesNames, "dc_vertices") == 0)
+    throw InputError(
+        "dc_vertices 'patch' (manifold Dual Contouring, one vertex per surface patch) is not "
+        "available yet; choose 'cell' (one vertex per cell, the paper's table)");
+  const int backend = checked_choice(p.backend, kBackendNames, "backend");
+  o.backend = backend == 1   ? Backend::Cpu
+              : backend == 2 ? Backend::GeometryShader
+              : backend == 3 ? Backend::HistoPyramid
+                             : Backend::Auto;
+  if (!std::isfinite(p.iso)) throw InputError("iso must be a finite number");
+  o.iso = p.iso;
+  o.normals = p.normals;
+  return o;
+}
+
+}  // namespace
+
+IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& temp_dir,
+                                const Progress& progress) {
+  const auto t0 = Clock::now();
+  auto report = [&](int percent, const std::string& what) {
+    if (progress) progress(percent, what);
+  };
+  if (p.file.empty())
+    throw InputError(
+        "no volume file chosen (the 'file' field is empty): choose one with its '...' button; "
+        "MeshLab 2020.09 ignores a path typed into the box");
+  if (!p.series.empty())
+    throw InputError(
+        "series: DICOM series are not supported yet (isotile reads raw, raw.gz, "
+        "NRRD and VDB volumes); leave 'series' empty");
+  if (p.file.rfind("field:", 0) != 0) {
+    std::error_code ec;
+    if (fs::is_directory(p.file, ec))
+      throw InputError(p.file +
+                       " is a directory: DICOM series are not supported yet; choose a raw, "
+                       "raw.gz, NRRD or VDB file");
+    if (!fs::exists(p.file, ec)) throw IoError(p.file + ": no such file");
+  }
+  if (!(p.simplify > 0 && p.simplify <= 1))
+    throw InputError("simplify is the fraction of faces kept, in (0, 1] (1: off); got " +
+                     std::to_string(p.simplify));
+  ExtractOptions o = extract_options(p);
+  const Backend backend = resolve_backend(o);  // InputError naming what is missing
+  const RawOptions raw = parse_input_text(
+      {.dims = p.dims, .type = p.type, .spacing = p.spacing, .origin = "", .endian = p.endian}, "");
+  const std::uint64_t memory =
+      p.memory.empty() || p.memory == "0" ? 0 : parse_memory_size(p.memory);
+
+  IsosurfaceResult r;
+  r.backend = std::string(backend_name(backend));
+  if (memory == 0) {
+    report(5, "reading " + p.file);
+    const Volume volume = read_volume(p.file, raw);
+    report(30, "extracting");
+    r.mesh = extract(volume.view(), o);
+    r.triangles_extracted = r.mesh.triangles.size();
+    if (p.simplify < 1) {
+      report(60, "simplifying");
+      SimplifyOptions so;
+      so.ratio = p.simplify;
+      r.mesh = simplify(r.mesh, so);
+    }
+  } else {
+    // Brick by brick within the budget, through the tiler's streamed file: what the CLI's
+    // --memory does. MeshLab then holds the whole result.
+    static std::atomic<int> counter{0};
+    const fs::path dir = temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir);
+    RemoveOnExit tmp{dir / ("isotile-meshlab-" + std::to_string(::getpid()) + "-" +
+                            std::to_string(counter++) + ".ply")};
+    auto source = open_volume_source(p.file, raw);
+    TiledOptions to;
+    to.extract = o;
+    to.memory = memory;
+    to.format = MeshFormat::Ply;
+    to.simplify = p.simplify;
+    to.progress = [&](std::string_view pass, std::int64_t done, std::int64_t total) {
+      report(static_cast<int>(5 + 85 * done / std::max<std::int64_t>(total, 1)),
+             std::string(pass) + " " + std::to_string(done) + "/" + std::to_string(total));
+    };
+    const TiledResult t = extract_tiled(*source, to, tmp.path);
+    r.bricks = t.plan.total();
+    r.triangles_extracted = p.simplify < 1 ? t.triangles_extracted : t.triangles;
+    report(90, "loading the bricks' mesh");
+    r.mesh = read_mesh(tmp.path);
+  }
+  report(95, "measuring");
+  r.quality = triangle_quality(r.mesh);
+  r.layer_name = fs::path(p.file).filename().string() + " " + std::string(method_name(o.method)) +
+                 " " + format_iso(p.iso);
+  r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  return r;
+}
+
+Mesh run_simplify(const Mesh& mesh, const SimplifyParams& p, SimplifyStats* stats) {
+  SimplifyOptions o;
+  o.ratio = p.faces > 0 ? 0 : p.ratio;
+  o.faces = p.faces;
+  o.max_error = p.max_error;
+  o.min_quality = p.min_quality;
+  return simplify(mesh, o, stats);
+}
+
+}  // namespace isotile::meshlab

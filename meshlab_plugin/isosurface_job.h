@@ -1,0 +1,74 @@
+// What the MeshLab filters ask of the libraries, without Qt or MeshLab: the isosurface filter's
+// fields (as typed) turned into a read, an extraction (in core or brick by brick) and an optional
+// simplification; the simplify filter's fields turned into a simplification. The plugin only
+// moves values and meshes between MeshLab and these functions, so that the work, the checks and
+// the messages are the CLI's.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "core/mesh.h"
+#include "core/mesh_quality.h"
+#include "core/simplify.h"
+
+namespace isotile::meshlab {
+
+// The isosurface filter's parameters, in declaration order (their names are the filter's).
+struct IsosurfaceParams {
+  std::string file;
+  std::string dims, type, endian, spacing;  // raw files whose name does not say: text, or empty
+  std::string series;                       // DICOM series UID; empty: the only one
+  double iso = 0;
+  int method = 0;         // 0 Marching Cubes, 1 Macet, 2 Dual Contouring
+  int macet_quality = 0;  // 0 fast, 1 max
+  double macet_relax = 0;
+  int dc_solver = 0;         // 0 mass point, 1 particle, 2 QEF
+  int dc_hermite = 0;        // 0 central, 1 ENO
+  int dc_vertices = 1;       // 0 patch (manifold; not available yet), 1 cell (the paper's)
+  int backend = 0;           // 0 auto, 1 CPU, 2 geometry shader, 3 HistoPyramid
+  std::string memory = "0";  // working-set budget of the extraction, e.g. "512MiB"; "0": in core
+  double simplify = 1;       // fraction of faces kept; 1: off
+  bool normals = false;      // gradient normals from the volume (else MeshLab's own)
+};
+
+// The choices of the enum parameters, in index order, as the dialog shows them.
+extern const char* const kMethodNames[3];
+extern const char* const kMacetQualityNames[2];
+extern const char* const kDcSolverNames[3];
+extern const char* const kDcHermiteNames[2];
+extern const char* const kDcVerticesNames[2];
+extern const char* const kBackendNames[4];
+
+struct IsosurfaceResult {
+  Mesh mesh;
+  std::string layer_name;  // "<file name> <method> <iso>"
+  std::string backend;     // where it ran ("cpu", "gs", "hp")
+  std::int64_t bricks = 1;
+  std::uint64_t triangles_extracted = 0;
+  QualityStats quality;
+  double seconds = 0;
+  std::string note;  // what the caller should log besides (e.g. a fallback), or empty
+};
+
+// Progress: percent (0..100) and what is being done.
+using Progress = std::function<void(int percent, const std::string& what)>;
+
+// Throws isotile::Error (InputError, IoError, CapacityError) with a message for the user: a bad
+// or missing file, a malformed field, a feature not available yet, a GPU backend without GL.
+// `temp_dir` receives the brick-by-brick extraction's file (removed before returning).
+IsosurfaceResult run_isosurface(const IsosurfaceParams& params, const std::string& temp_dir,
+                                const Progress& progress);
+
+// The simplify filter: faces kept as a fraction (ratio), a count, or an error bound (mesh
+// units); 0 leaves one out. Throws InputError like simplify().
+struct SimplifyParams {
+  double ratio = 0.1;
+  std::uint64_t faces = 0;
+  double max_error = 0;
+  double min_quality = 0.3;
+};
+Mesh run_simplify(const Mesh& mesh, const SimplifyParams& params, SimplifyStats* stats);
+
+}  // namespace isotile::meshlab

@@ -1,0 +1,122 @@
+// The MeshLab filters' Qt-free part: fields to library calls, and the messages a MeshLab user
+// sees for bad fields (runs in every build, sanitizers included).
+#include "meshlab_plugin/isosurface_job.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "core/errors.h"
+#include "core/mesh_topology.h"
+
+namespace isotile::meshlab {
+namespace {
+
+const std::string kNucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+
+IsosurfaceParams nucleon() {
+  IsosurfaceParams p;
+  p.file = kNucleon;
+  p.iso = 60.5;
+  return p;
+}
+
+std::string message_of(const IsosurfaceParams& p) {
+  try {
+    run_isosurface(p, "", {});
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(MeshlabJob, ExtractsNamesTheLayerAndReportsProgress) {
+  IsosurfaceParams p = nucleon();
+  p.method = 1;
+  int last = -1;
+  bool ordered = true;
+  const IsosurfaceResult r = run_isosurface(p, "", [&](int percent, const std::string&) {
+    ordered = ordered && percent >= last;
+    last = percent;
+  });
+  EXPECT_TRUE(ordered);
+  EXPECT_GT(last, 50);
+  EXPECT_GT(r.mesh.triangles.size(), 1000u);
+  EXPECT_EQ(r.layer_name, "nucleon_41x41x41_uint8.raw.gz macet 60.5");
+  EXPECT_EQ(r.backend, "cpu");
+  EXPECT_EQ(r.bricks, 1);
+  EXPECT_GT(r.quality.mean, 0.8);
+  EXPECT_EQ(r.quality.triangles, r.mesh.triangles.size());
+}
+
+TEST(MeshlabJob, BricksAndSimplification) {
+  IsosurfaceParams p = nucleon();
+  const IsosurfaceResult whole = run_isosurface(p, "", {});
+  p.memory = "256KiB";
+  const IsosurfaceResult bricked = run_isosurface(p, testing::TempDir(), {});
+  EXPECT_GT(bricked.bricks, 1);
+  EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
+  EXPECT_EQ(bricked.mesh.positions, whole.mesh.positions);
+  p.memory = "0";
+  p.simplify = 0.2;
+  const IsosurfaceResult simplified = run_isosurface(p, "", {});
+  EXPECT_EQ(simplified.triangles_extracted, whole.mesh.triangles.size());
+  EXPECT_NEAR(static_cast<double>(simplified.mesh.triangles.size()),
+              0.2 * whole.mesh.triangles.size(), 0.02 * 0.2 * whole.mesh.triangles.size());
+  // No intermediate file left in the temporary folder.
+  for (const auto& e : std::filesystem::directory_iterator(testing::TempDir()))
+    EXPECT_EQ(e.path().filename().string().rfind("isotile-meshlab-", 0), std::string::npos)
+        << e.path();
+}
+
+TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
+  struct Case {
+    void (*edit)(IsosurfaceParams&);
+    const char* says;
+  } cases[] = {
+      {[](IsosurfaceParams& p) { p.file = ""; }, "'file' field is empty"},
+      {[](IsosurfaceParams& p) { p.file = "/nonexistent/v_8x8x8_uint8.raw"; }, "no such file"},
+      {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "is a directory"},
+      {[](IsosurfaceParams& p) { p.dims = "41,x,41"; }, "dims must be three"},
+      {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown type 'uint12'"},
+      {[](IsosurfaceParams& p) { p.endian = "middle"; }, "endian must be"},
+      {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "spacing must be three"},
+      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "DICOM"},
+      {[](IsosurfaceParams& p) { p.method = 3; }, "method must be one of 0 Marching Cubes"},
+      {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
+      {[](IsosurfaceParams& p) {
+         p.method = 2;
+         p.dc_vertices = 0;
+       },
+       "'patch'"},
+      {[](IsosurfaceParams& p) { p.macet_relax = 0.2; }, "Macet method only"},
+      {[](IsosurfaceParams& p) { p.macet_relax = 0.7; }, "macet_relax must be in [0, 0.5)"},
+      {[](IsosurfaceParams& p) { p.memory = "much"; }, "much"},
+      {[](IsosurfaceParams& p) { p.simplify = 1.5; }, "simplify is the fraction"},
+      {[](IsosurfaceParams& p) { p.iso = INFINITY; }, "iso must be a finite number"},
+  };
+  for (const Case& c : cases) {
+    IsosurfaceParams p = nucleon();
+    c.edit(p);
+    const std::string m = message_of(p);
+    EXPECT_NE(m.find(c.says), std::string::npos) << "wanted '" << c.says << "', got: " << m;
+  }
+}
+
+TEST(MeshlabJob, SimplifyFilterTargets) {
+  const IsosurfaceResult r = run_isosurface(nucleon(), "", {});
+  const std::size_t n = r.mesh.triangles.size();
+  SimplifyStats st;
+  const Mesh ratio = run_simplify(r.mesh, {.ratio = 0.3}, &st);
+  EXPECT_NEAR(static_cast<double>(ratio.triangles.size()), 0.3 * n, 0.02 * 0.3 * n);
+  EXPECT_EQ(st.faces_before, n);
+  const Mesh faces = run_simplify(r.mesh, {.ratio = 0.9, .faces = 500}, nullptr);
+  EXPECT_NEAR(static_cast<double>(faces.triangles.size()), 500, 10);
+  EXPECT_EQ(mesh_topology(faces).euler, mesh_topology(r.mesh).euler);
+  EXPECT_THROW(run_simplify(r.mesh, {.ratio = 0}, nullptr), InputError);
+}
+
+}  // namespace
+}  // namespace isotile::meshlab
