@@ -2,7 +2,8 @@
 # Installs what isotile needs from Debian 12's packages, then configures and builds it.
 #
 #   ./setup.sh                 install, configure and build into build/ (Release)
-#   ./setup.sh --bench         also the benchmarks and their VTK peer (a large download)
+#   ./setup.sh --bench         also the benchmarks and their peers (VTK: a large download;
+#                              meshoptimizer)
 #   ./setup.sh --sanitize      ASan + UBSan build into build-asan/
 #   ./setup.sh --tsan          ThreadSanitizer build into build-tsan/, against a TBB built from
 #                              Debian's own onetbb source with TSan (Debian's libtbb is not
@@ -37,7 +38,7 @@ packages=(
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
 )
 if [ "$bench" = 1 ]; then
-  packages+=(libbenchmark-dev libvtk9-dev)
+  packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev)
   extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
 fi
 

@@ -9,7 +9,6 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <regex>
 #include <sstream>
 #include <string>
 
@@ -65,14 +64,14 @@ class MeshlabServer : public ::testing::Test {
   static std::string script(const std::map<std::string, std::string>& values) {
     std::string s = slurp(ISOTILE_MESHLAB_EXAMPLE);
     for (const auto& [name, value] : values) {
-      const std::regex param("name=\"" + name + "\" value=\"([^\"]*)\"");
-      std::smatch m;
-      if (!std::regex_search(s, m, param)) {
+      const std::string key = "name=\"" + name + "\" value=\"";
+      const std::size_t at = s.find(key);
+      if (at == std::string::npos) {
         ADD_FAILURE() << "the example has no parameter " << name;
         continue;
       }
-      s.replace(static_cast<std::size_t>(m.position(1)), static_cast<std::size_t>(m.length(1)),
-                value);
+      const std::size_t begin = at + key.size();
+      s.replace(begin, s.find('"', begin) - begin, value);
     }
     return s;
   }
