@@ -13,7 +13,7 @@
 #include <thread>
 
 #include "core/errors.h"
-#include "core/mesh_quality.h"
+#include "core/mesh/mesh_quality.h"
 #include "meshlab_plugin/isosurface_job.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/gl_backends.h"

@@ -9,9 +9,9 @@
 #include <filesystem>
 
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/mesh_io.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"

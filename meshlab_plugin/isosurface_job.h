@@ -9,9 +9,9 @@
 #include <functional>
 #include <string>
 
-#include "core/mesh.h"
-#include "core/mesh_quality.h"
-#include "core/simplify.h"
+#include "core/mesh/mesh.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/simplify/simplify.h"
 
 namespace isotile::meshlab {
 

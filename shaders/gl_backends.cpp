@@ -6,7 +6,7 @@
 #include <string>
 
 #include "core/errors.h"
-#include "core/extract.h"
+#include "core/extract/extract.h"
 #include "gl_context.h"
 #include "gl_program.h"
 

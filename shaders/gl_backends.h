@@ -1,7 +1,7 @@
 // The OpenGL Marching Cubes extractors (geometry-shader and HistoPyramid paths) and their
 // installation into core's backend table.
 //
-// Both give exactly the CPU's mesh (core/marching_cubes.h): the same vertices in key order
+// Both give exactly the CPU's mesh (core/extract/marching_cubes.h): the same vertices in key order
 // (lin(s) * 3 + axis), the same triangles cell by cell in table order, positions computed with
 // the CPU's double-precision formula. Volumes larger than the device's memory (or its largest
 // storage-buffer binding) are split into slabs along z, each extracted on its own; their seams
@@ -10,8 +10,8 @@
 
 #include <cstdint>
 
-#include "core/mesh.h"
-#include "core/volume.h"
+#include "core/mesh/mesh.h"
+#include "core/volume/volume.h"
 
 namespace isotile::gl {
 
@@ -19,7 +19,7 @@ struct McOptions {
   double iso = 0.0;
   bool normals = false;
   // Brick mode, global cells; empty: every cell of the view. Same contract as
-  // MarchingCubesOptions::cells (core/marching_cubes.h): the triangles of these cells, the
+  // MarchingCubesOptions::cells (core/extract/marching_cubes.h): the triangles of these cells, the
   // vertices of the crossed edges owned by samples of the closed box, the view holding the cells
   // plus marching_cubes_halo() samples.
   Box3 cells{};
@@ -47,8 +47,8 @@ struct McStats {
 Mesh mc_geometry_shader(const VolumeView& view, const McOptions& options, McStats* stats = nullptr);
 Mesh mc_histopyramid(const VolumeView& view, const McOptions& options, McStats* stats = nullptr);
 
-// Fills the GeometryShader and HistoPyramid entries of core's backend table (core/extract.h).
-// Call once at startup, before extract().
+// Fills the GeometryShader and HistoPyramid entries of core's backend table
+// (core/extract/extract.h). Call once at startup, before extract().
 void register_gl_backends();
 
 }  // namespace isotile::gl

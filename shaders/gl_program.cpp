@@ -13,7 +13,7 @@
 #include <memory>
 
 #include "core/errors.h"
-#include "core/marching_cubes_tables.h"
+#include "core/extract/marching_cubes_tables.h"
 
 namespace isotile::gl {
 
@@ -217,7 +217,7 @@ void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   i3("u_box_lo", u.cells.lo);
   i3("u_box_hi", u.cells.hi);
   glProgramUniform1d(prog, glGetUniformLocation(prog, "u_iso"), u.iso);
-  // As core/inside_bits.h: iso rounded up to a float, so that v >= it <=> double(v) >= iso.
+  // As core/extract/inside_bits.h: iso rounded up to a float, so that v >= it <=> double(v) >= iso.
   float iso_float = static_cast<float>(u.iso);
   if (static_cast<double>(iso_float) < u.iso)
     iso_float = std::nextafter(iso_float, std::numeric_limits<float>::infinity());

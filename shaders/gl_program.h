@@ -10,7 +10,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/volume.h"
+#include "core/volume/volume.h"
 
 namespace isotile::gl {
 
@@ -54,7 +54,7 @@ class Buffer {
 // their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.
 void dispatch(std::uint64_t n);
 
-// The Marching Cubes case tables (core/marching_cubes_tables.h) as the std140 uniform block
+// The Marching Cubes case tables (core/extract/marching_cubes_tables.h) as the std140 uniform block
 // `Tables` of mc_common.glsl, bound at uniform binding 0. Uploaded once per context.
 void bind_case_tables();
 

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "cli_support.h"
-#include "core/mesh_io.h"
+#include "core/mesh/mesh_io.h"
 
 namespace fs = std::filesystem;
 

@@ -6,8 +6,8 @@
 #include <string>
 
 #include "cli_support.h"
-#include "core/mesh_io.h"
-#include "core/mesh_topology.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_topology.h"
 
 namespace {
 

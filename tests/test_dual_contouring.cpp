@@ -13,14 +13,14 @@
 #include <string>
 #include <vector>
 
-#include "core/dual_contouring.h"
-#include "core/dual_contouring_table.h"
 #include "core/errors.h"
-#include "core/marching_cubes.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/dual_contouring.h"
+#include "core/extract/dual_contouring_table.h"
+#include "core/extract/marching_cubes.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 
 namespace isotile {

@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/marching_cubes.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/extract/marching_cubes.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "test_support.h"
@@ -127,8 +127,8 @@ TEST_P(GlPaths, SlabsEqualWholeVolume) {
   }
 }
 
-// Brick mode (the tiler's contract, core/marching_cubes.h): the GL output for a box of cells from
-// a view holding it plus the halo equals the CPU's brick output.
+// Brick mode (the tiler's contract, core/extract/marching_cubes.h): the GL output for a box of
+// cells from a view holding it plus the halo equals the CPU's brick output.
 TEST_P(GlPaths, BrickModeEqualsCpu) {
   REQUIRE_GL();
   const Volume vol = make_field_volume({FieldKind::Gyroid, 40});

@@ -6,8 +6,8 @@
 #include <string>
 
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/procedural_fields.h"
+#include "core/extract/extract.h"
+#include "core/volume/procedural_fields.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 

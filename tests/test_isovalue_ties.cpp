@@ -1,6 +1,6 @@
-// Samples equal to the isovalue (core/isovalue_ties.h): where Marching Cubes' crossings collapse
-// onto such samples, Macet and Dual Contouring give no degenerate triangles, a surface through a
-// plane of samples stays on it, and bricks still equal the whole volume.
+// Samples equal to the isovalue (core/extract/isovalue_ties.h): where Marching Cubes' crossings
+// collapse onto such samples, Macet and Dual Contouring give no degenerate triangles, a surface
+// through a plane of samples stays on it, and bricks still equal the whole volume.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,12 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "core/dual_contouring.h"
-#include "core/isovalue_ties.h"
-#include "core/macet.h"
-#include "core/marching_cubes.h"
-#include "core/mesh_quality.h"
-#include "core/volume_io.h"
+#include "core/extract/dual_contouring.h"
+#include "core/extract/isovalue_ties.h"
+#include "core/extract/macet.h"
+#include "core/extract/marching_cubes.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 
 namespace isotile {

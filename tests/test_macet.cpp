@@ -11,16 +11,16 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/macet.h"
-#include "core/macet_relax.h"
-#include "core/macet_table.h"
-#include "core/marching_cubes.h"
-#include "core/marching_cubes_tables.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
-#include "core/procedural_fields.h"
-#include "core/self_intersections.h"
-#include "core/volume_io.h"
+#include "core/extract/macet.h"
+#include "core/extract/macet_relax.h"
+#include "core/extract/macet_table.h"
+#include "core/extract/marching_cubes.h"
+#include "core/extract/marching_cubes_tables.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/mesh/self_intersections.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 
 namespace isotile {
@@ -246,7 +246,7 @@ TEST(Macet, RejectsAViewWithoutTheHaloAndBadOptions) {
   EXPECT_EQ(macet_halo({.quality = MacetQuality::Max, .max_sweeps = 2}), 35);
 }
 
-// Relaxation of pinned samples (core/macet_relax.h).
+// Relaxation of pinned samples (core/extract/macet_relax.h).
 
 std::vector<float> random_samples(Index3 n, unsigned seed) {
   std::mt19937 rng(seed);

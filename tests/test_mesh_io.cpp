@@ -14,9 +14,9 @@
 #include <string>
 #include <vector>
 
-#include "core/atomic_file.h"
 #include "core/errors.h"
-#include "core/mesh_io.h"
+#include "core/mesh/atomic_file.h"
+#include "core/mesh/mesh_io.h"
 
 namespace isotile {
 namespace {

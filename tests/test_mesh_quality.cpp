@@ -4,7 +4,7 @@
 #include <cmath>
 #include <random>
 
-#include "core/mesh_quality.h"
+#include "core/mesh/mesh_quality.h"
 
 namespace isotile {
 namespace {

@@ -8,7 +8,7 @@
 #include <random>
 
 #include "core/errors.h"
-#include "core/mesh_topology.h"
+#include "core/mesh/mesh_topology.h"
 
 namespace isotile {
 namespace {

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "core/errors.h"
-#include "core/mesh_topology.h"
+#include "core/mesh/mesh_topology.h"
 
 namespace isotile::meshlab {
 namespace {

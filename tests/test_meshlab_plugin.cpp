@@ -12,9 +12,9 @@
 #include <sstream>
 #include <string>
 
-#include "core/mesh_io.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
 #include "test_support.h"
 
 namespace {

@@ -1,4 +1,4 @@
-#include "core/procedural_fields.h"
+#include "core/volume/procedural_fields.h"
 
 #include <gtest/gtest.h>
 

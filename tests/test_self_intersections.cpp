@@ -1,4 +1,4 @@
-#include "core/self_intersections.h"
+#include "core/mesh/self_intersections.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -6,11 +6,11 @@
 #include <cstdint>
 #include <limits>
 
-#include "core/dual_contouring.h"
 #include "core/errors.h"
-#include "core/marching_cubes.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/dual_contouring.h"
+#include "core/extract/marching_cubes.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 
 namespace isotile {

@@ -1,6 +1,6 @@
 // Simplification: face counts, topology, the border, the error bound, non-manifold input,
 // determinism, and the shape targets on a real volume.
-#include "core/simplify.h"
+#include "core/simplify/simplify.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -12,12 +12,12 @@
 #include <set>
 
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
-#include "core/procedural_fields.h"
-#include "core/surface_distance.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/mesh/surface_distance.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 
 namespace isotile {

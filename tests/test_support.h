@@ -12,9 +12,9 @@
 #include <functional>
 #include <vector>
 
-#include "core/mesh.h"
-#include "core/procedural_fields.h"
-#include "core/volume.h"
+#include "core/mesh/mesh.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume.h"
 
 namespace isotile::testing {
 

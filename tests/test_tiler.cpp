@@ -17,10 +17,10 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/mesh_io.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "test_support.h"
 #include "tiler/brick_plan.h"
 #include "tiler/tiled_extract.h"

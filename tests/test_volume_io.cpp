@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/volume_io.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile {
 namespace {

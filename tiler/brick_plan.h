@@ -11,7 +11,7 @@
 
 #include <cstdint>
 
-#include "core/volume.h"
+#include "core/volume/volume.h"
 
 namespace isotile {
 

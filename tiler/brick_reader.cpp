@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/volume_io.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile {
 

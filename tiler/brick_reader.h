@@ -6,9 +6,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "core/brick_sites.h"
-#include "core/extract.h"
-#include "core/mesh_quality.h"
+#include "core/extract/brick_sites.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_quality.h"
 #include "tiler/brick_plan.h"
 #include "tiler/volume_source.h"
 

@@ -5,7 +5,7 @@
 
 #include <string>
 
-#include "core/volume_io.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile {
 

@@ -26,17 +26,17 @@
 #include <sstream>
 #include <string>
 
-#include "core/atomic_file.h"
 #include "core/errors.h"
-#include "core/extract.h"
-#include "core/mesh_io.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
-#include "core/procedural_fields.h"
-#include "core/self_intersections.h"
-#include "core/simplify.h"
-#include "core/surface_distance.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/mesh/atomic_file.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/mesh/self_intersections.h"
+#include "core/mesh/surface_distance.h"
+#include "core/simplify/simplify.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"

@@ -13,10 +13,10 @@
 #include <string>
 #include <vector>
 
-#include "core/atomic_file.h"
-#include "core/brick_sites.h"
 #include "core/errors.h"
-#include "core/volume_io.h"
+#include "core/extract/brick_sites.h"
+#include "core/mesh/atomic_file.h"
+#include "core/volume/volume_io.h"
 #include "tiler/brick_reader.h"
 #include "tiler/tiled_simplify.h"
 
@@ -68,7 +68,7 @@ char* put_le(char* p, T v) {
 }
 
 // The two triangles of a quad along the diagonal whose worse triangle is better (0-2 on ties), as
-// core/mesh_quality.h counts them.
+// core/mesh/mesh_quality.h counts them.
 std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
   const double a0 = radius_ratio(a, b, c), a1 = radius_ratio(a, c, d);
   const double b0 = radius_ratio(a, b, d), b1 = radius_ratio(b, c, d);

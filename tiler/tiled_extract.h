@@ -7,9 +7,10 @@
 // owns its site: its edge's lower sample, or its cell; a face to the brick of its cell or edge).
 // An exclusive scan of those counts in global key order gives every vertex and face its final
 // index before any is placed. The second pass extracts each brick in brick mode, turns its local
-// indices into final ones (core/brick_sites.h) and writes its records straight to their offsets
-// in the output file, so nothing but the current brick and the count tables is held in memory.
-// The file is written to a temporary name and renamed when complete (core/atomic_file.h).
+// indices into final ones (core/extract/brick_sites.h) and writes its records straight to their
+// offsets in the output file, so nothing but the current brick and the count tables is held in
+// memory. The file is written to a temporary name and renamed when complete
+// (core/mesh/atomic_file.h).
 #pragma once
 
 #include <cstdint>
@@ -17,10 +18,10 @@
 #include <functional>
 #include <string_view>
 
-#include "core/extract.h"
-#include "core/mesh_io.h"
-#include "core/mesh_quality.h"
-#include "core/simplify.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/simplify/simplify.h"
 #include "tiler/brick_plan.h"
 #include "tiler/volume_source.h"
 

@@ -14,8 +14,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/mesh/atomic_file.h"
 #include "tiler/brick_reader.h"
 
 namespace isotile {

@@ -4,8 +4,8 @@
 //   1. Count each brick's vertices and faces (classification only), to cut bricks whose
 //      extraction and simplification would not fit the budget into thinner z-slices.
 //   2. Extract each brick (or slice), simplify it with its seam vertices locked
-//      (core/simplify.h: simplify_piece), and spill the result to a scratch file, cut into the
-//      brick's eight octants.
+//      (core/simplify/simplify.h: simplify_piece), and spill the result to a scratch file, cut into
+//      the brick's eight octants.
 //   3. Over a grid shifted by half a brick, whose cells straddle the bricks' seams: each cell
 //      gathers the octants of the up to eight bricks around it, joins them at vertices with equal
 //      keys, simplifies toward the final count (the cell's own boundary, in the middle of

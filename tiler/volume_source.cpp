@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/procedural_fields.h"
+#include "core/volume/procedural_fields.h"
 
 namespace isotile {
 

@@ -14,8 +14,8 @@
 #include <memory>
 #include <string>
 
-#include "core/volume.h"
-#include "core/volume_io.h"
+#include "core/volume/volume.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile {
 

@@ -1,7 +1,7 @@
 // Shared by every Marching Cubes shader (prepended by gl_program.cpp after "#version 450" and
 // the variant's defines: SAMPLE_T is float or double, NORMALS when normals are wanted).
 //
-// Everything that decides a vertex follows core/marching_cubes.cpp exactly: a sample is inside when
+// Everything that decides a vertex follows core/extract/marching_cubes.cpp exactly: a sample is inside when
 // double(value) >= iso; a vertex on the edge from sample s along axis a sits at
 // origin + spacing * (s + t e_a) with t = (iso - v(s)) / (v(s + e_a) - v(s)), all in double and
 // rounded to float at the end; `precise` forbids fused multiply-adds the CPU does not do, so the
@@ -9,7 +9,7 @@
 
 layout(std430, binding = 0) readonly buffer Samples { SAMPLE_T samples[]; };
 
-// The case tables of core/marching_cubes_tables.h, uploaded from the same constexpr arrays.
+// The case tables of core/extract/marching_cubes_tables.h, uploaded from the same constexpr arrays.
 layout(std140, binding = 0) uniform Tables {
   uvec4 tri_table[256];  // per case: bytes 0..14 the edges of its triangles, byte 15 the count
   uvec4 edge_mask[64];   // crossed-edge mask (12 bits) of case c in component c % 4 of c / 4
@@ -22,7 +22,7 @@ uniform ivec3 u_global_dims;  // samples of the whole volume
 uniform ivec3 u_box_lo;       // cells extracted: [u_box_lo, u_box_hi), global;
 uniform ivec3 u_box_hi;       // their vertices: samples in the closed box [u_box_lo, u_box_hi]
 uniform double u_iso;
-uniform float u_iso_float;  // the smallest float >= u_iso (core/inside_bits.h's InsideTest)
+uniform float u_iso_float;  // the smallest float >= u_iso (core/extract/inside_bits.h's InsideTest)
 uniform dvec3 u_origin;
 uniform dvec3 u_spacing;
 
@@ -103,7 +103,7 @@ uint element_code(ivec3 s) {
 
 #ifdef NORMALS
 // Central differences in world units, one-sided only at the border of the whole volume (never at
-// a brick's border): core/marching_cubes.cpp's gradient().
+// a brick's border): core/extract/marching_cubes.cpp's gradient().
 dvec3 gradient(ivec3 p) {
   dvec3 g;
   for (int a = 0; a < 3; ++a) {

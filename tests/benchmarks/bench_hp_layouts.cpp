@@ -32,9 +32,9 @@
 #include <string>
 #include <vector>
 
-#include "core/marching_cubes.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/marching_cubes.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/gl_program.h"

@@ -27,12 +27,12 @@
 #include <string>
 #include <vector>
 
-#include "core/macet.h"
-#include "core/macet_relax.h"
-#include "core/marching_cubes.h"
-#include "core/mesh_quality.h"
-#include "core/self_intersections.h"
-#include "core/volume_io.h"
+#include "core/extract/macet.h"
+#include "core/extract/macet_relax.h"
+#include "core/extract/marching_cubes.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/self_intersections.h"
+#include "core/volume/volume_io.h"
 
 namespace {
 

@@ -29,11 +29,11 @@
 #include <string>
 #include <vector>
 
-#include "core/dual_contouring.h"
-#include "core/marching_cubes.h"
-#include "core/mesh_quality.h"
-#include "core/procedural_fields.h"
-#include "core/volume_io.h"
+#include "core/extract/dual_contouring.h"
+#include "core/extract/marching_cubes.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
 
 #include <tbb/global_control.h>
 #include <algorithm>

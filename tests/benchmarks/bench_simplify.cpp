@@ -12,11 +12,6 @@
 // median CPU time (user + system, from wait4). The in-process contenders are timed from arrays in
 // memory to arrays in memory, so their times leave out reading and writing files: a bound in
 // their favour.
-#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
-#include <OpenMesh/Tools/Decimater/ModAspectRatioT.hh>
-#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
-#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 #include <fcntl.h>
 #include <meshoptimizer.h>
 #include <signal.h>
@@ -25,6 +20,11 @@
 #include <sys/wait.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Tools/Decimater/DecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModAspectRatioT.hh>
+#include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
+#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 
 #include <algorithm>
 #include <chrono>
@@ -37,12 +37,12 @@
 #include <thread>
 #include <vector>
 
-#include "core/extract.h"
-#include "core/mesh_io.h"
-#include "core/mesh_quality.h"
-#include "core/mesh_topology.h"
-#include "core/surface_distance.h"
-#include "core/volume_io.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/mesh/surface_distance.h"
+#include "core/volume/volume_io.h"
 
 extern char** environ;
 
@@ -183,13 +183,13 @@ isotile::Mesh meshopt(const isotile::Mesh& in, std::size_t target) {
   std::vector<unsigned> idx;
   for (const auto& t : in.triangles) idx.insert(idx.end(), t.begin(), t.end());
   std::vector<unsigned> out_idx(idx.size());
-  const std::size_t n = meshopt_simplify(out_idx.data(), idx.data(), idx.size(),
-                                         in.positions[0].data(), in.positions.size(),
-                                         sizeof(isotile::Vec3f), target * 3, 1.0f,
-                                         meshopt_SimplifyLockBorder, nullptr);
+  const std::size_t n = meshopt_simplify(
+      out_idx.data(), idx.data(), idx.size(), in.positions[0].data(), in.positions.size(),
+      sizeof(isotile::Vec3f), target * 3, 1.0f, meshopt_SimplifyLockBorder, nullptr);
   isotile::Mesh out;
   out.positions = in.positions;
-  for (std::size_t i = 0; i + 2 < n; i += 3) out.triangles.push_back({out_idx[i], out_idx[i + 1], out_idx[i + 2]});
+  for (std::size_t i = 0; i + 2 < n; i += 3)
+    out.triangles.push_back({out_idx[i], out_idx[i + 1], out_idx[i + 2]});
   // Drop the unreferenced vertices, as a file round trip would.
   std::vector<std::int64_t> map(out.positions.size(), -1);
   isotile::Mesh compact;
@@ -241,12 +241,18 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--input") input = next();
-    else if (a == "--ratio") ratio = std::stod(next());
-    else if (a == "--threads") threads = std::stoi(next());
-    else if (a == "--repeat") repeat = std::stoi(next());
-    else if (a == "--isotile") isotile = next();
-    else if (a == "--no-meshlab") meshlab = false;
+    if (a == "--input")
+      input = next();
+    else if (a == "--ratio")
+      ratio = std::stod(next());
+    else if (a == "--threads")
+      threads = std::stoi(next());
+    else if (a == "--repeat")
+      repeat = std::stoi(next());
+    else if (a == "--isotile")
+      isotile = next();
+    else if (a == "--no-meshlab")
+      meshlab = false;
     else {
       std::fprintf(stderr,
                    "usage: bench_simplify [--input MESH] [--ratio R] [--threads N] [--repeat K] "
@@ -352,15 +358,17 @@ int main(int argc, char** argv) {
     const double w = median(wall), c = median(cpu);
     if (row.name.starts_with("isotile")) isotile_wall = w;
     if (row.name.starts_with("MeshLab")) meshlab_cpu = c;
-    std::printf("| %s | %.2f | %s | %zu | %.4f | %.3f | %.3f | %llu | %llu | %llu | %.3f | %.2f |\n",
-                row.name.c_str(), w, c >= 0 ? std::to_string(c).substr(0, 5).c_str() : "",
-                row.mesh.triangles.size(), q.min, q.q001, q.mean,
-                static_cast<unsigned long long>(t.nonmanifold_edges),
-                static_cast<unsigned long long>(t.components),
-                static_cast<unsigned long long>(t.boundary_edges), d.mean(), d.max());
+    std::printf(
+        "| %s | %.2f | %s | %zu | %.4f | %.3f | %.3f | %llu | %llu | %llu | %.3f | %.2f |\n",
+        row.name.c_str(), w, c >= 0 ? std::to_string(c).substr(0, 5).c_str() : "",
+        row.mesh.triangles.size(), q.min, q.q001, q.mean,
+        static_cast<unsigned long long>(t.nonmanifold_edges),
+        static_cast<unsigned long long>(t.components),
+        static_cast<unsigned long long>(t.boundary_edges), d.mean(), d.max());
   }
   if (isotile_wall > 0 && meshlab_cpu > 0)
-    std::printf("\nisotile wall / MeshLab CPU: %.3f (target <= 0.25)\n", isotile_wall / meshlab_cpu);
+    std::printf("\nisotile wall / MeshLab CPU: %.3f (target <= 0.25)\n",
+                isotile_wall / meshlab_cpu);
   fs::remove_all(dir);
   return 0;
 }

@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <memory>
 
-#include "core/volume.h"
+#include "core/volume/volume.h"
 
 namespace isotile::bench {
 

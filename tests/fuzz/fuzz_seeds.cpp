@@ -23,8 +23,8 @@
 #include <type_traits>
 #include <utility>
 
-#include "core/mesh_io.h"
-#include "core/scalar_type.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/scalar_type.h"
 #include "tests/fuzz/fuzz_targets.h"
 
 namespace isotile::fuzz {

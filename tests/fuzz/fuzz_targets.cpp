@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "core/errors.h"
-#include "core/mesh_io.h"
-#include "core/volume_io.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile::fuzz {
 

@@ -30,7 +30,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "core/volume.h"
+#include "core/volume/volume.h"
 
 namespace isotile::fuzz {
 

@@ -1,0 +1,178 @@
+#include "core/extract/extract.h"
+
+#include <algorithm>
+#include <array>
+#include <string>
+
+#include "core/errors.h"
+#include "core/extract/dual_contouring.h"
+#include "core/extract/macet.h"
+#include "core/extract/marching_cubes.h"
+
+namespace isotile {
+
+namespace {
+
+Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
+  return marching_cubes(view, {.iso = o.iso, .normals = o.normals, .cells = o.cells});
+}
+
+DualContouringOptions dc_options(const ExtractOptions& o) {
+  DualContouringOptions dc;
+  dc.iso = o.iso;
+  dc.solver = o.dc_solver;
+  dc.keep_quads = o.keep_quads;
+  dc.normals = o.normals;
+  dc.hermite = o.dc_hermite;
+  dc.cells = o.cells;
+  return dc;
+}
+
+Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
+  return dual_contouring(view, dc_options(o));
+}
+
+Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet(view, {.iso = o.iso,
+                      .normals = o.normals,
+                      .quality = o.quality,
+                      .relax = o.macet_relax,
+                      .cells = o.cells});
+}
+
+struct BackendEntry {
+  Backend backend;
+  std::string_view name;
+  // Indexed by Method; nullptr where the backend does not implement the method.
+  std::array<ExtractFn, kMethodCount> run;
+  // Empty when the backend is compiled in; otherwise why it is not.
+  std::string_view missing;
+  // Set by register_backend(): whether it can run here (see extract.h).
+  ProbeFn probe = nullptr;
+};
+
+// The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
+// then they say they are not built in, and selecting them is a clear error rather than a silent
+// fallback.
+std::array<BackendEntry, kBackendCount - 1> kBackends = {{
+    {Backend::Cpu, "cpu", {cpu_marching_cubes, cpu_macet, cpu_dual_contouring}, ""},
+    {Backend::GeometryShader,
+     "gs",
+     {nullptr, nullptr, nullptr},
+     "the OpenGL geometry-shader backend is not built into this version"},
+    {Backend::HistoPyramid,
+     "hp",
+     {nullptr, nullptr, nullptr},
+     "the OpenGL HistoPyramid backend is not built into this version"},
+}};
+static_assert(kBackends.size() == kBackendCount - 1, "one table entry per concrete backend");
+
+constexpr std::array<std::string_view, kMethodCount> kMethodNames = {"mc", "macet", "dc"};
+
+const BackendEntry& entry(Backend b) {
+  for (const auto& e : kBackends)
+    if (e.backend == b) return e;
+  throw InputError("unknown backend");
+}
+
+// Auto prefers a GPU path when one is available; the CPU comes last as the fallback.
+constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::GeometryShader,
+                                               Backend::Cpu};
+
+// Whether `e` can run here; `why` says why not, `hardware` whether it runs on a real GPU.
+// `hardware_only`: only a real GPU matters (Auto), which the probe may rule out cheaply.
+bool usable(const BackendEntry& e, std::string* why, bool* hardware, bool hardware_only = false) {
+  *hardware = false;
+  if (!e.missing.empty()) {
+    *why = e.missing;
+    return false;
+  }
+  *why = e.probe ? e.probe(hardware, hardware_only) : "";
+  return why->empty();
+}
+
+}  // namespace
+
+std::string_view method_name(Method m) {
+  return kMethodNames[static_cast<int>(m)];
+}
+
+std::string_view backend_name(Backend b) {
+  if (b == Backend::Auto) return "auto";
+  return entry(b).name;
+}
+
+void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
+                      ProbeFn probe) {
+  for (auto& e : kBackends)
+    if (e.backend == backend) {
+      e.run = run;
+      e.missing = "";
+      e.probe = probe;
+    }
+}
+
+std::vector<BackendCaps> capabilities() {
+  std::vector<BackendCaps> caps;
+  for (const auto& e : kBackends) {
+    std::string why;
+    bool hardware = false;
+    const bool ok = usable(e, &why, &hardware);
+    BackendCaps c{e.backend, ok, hardware, {}, why};
+    for (int m = 0; m < kMethodCount; ++m)
+      if (e.run[m]) c.methods.push_back(static_cast<Method>(m));
+    caps.push_back(std::move(c));
+  }
+  return caps;
+}
+
+Backend resolve_backend(const ExtractOptions& options) {
+  const int m = static_cast<int>(options.method);
+  if (options.backend == Backend::Auto) {
+    // A GPU backend only on a real GPU: on a software rasteriser the CPU path is faster.
+    for (Backend b : kAutoOrder) {
+      const auto& e = entry(b);
+      if (!e.run[m]) continue;
+      std::string why;
+      bool hardware = false;
+      if (b == Backend::Cpu ? usable(e, &why, &hardware)
+                            : usable(e, &why, &hardware, true) && hardware)
+        return b;
+    }
+    throw InputError("method '" + std::string(method_name(options.method)) +
+                     "' is not implemented by any backend of this build");
+  }
+  const auto& e = entry(options.backend);
+  if (!e.run[m] && !e.missing.empty())
+    throw InputError("backend '" + std::string(e.name) + "': " + std::string(e.missing));
+  if (!e.run[m])
+    throw InputError("backend '" + std::string(e.name) + "' does not implement method '" +
+                     std::string(method_name(options.method)) + "'");
+  std::string why;
+  bool hardware = false;
+  if (!usable(e, &why, &hardware))
+    throw InputError("backend '" + std::string(e.name) + "': " + why);
+  return options.backend;
+}
+
+int extract_halo(const ExtractOptions& options) {
+  switch (options.method) {
+    case Method::MarchingCubes:
+      return marching_cubes_halo({.iso = options.iso, .normals = options.normals});
+    case Method::Macet:
+      return macet_halo({.iso = options.iso,
+                         .normals = options.normals,
+                         .quality = options.quality,
+                         .relax = options.macet_relax});
+    case Method::DualContouring:
+      return dual_contouring_halo(dc_options(options));
+  }
+  return 2;
+}
+
+Mesh extract(const VolumeView& view, const ExtractOptions& options) {
+  const Backend b = resolve_backend(options);
+  return entry(b).run[static_cast<int>(options.method)](view, options);
+}
+
+}  // namespace isotile

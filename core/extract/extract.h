@@ -1,0 +1,77 @@
+// The one entry point: extract(view, options) runs the chosen method on the chosen backend.
+//
+// Backends are described by one table (extract.cpp) indexed by Backend, checked against the
+// enum's size at compile time; capabilities() reports what this build and machine can run.
+// Backend::Auto resolves to the fastest available backend that supports the method; the CPU is the
+// reference and the fallback.
+#pragma once
+
+#include <array>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/extract/dual_contouring.h"
+#include "core/extract/macet.h"
+#include "core/mesh/mesh.h"
+#include "core/volume/volume.h"
+
+namespace isotile {
+
+enum class Method { MarchingCubes, Macet, DualContouring };
+inline constexpr int kMethodCount = 3;
+enum class Backend { Cpu, GeometryShader, HistoPyramid, Auto };
+inline constexpr int kBackendCount = 4;
+
+std::string_view method_name(Method m);    // "mc", "macet", "dc"
+std::string_view backend_name(Backend b);  // "cpu", "gs", "hp", "auto"
+
+struct ExtractOptions {
+  Method method = Method::MarchingCubes;
+  Backend backend = Backend::Auto;
+  double iso = 0.0;
+  bool normals = false;
+  // Dual Contouring only.
+  DcSolver dc_solver = DcSolver::MassPoint;
+  bool keep_quads = false;
+  DcHermite dc_hermite = DcHermite::Central;  // Eno: sharper features, see dual_contouring.h
+  // Macet only: Fast (default) or Max (see core/extract/macet.h).
+  MacetQuality quality = MacetQuality::Fast;
+  double macet_relax = 0.0;  // MacetOptions::relax: 0 keeps vertices on the trilinear surface
+  // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one
+  // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
+  // core/extract/marching_cubes.h and core/extract/brick_sites.h.
+  Box3 cells{};
+};
+
+// Samples beyond a brick's cells that `options` needs the view to hold.
+int extract_halo(const ExtractOptions& options);
+
+struct BackendCaps {
+  Backend backend;
+  bool available = false;
+  bool hardware = false;        // runs on a real GPU (not the CPU, not a software rasteriser)
+  std::vector<Method> methods;  // methods this backend implements
+  std::string why_unavailable;  // empty when available
+};
+
+// One entry per concrete backend (Auto excluded), in enum order.
+std::vector<BackendCaps> capabilities();
+
+// The concrete backend `options` would run on; throws InputError (naming what is missing) when the
+// requested backend or method is not available.
+Backend resolve_backend(const ExtractOptions& options);
+
+Mesh extract(const VolumeView& view, const ExtractOptions& options);
+
+// Optional backends live in their own targets (the GL ones in shaders/, isotile_gl) so that core
+// does not depend on them; the program installs them at startup, before any extract(). `probe`
+// returns "" when the backend can run on this machine, setting *hardware when it runs on a real
+// GPU (Auto picks a GPU backend only then), else why it cannot; with `hardware_only` (Auto's
+// question) it may answer "cannot" cheaply for anything but a real GPU.
+using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
+using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
+void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
+                      ProbeFn probe);
+
+}  // namespace isotile

@@ -1,0 +1,38 @@
+// Triangle quality: the radius ratio q = 2 r_in / R_circ = (b+c-a)(c+a-b)(a+b-c) / (a b c), 1 for
+// an equilateral triangle and 0 for a degenerate one (the 0..1 form of the paper's Table I; VTK's
+// "radius ratio" is the inverse R/r).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "core/mesh/mesh.h"
+
+namespace isotile {
+
+// Radius ratio of one triangle, computed in double; 0 when any edge has zero length.
+double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c);
+
+// The same from the three edge lengths.
+inline double radius_ratio_of_lengths(double la, double lb, double lc) {
+  if (la == 0 || lb == 0 || lc == 0) return 0;
+  const double q = (lb + lc - la) * (lc + la - lb) * (la + lb - lc) / (la * lb * lc);
+  // Rounding can push collinear triangles slightly below 0 and equilateral ones above 1, and
+  // non-finite coordinates give NaN, which would break sorting; all of those clamp into [0, 1].
+  if (!(q > 0)) return 0;
+  return q < 1 ? q : 1;
+}
+
+struct QualityStats {
+  std::uint64_t triangles = 0;   // quads count as their two triangles (better diagonal)
+  std::uint64_t degenerate = 0;  // q < 1e-6 (zero area or collinear)
+  double min = 0, mean = 0, max = 0;
+  double q001 = 0, q01 = 0;  // 0.1% and 1% quantiles (lower tail)
+  double median = 0;
+  std::array<std::uint64_t, 20> histogram{};  // 20 bins of width 0.05 over [0, 1]
+};
+
+// Deterministic for any thread count (per-chunk partial sums are combined in a fixed order).
+QualityStats triangle_quality(const Mesh& mesh);
+
+}  // namespace isotile

@@ -1,0 +1,1015 @@
+// Every count read from a file is checked against the bytes that remain before anything is
+// allocated or looped over, and every read is bounds-checked: the reader must survive any bytes.
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/mesh/mesh_io.h"
+
+namespace isotile {
+
+namespace {
+
+constexpr std::uint64_t kMaxVertices = std::numeric_limits<std::uint32_t>::max();
+
+std::vector<char> read_file(const std::filesystem::path& path) {
+  auto fail = [&](const char* what, int err) {
+    throw IoError(std::string(what) + " " + path.string() + ": " + std::strerror(err));
+  };
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) fail("cannot open", errno);
+  struct FdCloser {
+    int fd;
+    ~FdCloser() { ::close(fd); }
+  } closer{fd};
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) fail("cannot read", errno);
+  if (S_ISDIR(st.st_mode)) fail("cannot read", EISDIR);
+  // One byte beyond the size lets the read that sees the end happen without growing the buffer;
+  // reading to the end rather than trusting st_size also copes with pipes and changing files.
+  std::vector<char> data(S_ISREG(st.st_mode) ? static_cast<std::size_t>(st.st_size) + 1 : 1 << 16);
+  std::size_t size = 0;
+  for (;;) {
+    if (size == data.size()) data.resize(2 * data.size());
+    const ssize_t n = ::read(fd, data.data() + size, data.size() - size);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      fail("cannot read", errno);
+    }
+    if (n == 0) break;
+    size += static_cast<std::size_t>(n);
+  }
+  data.resize(size);
+  return data;
+}
+
+class Reader {
+ public:
+  explicit Reader(std::string name) : name_(std::move(name)) {}
+  [[noreturn]] void fail(const std::string& what) const { throw InputError(name_ + ": " + what); }
+  const std::string& name() const { return name_; }
+
+ private:
+  std::string name_;
+};
+
+bool is_space(char c) {
+  return c == ' ' || c == '\n' || c == '\r' || c == '\t' || c == '\v' || c == '\f';
+}
+
+// Whitespace-separated tokens with line tracking, for the text formats.
+class Text {
+ public:
+  Text(const char* begin, const char* end, bool hash_comments)
+      : p_(begin), end_(end), comments_(hash_comments) {}
+
+  // The next token, crossing line ends (and comment lines); empty at the end of the text.
+  std::string_view token() {
+    for (;;) {
+      while (p_ < end_ && is_space(*p_)) {
+        if (*p_ == '\n') ++line_;
+        ++p_;
+      }
+      if (comments_ && p_ < end_ && *p_ == '#') {
+        skip_line();
+        continue;
+      }
+      return take();
+    }
+  }
+
+  // The next token on the current line; empty when the line (or a trailing comment) ends.
+  std::string_view line_token() {
+    while (p_ < end_ && *p_ != '\n' && is_space(*p_)) ++p_;
+    if (p_ == end_ || *p_ == '\n' || (comments_ && *p_ == '#')) return {};
+    return take();
+  }
+
+  void skip_line() {
+    const void* nl = std::memchr(p_, '\n', static_cast<std::size_t>(end_ - p_));
+    if (!nl) {
+      p_ = end_;
+      return;
+    }
+    p_ = static_cast<const char*>(nl) + 1;
+    ++line_;
+  }
+
+  std::size_t line() const { return line_; }
+  std::size_t remaining() const { return static_cast<std::size_t>(end_ - p_); }
+
+ private:
+  std::string_view take() {
+    const char* b = p_;
+    while (p_ < end_ && !is_space(*p_)) ++p_;
+    return {b, static_cast<std::size_t>(p_ - b)};
+  }
+
+  const char* p_;
+  const char* end_;
+  bool comments_;
+  std::size_t line_ = 1;
+};
+
+// Rounds like IEEE conversion, including overflow to infinity, which a plain cast leaves
+// undefined for values beyond the float range.
+float to_float(double d) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  // Halfway between FLT_MAX and 2^128: from here on, rounding to nearest gives infinity.
+  constexpr double kOverflow = 0x1.ffffffp127;
+  const double a = std::fabs(d);
+  if (a > kMax) {
+    const float big =
+        a >= kOverflow ? std::numeric_limits<float>::infinity() : std::numeric_limits<float>::max();
+    return d < 0 ? -big : big;
+  }
+  return static_cast<float>(d);
+}
+
+template <class T>
+bool parse_number(std::string_view s, T& out) {
+  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
+  if (s.empty() || s[0] == '+' || s[0] == ' ') return false;
+  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
+  return ec == std::errc() && ptr == s.data() + s.size();
+}
+
+std::string quoted(std::string_view s) {
+  constexpr std::size_t kMax = 40;
+  std::string out = "'";
+  for (char c : s.substr(0, kMax)) {
+    const auto u = static_cast<unsigned char>(c);
+    out += (u >= 32 && u < 127) ? c : '?';
+  }
+  if (s.size() > kMax) out += "...";
+  return out + "'";
+}
+
+std::string vertex_error(std::uint64_t face, std::int64_t vertex, std::uint64_t count) {
+  return "face " + std::to_string(face) + " references vertex " + std::to_string(vertex) +
+         " but there are " + std::to_string(count) + " vertices";
+}
+
+// Polygons of more than four corners become a fan around the first corner.
+void add_polygon(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
+  if (n == 3) {
+    mesh.triangles.push_back({c[0], c[1], c[2]});
+  } else if (n == 4) {
+    mesh.quads.push_back({c[0], c[1], c[2], c[3]});
+  } else {
+    for (std::size_t i = 1; i + 1 < n; ++i) mesh.triangles.push_back({c[0], c[i], c[i + 1]});
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// PLY
+
+enum class PlyType { I8, U8, I16, U16, I32, U32, F32, F64 };
+
+std::optional<PlyType> ply_type(std::string_view s) {
+  if (s == "char" || s == "int8") return PlyType::I8;
+  if (s == "uchar" || s == "uint8") return PlyType::U8;
+  if (s == "short" || s == "int16") return PlyType::I16;
+  if (s == "ushort" || s == "uint16") return PlyType::U16;
+  if (s == "int" || s == "int32") return PlyType::I32;
+  if (s == "uint" || s == "uint32") return PlyType::U32;
+  if (s == "float" || s == "float32") return PlyType::F32;
+  if (s == "double" || s == "float64") return PlyType::F64;
+  return std::nullopt;
+}
+
+std::size_t ply_size(PlyType t) {
+  switch (t) {
+    case PlyType::I8:
+    case PlyType::U8:
+      return 1;
+    case PlyType::I16:
+    case PlyType::U16:
+      return 2;
+    case PlyType::I32:
+    case PlyType::U32:
+    case PlyType::F32:
+      return 4;
+    case PlyType::F64:
+      return 8;
+  }
+  return 0;
+}
+
+bool ply_integer(PlyType t) {
+  return t != PlyType::F32 && t != PlyType::F64;
+}
+
+struct PlyProperty {
+  std::string name;
+  PlyType type = PlyType::F32;  // of the value, or of the list entries
+  bool list = false;
+  PlyType count_type = PlyType::U8;
+};
+
+struct PlyElement {
+  std::string name;
+  std::uint64_t count = 0;
+  std::vector<PlyProperty> properties;
+
+  // Bytes of the smallest binary record (every list empty); 0 when there are no properties.
+  std::uint64_t min_binary_size() const {
+    std::uint64_t n = 0;
+    for (const auto& p : properties) n += ply_size(p.list ? p.count_type : p.type);
+    return n;
+  }
+  bool fixed_size() const {
+    return std::none_of(properties.begin(), properties.end(), [](auto& p) { return p.list; });
+  }
+  int find(std::string_view prop) const {
+    for (std::size_t i = 0; i < properties.size(); ++i) {
+      if (properties[i].name == prop) return static_cast<int>(i);
+    }
+    return -1;
+  }
+};
+
+enum class PlyFormat { Ascii, Little, Big };
+
+template <class T>
+T load(const unsigned char* p, bool swap) {
+  unsigned char bytes[sizeof(T)];
+  std::memcpy(bytes, p, sizeof(T));
+  if (swap) std::reverse(bytes, bytes + sizeof(T));
+  T v;
+  std::memcpy(&v, bytes, sizeof(T));
+  return v;
+}
+
+float load_float(PlyType t, const unsigned char* p, bool swap) {
+  switch (t) {
+    case PlyType::I8:
+      return static_cast<float>(load<std::int8_t>(p, swap));
+    case PlyType::U8:
+      return static_cast<float>(load<std::uint8_t>(p, swap));
+    case PlyType::I16:
+      return static_cast<float>(load<std::int16_t>(p, swap));
+    case PlyType::U16:
+      return static_cast<float>(load<std::uint16_t>(p, swap));
+    case PlyType::I32:
+      return static_cast<float>(load<std::int32_t>(p, swap));
+    case PlyType::U32:
+      return static_cast<float>(load<std::uint32_t>(p, swap));
+    case PlyType::F32:
+      return load<float>(p, swap);
+    case PlyType::F64:
+      return to_float(load<double>(p, swap));
+  }
+  return 0;
+}
+
+// Integer types only (the header parser rejects float counts and indices).
+std::int64_t load_int(PlyType t, const unsigned char* p, bool swap) {
+  switch (t) {
+    case PlyType::I8:
+      return load<std::int8_t>(p, swap);
+    case PlyType::U8:
+      return load<std::uint8_t>(p, swap);
+    case PlyType::I16:
+      return load<std::int16_t>(p, swap);
+    case PlyType::U16:
+      return load<std::uint16_t>(p, swap);
+    case PlyType::I32:
+      return load<std::int32_t>(p, swap);
+    case PlyType::U32:
+      return load<std::uint32_t>(p, swap);
+    default:
+      return 0;
+  }
+}
+
+class PlyReader : Reader {
+ public:
+  PlyReader(std::string name, const std::vector<char>& data)
+      : Reader(std::move(name)),
+        begin_(reinterpret_cast<const unsigned char*>(data.data())),
+        end_(begin_ + data.size()) {}
+
+  Mesh read() {
+    parse_header();
+    std::uint64_t vertex_count = 0;
+    for (const auto& e : elements_) {
+      if (e.name == "vertex") vertex_count = e.count;
+    }
+    Mesh mesh;
+    for (const auto& e : elements_) {
+      if (e.name == "vertex") {
+        read_vertices(e, mesh);
+      } else if (e.name == "face") {
+        read_faces(e, vertex_count, mesh);
+      } else {
+        skip_element(e);
+      }
+    }
+    return mesh;
+  }
+
+ private:
+  void parse_header() {
+    const char* text = reinterpret_cast<const char*>(begin_);
+    const char* text_end = reinterpret_cast<const char*>(end_);
+    std::size_t line = 0;
+    const char* p = text;
+    bool have_format = false, done = false;
+    while (!done) {
+      if (p == text_end) fail("PLY header has no end_header line");
+      const char* nl = static_cast<const char*>(std::memchr(p, '\n', text_end - p));
+      if (!nl) fail("PLY header has no end_header line");
+      ++line;
+      Text words(p, nl, false);
+      p = nl + 1;
+      const std::string_view kw = words.token();
+      auto where = [&] { return "PLY header line " + std::to_string(line) + ": "; };
+      if (line == 1) {
+        if (kw != "ply" || !words.token().empty()) fail("not a PLY file (no 'ply' first line)");
+        continue;
+      }
+      if (kw.empty() || kw == "comment" || kw == "obj_info") continue;
+      if (kw == "format") {
+        const std::string_view f = words.token();
+        if (f == "ascii") {
+          format_ = PlyFormat::Ascii;
+        } else if (f == "binary_little_endian") {
+          format_ = PlyFormat::Little;
+        } else if (f == "binary_big_endian") {
+          format_ = PlyFormat::Big;
+        } else {
+          fail(where() + "unknown format " + quoted(f));
+        }
+        have_format = true;
+      } else if (kw == "element") {
+        PlyElement e;
+        e.name = std::string(words.token());
+        if (e.name.empty() || !parse_number(words.token(), e.count)) {
+          fail(where() + "expected 'element NAME COUNT'");
+        }
+        for (const auto& other : elements_) {
+          if (other.name == e.name && (e.name == "vertex" || e.name == "face")) {
+            fail(where() + "second '" + e.name + "' element");
+          }
+        }
+        elements_.push_back(std::move(e));
+      } else if (kw == "property") {
+        if (elements_.empty()) fail(where() + "property before any element");
+        PlyProperty prop;
+        std::string_view t = words.token();
+        if (t == "list") {
+          prop.list = true;
+          const std::string_view ct = words.token();
+          const auto count_type = ply_type(ct);
+          if (!count_type) fail(where() + "unknown type " + quoted(ct));
+          if (!ply_integer(*count_type)) fail(where() + "list count type must be an integer");
+          prop.count_type = *count_type;
+          t = words.token();
+        }
+        const auto type = ply_type(t);
+        if (!type) fail(where() + "unknown type " + quoted(t));
+        prop.type = *type;
+        prop.name = std::string(words.token());
+        if (prop.name.empty()) fail(where() + "property without a name");
+        elements_.back().properties.push_back(std::move(prop));
+      } else if (kw == "end_header") {
+        done = true;
+      } else {
+        fail(where() + "unexpected " + quoted(kw));
+      }
+    }
+    if (!have_format) fail("PLY header has no format line");
+    pos_ = reinterpret_cast<const unsigned char*>(p);
+    lines_before_ = line;
+    swap_ = format_ != PlyFormat::Ascii &&
+            (format_ == PlyFormat::Big) != (std::endian::native == std::endian::big);
+  }
+
+  std::uint64_t remaining() const { return static_cast<std::uint64_t>(end_ - pos_); }
+
+  [[noreturn]] void truncated(const PlyElement& e, std::uint64_t index) const {
+    fail("file ends in " + e.name + " " + std::to_string(index) + " of " + std::to_string(e.count));
+  }
+
+  // Makes sure `count` records of at least `min_size` bytes (binary) or `min_size` tokens
+  // (ASCII, each one at least one byte) can fit in what is left.
+  void check_fits(const PlyElement& e, std::uint64_t min_size) const {
+    if (min_size == 0) return;
+    if (e.count > remaining() / min_size) {
+      fail("element '" + e.name + "' declares " + std::to_string(e.count) +
+           " records but the file has only " + std::to_string(remaining()) + " bytes left");
+    }
+  }
+
+  std::uint64_t min_size(const PlyElement& e) const {
+    return format_ == PlyFormat::Ascii ? e.properties.size() : e.min_binary_size();
+  }
+
+  // ASCII helpers.
+  Text ascii_text() const {
+    return Text(reinterpret_cast<const char*>(pos_), reinterpret_cast<const char*>(end_), false);
+  }
+  void ascii_done(const Text& t) {
+    pos_ = end_ - t.remaining();
+    lines_before_ += t.line() - 1;
+  }
+
+  std::string_view ascii_token(Text& t, const PlyElement& e, std::uint64_t index) const {
+    const std::string_view s = t.token();
+    if (s.empty()) truncated(e, index);
+    return s;
+  }
+  [[noreturn]] void bad_number(const Text& t, std::string_view s) const {
+    fail("line " + std::to_string(lines_before_ + t.line()) + ": bad number " + quoted(s));
+  }
+  float ascii_float(Text& t, const PlyElement& e, std::uint64_t index, PlyType type) const {
+    const std::string_view s = ascii_token(t, e, index);
+    if (type == PlyType::F32) {
+      float f;
+      if (!parse_number(s, f)) bad_number(t, s);
+      return f;
+    }
+    double d;
+    if (!parse_number(s, d)) bad_number(t, s);
+    return to_float(d);
+  }
+  std::int64_t ascii_int(Text& t, const PlyElement& e, std::uint64_t index) const {
+    const std::string_view s = ascii_token(t, e, index);
+    std::int64_t v;
+    if (!parse_number(s, v)) bad_number(t, s);
+    return v;
+  }
+
+  // Binary helpers.
+  void need(std::uint64_t bytes, const PlyElement& e, std::uint64_t index) const {
+    if (bytes > remaining()) truncated(e, index);
+  }
+
+  // The list length, checked to be non-negative and to fit in the file.
+  std::uint64_t list_count(const PlyProperty& p, const PlyElement& e, std::uint64_t index,
+                           Text* text) {
+    std::int64_t n;
+    if (text) {
+      n = ascii_int(*text, e, index);
+    } else {
+      need(ply_size(p.count_type), e, index);
+      n = load_int(p.count_type, pos_, swap_);
+      pos_ += ply_size(p.count_type);
+    }
+    if (n < 0) {
+      fail(e.name + " " + std::to_string(index) + ": negative list length " + std::to_string(n));
+    }
+    const std::uint64_t per = text ? 1 : ply_size(p.type);
+    const std::uint64_t left = text ? text->remaining() : remaining();
+    if (static_cast<std::uint64_t>(n) > left / per) truncated(e, index);
+    return static_cast<std::uint64_t>(n);
+  }
+
+  void skip_property(const PlyProperty& p, const PlyElement& e, std::uint64_t index, Text* text) {
+    const std::uint64_t n = p.list ? list_count(p, e, index, text) : 1;
+    if (text) {
+      for (std::uint64_t i = 0; i < n; ++i) ascii_token(*text, e, index);
+    } else {
+      need(n * ply_size(p.type), e, index);
+      pos_ += n * ply_size(p.type);
+    }
+  }
+
+  void skip_element(const PlyElement& e) {
+    const std::uint64_t min = min_size(e);
+    check_fits(e, min);
+    if (min == 0) return;
+    if (format_ != PlyFormat::Ascii && e.fixed_size()) {
+      pos_ += e.count * min;
+      return;
+    }
+    std::optional<Text> text;
+    if (format_ == PlyFormat::Ascii) text.emplace(ascii_text());
+    for (std::uint64_t i = 0; i < e.count; ++i) {
+      for (const auto& p : e.properties) skip_property(p, e, i, text ? &*text : nullptr);
+    }
+    if (text) ascii_done(*text);
+  }
+
+  void read_vertices(const PlyElement& e, Mesh& mesh) {
+    const int xyz[3] = {e.find("x"), e.find("y"), e.find("z")};
+    const int nxyz[3] = {e.find("nx"), e.find("ny"), e.find("nz")};
+    if (xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0) fail("vertex element has no x, y and z");
+    const bool normals = nxyz[0] >= 0 && nxyz[1] >= 0 && nxyz[2] >= 0;
+    for (int i = 0; i < 3; ++i) {
+      if (e.properties[xyz[i]].list || (normals && e.properties[nxyz[i]].list)) {
+        fail("vertex coordinates and normals must not be lists");
+      }
+    }
+    check_fits(e, std::max<std::uint64_t>(min_size(e), 1));
+    if (e.count > kMaxVertices) {
+      throw CapacityError(name() + ": " + std::to_string(e.count) +
+                          " vertices exceed the 2^32-1 an in-memory mesh can index");
+    }
+    mesh.positions.resize(e.count);
+    if (normals) mesh.normals.resize(e.count);
+
+    // Which output each property feeds: 0-2 position, 3-5 normal, -1 none.
+    std::vector<int> target(e.properties.size(), -1);
+    for (int i = 0; i < 3; ++i) {
+      target[xyz[i]] = i;
+      if (normals) target[nxyz[i]] = 3 + i;
+    }
+    auto store = [&](std::uint64_t v, int slot, float value) {
+      if (slot < 3) {
+        mesh.positions[v][slot] = value;
+      } else {
+        mesh.normals[v][slot - 3] = value;
+      }
+    };
+
+    if (format_ == PlyFormat::Ascii) {
+      Text t = ascii_text();
+      for (std::uint64_t v = 0; v < e.count; ++v) {
+        for (std::size_t k = 0; k < e.properties.size(); ++k) {
+          const PlyProperty& p = e.properties[k];
+          if (target[k] < 0) {
+            skip_property(p, e, v, &t);
+          } else if (ply_integer(p.type)) {
+            store(v, target[k], static_cast<float>(ascii_int(t, e, v)));
+          } else {
+            store(v, target[k], ascii_float(t, e, v, p.type));
+          }
+        }
+      }
+      ascii_done(t);
+      return;
+    }
+
+    if (e.fixed_size()) {
+      const std::uint64_t record = e.min_binary_size();
+      // What our writer produces: copy straight through.
+      if (!swap_ && !normals && record == 12 && e.properties.size() == 3 && xyz[0] == 0 &&
+          xyz[1] == 1 && xyz[2] == 2 &&
+          std::all_of(e.properties.begin(), e.properties.end(),
+                      [](auto& p) { return p.type == PlyType::F32; })) {
+        if (e.count > 0) std::memcpy(mesh.positions.data(), pos_, e.count * record);
+        pos_ += e.count * record;
+        return;
+      }
+      std::vector<std::pair<std::size_t, int>> fields;  // offset, target
+      std::vector<PlyType> types;
+      std::size_t offset = 0;
+      for (std::size_t k = 0; k < e.properties.size(); ++k) {
+        if (target[k] >= 0) {
+          fields.emplace_back(offset, target[k]);
+          types.push_back(e.properties[k].type);
+        }
+        offset += ply_size(e.properties[k].type);
+      }
+      for (std::uint64_t v = 0; v < e.count; ++v) {
+        for (std::size_t f = 0; f < fields.size(); ++f) {
+          store(v, fields[f].second, load_float(types[f], pos_ + fields[f].first, swap_));
+        }
+        pos_ += record;
+      }
+      return;
+    }
+    for (std::uint64_t v = 0; v < e.count; ++v) {
+      for (std::size_t k = 0; k < e.properties.size(); ++k) {
+        const PlyProperty& p = e.properties[k];
+        if (target[k] < 0) {
+          skip_property(p, e, v, nullptr);
+        } else {
+          need(ply_size(p.type), e, v);
+          store(v, target[k], load_float(p.type, pos_, swap_));
+          pos_ += ply_size(p.type);
+        }
+      }
+    }
+  }
+
+  void read_faces(const PlyElement& e, std::uint64_t vertex_count, Mesh& mesh) {
+    int index_prop = e.find("vertex_indices");
+    if (index_prop < 0) index_prop = e.find("vertex_index");
+    if (index_prop < 0) fail("face element has no vertex_indices property");
+    const PlyProperty& ip = e.properties[index_prop];
+    if (!ip.list) fail("face property vertex_indices is not a list");
+    if (!ply_integer(ip.type)) fail("face vertex indices must be integers");
+    const std::uint64_t min = std::max<std::uint64_t>(min_size(e), 1);
+    check_fits(e, min);
+    // A face of three corners is the smallest there can be; reserve what will certainly fit.
+    const std::uint64_t likely = std::min<std::uint64_t>(e.count, remaining() / (min + 2));
+    mesh.triangles.reserve(likely);
+
+    std::optional<Text> text;
+    if (format_ == PlyFormat::Ascii) text.emplace(ascii_text());
+    Text* t = text ? &*text : nullptr;
+    const std::size_t isize = ply_size(ip.type);
+    std::vector<std::uint32_t> corners;
+    for (std::uint64_t f = 0; f < e.count; ++f) {
+      for (std::size_t k = 0; k < e.properties.size(); ++k) {
+        const PlyProperty& p = e.properties[k];
+        if (static_cast<int>(k) != index_prop) {
+          skip_property(p, e, f, t);
+          continue;
+        }
+        const std::uint64_t n = list_count(p, e, f, t);
+        if (n < 3) {
+          fail("face " + std::to_string(f) + " has " + std::to_string(n) +
+               " corners (at least 3 needed)");
+        }
+        corners.resize(n);
+        for (std::uint64_t c = 0; c < n; ++c) {
+          std::int64_t v;
+          if (t) {
+            v = ascii_int(*t, e, f);
+          } else {
+            v = load_int(p.type, pos_, swap_);
+            pos_ += isize;
+          }
+          if (v < 0 || static_cast<std::uint64_t>(v) >= vertex_count) {
+            fail(vertex_error(f, v, vertex_count));
+          }
+          corners[c] = static_cast<std::uint32_t>(v);
+        }
+        add_polygon(mesh, corners.data(), n);
+      }
+    }
+    if (t) ascii_done(*t);
+  }
+
+  const unsigned char* begin_;
+  const unsigned char* end_;
+  const unsigned char* pos_ = nullptr;
+  std::vector<PlyElement> elements_;
+  PlyFormat format_ = PlyFormat::Ascii;
+  bool swap_ = false;
+  std::size_t lines_before_ = 0;  // text lines before the current Text starts
+};
+
+// ---------------------------------------------------------------------------------------------
+// OBJ
+
+class ObjReader : Reader {
+ public:
+  ObjReader(std::string name, const std::vector<char>& data)
+      : Reader(std::move(name)), text_(data.data(), data.data() + data.size(), true) {}
+
+  Mesh read() {
+    Mesh mesh;
+    std::vector<Vec3f> normals;
+    // Normals are per position in a Mesh; an OBJ's separate normal indices only map onto that
+    // when every corner pairs a position with the normal of the same number.
+    bool normals_match = true;
+    bool any_normal = false;
+    std::uint64_t max_normal = 0;
+    // Corners stay 0-based and unchecked until all vertices are known: a face may come first.
+    std::vector<std::uint64_t> corners;
+    std::vector<std::size_t> face_start;
+    for (;;) {
+      const std::string_view kw = text_.token();
+      if (kw.empty()) break;
+      if (kw == "v" || kw == "vn") {
+        Vec3f p;
+        for (float& c : p) c = number();
+        (kw == "v" ? mesh.positions : normals).push_back(p);
+        if (mesh.positions.size() > kMaxVertices) {
+          throw CapacityError(name() + ": more than 2^32-1 vertices");
+        }
+      } else if (kw == "f") {
+        face_start.push_back(corners.size());
+        for (std::string_view c = text_.line_token(); !c.empty(); c = text_.line_token()) {
+          const std::size_t s1 = c.find('/');
+          const std::uint64_t v = index(c.substr(0, s1), mesh.positions.size());
+          corners.push_back(v);
+          if (s1 == std::string_view::npos) continue;
+          const std::string_view rest = c.substr(s1 + 1);
+          const std::size_t s2 = rest.find('/');
+          // "v/t" and "v/t/" carry no normal.
+          if (s2 == std::string_view::npos || s2 + 1 == rest.size()) continue;
+          const std::uint64_t n = index(rest.substr(s2 + 1), normals.size());
+          any_normal = true;
+          max_normal = std::max(max_normal, n);
+          if (n != v) normals_match = false;
+        }
+        const std::size_t n = corners.size() - face_start.back();
+        if (n < 3) {
+          fail(at() + "face has " + std::to_string(n) + " corners (at least 3 needed)");
+        }
+      }
+      text_.skip_line();
+    }
+    if (any_normal && max_normal >= normals.size()) {
+      fail("a face references normal " + std::to_string(max_normal + 1) + " but there are " +
+           std::to_string(normals.size()) + " normals");
+    }
+    const std::uint64_t nv = mesh.positions.size();
+    std::vector<std::uint32_t> face;
+    face_start.push_back(corners.size());
+    for (std::size_t f = 0; f + 1 < face_start.size(); ++f) {
+      face.clear();
+      for (std::size_t c = face_start[f]; c < face_start[f + 1]; ++c) {
+        if (corners[c] >= nv) fail(vertex_error(f, static_cast<std::int64_t>(corners[c] + 1), nv));
+        face.push_back(static_cast<std::uint32_t>(corners[c]));
+      }
+      add_polygon(mesh, face.data(), face.size());
+    }
+    if (normals_match && normals.size() == nv && nv > 0) mesh.normals = std::move(normals);
+    return mesh;
+  }
+
+ private:
+  std::string at() const { return "line " + std::to_string(text_.line()) + ": "; }
+
+  float number() {
+    const std::string_view s = text_.line_token();
+    float f;
+    if (!parse_number(s, f)) {
+      fail(at() + (s.empty() ? std::string("missing number") : "bad number " + quoted(s)));
+    }
+    return f;
+  }
+
+  // 1-based or negative (relative to what is defined so far) -> 0-based. Positive indices are
+  // range-checked later, against the final count.
+  std::uint64_t index(std::string_view s, std::uint64_t defined) {
+    std::int64_t i;
+    if (!parse_number(s, i) || i == 0) fail(at() + "bad index " + quoted(s));
+    if (i > 0) return static_cast<std::uint64_t>(i - 1);
+    if (static_cast<std::uint64_t>(-(i + 1)) >= defined) {
+      fail(at() + "relative index " + std::to_string(i) + " but only " + std::to_string(defined) +
+           " defined so far");
+    }
+    return defined - static_cast<std::uint64_t>(-(i + 1)) - 1;
+  }
+
+  Text text_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// OFF
+
+Mesh read_off(const Reader& r, const std::vector<char>& data) {
+  Text t(data.data(), data.data() + data.size(), true);
+  auto at = [&] { return "line " + std::to_string(t.line()) + ": "; };
+  const std::string_view magic = t.token();
+  bool normals = false;
+  if (magic == "NOFF" || magic == "CNOFF" || magic == "NCOFF") {
+    normals = true;
+  } else if (magic != "OFF" && magic != "COFF") {
+    r.fail("not an OFF file (first word is " + quoted(magic) + ")");
+  }
+  std::uint64_t counts[3];
+  for (auto& c : counts) {
+    const std::string_view s = t.token();
+    if (!parse_number(s, c)) r.fail(at() + "expected the vertex, face and edge counts");
+  }
+  t.skip_line();
+  const std::uint64_t nv = counts[0], nf = counts[1];
+  // A vertex line holds at least five characters ("0 0 0"), a face line at least seven.
+  if (nv > t.remaining() / 5 || nf > t.remaining() / 7 || nv * 5 + nf * 7 > t.remaining()) {
+    r.fail("header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
+           " faces but the file has only " + std::to_string(t.remaining()) + " bytes left");
+  }
+  if (nv > kMaxVertices) r.fail("more than 2^32-1 vertices");
+
+  Mesh mesh;
+  mesh.positions.resize(nv);
+  if (normals) mesh.normals.resize(nv);
+  auto number = [&](std::string_view s, const char* what, std::uint64_t i) {
+    float f;
+    if (!parse_number(s, f)) {
+      r.fail(at() + (s.empty() ? "missing coordinate of " : "bad number " + quoted(s) + " in ") +
+             what + " " + std::to_string(i));
+    }
+    return f;
+  };
+  for (std::uint64_t v = 0; v < nv; ++v) {
+    mesh.positions[v][0] = number(t.token(), "vertex", v);
+    mesh.positions[v][1] = number(t.line_token(), "vertex", v);
+    mesh.positions[v][2] = number(t.line_token(), "vertex", v);
+    if (normals) {
+      for (float& c : mesh.normals[v]) c = number(t.line_token(), "vertex", v);
+    }
+    t.skip_line();  // colours and texture coordinates
+  }
+  std::vector<std::uint32_t> corners;
+  for (std::uint64_t f = 0; f < nf; ++f) {
+    const std::string_view s = t.token();
+    std::uint64_t n;
+    if (!parse_number(s, n)) {
+      r.fail(at() + (s.empty() ? std::string("file ends") : "bad corner count " + quoted(s)) +
+             " in face " + std::to_string(f));
+    }
+    if (n < 3) {
+      r.fail("face " + std::to_string(f) + " has " + std::to_string(n) +
+             " corners (at least 3 needed)");
+    }
+    if (n > t.remaining() / 2) r.fail(at() + "face " + std::to_string(f) + " is truncated");
+    corners.resize(n);
+    for (std::uint64_t c = 0; c < n; ++c) {
+      const std::string_view w = t.line_token();
+      std::int64_t v;
+      if (!parse_number(w, v)) {
+        r.fail(at() + (w.empty() ? std::string("missing") : "bad") + " vertex index in face " +
+               std::to_string(f));
+      }
+      if (v < 0 || static_cast<std::uint64_t>(v) >= nv) r.fail(vertex_error(f, v, nv));
+      corners[c] = static_cast<std::uint32_t>(v);
+    }
+    add_polygon(mesh, corners.data(), n);
+    t.skip_line();
+  }
+  return mesh;
+}
+
+// ---------------------------------------------------------------------------------------------
+// STL
+
+// Welds corners by exact position, numbering vertices in order of first appearance.
+class Welder {
+ public:
+  explicit Welder(Mesh& mesh, std::uint64_t corners) : mesh_(mesh) {
+    std::size_t cap = 1024;
+    // Closed meshes have about half as many vertices as triangles; start there and grow.
+    while (cap < corners / 3) cap *= 2;
+    table_.assign(cap, kEmpty);
+  }
+
+  std::uint32_t add(Vec3f p) {
+    // -0 and +0 are the same position.
+    for (float& c : p) c = c == 0.0f ? 0.0f : c;
+    std::size_t i = hash(p) & (table_.size() - 1);
+    for (;;) {
+      const std::uint32_t v = table_[i];
+      if (v == kEmpty) break;
+      if (same(mesh_.positions[v], p)) return v;
+      i = (i + 1) & (table_.size() - 1);
+    }
+    if (mesh_.positions.size() >= kMaxVertices) {
+      throw CapacityError("more than 2^32-1 distinct STL vertices");
+    }
+    const auto v = static_cast<std::uint32_t>(mesh_.positions.size());
+    mesh_.positions.push_back(p);
+    table_[i] = v;
+    if (2 * mesh_.positions.size() > table_.size()) grow();
+    return v;
+  }
+
+ private:
+  static constexpr std::uint32_t kEmpty = std::numeric_limits<std::uint32_t>::max();
+
+  // Bitwise, so that NaN coordinates weld too instead of growing a vertex per corner.
+  static bool same(const Vec3f& a, const Vec3f& b) { return std::memcmp(&a, &b, 12) == 0; }
+
+  static std::size_t hash(const Vec3f& p) {
+    std::uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (float c : p) {
+      h ^= std::bit_cast<std::uint32_t>(c);
+      h *= 0xBF58476D1CE4E5B9ull;
+      h ^= h >> 31;
+    }
+    return static_cast<std::size_t>(h);
+  }
+
+  void grow() {
+    std::vector<std::uint32_t> bigger(table_.size() * 2, kEmpty);
+    const std::size_t mask = bigger.size() - 1;
+    for (std::uint32_t v : table_) {
+      if (v == kEmpty) continue;
+      std::size_t i = hash(mesh_.positions[v]) & mask;
+      while (bigger[i] != kEmpty) i = (i + 1) & mask;
+      bigger[i] = v;
+    }
+    table_.swap(bigger);
+  }
+
+  Mesh& mesh_;
+  std::vector<std::uint32_t> table_;
+};
+
+Mesh read_stl_binary(const Reader& r, const std::vector<char>& data) {
+  if (data.size() < 84) r.fail("binary STL shorter than its 84-byte header");
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+  const bool swap = std::endian::native == std::endian::big;
+  const std::uint64_t count = load<std::uint32_t>(bytes + 80, swap);
+  if (count > (data.size() - 84) / 50) {
+    r.fail("binary STL header says " + std::to_string(count) + " triangles (" +
+           std::to_string(84 + 50 * count) + " bytes) but the file has " +
+           std::to_string(data.size()) + " bytes");
+  }
+  Mesh mesh;
+  mesh.triangles.resize(count);
+  Welder weld(mesh, 3 * count);
+  for (std::uint64_t t = 0; t < count; ++t) {
+    const unsigned char* p = bytes + 84 + 50 * t + 12;  // past the stored normal
+    for (int c = 0; c < 3; ++c) {
+      Vec3f v;
+      for (int k = 0; k < 3; ++k) v[k] = load<float>(p + 12 * c + 4 * k, swap);
+      mesh.triangles[t][c] = weld.add(v);
+    }
+  }
+  return mesh;
+}
+
+Mesh read_stl_ascii(const Reader& r, const std::vector<char>& data) {
+  Text t(data.data(), data.data() + data.size(), false);
+  auto at = [&] { return "line " + std::to_string(t.line()) + ": "; };
+  auto expect = [&](std::string_view word) {
+    const std::string_view s = t.token();
+    if (s != word) {
+      r.fail(at() + "expected '" + std::string(word) + "' but found " +
+             (s.empty() ? std::string("the end of the file") : quoted(s)));
+    }
+  };
+  auto number = [&] {
+    const std::string_view s = t.token();
+    float f;
+    if (!parse_number(s, f)) r.fail(at() + "bad number " + quoted(s));
+    return f;
+  };
+  Mesh mesh;
+  // An ASCII facet takes well over 100 bytes; this bound only sizes the weld table.
+  Welder weld(mesh, data.size() / 40);
+  expect("solid");
+  t.skip_line();  // the solid's name
+  for (;;) {
+    const std::string_view kw = t.token();
+    if (kw == "endsolid") {
+      t.skip_line();
+      const std::string_view next = t.token();
+      if (next.empty()) break;
+      if (next != "solid") r.fail(at() + "expected 'solid' but found " + quoted(next));
+      t.skip_line();
+      continue;
+    }
+    if (kw != "facet") {
+      r.fail(at() + "expected 'facet' or 'endsolid' but found " +
+             (kw.empty() ? std::string("the end of the file") : quoted(kw)));
+    }
+    expect("normal");
+    for (int i = 0; i < 3; ++i) number();
+    expect("outer");
+    expect("loop");
+    Tri tri;
+    for (auto& c : tri) {
+      expect("vertex");
+      Vec3f v;
+      for (float& x : v) x = number();
+      c = weld.add(v);
+    }
+    expect("endloop");
+    expect("endfacet");
+    mesh.triangles.push_back(tri);
+  }
+  return mesh;
+}
+
+Mesh read_stl(const Reader& r, const std::vector<char>& data) {
+  // Binary files may also begin with "solid", so a size that matches the binary layout wins.
+  if (data.size() >= 84) {
+    const auto count = load<std::uint32_t>(reinterpret_cast<const unsigned char*>(data.data()) + 80,
+                                           std::endian::native == std::endian::big);
+    if (84 + 50 * std::uint64_t{count} == data.size()) return read_stl_binary(r, data);
+  }
+  std::size_t i = 0;
+  while (i < data.size() && is_space(data[i])) ++i;
+  if (data.size() - i >= 5 && std::memcmp(data.data() + i, "solid", 5) == 0 &&
+      (data.size() - i == 5 || is_space(data[i + 5]))) {
+    return read_stl_ascii(r, data);
+  }
+  return read_stl_binary(r, data);
+}
+
+}  // namespace
+
+Mesh read_mesh(const std::filesystem::path& path) {
+  const MeshFormat format = mesh_format_from_path(path);
+  const std::vector<char> data = read_file(path);
+  const std::string name = path.string();
+  Reader r(name);
+  if (data.empty()) r.fail("empty file");
+  switch (format) {
+    case MeshFormat::Ply:
+      return PlyReader(name, data).read();
+    case MeshFormat::Obj:
+      return ObjReader(name, data).read();
+    case MeshFormat::Off:
+      return read_off(r, data);
+    case MeshFormat::Stl:
+      return read_stl(r, data);
+  }
+  r.fail("unknown format");
+}
+
+}  // namespace isotile

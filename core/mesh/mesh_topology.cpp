@@ -1,0 +1,291 @@
+// Everything is computed per vertex from a vertex -> incident corners table: each edge is
+// examined at its lower endpoint, each fan at its centre. That keeps memory at one index per
+// corner (no global edge sort) and lets all vertices be processed in parallel; every result is
+// an integer count, so the outcome does not depend on the thread count.
+#include "core/mesh/mesh_topology.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <atomic>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+struct Counts {
+  std::uint64_t vertices = 0, unreferenced = 0, edges = 0, boundary = 0, border = 0,
+                nonmanifold_edges = 0, nonmanifold_vertices = 0, inconsistent = 0;
+
+  Counts& operator+=(const Counts& o) {
+    vertices += o.vertices;
+    unreferenced += o.unreferenced;
+    edges += o.edges;
+    boundary += o.boundary;
+    border += o.border;
+    nonmanifold_edges += o.nonmanifold_edges;
+    nonmanifold_vertices += o.nonmanifold_vertices;
+    inconsistent += o.inconsistent;
+    return *this;
+  }
+};
+
+// Lock-free union-find: a root is only ever linked below a smaller index, so no cycles form,
+// and path halving only shortcuts to ancestors.
+class ConcurrentUnionFind {
+ public:
+  explicit ConcurrentUnionFind(std::size_t n) : parent_(n) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n), [&](const auto& r) {
+      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+        parent_[i].store(static_cast<std::uint32_t>(i), std::memory_order_relaxed);
+      }
+    });
+  }
+
+  std::uint32_t find(std::uint32_t x) {
+    for (;;) {
+      std::uint32_t p = parent_[x].load(std::memory_order_acquire);
+      if (p == x) return x;
+      const std::uint32_t gp = parent_[p].load(std::memory_order_acquire);
+      if (gp != p) parent_[x].compare_exchange_weak(p, gp, std::memory_order_acq_rel);
+      x = gp;
+    }
+  }
+
+  void unite(std::uint32_t a, std::uint32_t b) {
+    for (;;) {
+      a = find(a);
+      b = find(b);
+      if (a == b) return;
+      if (a < b) std::swap(a, b);
+      std::uint32_t expected = a;
+      if (parent_[a].compare_exchange_strong(expected, b, std::memory_order_acq_rel)) return;
+    }
+  }
+
+  bool is_root(std::uint32_t x) const { return parent_[x].load(std::memory_order_relaxed) == x; }
+
+ private:
+  std::vector<std::atomic<std::uint32_t>> parent_;
+};
+
+// Corners are numbered 3t + i for triangle t, then 3T + 4k + i for quad k.
+template <class C>
+class Corners {
+ public:
+  explicit Corners(const Mesh& mesh)
+      : mesh_(mesh), tri_corners_(C{3} * static_cast<C>(mesh.triangles.size())) {}
+
+  C count() const { return tri_corners_ + C{4} * static_cast<C>(mesh_.quads.size()); }
+
+  // Vertex at the corner, and at the next and previous corner of its face.
+  std::uint32_t vertex(C c) const { return at(c, 0); }
+  std::uint32_t next(C c) const { return at(c, 1); }
+  std::uint32_t prev(C c) const { return at(c, -1); }
+  // Corners of one face have equal face numbers and no other face's corner lies between them.
+  C face(C c) const { return c < tri_corners_ ? c / 3 : tri_corners_ + (c - tri_corners_) / 4; }
+
+ private:
+  std::uint32_t at(C c, int step) const {
+    if (c < tri_corners_) {
+      const C t = c / 3;
+      const int i = static_cast<int>(c - 3 * t);
+      return mesh_.triangles[t][(i + 3 + step) % 3];
+    }
+    const C q = (c - tri_corners_) / 4;
+    const int i = static_cast<int>(c - tri_corners_ - 4 * q);
+    return mesh_.quads[q][(i + 4 + step) % 4];
+  }
+
+  const Mesh& mesh_;
+  C tri_corners_;
+};
+
+bool on_border(const Vec3f& a, const Vec3f& b, const std::array<Vec3f, 2>& box) {
+  for (int axis = 0; axis < 3; ++axis) {
+    for (const Vec3f& side : box) {
+      if (a[axis] == side[axis] && b[axis] == side[axis]) return true;
+    }
+  }
+  return false;
+}
+
+// Smallest local union-find, for the faces around one vertex.
+std::size_t local_find(std::vector<std::size_t>& parent, std::size_t x) {
+  while (parent[x] != x) x = parent[x] = parent[parent[x]];
+  return x;
+}
+
+template <class C>
+TopologyStats compute(const Mesh& mesh, const TopologyOptions& options) {
+  const Corners<C> corners(mesh);
+  const C ncorners = corners.count();
+  const std::size_t nv = mesh.positions.size();
+
+  // vertex -> incident corners, as offsets into one array (a counting sort).
+  std::vector<C> offsets(nv + 1, 0);
+  std::vector<C> incident(ncorners);
+  {
+    std::vector<std::atomic<C>> fill(nv);
+    tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
+      for (C c = r.begin(); c < r.end(); ++c) {
+        fill[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed);
+      }
+    });
+    for (std::size_t v = 0; v < nv; ++v) {
+      offsets[v + 1] = offsets[v] + fill[v].load(std::memory_order_relaxed);
+      fill[v].store(offsets[v], std::memory_order_relaxed);
+    }
+    // The order within a vertex depends on scheduling; each vertex sorts its list below.
+    tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
+      for (C c = r.begin(); c < r.end(); ++c) {
+        incident[fill[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed)] = c;
+      }
+    });
+  }
+
+  const auto& pos = mesh.positions;
+  const Counts counts = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, nv, 1 << 12), Counts{},
+      [&](const tbb::blocked_range<std::size_t>& r, Counts sum) {
+        // (other endpoint, 1 when the face runs v -> other) for each edge v owns.
+        std::vector<std::pair<std::uint32_t, int>> edges;
+        // (neighbour across an edge, local corner) for the fans.
+        std::vector<std::pair<std::uint32_t, std::size_t>> links;
+        std::vector<std::size_t> parent;
+        for (std::size_t vi = r.begin(); vi < r.end(); ++vi) {
+          const auto v = static_cast<std::uint32_t>(vi);
+          C* first = incident.data() + offsets[vi];
+          C* last = incident.data() + offsets[vi + 1];
+          if (first == last) {
+            ++sum.unreferenced;
+            continue;
+          }
+          ++sum.vertices;
+          std::sort(first, last);
+          const std::size_t degree = static_cast<std::size_t>(last - first);
+
+          // An edge belongs to its lower endpoint; a face's edge v-w is seen from v's corner
+          // either leaving v (w = next) or entering it (w = prev). The self-edge of a face that
+          // repeats v is taken once, as leaving.
+          edges.clear();
+          for (const C* c = first; c != last; ++c) {
+            const std::uint32_t n = corners.next(*c), p = corners.prev(*c);
+            if (n >= v) edges.emplace_back(n, 1);
+            if (p > v) edges.emplace_back(p, 0);
+          }
+          std::sort(edges.begin(), edges.end());
+          for (std::size_t i = 0; i < edges.size();) {
+            std::size_t j = i + 1;
+            while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+            ++sum.edges;
+            if (j - i == 1) {
+              ++sum.boundary;
+              if (options.border_box &&
+                  on_border(pos[v], pos[edges[i].first], *options.border_box)) {
+                ++sum.border;
+              }
+            } else if (j - i > 2) {
+              ++sum.nonmanifold_edges;
+            } else if (edges[i].second == edges[i + 1].second) {
+              ++sum.inconsistent;
+            }
+            i = j;
+          }
+
+          // Faces around v are one fan when linked through shared edges at v.
+          if (degree == 1) continue;
+          parent.resize(degree);
+          for (std::size_t i = 0; i < degree; ++i) parent[i] = i;
+          links.clear();
+          for (std::size_t i = 0; i < degree; ++i) {
+            const std::uint32_t n = corners.next(first[i]), p = corners.prev(first[i]);
+            if (n != v) links.emplace_back(n, i);
+            if (p != v) links.emplace_back(p, i);
+            // A face that visits v twice is still one face.
+            if (i > 0 && corners.face(first[i]) == corners.face(first[i - 1])) {
+              parent[local_find(parent, i)] = local_find(parent, i - 1);
+            }
+          }
+          std::sort(links.begin(), links.end());
+          for (std::size_t i = 1; i < links.size(); ++i) {
+            if (links[i].first != links[i - 1].first) continue;
+            const std::size_t a = local_find(parent, links[i].second);
+            const std::size_t b = local_find(parent, links[i - 1].second);
+            if (a != b) parent[a] = b;
+          }
+          std::size_t fans = 0;
+          for (std::size_t i = 0; i < degree && fans < 2; ++i) fans += parent[i] == i;
+          if (fans > 1) ++sum.nonmanifold_vertices;
+        }
+        return sum;
+      },
+      [](Counts a, const Counts& b) { return a += b; });
+
+  ConcurrentUnionFind components(nv);
+  auto join = [&](const auto& faces) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, faces.size(), 1 << 14),
+                      [&](const auto& r) {
+                        for (std::size_t f = r.begin(); f < r.end(); ++f) {
+                          for (std::size_t i = 1; i < faces[f].size(); ++i) {
+                            components.unite(faces[f][0], faces[f][i]);
+                          }
+                        }
+                      });
+  };
+  join(mesh.triangles);
+  join(mesh.quads);
+  // Only referenced vertices are ever joined, so a set's root is referenced exactly when the set
+  // has faces; unreferenced vertices stay roots of their own and are left out.
+  const std::uint64_t ncomponents = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, nv, 1 << 14), std::uint64_t{0},
+      [&](const tbb::blocked_range<std::size_t>& r, std::uint64_t n) {
+        for (std::size_t v = r.begin(); v < r.end(); ++v) {
+          if (offsets[v + 1] != offsets[v] && components.is_root(static_cast<std::uint32_t>(v))) {
+            ++n;
+          }
+        }
+        return n;
+      },
+      [](std::uint64_t a, std::uint64_t b) { return a + b; });
+
+  TopologyStats s;
+  s.vertices = counts.vertices;
+  s.unreferenced_vertices = counts.unreferenced;
+  s.edges = counts.edges;
+  s.faces = mesh.triangles.size() + mesh.quads.size();
+  s.boundary_edges = counts.boundary;
+  s.border_boundary_edges = counts.border;
+  s.nonmanifold_edges = counts.nonmanifold_edges;
+  s.nonmanifold_vertices = counts.nonmanifold_vertices;
+  s.inconsistently_oriented_edges = counts.inconsistent;
+  s.euler = static_cast<std::int64_t>(s.vertices) - static_cast<std::int64_t>(s.edges) +
+            static_cast<std::int64_t>(s.faces);
+  s.components = ncomponents;
+  s.closed = s.boundary_edges == 0 && s.nonmanifold_edges == 0;
+  s.watertight = s.boundary_edges == s.border_boundary_edges && s.nonmanifold_edges == 0;
+  return s;
+}
+
+}  // namespace
+
+TopologyStats mesh_topology(const Mesh& mesh, const TopologyOptions& options) {
+  check_face_indices(mesh);
+  const std::uint64_t corners =
+      3 * std::uint64_t{mesh.triangles.size()} + 4 * std::uint64_t{mesh.quads.size()};
+  // 32-bit corner numbers halve the memory of the incidence table whenever they suffice.
+  if (corners < std::numeric_limits<std::uint32_t>::max()) {
+    return compute<std::uint32_t>(mesh, options);
+  }
+  return compute<std::uint64_t>(mesh, options);
+}
+
+}  // namespace isotile

@@ -1,0 +1,141 @@
+#include "core/mesh/surface_distance.h"
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Simple_cartesian.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+using K = CGAL::Simple_cartesian<double>;
+using Point = K::Point_3;
+using Triangle = K::Triangle_3;
+using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<Triangle>::const_iterator>;
+using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
+
+// Fixed chunks make the sums independent of the thread count.
+constexpr std::size_t kChunk = 1 << 12;
+
+Point scaled(const Vec3f& p, const Vec3d& s) {
+  return {double{p[0]} * s[0], double{p[1]} * s[1], double{p[2]} * s[2]};
+}
+
+// Non-degenerate triangles of the mesh (quads as two), scaled. Zero-area triangles add nothing
+// to the surface and CGAL's closest-point query divides by their area.
+std::vector<Triangle> scaled_triangles(const Mesh& mesh, const Vec3d& s) {
+  check_face_indices(mesh);
+  std::vector<Triangle> out;
+  out.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
+  auto add = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+    const Triangle t(scaled(mesh.positions[a], s), scaled(mesh.positions[b], s),
+                     scaled(mesh.positions[c], s));
+    if (!t.is_degenerate()) out.push_back(t);
+  };
+  for (const Tri& t : mesh.triangles) add(t[0], t[1], t[2]);
+  for (const Quad& q : mesh.quads) {
+    add(q[0], q[1], q[2]);
+    add(q[0], q[2], q[3]);
+  }
+  return out;
+}
+
+// The vertices used by faces, then `count` points spread over the faces by area.
+std::vector<Point> samples(const Mesh& mesh, const std::vector<Triangle>& tris, std::uint64_t count,
+                           const Vec3d& s) {
+  std::vector<char> used(mesh.positions.size(), 0);
+  for (const Tri& t : mesh.triangles)
+    for (std::uint32_t v : t) used[v] = 1;
+  for (const Quad& q : mesh.quads)
+    for (std::uint32_t v : q) used[v] = 1;
+  std::vector<Point> out;
+  out.reserve(mesh.positions.size() + count);
+  for (std::size_t v = 0; v < used.size(); ++v)
+    if (used[v]) out.push_back(scaled(mesh.positions[v], s));
+
+  std::vector<double> cumulative(tris.size());
+  double total = 0;
+  for (std::size_t i = 0; i < tris.size(); ++i)
+    cumulative[i] = total += std::sqrt(tris[i].squared_area());
+  if (total <= 0 || count == 0) return out;
+  // R2 low-discrepancy sequence (Roberts) for the spot inside each triangle.
+  constexpr double kA1 = 0.7548776662466927, kA2 = 0.5698402909980532;
+  std::size_t t = 0;
+  for (std::uint64_t k = 0; k < count; ++k) {
+    const double at = (static_cast<double>(k) + 0.5) * total / static_cast<double>(count);
+    while (t + 1 < tris.size() && cumulative[t] < at) ++t;
+    const double r1 = std::fmod(0.5 + kA1 * static_cast<double>(k), 1.0);
+    const double r2 = std::fmod(0.5 + kA2 * static_cast<double>(k), 1.0);
+    const double sr = std::sqrt(r1);
+    const double u = 1 - sr, v = sr * (1 - r2), w = sr * r2;
+    const Triangle& tri = tris[t];
+    out.emplace_back(u * tri[0].x() + v * tri[1].x() + w * tri[2].x(),
+                     u * tri[0].y() + v * tri[1].y() + w * tri[2].y(),
+                     u * tri[0].z() + v * tri[1].z() + w * tri[2].z());
+  }
+  return out;
+}
+
+OneWayDistance one_way(const std::vector<Point>& from, const Tree& to) {
+  const std::size_t n = from.size();
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<double> sum(chunks, 0.0), max(chunks, 0.0);
+  std::vector<std::size_t> arg(chunks, 0);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    double s = 0, m = -1;
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+      const double d = std::sqrt(to.squared_distance(from[i]));
+      s += d;
+      if (d > m) {
+        m = d;
+        arg[c] = i;
+      }
+    }
+    sum[c] = s;
+    max[c] = m;
+  });
+  OneWayDistance r;
+  r.samples = n;
+  double s = 0;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    s += sum[c];
+    if (max[c] > r.max) {
+      r.max = max[c];
+      const Point& p = from[arg[c]];
+      r.max_at = {p.x(), p.y(), p.z()};
+    }
+  }
+  r.mean = n ? s / static_cast<double>(n) : 0.0;
+  return r;
+}
+
+}  // namespace
+
+SurfaceDistance surface_distance(const Mesh& a, const Mesh& b,
+                                 const SurfaceDistanceOptions& options) {
+  const std::vector<Triangle> ta = scaled_triangles(a, options.scale);
+  const std::vector<Triangle> tb = scaled_triangles(b, options.scale);
+  if (ta.empty() || tb.empty())
+    throw InputError("surface distance: both meshes need at least one face with non-zero area");
+  Tree tree_a(ta.begin(), ta.end()), tree_b(tb.begin(), tb.end());
+  // Both trees are built here, before the parallel queries: CGAL builds them lazily on first use
+  // otherwise, which is not thread-safe.
+  tree_a.build();
+  tree_b.build();
+  tree_a.accelerate_distance_queries();
+  tree_b.accelerate_distance_queries();
+  SurfaceDistance r;
+  r.a_to_b = one_way(samples(a, ta, options.face_samples, options.scale), tree_b);
+  r.b_to_a = one_way(samples(b, tb, options.face_samples, options.scale), tree_a);
+  return r;
+}
+
+}  // namespace isotile

@@ -1,0 +1,223 @@
+// NRRD volumes through teem: attached or detached data, any encoding teem was built with.
+#include <teem/nrrd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+#include "core/errors.h"
+#include "core/volume/volume_io.h"
+
+namespace isotile {
+
+namespace {
+
+// biff keeps its error messages in process-wide state with no locking.
+std::mutex& teem_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+struct NrrdNuker {
+  void operator()(Nrrd* n) const { nrrdNuke(n); }
+};
+
+// teem's messages span several lines, one per call level; the CLI prints errors on one line.
+std::string one_line(std::string text) {
+  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
+  std::string out;
+  out.reserve(text.size());
+  for (char c : text) {
+    if (c == '\n')
+      out += "; ";
+    else
+      out += c;
+  }
+  return out;
+}
+
+std::string take_biff_error() {
+  char* raw = biffGetDone(NRRD);
+  if (!raw) return "unknown teem error";
+  std::string text = raw;
+  std::free(raw);
+  return one_line(text);
+}
+
+std::optional<ScalarType> scalar_type_of_nrrd(int type) {
+  switch (type) {
+    case nrrdTypeChar:
+      return ScalarType::Int8;
+    case nrrdTypeUChar:
+      return ScalarType::UInt8;
+    case nrrdTypeShort:
+      return ScalarType::Int16;
+    case nrrdTypeUShort:
+      return ScalarType::UInt16;
+    case nrrdTypeInt:
+      return ScalarType::Int32;
+    case nrrdTypeUInt:
+      return ScalarType::UInt32;
+    case nrrdTypeFloat:
+      return ScalarType::Float32;
+    case nrrdTypeDouble:
+      return ScalarType::Float64;
+    default:
+      return std::nullopt;
+  }
+}
+
+double axis_spacing(const Nrrd& nrrd, const NrrdAxisInfo& axis) {
+  if (std::isfinite(axis.spacing) && axis.spacing != 0) return axis.spacing;
+  if (nrrd.spaceDim > 0) {
+    double sum = 0;
+    bool finite = true;
+    for (unsigned d = 0; d < nrrd.spaceDim; ++d) {
+      finite = finite && std::isfinite(axis.spaceDirection[d]);
+      sum += axis.spaceDirection[d] * axis.spaceDirection[d];
+    }
+    if (finite && sum > 0) return std::sqrt(sum);
+  }
+  return 1;
+}
+
+Vec3d nrrd_origin(const Nrrd& nrrd) {
+  Vec3d origin{0, 0, 0};
+  if (nrrd.spaceDim == 0) return origin;
+  for (unsigned d = 0; d < nrrd.spaceDim; ++d)
+    if (!std::isfinite(nrrd.spaceOrigin[d])) return origin;
+  for (unsigned d = 0; d < nrrd.spaceDim && d < 3; ++d) origin[d] = nrrd.spaceOrigin[d];
+  return origin;
+}
+
+}  // namespace
+
+namespace {
+
+void probe_file(const std::string& path) {
+  // teem's own message for a missing file is buried in a chain of call levels.
+  if (std::FILE* probe = std::fopen(path.c_str(), "rb"))
+    std::fclose(probe);
+  else
+    throw IoError("cannot open " + path + ": " + std::strerror(errno));
+}
+
+struct HeaderInfo {
+  ScalarType type;
+  Index3 dims;
+  Vec3d spacing;
+  Vec3d origin;
+};
+
+HeaderInfo header_info(const std::string& path, const Nrrd& nrrd) {
+  unsigned first = 0;
+  if (nrrd.dim == 4 && nrrd.axis[0].size == 1)
+    first = 1;
+  else if (nrrd.dim != 3)
+    throw InputError(path + ": NRRD has " + std::to_string(nrrd.dim) +
+                     " axes; a volume needs 3 (or 4 with the first of size 1)");
+  const std::optional<ScalarType> type = scalar_type_of_nrrd(nrrd.type);
+  if (!type)
+    throw InputError(path + ": NRRD sample type '" + airEnumStr(nrrdType, nrrd.type) +
+                     "' is not supported (int8 to uint32, float or double)");
+  HeaderInfo h{*type, {}, {}, nrrd_origin(nrrd)};
+  for (int a = 0; a < 3; ++a) {
+    const NrrdAxisInfo& axis = nrrd.axis[first + a];
+    h.dims[a] = static_cast<std::int64_t>(axis.size);
+    h.spacing[a] = axis_spacing(nrrd, axis);
+  }
+  return h;
+}
+
+struct IoStateNixer {
+  void operator()(NrrdIoState* nio) const {
+    if (nio->dataFile) std::fclose(nio->dataFile);
+    nio->dataFile = nullptr;
+    nrrdIoStateNix(nio);
+  }
+};
+
+}  // namespace
+
+Volume read_nrrd(const std::string& path) {
+  probe_file(path);
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
+  {
+    std::lock_guard lock(teem_mutex());
+    if (nrrdLoad(nrrd.get(), path.c_str(), nullptr) != 0)
+      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  }
+  const HeaderInfo h = header_info(path, *nrrd);
+  Volume volume(h.type, h.dims, h.spacing, h.origin);
+  const std::size_t have = nrrdElementNumber(nrrd.get()) * nrrdElementSize(nrrd.get());
+  if (have != volume.byte_size() || nrrd->data == nullptr)
+    throw InputError(path + ": NRRD holds " + std::to_string(have) + " bytes of data, expected " +
+                     std::to_string(volume.byte_size()));
+  std::memcpy(volume.bytes(), nrrd->data, volume.byte_size());
+  nrrd.reset();
+  check_finite(volume.view(), path);
+  return volume;
+}
+
+std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
+  probe_file(path);
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  nio->keepNrrdDataFileOpen = AIR_TRUE;
+  {
+    std::lock_guard lock(teem_mutex());
+    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
+      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  }
+  const HeaderInfo h = header_info(path, *nrrd);
+  NrrdDataLayout out;
+  out.type = h.type;
+  out.dims = h.dims;
+  out.spacing = h.spacing;
+  out.origin = h.origin;
+  out.endian = nio->endian == airEndianBig ? Endian::Big : Endian::Little;
+  if (nio->lineSkip != 0 || nio->dataFNArr->len > 1) return std::nullopt;
+  if (nio->encoding == nrrdEncodingGzip)
+    out.gzip = true;
+  else if (nio->encoding != nrrdEncodingRaw)
+    return std::nullopt;
+  const std::uint64_t bytes = checked_volume_bytes(h.type, h.dims);
+  std::uint64_t start = 0;  // where the data file's samples begin, before byte skip
+  if (nio->dataFNArr->len == 1) {
+    std::filesystem::path data = nio->dataFN[0];
+    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
+    out.data_file = data.string();
+  } else {
+    // Attached: the samples follow the header in the same file.
+    if (!nio->dataFile) return std::nullopt;
+    const long at = std::ftell(nio->dataFile);
+    if (at < 0) return std::nullopt;
+    out.data_file = path;
+    start = static_cast<std::uint64_t>(at);
+  }
+  if (out.gzip) {
+    if (nio->byteSkip != 0) return std::nullopt;
+    out.offset = start;
+    return start == 0 ? std::optional<NrrdDataLayout>(out) : std::nullopt;
+  }
+  if (nio->byteSkip == -1) {
+    // The samples are the file's last bytes.
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(out.data_file, ec);
+    if (ec || size < bytes) return std::nullopt;
+    out.offset = size - bytes;
+  } else {
+    out.offset = start + static_cast<std::uint64_t>(nio->byteSkip);
+  }
+  return out;
+}
+
+}  // namespace isotile

@@ -1,0 +1,294 @@
+// Raw volumes: plain or gzip'd samples, x fastest, dims and type from the options or the name.
+#include <sys/stat.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <bit>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <regex>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/errors.h"
+#include "core/volume/volume_io.h"
+
+namespace isotile {
+
+namespace {
+
+// Bounded so one failed read says something promptly and gzread's unsigned length cannot wrap.
+constexpr std::size_t kChunkBytes = std::size_t{64} << 20;
+
+struct NameMatch {
+  std::string dims[3];
+  std::string type;
+};
+
+// The NAME_XxYxZ_TYPE.raw[.gz] pattern, without judging whether TYPE is known, so that read_raw
+// can say "unknown type" rather than "name has no dims".
+std::optional<NameMatch> match_raw_name(const std::string& path) {
+  static const std::regex kPattern(R"(^.+_([0-9]+)x([0-9]+)x([0-9]+)_([A-Za-z0-9]+)\.raw(\.gz)?$)");
+  const std::string name = std::filesystem::path(path).filename().string();
+  std::smatch m;
+  if (!std::regex_match(name, m, kPattern)) return std::nullopt;
+  NameMatch out;
+  for (int a = 0; a < 3; ++a) out.dims[a] = m[a + 1].str();
+  out.type = m[4].str();
+  return out;
+}
+
+std::optional<std::int64_t> parse_dim(const std::string& s) {
+  std::int64_t v = 0;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec != std::errc() || end != s.data() + s.size()) return std::nullopt;
+  return v;
+}
+
+std::string dims_string(const Index3& d) {
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
+}
+
+bool ends_with_gz(const std::string& path) {
+  const std::string name = std::filesystem::path(path).filename().string();
+  if (name.size() < 3) return false;
+  std::string ext = name.substr(name.size() - 3);
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  return ext == ".gz";
+}
+
+std::string size_mismatch(const std::string& path, const char* holds, std::uint64_t have,
+                          const Index3& dims, ScalarType type, std::uint64_t need) {
+  return path + ": " + holds + " " + std::to_string(have) + " bytes but " + dims_string(dims) +
+         " " + std::string(scalar_name(type)) + " needs " + std::to_string(need) +
+         (have < need ? " (too short)" : " (too long)");
+}
+
+template <class U>
+void swap_words(std::byte* bytes, std::size_t count) {
+  U* words = reinterpret_cast<U*>(bytes);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, std::size_t{1} << 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        if constexpr (sizeof(U) == 2) words[i] = __builtin_bswap16(words[i]);
+                        if constexpr (sizeof(U) == 4) words[i] = __builtin_bswap32(words[i]);
+                        if constexpr (sizeof(U) == 8) words[i] = __builtin_bswap64(words[i]);
+                      }
+                    });
+}
+
+void byte_swap(Volume& volume) {
+  const std::size_t n = static_cast<std::size_t>(volume.sample_count());
+  switch (scalar_size(volume.type())) {
+    case 2:
+      swap_words<std::uint16_t>(volume.bytes(), n);
+      break;
+    case 4:
+      swap_words<std::uint32_t>(volume.bytes(), n);
+      break;
+    case 8:
+      swap_words<std::uint64_t>(volume.bytes(), n);
+      break;
+    default:
+      break;
+  }
+}
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+
+void read_plain(const std::string& path, std::FILE* file, Volume& volume) {
+  std::byte* out = volume.bytes();
+  const std::size_t need = volume.byte_size();
+  std::size_t done = 0;
+  while (done < need) {
+    const std::size_t want = std::min(kChunkBytes, need - done);
+    const std::size_t got = std::fread(out + done, 1, want, file);
+    done += got;
+    if (got < want) {
+      if (std::ferror(file)) throw IoError("cannot read " + path + ": " + std::strerror(errno));
+      throw InputError(size_mismatch(path, "file holds", done, volume.dims(), volume.type(), need));
+    }
+  }
+  // Matters only for non-regular files (pipes), whose size was not known in advance.
+  char extra;
+  if (std::fread(&extra, 1, 1, file) == 1)
+    throw InputError(path + ": file holds more than the " + std::to_string(need) + " bytes " +
+                     dims_string(volume.dims()) + " " + std::string(scalar_name(volume.type())) +
+                     " needs (too long)");
+}
+
+struct GzCloser {
+  void operator()(gzFile f) const { gzclose_r(f); }
+};
+
+// gzerror's text repeats the path; the message names it once already.
+std::string gz_message(const std::string& path, const char* message) {
+  std::string text = message ? message : "unknown zlib error";
+  if (text.rfind(path + ": ", 0) == 0) text.erase(0, path.size() + 2);
+  return text;
+}
+
+[[noreturn]] void throw_gz_error(const std::string& path, gzFile file) {
+  int code = Z_OK;
+  const char* message = gzerror(file, &code);
+  if (code == Z_ERRNO) throw IoError("cannot read " + path + ": " + std::strerror(errno));
+  throw InputError(path + ": corrupt gzip data: " + gz_message(path, message));
+}
+
+using GzFilePtr = std::unique_ptr<gzFile_s, GzCloser>;
+
+GzFilePtr open_gzip(const std::string& path) {
+  errno = 0;
+  GzFilePtr file(gzopen(path.c_str(), "rb"));
+  if (!file)
+    throw IoError("cannot open " + path + ": " +
+                  (errno ? std::strerror(errno) : "out of memory for zlib state"));
+  gzbuffer(file.get(), 1u << 20);
+  // zlib would pass a non-gzip file through unchanged; a .gz name that is not gzip is a mistake
+  // worth naming rather than a size mismatch further on.
+  if (gzdirect(file.get()))
+    throw InputError(path + ": not gzip data (the name ends in .gz); rename it or recompress it");
+  return file;
+}
+
+void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
+  std::byte* out = volume.bytes();
+  const std::size_t need = volume.byte_size();
+  std::size_t done = 0;
+  while (done < need) {
+    const auto want = static_cast<unsigned>(std::min(kChunkBytes, need - done));
+    const int got = gzread(file.get(), out + done, want);
+    if (got < 0) throw_gz_error(path, file.get());
+    done += static_cast<std::size_t>(got);
+    if (static_cast<unsigned>(got) < want) {
+      // zlib reports a stream cut off mid-way as Z_BUF_ERROR after returning what it had.
+      int code = Z_OK;
+      const char* message = gzerror(file.get(), &code);
+      if (code == Z_BUF_ERROR)
+        throw InputError(path + ": truncated gzip data (" + gz_message(path, message) + ")");
+      if (code != Z_OK) throw_gz_error(path, file.get());
+      throw InputError(
+          size_mismatch(path, "decompresses to", done, volume.dims(), volume.type(), need));
+    }
+  }
+  // Reading past the end also makes zlib verify the gzip trailer (CRC and length).
+  char extra;
+  const int got = gzread(file.get(), &extra, 1);
+  if (got < 0) throw_gz_error(path, file.get());
+  if (got == 1)
+    throw InputError(path + ": decompresses to more than the " + std::to_string(need) + " bytes " +
+                     dims_string(volume.dims()) + " " + std::string(scalar_name(volume.type())) +
+                     " needs (too long)");
+  int code = Z_OK;
+  const char* message = gzerror(file.get(), &code);
+  if (code == Z_BUF_ERROR)
+    throw InputError(path + ": truncated gzip data (" + gz_message(path, message) + ")");
+  if (code != Z_OK) throw_gz_error(path, file.get());
+}
+
+using Layout = RawLayout;
+
+Layout resolve_layout(const std::string& path, const RawOptions& options) {
+  std::optional<Index3> dims = options.dims;
+  std::optional<ScalarType> type = options.type;
+  if (!dims || !type) {
+    if (const std::optional<NameMatch> m = match_raw_name(path)) {
+      if (!dims) {
+        Index3 d{};
+        for (int a = 0; a < 3; ++a) {
+          const std::optional<std::int64_t> v = parse_dim(m->dims[a]);
+          if (!v)
+            throw InputError(path + ": dimension " + m->dims[a] +
+                             " in the file name is too large; pass --dims X,Y,Z");
+          d[a] = *v;
+        }
+        dims = d;
+      }
+      if (!type) {
+        type = parse_scalar_type(m->type);
+        if (!type)
+          throw InputError(path + ": unknown sample type '" + m->type +
+                           "' in the file name; pass --type T (int8, uint8, int16, uint16, "
+                           "int32, uint32, float32 or float64)");
+      }
+    }
+  }
+  if (!dims || !type) {
+    std::string missing = !dims && !type ? "dims and type" : !dims ? "dims" : "type";
+    throw InputError(path + ": the " + missing +
+                     " of a raw volume are unknown (name is not NAME_XxYxZ_TYPE.raw[.gz]); pass "
+                     "--dims X,Y,Z and --type T");
+  }
+  return {*dims, *type};
+}
+
+}  // namespace
+
+RawLayout resolve_raw_layout(const std::string& path, const RawOptions& options) {
+  return resolve_layout(path, options);
+}
+
+std::optional<RawNameInfo> parse_raw_name(const std::string& path) {
+  const std::optional<NameMatch> m = match_raw_name(path);
+  if (!m) return std::nullopt;
+  RawNameInfo info{};
+  for (int a = 0; a < 3; ++a) {
+    const std::optional<std::int64_t> d = parse_dim(m->dims[a]);
+    if (!d) return std::nullopt;
+    info.dims[a] = *d;
+  }
+  const std::optional<ScalarType> type = parse_scalar_type(m->type);
+  if (!type) return std::nullopt;
+  info.type = *type;
+  return info;
+}
+
+Volume read_raw(const std::string& path, const RawOptions& options) {
+  // Opened before the name is judged, so a mistyped path is reported as missing rather than as
+  // lacking --dims.
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0)
+    throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + path + ": " + std::strerror(EISDIR));
+  const bool gzip = ends_with_gz(path);
+  GzFilePtr gz_file;
+  std::unique_ptr<std::FILE, FileCloser> plain_file;
+  if (gzip) {
+    gz_file = open_gzip(path);
+  } else {
+    plain_file.reset(std::fopen(path.c_str(), "rb"));
+    if (!plain_file) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  }
+
+  const Layout layout = resolve_layout(path, options);
+  const std::size_t need = checked_volume_bytes(layout.type, layout.dims);
+  // A size check up front avoids allocating gigabytes for a file that cannot fit. Pipes and other
+  // non-regular files are checked while reading instead.
+  if (!gzip && S_ISREG(st.st_mode) && static_cast<std::uint64_t>(st.st_size) != need)
+    throw InputError(size_mismatch(path, "file holds", static_cast<std::uint64_t>(st.st_size),
+                                   layout.dims, layout.type, need));
+
+  Volume volume(layout.type, layout.dims, options.spacing.value_or(Vec3d{1, 1, 1}),
+                options.origin.value_or(Vec3d{0, 0, 0}));
+  if (gzip)
+    read_gzip(path, gz_file, volume);
+  else
+    read_plain(path, plain_file.get(), volume);
+  const bool native_big = std::endian::native == std::endian::big;
+  if ((options.endian == Endian::Big) != native_big) byte_swap(volume);
+  check_finite(volume.view(), path);
+  return volume;
+}
+
+}  // namespace isotile

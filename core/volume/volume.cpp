@@ -1,0 +1,111 @@
+#include "core/volume/volume.h"
+
+#include <algorithm>
+#include <limits>
+#include <string>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+double VolumeView::value(std::int64_t i, std::int64_t j, std::int64_t k) const {
+  return visit_scalar(type, [&](auto tag) {
+    using T = decltype(tag);
+    return static_cast<double>(typed<T>()[offset(i, j, k)]);
+  });
+}
+
+VolumeView dense_view(const void* data, ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin) {
+  VolumeView v;
+  v.data = data;
+  v.type = type;
+  v.dims = dims;
+  v.strides = {1, dims[0], dims[0] * dims[1]};
+  v.spacing = spacing;
+  v.origin = origin;
+  v.box = {{0, 0, 0}, dims};
+  v.global_dims = dims;
+  return v;
+}
+
+VolumeView subview(const VolumeView& view, const Box3& local) {
+  VolumeView v = view;
+  Index3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::clamp<std::int64_t>(local.lo[a], 0, view.dims[a]);
+    hi[a] = std::clamp<std::int64_t>(local.hi[a], lo[a], view.dims[a]);
+    v.dims[a] = hi[a] - lo[a];
+    v.box.lo[a] = view.box.lo[a] + lo[a];
+    v.box.hi[a] = view.box.lo[a] + hi[a];
+  }
+  v.data = static_cast<const std::byte*>(view.data) +
+           view.offset(lo[0], lo[1], lo[2]) * static_cast<std::int64_t>(scalar_size(view.type));
+  return v;
+}
+
+Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo) {
+  Box3 local;
+  if (global_cells.empty()) {
+    for (int a = 0; a < 3; ++a) local.hi[a] = std::max<std::int64_t>(view.dims[a] - 1, 0);
+    return local;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t lo = std::max<std::int64_t>(global_cells.lo[a], 0);
+    const std::int64_t hi = std::min<std::int64_t>(global_cells.hi[a], view.global_dims[a] - 1);
+    // Samples needed: [lo - halo, hi + halo], clipped to the volume.
+    const std::int64_t need_lo = std::max<std::int64_t>(lo - halo, 0);
+    const std::int64_t need_hi = std::min<std::int64_t>(hi + halo, view.global_dims[a] - 1);
+    if (lo >= hi || need_lo < view.box.lo[a] || need_hi >= view.box.hi[a])
+      throw InputError("the view (samples " + std::to_string(view.box.lo[a]) + ".." +
+                       std::to_string(view.box.hi[a] - 1) + " along axis " + std::to_string(a) +
+                       ") does not hold cells " + std::to_string(global_cells.lo[a]) + ".." +
+                       std::to_string(global_cells.hi[a] - 1) + " with a halo of " +
+                       std::to_string(halo) + " samples");
+    local.lo[a] = lo - view.box.lo[a];
+    local.hi[a] = hi - view.box.lo[a];
+  }
+  return local;
+}
+
+std::size_t checked_volume_bytes(ScalarType type, const Index3& dims) {
+  for (int a = 0; a < 3; ++a)
+    if (dims[a] <= 0)
+      throw InputError("volume dimensions must be positive, got " + std::to_string(dims[0]) + "x" +
+                       std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
+  constexpr std::int64_t kMax = std::numeric_limits<std::int64_t>::max();
+  std::int64_t n = 1;
+  for (int a = 0; a < 3; ++a) {
+    if (n > kMax / dims[a])
+      throw CapacityError("volume dimensions " + std::to_string(dims[0]) + "x" +
+                          std::to_string(dims[1]) + "x" + std::to_string(dims[2]) +
+                          " overflow a 64-bit sample count");
+    n *= dims[a];
+  }
+  const auto size = static_cast<std::int64_t>(scalar_size(type));
+  if (n > kMax / size)
+    throw CapacityError("volume of " + std::to_string(n) +
+                        " samples overflows a 64-bit byte count");
+  return static_cast<std::size_t>(n * size);
+}
+
+Volume::Volume(ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin)
+    : bytes_(checked_volume_bytes(type, dims)),
+      type_(type),
+      dims_(dims),
+      spacing_(spacing),
+      origin_(origin) {
+  try {
+    data_ = std::make_unique_for_overwrite<std::byte[]>(bytes_);
+  } catch (const std::bad_alloc&) {
+    throw CapacityError("cannot allocate " + std::to_string(bytes_ >> 20) +
+                        " MiB for a volume of " + std::to_string(dims[0]) + "x" +
+                        std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
+                        std::string(scalar_name(type)));
+  }
+}
+
+VolumeView Volume::view() const {
+  return dense_view(data_.get(), type_, dims_, spacing_, origin_);
+}
+
+}  // namespace isotile

@@ -1,0 +1,107 @@
+// Volumes on uniform grids: a non-owning view (what every algorithm takes) and an owning volume.
+//
+// Index conventions: sample (i, j, k) of a view lives at data + (i*strides[0] + j*strides[1] +
+// k*strides[2]) * scalar_size(type); x varies fastest in a dense volume. A view may be a brick of
+// a larger (global) grid: `box` is the part of the global grid it covers, so its local sample
+// (0, 0, 0) is global sample box.lo. World position of global sample g is origin + spacing * g,
+// for every brick alike, so positions computed from global indices agree bit for bit across
+// bricks. All indices are 64-bit.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include "core/volume/scalar_type.h"
+
+namespace isotile {
+
+using Index3 = std::array<std::int64_t, 3>;
+using Vec3d = std::array<double, 3>;
+
+// Half-open box of global sample indices [lo, hi).
+struct Box3 {
+  Index3 lo{0, 0, 0};
+  Index3 hi{0, 0, 0};
+
+  std::int64_t extent(int axis) const { return hi[axis] - lo[axis]; }
+  bool empty() const { return extent(0) <= 0 || extent(1) <= 0 || extent(2) <= 0; }
+};
+
+struct VolumeView {
+  const void* data = nullptr;
+  ScalarType type = ScalarType::Float32;
+  Index3 dims{0, 0, 0};         // samples along x, y, z
+  Index3 strides{0, 0, 0};      // in samples, not bytes
+  Vec3d spacing{1, 1, 1};       // world distance between neighbouring samples
+  Vec3d origin{0, 0, 0};        // world position of global sample (0, 0, 0)
+  Box3 box{};                   // global samples this view covers; box.hi - box.lo == dims
+  Index3 global_dims{0, 0, 0};  // dims of the whole volume this view is part of
+
+  std::int64_t sample_count() const { return dims[0] * dims[1] * dims[2]; }
+  std::int64_t offset(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return i * strides[0] + j * strides[1] + k * strides[2];
+  }
+  template <class T>
+  const T* typed() const {
+    return static_cast<const T*>(data);
+  }
+  // Generic slow accessor (tests, diagnostics); algorithms dispatch on the type once instead.
+  double value(std::int64_t i, std::int64_t j, std::int64_t k) const;
+};
+
+// A dense view with x fastest, covering the whole global grid.
+VolumeView dense_view(const void* data, ScalarType type, Index3 dims, Vec3d spacing = {1, 1, 1},
+                      Vec3d origin = {0, 0, 0});
+
+// The part of `view` inside `local` (in the view's own sample indices); clamped to the view.
+VolumeView subview(const VolumeView& view, const Box3& local);
+
+// The cells an extractor works on, in the view's own indices. An empty `global_cells` means every
+// cell of the view. Otherwise the view must hold those cells and `halo` samples beyond them on
+// every side where the volume goes on (InputError if not); the result is clipped to the volume.
+Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo);
+
+// An owning dense volume. Samples are left uninitialised on creation (volumes are large and are
+// always filled right after).
+class Volume {
+ public:
+  Volume() = default;
+  // Throws InputError for zero dims, CapacityError when the byte size overflows.
+  Volume(ScalarType type, Index3 dims, Vec3d spacing = {1, 1, 1}, Vec3d origin = {0, 0, 0});
+
+  VolumeView view() const;
+  ScalarType type() const { return type_; }
+  const Index3& dims() const { return dims_; }
+  const Vec3d& spacing() const { return spacing_; }
+  const Vec3d& origin() const { return origin_; }
+  void set_spacing(const Vec3d& s) { spacing_ = s; }
+  void set_origin(const Vec3d& o) { origin_ = o; }
+  std::int64_t sample_count() const { return dims_[0] * dims_[1] * dims_[2]; }
+  std::size_t byte_size() const { return bytes_; }
+  std::byte* bytes() { return data_.get(); }
+  const std::byte* bytes() const { return data_.get(); }
+  template <class T>
+  T* data() {
+    return reinterpret_cast<T*>(data_.get());
+  }
+  template <class T>
+  const T* data() const {
+    return reinterpret_cast<const T*>(data_.get());
+  }
+
+ private:
+  std::unique_ptr<std::byte[]> data_;
+  std::size_t bytes_ = 0;
+  ScalarType type_ = ScalarType::Float32;
+  Index3 dims_{0, 0, 0};
+  Vec3d spacing_{1, 1, 1};
+  Vec3d origin_{0, 0, 0};
+};
+
+// Number of bytes of dims[0]*dims[1]*dims[2] samples of `type`. Throws InputError when a dim is
+// not positive and CapacityError when the product overflows 63 bits.
+std::size_t checked_volume_bytes(ScalarType type, const Index3& dims);
+
+}  // namespace isotile

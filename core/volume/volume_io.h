@@ -1,0 +1,92 @@
+// Reading volumes from files and from procedural field specs.
+//
+// Formats, chosen by name:
+//   field:NAME:N                 procedural field (see procedural_fields.h), N^3 samples
+//   *.nrrd, *.nhdr               NRRD through teem (attached or detached data, raw or gzip)
+//   *.vdb                        OpenVDB: first float or double grid, active bounding box densified
+//   *.raw, *.raw.gz, others      raw samples, x fastest; gzip'd when the name ends in .gz
+// A raw file named NAME_XxYxZ_TYPE.raw[.gz] (e.g. bonsai_256x256x256_uint8.raw.gz) needs no
+// options; otherwise RawOptions must give dims and type. Options given explicitly override what
+// the name says.
+//
+// Every reader throws InputError (malformed content, wrong size, NaN/Inf samples) or IoError
+// (cannot open or read) with a message naming the file and the problem.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/volume/volume.h"
+
+namespace isotile {
+
+enum class Endian { Little, Big };
+
+struct RawOptions {
+  std::optional<Index3> dims;
+  std::optional<ScalarType> type;
+  std::optional<Vec3d> spacing;
+  std::optional<Vec3d> origin;
+  Endian endian = Endian::Little;
+};
+
+// What a raw file's name says, if it follows NAME_XxYxZ_TYPE.raw[.gz].
+struct RawNameInfo {
+  Index3 dims;
+  ScalarType type;
+};
+std::optional<RawNameInfo> parse_raw_name(const std::string& path);
+
+// Dims and type of a raw file: the options where given, else its name; InputError if unknown.
+struct RawLayout {
+  Index3 dims;
+  ScalarType type;
+};
+RawLayout resolve_raw_layout(const std::string& path, const RawOptions& options);
+
+// Reads any supported input (dispatches on the name as described above).
+Volume read_volume(const std::string& input, const RawOptions& raw = {});
+
+// The individual readers.
+Volume read_raw(const std::string& path, const RawOptions& options);  // plain or .gz
+Volume read_nrrd(const std::string& path);
+Volume read_vdb(const std::string& path);
+
+// An OpenVDB grid kept as its sparse tree and densified box by box (the out-of-core tiler reads
+// .vdb input this way). Its volume is the grid's active bounding box; boxes are in that volume's
+// sample indices. read_box writes box-extent samples of `type`, x fastest.
+class VdbVolume {
+ public:
+  virtual ~VdbVolume();
+  virtual void read_box(const Box3& box, void* out) const = 0;
+  ScalarType type = ScalarType::Float32;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+};
+std::unique_ptr<VdbVolume> open_vdb(const std::string& path);
+
+// Where a NRRD file keeps its samples, when that is one file of raw or gzip'd samples that can be
+// read box by box; nullopt otherwise (several data files, other encodings, line skips).
+struct NrrdDataLayout {
+  std::string data_file;     // the file holding the samples (the NRRD itself when attached)
+  std::uint64_t offset = 0;  // byte offset of the first sample (raw encoding)
+  bool gzip = false;
+  Endian endian = Endian::Little;
+  ScalarType type = ScalarType::UInt8;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+};
+std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
+
+// Throws InputError when a floating-point volume holds NaN or Inf samples, saying how many and
+// where the first one is (x, y, z). Integer volumes always pass.
+void check_finite(const VolumeView& view, const std::string& what);
+
+// Minimum and maximum sample value (0, 0 for an empty view).
+std::pair<double, double> value_range(const VolumeView& view);
+
+}  // namespace isotile
