@@ -21,30 +21,21 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 struct ServerRun {
   int code = -1;
   std::string log;
 };
 
-class MeshlabServer : public ::testing::Test {
+class MeshlabServer : public isotile::testing::TempDirTest {
  protected:
+  MeshlabServer() : TempDirTest("isotile-meshlab-") {}
   void SetUp() override {
 #ifdef ISOTILE_SANITIZED
     GTEST_SKIP() << "a sanitizer-instrumented plugin cannot load into Debian's uninstrumented "
                     "meshlabserver (the sanitizer runtime must come first); the meshlabserver "
                     "tests run in the Release pass";
 #endif
-    dir_ = fs::temp_directory_path() /
-           ("isotile-meshlab-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
+    TempDirTest::SetUp();
     // MeshLab looks for plugins next to its real executable only (a symlinked binary does not
     // work): a copy of meshlabserver in bin/, the libraries and plugins it loads beside it.
     const fs::path lib = dir_ / "prefix/lib/x86_64-linux-gnu/meshlab";
@@ -56,10 +47,6 @@ class MeshlabServer : public ::testing::Test {
     fs::create_symlink(system / "plugins/libio_base.so", lib / "plugins/libio_base.so");
     fs::create_symlink(ISOTILE_MESHLAB_PLUGIN, lib / "plugins/libfilter_isotile.so");
   }
-  void TearDown() override {
-    fs::remove_all(dir_);
-  }
-
   // The shipped example with some parameters' values replaced.
   static std::string script(const std::map<std::string, std::string>& values) {
     std::string s = slurp(ISOTILE_MESHLAB_EXAMPLE);
@@ -107,22 +94,23 @@ class MeshlabServer : public ::testing::Test {
     EXPECT_NEAR(a.min, b.min, 1e-6) << what;
     EXPECT_NEAR(a.mean, b.mean, 1e-6) << what;
   }
-
-  fs::path dir_;
 };
+
+// Each method as the filter's enum indices and as the CLI's options.
+struct MethodCase {
+  const char* method;
+  const char* quality;
+  const char* cli;
+};
+constexpr MethodCase kMethods[] = {{"0", "0", "--method mc"},
+                                   {"1", "0", "--method macet"},
+                                   {"1", "1", "--method macet --quality max"},
+                                   {"2", "0", "--method dc"}};
 
 const std::string kNucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
 
 TEST_F(MeshlabServer, EveryMethodGivesTheCliMeshOnASmallVolume) {
-  struct Case {
-    const char* method;  // the enum index
-    const char* quality;
-    const char* cli;
-  } cases[] = {{"0", "0", "--method mc"},
-               {"1", "0", "--method macet"},
-               {"1", "1", "--method macet --quality max"},
-               {"2", "0", "--method dc"}};
-  for (const Case& c : cases) {
+  for (const MethodCase& c : kMethods) {
     const ServerRun r = run(script(
         {{"file", kNucleon}, {"iso", "60.5"}, {"method", c.method}, {"macet_quality", c.quality}}));
     ASSERT_EQ(r.code, 0) << c.cli << "\n" << r.log;
@@ -136,15 +124,7 @@ TEST_F(MeshlabServer, EveryMethodGivesTheCliMeshOnASmallVolume) {
 TEST_F(MeshlabServer, EngineGivesTheCliMeshForEveryMethod) {
   const fs::path engine = isotile::testing::shared_volume("engine_256x256x128_uint8.raw.gz");
   if (!fs::exists(engine)) GTEST_SKIP() << "no shared data at " << engine;
-  struct Case {
-    const char* method;
-    const char* quality;
-    const char* cli;
-  } cases[] = {{"0", "0", "--method mc"},
-               {"1", "0", "--method macet"},
-               {"1", "1", "--method macet --quality max"},
-               {"2", "0", "--method dc"}};
-  for (const Case& c : cases) {
+  for (const MethodCase& c : kMethods) {
     const ServerRun r = run(
         script({{"file", engine.string()}, {"method", c.method}, {"macet_quality", c.quality}}));
     ASSERT_EQ(r.code, 0) << c.cli << "\n" << r.log;

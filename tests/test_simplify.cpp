@@ -37,24 +37,6 @@ std::array<Vec3f, 2> field_box(std::int64_t n) {
   return {Vec3f{0, 0, 0}, Vec3f{hi, hi, hi}};
 }
 
-// Boundary edges (one face) as sorted position pairs: where the border runs, whatever the indices.
-std::set<std::array<float, 6>> boundary_edges(const Mesh& m) {
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
-  for (const Tri& t : m.triangles)
-    for (int i = 0; i < 3; ++i) {
-      const std::uint32_t a = t[i], b = t[(i + 1) % 3];
-      ++count[{std::min(a, b), std::max(a, b)}];
-    }
-  std::set<std::array<float, 6>> out;
-  for (const auto& [e, c] : count) {
-    if (c != 1) continue;
-    Vec3f a = m.positions[e.first], b = m.positions[e.second];
-    if (b < a) std::swap(a, b);
-    out.insert({a[0], a[1], a[2], b[0], b[1], b[2]});
-  }
-  return out;
-}
-
 double mean_edge(const Mesh& m) {
   double sum = 0;
   for (const Tri& t : m.triangles)
@@ -137,10 +119,10 @@ TEST(Simplify, VerticesStayCloseToTheExactSurface) {
 TEST(Simplify, BorderEdgesStayExactlyWhereTheyWere) {
   // The gyroid runs through the volume's faces: its border is a set of open curves there.
   const Mesh in = field_mesh(FieldKind::Gyroid, 48);
-  const auto border = boundary_edges(in);
+  const auto border = testing::boundary_edges(in);
   ASSERT_GT(border.size(), 100u);
   const Mesh out = simplify(in, {.ratio = 0.1});
-  EXPECT_EQ(boundary_edges(out), border);
+  EXPECT_EQ(testing::boundary_edges(out), border);
   const TopologyStats t = mesh_topology(out, {.border_box = field_box(48)});
   EXPECT_TRUE(t.watertight);
   EXPECT_EQ(t.nonmanifold_edges, 0u);
@@ -278,23 +260,7 @@ TEST(Simplify, DualContouringNonManifoldEdgesStayAsTheyWere) {
   EXPECT_EQ(t.components, before.components);
   EXPECT_LT(out.triangles.size(), in.triangles.size());
   // Every non-manifold edge of the result was one of the input's, at the same place.
-  auto nm_edges = [](const Mesh& m) {
-    std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
-    for (const Tri& tr : m.triangles)
-      for (int i = 0; i < 3; ++i) {
-        const std::uint32_t a = tr[i], b = tr[(i + 1) % 3];
-        ++count[{std::min(a, b), std::max(a, b)}];
-      }
-    std::set<std::array<float, 6>> out;
-    for (const auto& [e, c] : count)
-      if (c > 2) {
-        Vec3f a = m.positions[e.first], b = m.positions[e.second];
-        if (b < a) std::swap(a, b);
-        out.insert({a[0], a[1], a[2], b[0], b[1], b[2]});
-      }
-    return out;
-  };
-  EXPECT_EQ(nm_edges(out), nm_edges(in));
+  EXPECT_EQ(testing::nonmanifold_edges(out), testing::nonmanifold_edges(in));
 }
 
 TEST(SurfaceDistance, IsZeroForTheSameMeshAndTheOffsetOfAPlane) {

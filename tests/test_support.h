@@ -2,6 +2,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -9,7 +10,12 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include "core/mesh/mesh.h"
@@ -22,6 +28,52 @@ namespace isotile::testing {
 inline std::filesystem::path shared_volume(const char* name) {
   return std::filesystem::path(ISOTILE_SHARED_DATA) / name;
 }
+
+// The edges with `faces` faces (1: the boundary; 3 or more: non-manifold, with faces = 0) as
+// sorted position pairs: where they run, whatever the vertex indices.
+inline std::set<std::array<float, 6>> edges_by_faces(const Mesh& m, int faces) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
+  for (const Tri& t : m.triangles)
+    for (int i = 0; i < 3; ++i) ++count[std::minmax(t[i], t[(i + 1) % 3])];
+  std::set<std::array<float, 6>> out;
+  for (const auto& [e, c] : count) {
+    if (faces == 0 ? c <= 2 : c != faces) continue;
+    Vec3f a = m.positions[e.first], b = m.positions[e.second];
+    if (b < a) std::swap(a, b);
+    out.insert({a[0], a[1], a[2], b[0], b[1], b[2]});
+  }
+  return out;
+}
+inline std::set<std::array<float, 6>> boundary_edges(const Mesh& m) {
+  return edges_by_faces(m, 1);
+}
+inline std::set<std::array<float, 6>> nonmanifold_edges(const Mesh& m) {
+  return edges_by_faces(m, 0);
+}
+
+// A fresh folder per test (named after the suite's `prefix` and the test), removed afterwards.
+class TempDirTest : public ::testing::Test {
+ protected:
+  explicit TempDirTest(const char* prefix) : prefix_(prefix) {}
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           (prefix_ + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  static std::string slurp(const std::filesystem::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  }
+
+  std::string prefix_;
+  std::filesystem::path dir_;
+};
 
 // Largest distance, in voxels, from a vertex of `m` to the field's exact surface.
 inline double max_distance(const FieldSpec& spec, const Mesh& m) {

@@ -32,16 +32,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class TiledSimplify : public ::testing::Test {
+class TiledSimplify : public testing::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("isotile-tsimp-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  TiledSimplify() : TempDirTest("isotile-tsimp-") {}
 
   // Extracts and simplifies `input` within `memory`; returns the mesh read back.
   Mesh run(const std::string& input, const ExtractOptions& o, double ratio, std::uint64_t memory,
@@ -57,15 +50,6 @@ class TiledSimplify : public ::testing::Test {
     if (result) *result = r;
     return read_mesh(dir_ / name);
   }
-
-  static std::string slurp(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-  }
-
-  fs::path dir_;
 };
 
 ExtractOptions options(Method m, double iso = 0) {
@@ -74,20 +58,6 @@ ExtractOptions options(Method m, double iso = 0) {
   o.backend = Backend::Cpu;
   o.iso = iso;
   return o;
-}
-
-std::set<std::array<float, 6>> boundary_edges(const Mesh& m) {
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
-  for (const Tri& t : m.triangles)
-    for (int i = 0; i < 3; ++i) ++count[std::minmax(t[i], t[(i + 1) % 3])];
-  std::set<std::array<float, 6>> out;
-  for (const auto& [e, c] : count) {
-    if (c != 1) continue;
-    Vec3f a = m.positions[e.first], b = m.positions[e.second];
-    if (b < a) std::swap(a, b);
-    out.insert({a[0], a[1], a[2], b[0], b[1], b[2]});
-  }
-  return out;
 }
 
 TEST_F(TiledSimplify, ClosedSphereStaysClosedAtEveryBudget) {
@@ -129,7 +99,7 @@ TEST_F(TiledSimplify, GyroidBorderIsKeptExactlyAndTheMeshIsWatertight) {
   TiledResult r;
   const Mesh m = run(field, options(Method::Macet), 0.1, std::uint64_t{6} << 20, &r);
   EXPECT_GE(r.plan.total(), 8);
-  EXPECT_EQ(boundary_edges(m), boundary_edges(whole));
+  EXPECT_EQ(testing::boundary_edges(m), testing::boundary_edges(whole));
   const std::array<Vec3f, 2> box{Vec3f{0, 0, 0}, Vec3f{95, 95, 95}};
   const TopologyStats before = mesh_topology(whole, {.border_box = box});
   const TopologyStats t = mesh_topology(m, {.border_box = box});

@@ -31,23 +31,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class Tiler : public ::testing::Test {
+class Tiler : public testing::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("isotile-tiler-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  static std::string slurp(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-  }
+  Tiler() : TempDirTest("isotile-tiler-") {}
 
   // In core: read whole, extract, write_mesh. Returns the file's bytes.
   std::string whole(const std::string& input, const ExtractOptions& o, MeshFormat format,
@@ -72,8 +58,6 @@ class Tiler : public ::testing::Test {
     if (result) *result = r;
     return slurp(out);
   }
-
-  fs::path dir_;
 };
 
 ExtractOptions options(Method m, bool normals = false) {
