@@ -797,8 +797,8 @@ int main(int argc, char** argv) {
       simplify_cmd->add_option("--faces", sa.faces, "Number of faces to keep (at least 1)");
   auto* error_opt = simplify_cmd->add_option(
       "--max-error", sa.max_error,
-      "Simplify as far as no vertex strays more than E (mesh units) from the planes of the "
-      "faces it replaces");
+      "Simplify as far as the surface stays within E (mesh units) of the input: its "
+      "vertices, edge midpoints and face centroids within E of the result (docs/simplify.md)");
   ratio_opt->excludes(faces_opt)->excludes(error_opt);
   faces_opt->excludes(error_opt);
   simplify_cmd

@@ -39,9 +39,10 @@ struct SimplifyOptions {
   // must be set.
   double ratio = 0;
   std::uint64_t faces = 0;
-  // Mesh units. A vertex never strays further than this from any plane of the input faces it
-  // stands for (its quadric's sum of squared distances stays within max_error^2), which bounds
-  // the distance from the input surface.
+  // Mesh units. Every input vertex, edge midpoint and face centroid stays within this of the
+  // result, and every result vertex within this of each plane of the input faces it stands for
+  // (its quadric's sum of squared distances stays within max_error^2). Between those points the
+  // input may stray slightly further where max_error is below a third of its edge length.
   double max_error = 0;
   // Radius ratio below which a collapse may not take a new triangle (unless it lifts the worst
   // triangle around it) and the cleanup pass works.
