@@ -315,7 +315,6 @@ Grid shifted(const Grid& g) {
 struct PassResult {
   WorkMesh mesh;
   std::int64_t regions = 0;
-  std::uint64_t shared_vertices = 0;  // vertices in more than one region (locked in this pass)
 };
 
 // The cost ceiling of the next round: the `k`-th smallest key among the regions' waiting edges,
@@ -365,8 +364,7 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     if (start[c + 1] > start[c]) occupied.push_back(c);
   const std::size_t nr = occupied.size();
 
-  // Regions hold their vertices in ascending input order; a vertex in several regions is shared.
-  std::vector<std::uint8_t> regions_of(in.positions.size(), 0);
+  // Regions hold their vertices in ascending input order.
   std::vector<std::vector<std::uint32_t>> ids(nr);
   tbb::parallel_for(std::size_t{0}, nr, [&](std::size_t r) {
     const std::int64_t c = occupied[r];
@@ -376,9 +374,6 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     std::sort(v.begin(), v.end());
     v.erase(std::unique(v.begin(), v.end()), v.end());
   });
-  for (const auto& v : ids)
-    for (std::uint32_t x : v)
-      regions_of[x] = static_cast<std::uint8_t>(std::min(regions_of[x] + 1, 2));
 
   // The error bound's points go with their faces (in point order within each region).
   std::vector<std::int64_t> region_of_cell(cells, -1);
@@ -495,7 +490,6 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
   }
   PassResult res;
   res.regions = static_cast<std::int64_t>(nr);
-  for (std::uint8_t n : regions_of) res.shared_vertices += n > 1;
   std::vector<std::uint32_t> index(nv, 0);
   WorkMesh& m = res.mesh;
   for (std::size_t v = 0; v < nv; ++v) {
