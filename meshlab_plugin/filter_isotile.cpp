@@ -212,8 +212,9 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                         "central differences, or ENO (kink-aware: sharper edges and corners)"));
   par.addParam(RichEnum("dc_vertices", d.dc_vertices, choices(ml::kDcVerticesNames, 2),
                         "Dual Contouring vertices",
-                        "cell: one vertex per cell (the paper's table); patch: one per surface "
-                        "patch, manifold (not available yet)"));
+                        "patch: one vertex per surface patch of a cell, a manifold mesh; cell: "
+                        "one vertex per cell (the paper's table; non-manifold edges where a cell "
+                        "holds several sheets)"));
   par.addParam(RichEnum("backend", d.backend, choices(ml::kBackendNames, 4), "Backend",
                         "Auto (the GPU where there is one, else the CPU), CPU, or OpenGL: "
                         "geometry shader or HistoPyramid (Marching Cubes only)"));

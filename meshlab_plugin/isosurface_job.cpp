@@ -73,10 +73,9 @@ ExtractOptions extract_options(const IsosurfaceParams& p) {
   o.dc_hermite = checked_choice(p.dc_hermite, kDcHermiteNames, "dc_hermite") == 1
                      ? DcHermite::Eno
                      : DcHermite::Central;
-  if (checked_choice(p.dc_vertices, kDcVerticesNames, "dc_vertices") == 0)
-    throw InputError(
-        "dc_vertices 'patch' (manifold Dual Contouring, one vertex per surface patch) is not "
-        "available yet; choose 'cell' (one vertex per cell, the paper's table)");
+  o.dc_vertices = checked_choice(p.dc_vertices, kDcVerticesNames, "dc_vertices") == 1
+                      ? DcVertices::Cell
+                      : DcVertices::Patch;
   const int backend = checked_choice(p.backend, kBackendNames, "backend");
   o.backend = backend == 1   ? Backend::Cpu
               : backend == 2 ? Backend::GeometryShader

@@ -26,7 +26,7 @@ struct IsosurfaceParams {
   double macet_relax = 0;
   int dc_solver = 0;         // 0 mass point, 1 particle, 2 QEF
   int dc_hermite = 0;        // 0 central, 1 ENO
-  int dc_vertices = 1;       // 0 patch (manifold; not available yet), 1 cell (the paper's)
+  int dc_vertices = 0;       // 0 patch (manifold), 1 cell (the paper's)
   int backend = 0;           // 0 auto, 1 CPU, 2 geometry shader, 3 HistoPyramid
   std::string memory = "0";  // working-set budget of the extraction, e.g. "512MiB"; "0": in core
   double simplify = 1;       // fraction of faces kept; 1: off

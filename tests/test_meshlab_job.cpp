@@ -88,9 +88,9 @@ TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
       {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
       {[](IsosurfaceParams& p) {
          p.method = 2;
-         p.dc_vertices = 0;
+         p.dc_vertices = 2;
        },
-       "'patch'"},
+       "dc_vertices must be one of 0 patch, 1 cell"},
       {[](IsosurfaceParams& p) { p.macet_relax = 0.2; }, "Macet method only"},
       {[](IsosurfaceParams& p) { p.macet_relax = 0.7; }, "macet_relax must be in [0, 0.5)"},
       {[](IsosurfaceParams& p) { p.memory = "much"; }, "much"},

@@ -100,19 +100,24 @@ class MeshlabServer : public isotile::testing::TempDirTest {
 struct MethodCase {
   const char* method;
   const char* quality;
+  const char* dc_vertices;
   const char* cli;
 };
-constexpr MethodCase kMethods[] = {{"0", "0", "--method mc"},
-                                   {"1", "0", "--method macet"},
-                                   {"1", "1", "--method macet --quality max"},
-                                   {"2", "0", "--method dc"}};
+constexpr MethodCase kMethods[] = {{"0", "0", "0", "--method mc"},
+                                   {"1", "0", "0", "--method macet"},
+                                   {"1", "1", "0", "--method macet --quality max"},
+                                   {"2", "0", "0", "--method dc"},
+                                   {"2", "0", "1", "--method dc --dc-vertices cell"}};
 
 const std::string kNucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
 
 TEST_F(MeshlabServer, EveryMethodGivesTheCliMeshOnASmallVolume) {
   for (const MethodCase& c : kMethods) {
-    const ServerRun r = run(script(
-        {{"file", kNucleon}, {"iso", "60.5"}, {"method", c.method}, {"macet_quality", c.quality}}));
+    const ServerRun r = run(script({{"file", kNucleon},
+                                    {"iso", "60.5"},
+                                    {"method", c.method},
+                                    {"macet_quality", c.quality},
+                                    {"dc_vertices", c.dc_vertices}}));
     ASSERT_EQ(r.code, 0) << c.cli << "\n" << r.log;
     EXPECT_NE(r.log.find("isotile: "), std::string::npos) << r.log;
     EXPECT_NE(r.log.find("radius ratio min"), std::string::npos) << r.log;
@@ -125,8 +130,10 @@ TEST_F(MeshlabServer, EngineGivesTheCliMeshForEveryMethod) {
   const fs::path engine = isotile::testing::shared_volume("engine_256x256x128_uint8.raw.gz");
   if (!fs::exists(engine)) GTEST_SKIP() << "no shared data at " << engine;
   for (const MethodCase& c : kMethods) {
-    const ServerRun r = run(
-        script({{"file", engine.string()}, {"method", c.method}, {"macet_quality", c.quality}}));
+    const ServerRun r = run(script({{"file", engine.string()},
+                                    {"method", c.method},
+                                    {"macet_quality", c.quality},
+                                    {"dc_vertices", c.dc_vertices}}));
     ASSERT_EQ(r.code, 0) << c.cli << "\n" << r.log;
     expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"),
                      cli(engine.string() + " --iso 49.5 " + c.cli), c.cli);
@@ -153,7 +160,7 @@ TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
       {{{"file", "/nonexistent/volume_8x8x8_uint8.raw"}}, "no such file"},
       {{{"file", kNucleon}, {"dims", "41,41"}}, "dims must be three comma-separated numbers"},
       {{{"file", kNucleon}, {"type", "uint12"}}, "unknown type 'uint12'"},
-      {{{"file", kNucleon}, {"dc_vertices", "0"}, {"method", "2"}}, "not available yet"},
+      {{{"file", kNucleon}, {"dc_vertices", "2"}, {"method", "2"}}, "dc_vertices must be one of"},
       {{{"file", kNucleon}, {"memory", "lots"}}, "lots"},
       {{{"file", kNucleon}, {"simplify", "0"}}, "simplify"},
       {{{"file", kNucleon}, {"series", "1.2.3"}}, "DICOM"},

@@ -245,6 +245,7 @@ TEST(Simplify, DualContouringNonManifoldEdgesStayAsTheyWere) {
   }
   ExtractOptions o;
   o.method = Method::DualContouring;
+  o.dc_vertices = DcVertices::Cell;  // the paper's table: sheets meet in one vertex per cell
   o.iso = 0.5;
   const Mesh in = extract(vol.view(), o);
   const TopologyStats before = mesh_topology(in);

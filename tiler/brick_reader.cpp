@@ -28,8 +28,9 @@ BrickReader::BrickReader(VolumeSource& source, const ExtractOptions& extract)
   // Every backend keeps the brick contract (the GL paths were checked against the CPU's brick
   // output), so bricks may run anywhere; resolve once, so all bricks run on the same one.
   ex_.backend = resolve_backend(ex_);
-  layout_ =
-      ex_.method == Method::DualContouring ? SiteLayout::CellVertices : SiteLayout::EdgeVertices;
+  layout_ = ex_.method != Method::DualContouring   ? SiteLayout::EdgeVertices
+            : ex_.dc_vertices == DcVertices::Patch ? SiteLayout::PatchVertices
+                                                   : SiteLayout::CellVertices;
   halo_ = extract_halo(ex_);
 }
 
@@ -57,8 +58,10 @@ VolumeView BrickReader::read(const Box3& box) {
 BrickCounts BrickReader::count(const Box3& cells) {
   const Box3 owned = owned_samples(cells, n_);
   const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
-  Box3 read_box = grow(cells, 0, n_);
-  for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1, n_[a]);
+  // Patch vertices look at the cells across their faces: one sample more on every side.
+  const int more = layout_ == SiteLayout::PatchVertices ? 1 : 0;
+  Box3 read_box = grow(cells, more, n_);
+  for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1 + more, n_[a]);
   const VolumeView view = read(read_box);
   check_finite(view, src_.name);
   return count_brick_sites(view, ex_.iso, layout_, vbox, cells);

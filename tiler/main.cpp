@@ -110,7 +110,9 @@ json quality_json(const QualityStats& q) {
   return j;
 }
 
-json topology_json(const TopologyStats& t) {
+// `border_known`: the mesh's volume box is known (an extraction); a mesh read from a file has
+// none, so whether its boundary lies on a volume border cannot be told: watertight is null.
+json topology_json(const TopologyStats& t, bool border_known) {
   json j;
   j["boundary_edges"] = t.boundary_edges;
   j["border_boundary_edges"] = t.border_boundary_edges;
@@ -120,20 +122,8 @@ json topology_json(const TopologyStats& t) {
   j["euler"] = t.euler;
   j["components"] = t.components;
   j["closed"] = t.closed;
-  j["watertight"] = t.watertight;
+  j["watertight"] = border_known ? json(t.watertight) : json(nullptr);
   return j;
-}
-
-// The world-space box of the volume, computed exactly as extractors compute vertex positions, so
-// that vertices on the border compare equal to it.
-std::array<Vec3f, 2> border_box(const VolumeView& v) {
-  std::array<Vec3f, 2> box{};
-  for (int a = 0; a < 3; ++a) {
-    box[0][a] = static_cast<float>(v.origin[a] + v.spacing[a] * 0.0);
-    box[1][a] =
-        static_cast<float>(v.origin[a] + v.spacing[a] * static_cast<double>(v.global_dims[a] - 1));
-  }
-  return box;
 }
 
 // Mean and max distance of the vertices to the exact surface of a procedural field. Sums are
@@ -190,6 +180,7 @@ struct ExtractArgs {
   bool ascii = false;
   std::string dc_solver = "mass";
   std::string dc_hermite = "central";
+  std::string dc_vertices = "patch";
   std::string quality = "fast";  // Macet
   double macet_relax = 0.0;
   bool quads = false;
@@ -354,6 +345,7 @@ int run_extract(const ExtractArgs& args) {
                                                    : DcSolver::MassPoint;
   options.keep_quads = args.quads;
   options.dc_hermite = args.dc_hermite == "eno" ? DcHermite::Eno : DcHermite::Central;
+  options.dc_vertices = args.dc_vertices == "cell" ? DcVertices::Cell : DcVertices::Patch;
   options.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
   options.macet_relax = args.macet_relax;
   if (options.macet_relax > 0 && options.method != Method::Macet)
@@ -418,7 +410,7 @@ int run_extract(const ExtractArgs& args) {
   }
   t0 = Clock::now();
   const QualityStats q = triangle_quality(mesh);
-  const TopologyStats topo = mesh_topology(mesh, {.border_box = border_box(view)});
+  const TopologyStats topo = mesh_topology(mesh, volume_border(view, options.method));
   json j;
   j["input"] = args.in.input;
   j["output"] = args.output;
@@ -435,7 +427,7 @@ int run_extract(const ExtractArgs& args) {
   j["triangles"] = mesh.triangles.size() + 2 * mesh.quads.size();
   j["vertices"] = mesh.positions.size();
   j.update(quality_json(q));
-  j.update(topology_json(topo));
+  j.update(topology_json(topo, true));
   j["bricks"] = 1;
   if (args.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
   if (extracted) {
@@ -505,7 +497,7 @@ int run_simplify(const SimplifyArgs& args) {
     j["triangles"] = out.triangles.size();
     j["vertices"] = out.positions.size();
     j.update(quality_json(triangle_quality(out)));
-    j.update(topology_json(mesh_topology(out)));
+    j.update(topology_json(mesh_topology(out), false));
     j.update(simplify_json(sstats, mesh, out, {1, 1, 1}));
     j["seconds"] = {{"read", t_read},
                     {"simplify", t_simplify},
@@ -588,7 +580,7 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections,
   j["triangles"] = q.triangles;
   j["vertices"] = mesh.positions.size();
   j.update(quality_json(q));
-  j.update(topology_json(t));
+  j.update(topology_json(t, false));
   j["edges"] = t.edges;
   j["unreferenced_vertices"] = t.unreferenced_vertices;
   std::optional<std::uint64_t> crossing;
@@ -625,6 +617,9 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections,
   std::printf("euler / components    %lld / %llu\n", static_cast<long long>(t.euler),
               static_cast<unsigned long long>(t.components));
   std::printf("closed                %s\n", t.closed ? "yes" : "no");
+  std::printf(
+      "watertight            cannot tell: a mesh file carries no volume box (isotile "
+      "extract --stats can)\n");
   if (crossing)
     std::printf("self-intersections    %llu triangle pairs\n",
                 static_cast<unsigned long long>(*crossing));
@@ -728,6 +723,12 @@ int main(int argc, char** argv) {
           "crossings; default) or eno (kink-aware crossings and one-sided normals: sharper "
           "edges and corners)")
       ->check(CLI::IsMember({"central", "eno"}));
+  extract_cmd
+      ->add_option("--dc-vertices", ex.dc_vertices,
+                   "Dual Contouring's vertices: patch (one per surface patch of a cell: a "
+                   "manifold mesh; default) or cell (one per cell, the paper's table: "
+                   "non-manifold edges where a cell holds several sheets)")
+      ->check(CLI::IsMember({"patch", "cell"}));
   extract_cmd
       ->add_option("--quality", ex.quality,
                    "Macet: fast (closed-form end-point push, default) or max (adds a local "

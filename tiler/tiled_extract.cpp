@@ -221,7 +221,7 @@ class TiledExtraction {
     std::vector<std::uint64_t> index(keys.size());
     std::vector<char> is_owned(keys.size());
     const auto nx = static_cast<std::uint64_t>(n_[0]), ny = static_cast<std::uint64_t>(n_[1]);
-    const std::uint64_t per_site = layout_ == SiteLayout::EdgeVertices ? 3 : 1;
+    const std::uint64_t per_site = keys_per_site(layout_);
     for (std::size_t g0 = 0; g0 < keys.size();) {
       const std::uint64_t lin = keys[g0] / per_site;
       const auto y = static_cast<std::int64_t>(lin / nx % ny);

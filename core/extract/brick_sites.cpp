@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/errors.h"
+#include "core/extract/dual_contouring_patches.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/marching_cubes.h"
 #include "core/extract/marching_cubes_tables.h"
@@ -59,6 +60,33 @@ void require(const VolumeView& view, const Box3& box, int extra) {
   }
 }
 
+// The MC case of global cell (x, y, z); -1 when the volume or the view lacks one of its samples.
+int case_at(const Classified& c, int64_t x, int64_t y, int64_t z) {
+  if (x < 0 || y < 0 || z < 0 || x + 1 >= c.n[0] || y + 1 >= c.n[1] || z + 1 >= c.n[2]) return -1;
+  const int64_t lx = x - c.lo[0];
+  if (lx < 0 || lx + 1 >= c.grid.nx) return -1;
+  int cs = 0;
+  for (int corner = 0; corner < 8; ++corner) {
+    const uint64_t* row = c.row(y + ((corner >> 1) & 1), z + ((corner >> 2) & 1));
+    if (!row) return -1;
+    const int64_t b = lx + (corner & 1);
+    cs |= static_cast<int>((row[b >> 6] >> (b & 63)) & 1) << corner;
+  }
+  return cs;
+}
+
+// Vertices of global cell (x, y, z) of case cs with DcVertices::Patch.
+int patch_count(const Classified& c, int64_t x, int64_t y, int64_t z, int cs) {
+  const int64_t cell[3] = {x, y, z};
+  const unsigned open = dc::border_faces(cell, c.n);
+  if (!dc::kConflictFaces[cs] && !open) return dc::kPatchTable.count[cs];
+  const unsigned flips = dc::face_flips(cs, [&](int f) {
+    const auto& d = dc::kFaceNeighbour[f];
+    return case_at(c, x + d[0], y + d[1], z + d[2]);
+  });
+  return flips || open ? dc::cell_patches(cs, flips, open).count : dc::kPatchTable.count[cs];
+}
+
 template <class Fn>
 RowCounts per_row(const Box3& box, Fn&& count_row) {
   RowCounts out{box, {}};
@@ -100,7 +128,11 @@ void edge_masks(const Classified& c, int64_t j, int64_t k, int64_t w, bool quads
 BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout layout,
                               const Box3& vertex_box, const Box3& face_box) {
   // Edges reach one sample beyond their site; cells one sample beyond theirs.
-  require(view, vertex_box, 1);
+  // Patches look at the cells across their faces: one sample more on every side.
+  const int more = layout == SiteLayout::PatchVertices ? 1 : 0;
+  Box3 wider = vertex_box;
+  for (int a = 0; a < 3; ++a) wider.lo[a] = std::max<int64_t>(wider.lo[a] - more, 0);
+  require(view, wider, 1 + more);
   require(view, face_box, 1);
   const Classified c = classify_view(view, iso);
   const int64_t x0 = c.lo[0];
@@ -118,7 +150,7 @@ BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout lay
       return n;
     });
   };
-  // Mixed cells of cell row (j, k): each contributes `weight(case)`.
+  // Mixed cells of cell row (j, k): each contributes `weight(case, x, j, k)`.
   auto cells = [&](const Box3& box, auto&& weight) {
     return per_row(box, [&](int64_t j, int64_t k) {
       const uint64_t* rows[4] = {c.row(j, k), c.row(j + 1, k), c.row(j, k + 1),
@@ -127,8 +159,10 @@ BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout lay
       const int64_t lo = box.lo[0] - x0, hi = box.hi[0] - x0;
       for (int64_t w = lo >> 6; w <= (hi - 1) >> 6; ++w) {
         const CellWord cw(rows, w, c.grid.words, c.grid.nx);
-        for (uint64_t m = cw.mixed & range_bits(w, lo, hi); m; m &= m - 1)
-          n += weight(cw.cell_case(std::countr_zero(m)));
+        for (uint64_t m = cw.mixed & range_bits(w, lo, hi); m; m &= m - 1) {
+          const int b = std::countr_zero(m);
+          n += weight(cw.cell_case(b), x0 + w * 64 + b, j, k);
+        }
       }
       return n;
     });
@@ -137,9 +171,14 @@ BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout lay
   BrickCounts out;
   if (layout == SiteLayout::EdgeVertices) {
     out.vertices = edges(vertex_box, false);
-    out.faces = cells(face_box, [](int cs) { return uint32_t{mc::kCaseTable.triangle_count[cs]}; });
+    out.faces = cells(face_box, [](int cs, int64_t, int64_t, int64_t) {
+      return uint32_t{mc::kCaseTable.triangle_count[cs]};
+    });
   } else {
-    out.vertices = cells(vertex_box, [](int) { return uint32_t{1}; });
+    const bool patches = layout == SiteLayout::PatchVertices;
+    out.vertices = cells(vertex_box, [&](int cs, int64_t x, int64_t y, int64_t z) {
+      return patches ? static_cast<uint32_t>(patch_count(c, x, y, z, cs)) : uint32_t{1};
+    });
     out.faces = edges(face_box, true);
   }
   return out;
@@ -153,45 +192,52 @@ std::vector<uint64_t> brick_vertex_keys(const VolumeView& view, double iso, Site
     o.cells = cells;
     return marching_cubes_vertex_keys(view, o);
   }
-  // Active cells in [cells.lo - 1, cells.hi), clipped to the volume.
+  // Active cells in [cells.lo - 1, cells.hi), clipped to the volume, one key per patch.
   Box3 box;
   for (int a = 0; a < 3; ++a) {
     box.lo[a] = std::max<int64_t>(cells.lo[a] - 1, 0);
     box.hi[a] = std::min<int64_t>(cells.hi[a], view.global_dims[a] - 1);
   }
-  require(view, box, 1);
+  const bool patches = layout == SiteLayout::PatchVertices;
+  Box3 wider = box;
+  for (int a = 0; a < 3; ++a) wider.lo[a] = std::max<int64_t>(wider.lo[a] - patches, 0);
+  require(view, wider, 1 + patches);
   const Classified c = classify_view(view, iso);
-  const RowCounts counts = per_row(box, [&](int64_t j, int64_t k) {
+  // Visits the active cells of global cell row (j, k) in the box: fn(x index, patch count).
+  auto each_cell = [&](int64_t j, int64_t k, auto&& fn) {
     const uint64_t* rows[4] = {c.row(j, k), c.row(j + 1, k), c.row(j, k + 1), c.row(j + 1, k + 1)};
-    uint32_t n = 0;
     const int64_t lo = box.lo[0] - c.lo[0], hi = box.hi[0] - c.lo[0];
     for (int64_t w = lo >> 6; w <= (hi - 1) >> 6; ++w) {
       const CellWord cw(rows, w, c.grid.words, c.grid.nx);
-      n += static_cast<uint32_t>(std::popcount(cw.mixed & range_bits(w, lo, hi)));
+      for (uint64_t m = cw.mixed & range_bits(w, lo, hi); m; m &= m - 1) {
+        const int b = std::countr_zero(m);
+        const int64_t x = c.lo[0] + w * 64 + b;
+        fn(x - c.lo[0], patches ? patch_count(c, x, j, k, cw.cell_case(b)) : 1);
+      }
     }
+  };
+  const RowCounts counts = per_row(box, [&](int64_t j, int64_t k) {
+    uint32_t n = 0;
+    each_cell(j, k, [&](int64_t, int p) { n += static_cast<uint32_t>(p); });
     return n;
   });
   std::vector<uint64_t> offset(counts.count.size() + 1);
   for (size_t r = 0; r < counts.count.size(); ++r) offset[r + 1] = offset[r] + counts.count[r];
   std::vector<uint64_t> keys(offset.back());
   const int64_t ny = box.extent(1);
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, static_cast<int64_t>(counts.count.size())),
-                    [&](const auto& range) {
-                      for (int64_t r = range.begin(); r != range.end(); ++r) {
-                        const int64_t j = box.lo[1] + r % ny, k = box.lo[2] + r / ny;
-                        const uint64_t* rows[4] = {c.row(j, k), c.row(j + 1, k), c.row(j, k + 1),
-                                                   c.row(j + 1, k + 1)};
-                        const int64_t lo = box.lo[0] - c.lo[0], hi = box.hi[0] - c.lo[0];
-                        const uint64_t base =
-                            static_cast<uint64_t>(c.n[0] * (j + c.n[1] * k) + c.lo[0]);
-                        uint64_t* out = keys.data() + offset[r];
-                        for (int64_t w = lo >> 6; w <= (hi - 1) >> 6; ++w) {
-                          const CellWord cw(rows, w, c.grid.words, c.grid.nx);
-                          for (uint64_t m = cw.mixed & range_bits(w, lo, hi); m; m &= m - 1)
-                            *out++ = base + static_cast<uint64_t>(w * 64 + std::countr_zero(m));
-                        }
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<int64_t>(0, static_cast<int64_t>(counts.count.size())),
+      [&](const auto& range) {
+        for (int64_t r = range.begin(); r != range.end(); ++r) {
+          const int64_t j = box.lo[1] + r % ny, k = box.lo[2] + r / ny;
+          const uint64_t base = static_cast<uint64_t>(c.n[0] * (j + c.n[1] * k) + c.lo[0]);
+          uint64_t* out = keys.data() + offset[r];
+          each_cell(j, k, [&](int64_t x, int p) {
+            for (int q = 0; q < p; ++q)
+              *out++ = 4 * (base + static_cast<uint64_t>(x)) + static_cast<uint64_t>(q);
+          });
+        }
+      });
   return keys;
 }
 

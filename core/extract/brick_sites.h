@@ -6,8 +6,9 @@
 // The brick contract (core/extract/marching_cubes.h, core/extract/dual_contouring.h): Marching
 // Cubes and Macet put vertices on crossed edges, owned by the edge's lower sample, and faces in
 // cells; Dual Contouring puts vertices in active cells and faces on crossed edges whose four cells
-// exist. Keys are global: lin(s) * 3 + axis for an edge, lin(c) for a cell, with lin(p) = p.x + N.x
-// * (p.y + N.y * p.z) over the global sample dims N.
+// exist. Keys are global: lin(s) * 3 + axis for an edge, lin(c) * 4 + patch for a cell's vertex
+// (patch 0 when a cell has one), with lin(p) = p.x + N.x * (p.y + N.y * p.z) over the global
+// sample dims N.
 #pragma once
 
 #include <cstdint>
@@ -19,9 +20,15 @@ namespace isotile {
 
 // Where a method's vertices and faces live.
 enum class SiteLayout {
-  EdgeVertices,  // Marching Cubes, Macet: vertices on edges (sample sites), faces in cells
-  CellVertices,  // Dual Contouring: vertices in cells, faces on edges (sample sites)
+  EdgeVertices,   // Marching Cubes, Macet: vertices on edges (sample sites), faces in cells
+  CellVertices,   // Dual Contouring (DcVertices::Cell): a vertex per active cell, faces on edges
+  PatchVertices,  // Dual Contouring (DcVertices::Patch): a vertex per patch of an active cell
 };
+
+// The three keys per site of edge vertices, four (patches) of cell vertices.
+inline std::uint64_t keys_per_site(SiteLayout layout) {
+  return layout == SiteLayout::EdgeVertices ? 3 : 4;
+}
 
 // One count per row (y, z) of `box` (global indices), z-major: row r is (box.lo.y + r % ny,
 // box.lo.z + r / ny), counting the sites with x in [box.lo.x, box.hi.x).
@@ -31,8 +38,8 @@ struct RowCounts {
 };
 
 // Vertices owned by the sites in `vertex_box` (samples for EdgeVertices, cells for CellVertices)
-// and faces of the sites in `face_box` (cells for EdgeVertices: triangles; samples for
-// CellVertices: quads, one per crossed edge whose four cells exist). The view must hold every
+// and faces of the sites in `face_box` (cells for EdgeVertices: triangles; samples for Cell- and
+// PatchVertices: quads, one per crossed edge whose four cells exist). The view must hold every
 // sample these depend on (one beyond each box); InputError otherwise.
 struct BrickCounts {
   RowCounts vertices;

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/extract/dual_contouring_patches.h"
 #include "core/extract/dual_contouring_table.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/isovalue_ties.h"
@@ -156,10 +157,12 @@ inline uint64_t bits_in(int64_t w, int64_t lo, int64_t hi) {
   return valid_bits(w, hi) & ~valid_bits(w, lo);
 }
 
-// Mixed cells of one cell row, with the number of mixed cells in earlier words of the row, so a
-// cell's vertex index is its row's offset + prefix + popcount below it.
+// Mixed cells of one cell row, with the number of vertices of earlier words of the row, so a
+// cell's first vertex index is its row's offset + prefix + popcount below it, plus one for each
+// extra patch of the cells below it that have several (`multi`, rare).
 struct MixedWord {
   uint64_t mask;
+  uint64_t multi;  // DcVertices::Patch: cells with more than one patch
   uint32_t prefix;
 };
 
@@ -177,6 +180,7 @@ class Extractor {
     grid_.ny = view.dims[1];
     grid_.nz = view.dims[2];
     grid_.words = (grid_.nx + 63) / 64;
+    patches_ = options.vertices == DcVertices::Patch;
     for (int c = 0; c < 8; ++c) corner_offset_[c] = view.offset(c & 1, (c >> 1) & 1, (c >> 2) & 1);
   }
 
@@ -196,8 +200,12 @@ class Extractor {
       const uint64_t row = static_cast<uint64_t>(
           n[0] * ((view_.box.lo[1] + j) + n[1] * (view_.box.lo[2] + k)) + view_.box.lo[0]);
       for (int64_t w = 0; w < grid_.words; ++w)
-        for (uint64_t m = mixed_[r * grid_.words + w].mask; m; m &= m - 1)
-          out.push_back(row + static_cast<uint64_t>(w * 64 + std::countr_zero(m)));
+        for (uint64_t m = mixed_[r * grid_.words + w].mask; m; m &= m - 1) {
+          const int64_t i = w * 64 + std::countr_zero(m);
+          const int patches = patches_ ? patches_at(i, j, k, case_at(i, j, k)).count : 1;
+          for (int p = 0; p < patches; ++p)
+            out.push_back(4 * (row + static_cast<uint64_t>(i)) + static_cast<uint64_t>(p));
+        }
     }
     return out;
   }
@@ -244,8 +252,9 @@ class Extractor {
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       std::vector<dc::CellQef> qef;
       std::vector<std::array<double, 3>> x;
+      std::vector<int64_t> cell_x;
       for (int64_t r = range.begin(); r != range.end(); ++r)
-        if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, mesh);
+        if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, cell_x, mesh);
     });
     if (options_.keep_quads)
       mesh.quads.resize(n_quads);
@@ -267,13 +276,67 @@ class Extractor {
     const uint64_t* rows[4];
     if (has_cells) cell_rows(j, k, rows);
     for (int64_t w = 0; w < grid_.words; ++w) {
-      const uint64_t m = has_cells ? CellWord(rows, w, grid_.words, grid_.nx).mixed &
-                                         bits_in(w, vcells_.lo[0], vcells_.hi[0])
-                                   : 0;
-      out[w] = {m, total};
+      out[w] = {0, 0, total};
+      if (!has_cells) continue;
+      const CellWord cw(rows, w, grid_.words, grid_.nx);
+      const uint64_t m = cw.mixed & bits_in(w, vcells_.lo[0], vcells_.hi[0]);
+      out[w].mask = m;
       total += static_cast<uint32_t>(std::popcount(m));
+      if (!patches_) continue;
+      for (uint64_t b = m; b; b &= b - 1) {
+        const int bit = std::countr_zero(b);
+        const int cs = cw.cell_case(bit);
+        const int64_t i = w * 64 + bit;
+        if (dc::kPatchTable.count[cs] == 1 && !dc::kConflictFaces[cs] && !on_border(i, j, k))
+          continue;
+        const int extra = patches_at(i, j, k, cs).count - 1;
+        if (extra > 0) {
+          out[w].multi |= uint64_t{1} << bit;
+          total += static_cast<uint32_t>(extra);
+        }
+      }
     }
     return total;
+  }
+
+  // MC case of cell (i, j, k) from the classification.
+  int case_at(int64_t i, int64_t j, int64_t k) const {
+    int cs = 0;
+    for (int c = 0; c < 8; ++c) {
+      const int64_t x = i + (c & 1);
+      const uint64_t word = grid_.row(j + ((c >> 1) & 1), k + ((c >> 2) & 1))[x >> 6];
+      cs |= static_cast<int>((word >> (x & 63)) & 1) << c;
+    }
+    return cs;
+  }
+
+  bool on_border(int64_t i, int64_t j, int64_t k) const {
+    const int64_t p[3] = {i, j, k};
+    for (int a = 0; a < 3; ++a) {
+      const int64_t global = view_.box.lo[a] + p[a];
+      if (global == 0 || global + 2 == view_.global_dims[a]) return true;
+    }
+    return false;
+  }
+
+  // The patches of cell (i, j, k) of case cs (dual_contouring_patches.h). A neighbour beyond the
+  // view counts as absent: brick mode's halo holds every neighbour inside the volume.
+  dc::CellPatches patches_at(int64_t i, int64_t j, int64_t k, int cs) const {
+    const unsigned flips = dc::face_flips(cs, [&](int f) {
+      const auto& d = dc::kFaceNeighbour[f];
+      const int64_t p[3] = {i + d[0], j + d[1], k + d[2]};
+      for (int a = 0; a < 3; ++a)
+        if (p[a] < 0 || p[a] + 1 >= view_.dims[a]) return -1;
+      return case_at(p[0], p[1], p[2]);
+    });
+    const int64_t global[3] = {view_.box.lo[0] + i, view_.box.lo[1] + j, view_.box.lo[2] + k};
+    const unsigned open = dc::border_faces(global, view_.global_dims);
+    if (flips || open) return dc::cell_patches(cs, flips, open);
+    dc::CellPatches out;
+    out.count = dc::kPatchTable.count[cs];
+    out.patch = dc::kPatchTable.patch[cs];
+    out.edges = dc::kPatchTable.edges[cs];
+    return out;
   }
 
   void cell_rows(int64_t j, int64_t k, const uint64_t* rows[4]) const {
@@ -347,9 +410,10 @@ class Extractor {
     return gradient(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1), inner);
   }
 
-  // The Hermite planes of cell (i, j, k) with MC case `cs`; returns their number. Normals only
+  // The Hermite planes of the crossed edges `edges` (a mask over MC's edge numbers) of cell
+  // (i, j, k); returns their number. Normals only
   // when the solver uses them (the mass point does not).
-  int hermite(int64_t i, int64_t j, int64_t k, int cs, bool with_normals,
+  int hermite(int64_t i, int64_t j, int64_t k, unsigned edges, bool with_normals,
               dc::HermitePlane* planes) const {
     double value[8];
     const T* origin = data_ + view_.offset(i, j, k);
@@ -358,7 +422,7 @@ class Extractor {
     std::array<double, 3> grad[8];
     unsigned have = 0;
     int count = 0;
-    for (unsigned em = mc::kCaseTable.edge_mask[cs]; em; em &= em - 1) {
+    for (unsigned em = edges; em; em &= em - 1) {
       const int e = std::countr_zero(em), axis = e / 4;
       const int c0 = mc::kEdgeCorners[e][0], c1 = mc::kEdgeCorners[e][1];
       dc::HermitePlane& h = planes[count++];
@@ -582,12 +646,14 @@ class Extractor {
   // One row of cells in three sweeps (Hermite data, solve, write), so particles can run many
   // cells abreast. `qef` and `x` are scratch reused across rows.
   void fill_vertices(int64_t j, int64_t k, std::vector<dc::CellQef>& qef,
-                     std::vector<std::array<double, 3>>& x, Mesh& mesh) const {
+                     std::vector<std::array<double, 3>>& x, std::vector<int64_t>& cell_x,
+                     Mesh& mesh) const {
     const int64_t r = k * grid_.ny + j;
     const uint64_t first = vertex_offset_[r];
     const size_t n = static_cast<size_t>(vertex_offset_[r + 1] - first);
     qef.resize(n);
     x.resize(n);
+    cell_x.resize(n);
     const bool with_normals = options_.solver != DcSolver::MassPoint;
     const uint64_t* rows[4];
     cell_rows(j, k, rows);
@@ -598,9 +664,21 @@ class Extractor {
       const CellWord cw(rows, w, grid_.words, grid_.nx);
       for (uint64_t m = mixed[w].mask; m; m &= m - 1) {
         const int b = std::countr_zero(m);
-        dc::HermitePlane planes[12];
-        const int count = hermite(w * 64 + b, j, k, cw.cell_case(b), with_normals, planes);
-        qef[v++] = dc::accumulate_planes(planes, count, with_normals);
+        const int cs = cw.cell_case(b);
+        dc::CellPatches cp;
+        if (patches_) {
+          cp = patches_at(w * 64 + b, j, k, cs);
+        } else {
+          cp.count = 1;
+          cp.edges[0] = mc::kCaseTable.edge_mask[cs];
+        }
+        for (int p = 0; p < cp.count; ++p) {
+          const unsigned edges = cp.edges[p];
+          dc::HermitePlane planes[12];
+          const int count = hermite(w * 64 + b, j, k, edges, with_normals, planes);
+          cell_x[v] = w * 64 + b;
+          qef[v++] = dc::accumulate_planes(planes, count, with_normals);
+        }
       }
     }
     assert(v == n);
@@ -617,28 +695,34 @@ class Extractor {
         break;
     }
 
-    v = 0;
-    for (int64_t w = 0; w < grid_.words; ++w)
-      for (uint64_t m = mixed[w].mask; m; m &= m - 1) {
-        const int64_t cell[3] = {w * 64 + std::countr_zero(m), j, k};
-        const size_t index = first + v;
-        Vec3f& pos = mesh.positions[index];
-        for (int a = 0; a < 3; ++a)
-          pos[a] = static_cast<float>(
-              view_.origin[a] +
-              view_.spacing[a] * (static_cast<double>(view_.box.lo[a] + cell[a]) + x[v][a]));
-        if (options_.normals) mesh.normals[index] = vertex_normal(cell[0], j, k, x[v]);
-        ++v;
-      }
+    for (v = 0; v < n; ++v) {
+      const int64_t cell[3] = {cell_x[v], j, k};
+      const size_t index = first + v;
+      Vec3f& pos = mesh.positions[index];
+      for (int a = 0; a < 3; ++a)
+        pos[a] = static_cast<float>(view_.origin[a] +
+                                    view_.spacing[a] *
+                                        (static_cast<double>(view_.box.lo[a] + cell[a]) + x[v][a]));
+      if (options_.normals) mesh.normals[index] = vertex_normal(cell[0], j, k, x[v]);
+    }
   }
 
-  uint32_t vertex_of_cell(int64_t i, int64_t j, int64_t k) const {
+  // The vertex of cell (i, j, k) that serves its MC edge `edge` (with DcVertices::Cell, its one).
+  uint32_t vertex_of_cell(int64_t i, int64_t j, int64_t k, int edge) const {
     const int64_t r = k * grid_.ny + j;
     const MixedWord& mw = mixed_[r * grid_.words + (i >> 6)];
     assert((mw.mask >> (i & 63)) & 1);
-    const uint64_t below = mw.mask & ((uint64_t{1} << (i & 63)) - 1);
-    return static_cast<uint32_t>(vertex_offset_[r] + mw.prefix +
-                                 static_cast<uint32_t>(std::popcount(below)));
+    const uint64_t lower = (uint64_t{1} << (i & 63)) - 1;
+    uint64_t index = vertex_offset_[r] + mw.prefix + std::popcount(mw.mask & lower);
+    if (mw.multi) {
+      const int64_t w0 = i & ~int64_t{63};
+      for (uint64_t m = mw.multi & lower; m; m &= m - 1) {
+        const int64_t x = w0 + std::countr_zero(m);
+        index += patches_at(x, j, k, case_at(x, j, k)).count - 1;
+      }
+      if ((mw.multi >> (i & 63)) & 1) index += patches_at(i, j, k, case_at(i, j, k)).patch[edge];
+    }
+    return static_cast<uint32_t>(index);
   }
 
   void fill_faces(int64_t j, int64_t k, uint64_t first, Mesh& mesh) const {
@@ -656,8 +740,9 @@ class Extractor {
         for (int q = 0; q < cs.count; ++q) {
           Quad quad;
           for (int v = 0; v < 4; ++v) {
-            const auto& d = dc::kBlockCell[cs.quads[q][v]];
-            quad[v] = vertex_of_cell(i + d[0], j + d[1], k + d[2]);
+            const int n = cs.quads[q][v];
+            const auto& d = dc::kBlockCell[n];
+            quad[v] = vertex_of_cell(i + d[0], j + d[1], k + d[2], dc::kBlockEdge[n][cs.axis[q]]);
           }
           if (options_.keep_quads) {
             mesh.quads[out++] = quad;
@@ -705,6 +790,7 @@ class Extractor {
   BitGrid grid_;
   std::vector<MixedWord> mixed_;
   int64_t corner_offset_[8];  // of a cell's corner c from its corner 0, in samples
+  bool patches_ = false;      // DcVertices::Patch
   std::vector<uint64_t> vertex_offset_;
 };
 

@@ -1,21 +1,24 @@
 // Table-driven Dual Contouring on the CPU (paper Sec. III; table in dual_contouring_table.h).
 //
 // Classification is Marching Cubes': a sample is inside when value >= iso. Every cell (the cube
-// between samples (i..i+1, j..j+1, k..k+1)) with a crossed edge among its 12 gets one dual vertex,
-// placed from the cell's Hermite data: the crossings of its edges (linear interpolation from each
-// edge's lower-index end, as in MC) and unit normals there (central-difference gradients of the
-// samples, one-sided only at the border of the whole volume, interpolated along the edge). Every
-// crossed edge whose four surrounding cells all exist gets one quad joining their vertices, wound
-// so its normal points from the inside end of the edge to the outside end. Edges on the border of
-// the volume lack some of those cells and get no quad: the mesh is open there, like MC's. A cell
-// whose only crossed edges lie on the border still gets its vertex, which no face then uses.
+// between samples (i..i+1, j..j+1, k..k+1)) with a crossed edge among its 12 gets one dual vertex
+// per surface patch (DcVertices::Patch, the default) or one in all (DcVertices::Cell), placed from
+// the Hermite data of the patch's (or cell's) edges: their crossings (linear interpolation from
+// each edge's lower-index end, as in MC) and unit normals there (central-difference gradients of
+// the samples, one-sided only at the border of the whole volume, interpolated along the edge).
+// Every crossed edge whose four surrounding cells all exist gets one quad joining the vertices that
+// serve it in those cells, wound so its normal points from the inside end of the edge to the
+// outside end. Edges on the border of the volume lack some of those cells and get no quad: the
+// mesh is open there, like MC's. A cell whose only crossed edges lie on the border still gets its
+// vertex, which no face then uses.
 //
 // Positions are origin + spacing * (global cell index + offset in the cell), computed in double
 // and rounded to float, so bricks of one volume agree on the vertices they share.
 //
 // Parallel and deterministic: count, exclusive scan, fill over rows of cells and of samples.
-// Order (the brick contract): vertices cell by cell in ascending global key lin(cell) = x + Nx (y
-// + Ny z) with the volume's sample dims N as strides; faces by the global index of their edge's
+// Order (the brick contract): vertices cell by cell in ascending global key 4 lin(cell) + patch,
+// lin(cell) = x + Nx (y + Ny z) with the volume's sample dims N as strides (patch 0 alone with
+// DcVertices::Cell); faces by the global index of their edge's
 // lower sample, then axis x, y, z (the table lists a case's quads in that order). A split quad q
 // becomes triangles 2q and 2q + 1. The output is byte-identical for any thread count.
 //
@@ -61,6 +64,18 @@ enum class DcSolver { Particle, Qef, MassPoint };
 //            quarter of MC's; smooth fields change by at most 2% (docs/quality.md). Halo 4.
 enum class DcHermite { Central, Eno };
 
+// How many dual vertices a cell gets.
+//   Patch: one per surface patch of the cell (the polygons Marching Cubes draws there; table in
+//          dual_contouring_table.h), each placed from the Hermite planes of its own edges, as in
+//          Dual Marching Cubes / Manifold Dual Contouring, with the face flips and border cuts
+//          of dual_contouring_patches.h: every edge has at most two faces and every vertex one
+//          fan (0 non-manifold edges and vertices on the shared volumes and on random ones).
+//          Halo and cost are the cell variant's; patch vertices read the cases of the cells
+//          across their faces, which the halo already holds.
+//   Cell:  one per cell from all its planes (the paper's table). Where a cell holds several
+//          sheets they meet in its one vertex: non-manifold edges (bonsai at 49.5: 4,095).
+enum class DcVertices { Patch, Cell };
+
 struct DualContouringOptions {
   double iso = 0.0;
   // The mass point by default. Measured at iso 49.5 (radius ratio min / mean): bonsai 0.015 /
@@ -80,6 +95,7 @@ struct DualContouringOptions {
                             // diagonal whose worse triangle has the better radius ratio
   bool normals = false;     // unit normals at the vertices, pointing outward
   DcHermite hermite = DcHermite::Central;
+  DcVertices vertices = DcVertices::Patch;
   Box3 cells{};  // brick mode, in global cell indices; empty: every cell of the view
 };
 
@@ -92,8 +108,8 @@ int dual_contouring_halo(const DualContouringOptions& options);
 // more than 2^32 - 1 vertices, InputError for a negative step count or a non-positive rate.
 Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options);
 
-// The keys lin(cell) (global, sample dims as strides) of the vertices dual_contouring(view,
-// options) returns, in the same order.
+// The keys 4 lin(cell) + patch (global, sample dims as strides) of the vertices
+// dual_contouring(view, options) returns, in the same order.
 std::vector<std::uint64_t> dual_contouring_vertex_keys(const VolumeView& view,
                                                        const DualContouringOptions& options);
 

@@ -25,6 +25,8 @@
 #include <array>
 #include <cstdint>
 
+#include "core/extract/marching_cubes_tables.h"
+
 namespace isotile::dc {
 
 inline constexpr std::array<std::array<std::int8_t, 3>, 8> kBlockCell = {{
@@ -63,5 +65,64 @@ inline constexpr std::array<DcCase, 16> kDcTable = {{
     /* 1110 */ {1, {0}, {{{4, 0, 1, 5}}}},
     /* 1111 */ {0, {}, {}},
 }};
+
+// Surface patches of a cell, for DcVertices::Patch (manifold Dual Contouring, as in Dual Marching
+// Cubes): the polygons Marching Cubes' table draws in a cell of each case, found as the connected
+// components of its triangles (triangles of one polygon share edges; polygons share none). A
+// crossed cell edge belongs to exactly one patch; patches are numbered by their lowest edge, so
+// the numbering is a function of the case alone and every path derives the same one. The MC rule
+// on ambiguous faces depends on the face's samples only, so the two cells sharing a face agree on
+// which crossings of that face are joined.
+struct PatchTable {
+  std::array<std::uint8_t, 256> count{};                  // patches of the case (0 to 4)
+  std::array<std::array<std::int8_t, 12>, 256> patch{};   // patch of each edge; -1: not crossed
+  std::array<std::array<std::uint16_t, 4>, 256> edges{};  // edge mask of each patch
+};
+
+inline constexpr PatchTable kPatchTable = [] {
+  PatchTable t{};
+  for (int cs = 0; cs < 256; ++cs) {
+    std::array<int, 12> root{};
+    for (int e = 0; e < 12; ++e) root[e] = e;
+    auto find = [&root](int e) {
+      while (root[e] != e) e = root[e];
+      return e;
+    };
+    const auto& tri = mc::kCaseTable.triangles[cs];
+    for (int f = 0; f < mc::kCaseTable.triangle_count[cs]; ++f)
+      for (int v = 1; v < 3; ++v) {
+        const int a = find(tri[3 * f]), b = find(tri[3 * f + v]);
+        if (a != b) root[a < b ? b : a] = a < b ? a : b;  // the lower edge stays the root
+      }
+    std::array<int, 12> number{};
+    for (int& n : number) n = -1;
+    int count = 0;
+    for (int e = 0; e < 12; ++e) {
+      t.patch[cs][e] = -1;
+      if (!((mc::kCaseTable.edge_mask[cs] >> e) & 1)) continue;
+      const int r = find(e);
+      if (number[r] < 0) number[r] = count++;
+      t.patch[cs][e] = static_cast<std::int8_t>(number[r]);
+      t.edges[cs][number[r]] |= static_cast<std::uint16_t>(1u << e);
+    }
+    t.count[cs] = static_cast<std::uint8_t>(count);
+  }
+  return t;
+}();
+
+// The cell edge (MC numbering) that grid edge (s, axis) is in the cell of V'n (kBlockCell[n]):
+// the edge along `axis` whose lower corner sits at s minus the cell's corner.
+inline constexpr std::array<std::array<std::int8_t, 3>, 8> kBlockEdge = [] {
+  std::array<std::array<std::int8_t, 3>, 8> out{};
+  for (int n = 0; n < 8; ++n)
+    for (int axis = 0; axis < 3; ++axis) {
+      int corner = 0;
+      for (int a = 0; a < 3; ++a) corner |= (-kBlockCell[n][a]) << a;
+      out[n][axis] = -1;
+      for (int e = 4 * axis; e < 4 * axis + 4; ++e)
+        if (mc::kEdgeCorners[e][0] == corner) out[n][axis] = static_cast<std::int8_t>(e);
+    }
+  return out;
+}();
 
 }  // namespace isotile::dc

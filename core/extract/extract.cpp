@@ -24,6 +24,7 @@ DualContouringOptions dc_options(const ExtractOptions& o) {
   dc.keep_quads = o.keep_quads;
   dc.normals = o.normals;
   dc.hermite = o.dc_hermite;
+  dc.vertices = o.dc_vertices;
   dc.cells = o.cells;
   return dc;
 }
@@ -153,6 +154,20 @@ Backend resolve_backend(const ExtractOptions& options) {
   if (!usable(e, &why, &hardware))
     throw InputError("backend '" + std::string(e.name) + "': " + why);
   return options.backend;
+}
+
+TopologyOptions volume_border(const VolumeView& view, Method method) {
+  std::array<Vec3f, 2> box{}, inner{};
+  const double depth = method == Method::DualContouring ? 1.0 : 0.0;
+  for (int a = 0; a < 3; ++a) {
+    const double last = static_cast<double>(view.global_dims[a] - 1);
+    box[0][a] = static_cast<float>(view.origin[a] + view.spacing[a] * 0.0);
+    box[1][a] = static_cast<float>(view.origin[a] + view.spacing[a] * last);
+    inner[0][a] = static_cast<float>(view.origin[a] + view.spacing[a] * std::min(depth, last));
+    inner[1][a] =
+        static_cast<float>(view.origin[a] + view.spacing[a] * std::max(last - depth, 0.0));
+  }
+  return {.border_box = box, .border_inner = inner};
 }
 
 int extract_halo(const ExtractOptions& options) {

@@ -14,6 +14,7 @@
 #include "core/extract/dual_contouring.h"
 #include "core/extract/macet.h"
 #include "core/mesh/mesh.h"
+#include "core/mesh/mesh_topology.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -34,7 +35,8 @@ struct ExtractOptions {
   // Dual Contouring only.
   DcSolver dc_solver = DcSolver::MassPoint;
   bool keep_quads = false;
-  DcHermite dc_hermite = DcHermite::Central;  // Eno: sharper features, see dual_contouring.h
+  DcHermite dc_hermite = DcHermite::Central;   // Eno: sharper features, see dual_contouring.h
+  DcVertices dc_vertices = DcVertices::Patch;  // Cell: the paper's one vertex per cell
   // Macet only: Fast (default) or Max (see core/extract/macet.h).
   MacetQuality quality = MacetQuality::Fast;
   double macet_relax = 0.0;  // MacetOptions::relax: 0 keeps vertices on the trilinear surface
@@ -46,6 +48,12 @@ struct ExtractOptions {
 
 // Samples beyond a brick's cells that `options` needs the view to hold.
 int extract_halo(const ExtractOptions& options);
+
+// The border of the whole volume of `view` for mesh_topology(), so that `watertight` means the
+// same for every method: closed except where the surface leaves the volume. The box is computed
+// as extractors compute positions (vertices on the border compare equal to it); Dual
+// Contouring's vertices there lie in the border cells, so its border layer is one voxel deep.
+TopologyOptions volume_border(const VolumeView& view, Method method);
 
 struct BackendCaps {
   Backend backend;

@@ -109,11 +109,13 @@ class Corners {
   C tri_corners_;
 };
 
-bool on_border(const Vec3f& a, const Vec3f& b, const std::array<Vec3f, 2>& box) {
+bool on_border(const Vec3f& a, const Vec3f& b, const std::array<Vec3f, 2>& box,
+               const std::array<Vec3f, 2>& inner) {
   for (int axis = 0; axis < 3; ++axis) {
-    for (const Vec3f& side : box) {
-      if (a[axis] == side[axis] && b[axis] == side[axis]) return true;
-    }
+    const float lo = box[0][axis], hi = box[1][axis];
+    const float in_lo = inner[0][axis], in_hi = inner[1][axis];
+    if (a[axis] >= lo && a[axis] <= in_lo && b[axis] >= lo && b[axis] <= in_lo) return true;
+    if (a[axis] <= hi && a[axis] >= in_hi && b[axis] <= hi && b[axis] >= in_hi) return true;
   }
   return false;
 }
@@ -190,7 +192,8 @@ TopologyStats compute(const Mesh& mesh, const TopologyOptions& options) {
             if (j - i == 1) {
               ++sum.boundary;
               if (options.border_box &&
-                  on_border(pos[v], pos[edges[i].first], *options.border_box)) {
+                  on_border(pos[v], pos[edges[i].first], *options.border_box,
+                            options.border_inner.value_or(*options.border_box))) {
                 ++sum.border;
               }
             } else if (j - i > 2) {

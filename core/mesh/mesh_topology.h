@@ -14,7 +14,12 @@ struct TopologyOptions {
   // World-space box of the volume the mesh came from (min and max corner, as floats computed the
   // way extractors compute positions). Boundary edges whose two ends lie on the same face of this
   // box count as border edges: an isosurface legitimately ends there.
-  std::optional<std::array<Vec3f, 2>> border_box;
+  std::optional<std::array<Vec3f, 2>> border_box = std::nullopt;
+  // The inner faces of the border layer, for meshes whose open surfaces end inside the volume:
+  // a boundary edge whose two ends lie between a face of border_box and the same face of this box
+  // counts as a border edge. Unset: the ends must lie on the face. Dual Contouring's vertices
+  // where a surface leaves the volume lie in the border cells, one voxel deep (border_layer()).
+  std::optional<std::array<Vec3f, 2>> border_inner = std::nullopt;
 };
 
 struct TopologyStats {
@@ -30,7 +35,9 @@ struct TopologyStats {
   std::int64_t euler = 0;                           // V - E + F over referenced vertices
   std::uint64_t components = 0;                     // connected by shared vertices
   bool closed = false;                              // no boundary edges and no non-manifold edges
-  bool watertight = false;  // the only boundary edges lie on the volume border, none non-manifold
+  // The only boundary edges lie on the volume border (within border_inner), none non-manifold.
+  // Without a border_box nothing is border: then the same as closed.
+  bool watertight = false;
 };
 
 TopologyStats mesh_topology(const Mesh& mesh, const TopologyOptions& options = {});
