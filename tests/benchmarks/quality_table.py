@@ -7,7 +7,7 @@ rejects (e.g. Macet before it is built in) gets a row marked "pending" with the 
 the table fills in by itself once the method lands.
 
   tests/benchmarks/quality_table.py [--isotile build/tiler/isotile] [--data ../shared/data]
-                                    [--threads 2] [--only bonsai,engine] [--iso 50]
+                                    [--threads 2] [--only bonsai,engine] [--iso 50] [--methods DC]
   tests/benchmarks/quality_table.py --fields [--sizes 32,64,128]
 
 --fields instead measures every CLI method on the procedural fields: vertex distance to the exact
@@ -32,9 +32,13 @@ VOLUMES = [
 
 METHODS = [
     ("MC", ["--method", "mc"]),
-    ("DC mass point (default)", ["--method", "dc"]),
-    ("DC particle (10 steps)", ["--method", "dc", "--dc-solver", "particle"]),
-    ("DC QEF", ["--method", "dc", "--dc-solver", "qef"]),
+    ("DC mass point, patch (default)", ["--method", "dc"]),
+    ("DC particle (10 steps), patch", ["--method", "dc", "--dc-solver", "particle"]),
+    ("DC QEF, patch", ["--method", "dc", "--dc-solver", "qef"]),
+    ("DC mass point, cell", ["--method", "dc", "--dc-vertices", "cell"]),
+    ("DC particle (10 steps), cell", ["--method", "dc", "--dc-solver", "particle",
+                                      "--dc-vertices", "cell"]),
+    ("DC QEF, cell", ["--method", "dc", "--dc-solver", "qef", "--dc-vertices", "cell"]),
     ("Macet fast", ["--method", "macet", "--quality", "fast"]),
     ("Macet max", ["--method", "macet", "--quality", "max"]),
     ("Macet max, relax 0.35", ["--method", "macet", "--quality", "max", "--macet-relax", "0.35"]),
@@ -91,9 +95,12 @@ def main():
     ap.add_argument("--iso", type=float, default=None,
                     help="one isovalue for every volume instead of their own (e.g. 50: samples "
                          "equal to it, docs/quality.md)")
+    ap.add_argument("--methods", default="",
+                    help="only the methods whose label contains this text (e.g. DC)")
     ap.add_argument("--fields", action="store_true", help="procedural fields instead")
     ap.add_argument("--sizes", default="32,64,128", help="grid sizes for --fields")
     a = ap.parse_args()
+    METHODS[:] = [m for m in METHODS if a.methods in m[0]]
     if a.fields:
         return fields_table(a)
     only = set(filter(None, a.only.split(",")))
