@@ -215,6 +215,34 @@ TEST_F(Cli, QualityMeasuresAWrittenMesh) {
   EXPECT_EQ(j["closed"], true);
   EXPECT_EQ(j["components"], 1);
   EXPECT_GT(j["radius_ratio_min"].get<double>(), 0.0);
+  // A file carries no volume box: whether its boundary is the volume's border cannot be told.
+  EXPECT_TRUE(j["watertight"].is_null());
+  const Result text = run("quality t.ply");
+  ASSERT_EQ(text.code, 0) << text.err;
+  EXPECT_NE(text.out.find("watertight            cannot tell"), std::string::npos) << text.out;
+}
+
+// The watertight key means the same for every method: an open gyroid leaves the volume, and only
+// there has boundary edges, whether MC's vertices lie on the border planes or DC's in the border
+// cells (both vertex variants).
+TEST_F(Cli, WatertightMeansTheSameForEveryMethod) {
+  for (const char* method : {"mc", "macet", "dc"}) {
+    const Result r = run(std::string("extract field:gyroid:40 -q -o g.ply --stats - --method ") +
+                         method);
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_GT(j["boundary_edges"].get<int>(), 100) << method;
+    EXPECT_EQ(j["border_boundary_edges"], j["boundary_edges"]) << method;
+    EXPECT_EQ(j["watertight"], true) << method;
+    EXPECT_EQ(j["nonmanifold_edges"], 0) << method;
+  }
+  const Result cell = run("extract field:gyroid:40 -q -o g.ply --stats - --method dc "
+                          "--dc-vertices cell");
+  ASSERT_EQ(cell.code, 0) << cell.err;
+  EXPECT_EQ(nlohmann::json::parse(cell.out)["watertight"], true);
+  const Result bad = run("extract field:gyroid:40 -q -o g.ply --method dc --dc-vertices one");
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.err.find("--dc-vertices"), std::string::npos) << bad.err;
 }
 
 TEST_F(Cli, DemoRunsWithoutArguments) {
