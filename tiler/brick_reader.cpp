@@ -67,11 +67,13 @@ BrickCounts BrickReader::count(const Box3& cells) {
   return count_brick_sites(view, ex_.iso, layout_, vbox, cells);
 }
 
-// A sequential source keeps the planes that consecutive slabs grown by the halo share.
+// A sequential source keeps the planes that consecutive slabs grown by the halo share; a source
+// may hold buffers of its own.
 std::uint64_t BrickReader::kept_bytes() const {
-  if (!src_.sequential()) return 0;
-  return static_cast<std::uint64_t>(2 * halo_ + 1) * static_cast<std::uint64_t>(n_[0]) *
-         static_cast<std::uint64_t>(n_[1]) * scalar_size(src_.type);
+  const std::uint64_t buffers = src_.buffer_bytes();
+  if (!src_.sequential()) return buffers;
+  return buffers + static_cast<std::uint64_t>(2 * halo_ + 1) * static_cast<std::uint64_t>(n_[0]) *
+                       static_cast<std::uint64_t>(n_[1]) * scalar_size(src_.type);
 }
 
 // Macet displaces every grid vertex of its view, halo included, and keeps about 70 bytes per
@@ -98,6 +100,32 @@ std::uint64_t BrickReader::estimate(const Box3& cells, std::uint64_t vertices, s
       samples * (static_cast<double>(sample_bytes()) + 0.125 + state_bytes_per_sample()) +
       static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face +
       static_cast<double>(kept_bytes()));
+}
+
+BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertices,
+                                        std::uint64_t faces, std::uint64_t memory,
+                                        double extra_per_face, bool odd) const {
+  // Thinner slices carry relatively more halo, so the count grows until the thickest slice fits
+  // (its share of the output taken as even), or every slice is one cell thick. Slices run in
+  // ascending z, so a sequential source (gzip'd slabs) reads them as it reads thinner slabs.
+  const std::int64_t depth = cells.extent(2);
+  auto thickest = [&](std::int64_t slices) {
+    Box3 part = cells;
+    part.hi[2] = cells.lo[2] + (depth + slices - 1) / slices;
+    const auto n = static_cast<std::uint64_t>(slices);
+    return estimate(part, (vertices + n - 1) / n, (faces + n - 1) / n, extra_per_face);
+  };
+  Slicing s{1, estimate(cells, vertices, faces, extra_per_face)};
+  if (s.bytes <= memory) return s;
+  s.count =
+      std::min<std::int64_t>(depth, static_cast<std::int64_t>((s.bytes + memory - 1) / memory));
+  for (;;) {
+    // An even count would cut at the brick's middle plane (see tiled_simplify.cpp).
+    if (odd && s.count % 2 == 0 && s.count < depth) ++s.count;
+    s.bytes = thickest(s.count);
+    if (s.bytes <= memory || s.count >= depth) return s;
+    ++s.count;
+  }
 }
 
 void QualityAccumulator::add(double q) {

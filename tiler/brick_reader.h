@@ -44,6 +44,15 @@ class BrickReader {
   // the records being written, and `extra_per_face` bytes for each face (a later stage's).
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
                          double extra_per_face = 0) const;
+  // Once a brick's output is counted: into how many z-slices (same columns, so the segment
+  // tables still apply) it must be cut for each to fit `memory`, and the thickest slice's
+  // estimate. `odd`: never an even count (which would cut at the brick's middle plane).
+  struct Slicing {
+    std::int64_t count;
+    std::uint64_t bytes;
+  };
+  Slicing slice(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
+                std::uint64_t memory, double extra_per_face = 0, bool odd = false) const;
 
  private:
   std::uint64_t kept_bytes() const;

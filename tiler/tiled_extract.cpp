@@ -150,13 +150,10 @@ class TiledExtraction {
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
       // The real output is known now: cut a brick whose output would overflow the budget into
-      // thinner z-slices (same columns, so the segment tables still apply).
-      std::uint64_t bytes = reader_.estimate(cells, brick_vertices[b], brick_faces[b]);
-      std::int64_t slices = 1;
-      if (bytes > opt_.memory && !src_.sequential()) {
-        slices = std::min<std::int64_t>(
-            cells.extent(2), static_cast<std::int64_t>((bytes + opt_.memory - 1) / opt_.memory));
-      }
+      // thinner z-slices.
+      const BrickReader::Slicing cut =
+          reader_.slice(cells, brick_vertices[b], brick_faces[b], opt_.memory);
+      const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
         Box3 part = cells;
         part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
@@ -164,9 +161,7 @@ class TiledExtraction {
         extract_brick(part, vseg, fseg, file, quality);
         ++result.bricks_extracted;
       }
-      bytes = reader_.estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
-                               brick_faces[b] / static_cast<std::uint64_t>(slices));
-      result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
+      result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
       if (opt_.progress) opt_.progress("extract", b + 1, bricks);
     }
     result.seconds_extract = since(t0);

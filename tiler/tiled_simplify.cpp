@@ -187,16 +187,11 @@ class TiledSimplification {
     src_.rewind();
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
-      std::uint64_t bytes =
-          reader_.estimate(cells, brick_vertices[b], brick_faces[b], kSimplifyBytesPerFace);
-      std::int64_t slices = 1;
-      if (bytes > opt_.memory && !src_.sequential()) {
-        slices = std::min<std::int64_t>(
-            cells.extent(2), static_cast<std::int64_t>((bytes + opt_.memory - 1) / opt_.memory));
-        // An even count would cut at the brick's middle plane, which is also a seam cell's
-        // boundary: that cut would stay locked in both passes.
-        if (slices % 2 == 0 && slices < cells.extent(2)) ++slices;
-      }
+      // An even count would cut at the brick's middle plane, which is also a seam cell's
+      // boundary: that cut would stay locked in both passes.
+      const BrickReader::Slicing cut = reader_.slice(cells, brick_vertices[b], brick_faces[b],
+                                                     opt_.memory, kSimplifyBytesPerFace, true);
+      const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
         Box3 part = cells;
         part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
@@ -205,10 +200,7 @@ class TiledSimplification {
         simplify_brick(b, part, result);
         ++result.bricks_extracted;
       }
-      bytes = reader_.estimate(cells, brick_vertices[b] / static_cast<std::uint64_t>(slices),
-                               brick_faces[b] / static_cast<std::uint64_t>(slices),
-                               kSimplifyBytesPerFace);
-      result.largest_brick_bytes = std::max(result.largest_brick_bytes, bytes);
+      result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
       if (opt_.progress) opt_.progress("simplify", b + 1, bricks);
     }
     result.seconds_extract = since(t0);

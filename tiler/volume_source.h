@@ -37,6 +37,8 @@ class VolumeSource {
   virtual void set_overlap(std::int64_t /*planes*/) {}
   // Whether the whole volume is held in memory anyway (its bytes count as resident).
   virtual bool in_memory() const { return false; }
+  // Bytes the source holds while reading, whatever the box (a decompressor's buffers).
+  virtual std::uint64_t buffer_bytes() const { return 0; }
   // Reads global box `box` into `out` (box extent samples of `type`, x fastest). Throws IoError
   // or InputError (e.g. NaN samples) naming the input.
   virtual void read(const Box3& box, void* out) = 0;
