@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include "skip_support.h"
+
 namespace isotile::testing {
 
 struct CliResult {

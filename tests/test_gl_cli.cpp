@@ -24,11 +24,18 @@ using isotile::testing::slurp;
 
 class GlCli : public isotile::testing::CliTest {
  protected:
-  bool have_gl() { return run("gl-info").code == 0; }
+  Result gl_info() { return run("gl-info"); }
 };
 
+// A broken `gl-info` alone must not turn these into skips where GL is demanded.
+#define REQUIRE_GL_CLI()                                                                   \
+  do {                                                                                     \
+    const Result info = gl_info();                                                         \
+    if (info.code != 0) ISOTILE_SKIP(Gl, "isotile gl-info found no OpenGL: " << info.err); \
+  } while (0)
+
 TEST_F(GlCli, GlBackendsWriteTheCpuFile) {
-  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  REQUIRE_GL_CLI();
   for (const char* b : {"cpu", "gs", "hp"}) {
     const Result r = run(std::string("extract field:gyroid:40 --normals -q --backend ") + b +
                          " -o " + b + ".ply --stats " + b + ".json");
@@ -43,7 +50,7 @@ TEST_F(GlCli, GlBackendsWriteTheCpuFile) {
 
 // The tiler drives the GL backends brick by brick; the streamed file is the in-core CPU file.
 TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
-  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  REQUIRE_GL_CLI();
   ASSERT_EQ(run("extract field:torus:40 --normals -q --backend cpu -o cpu.ply").code, 0);
   for (const char* b : {"gs", "hp"}) {
     const Result r = run(std::string("extract field:torus:40 --normals -q --memory 60KiB ") +
@@ -57,7 +64,7 @@ TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
 }
 
 TEST_F(GlCli, GlInfoDescribesTheDevice) {
-  if (!have_gl()) GTEST_SKIP() << "no OpenGL context";
+  REQUIRE_GL_CLI();
   const Result r = run("gl-info --json");
   ASSERT_EQ(r.code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);

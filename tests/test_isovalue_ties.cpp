@@ -164,7 +164,7 @@ TEST(IsovalueTiesRealData, BonsaiAtAnIntegerIsovalueHasNoDegenerateTriangles) {
   // Bonsai at 50 has 10,340 pinned ties; before the offset DC's mass point gave 26,781 degenerate
   // triangles and Macet fast 4,674 (docs/quality.md).
   const auto path = testing::shared_volume("bonsai_256x256x256_uint8.raw.gz");
-  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data at " << path;
+  ISOTILE_REQUIRE_SHARED(path);
   const Volume vol = read_volume(path.string());
   const QualityStats dc = triangle_quality(dual_contouring(vol.view(), {.iso = kIso}));
   EXPECT_EQ(dc.degenerate, 0u);

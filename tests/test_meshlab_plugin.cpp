@@ -31,9 +31,10 @@ class MeshlabServer : public isotile::testing::TempDirTest {
   MeshlabServer() : TempDirTest("isotile-meshlab-") {}
   void SetUp() override {
 #ifdef ISOTILE_SANITIZED
-    GTEST_SKIP() << "a sanitizer-instrumented plugin cannot load into Debian's uninstrumented "
-                    "meshlabserver (the sanitizer runtime must come first); the meshlabserver "
-                    "tests run in the Release pass";
+    ISOTILE_SKIP(Meshlab,
+                 "a sanitizer-instrumented plugin cannot load into Debian's uninstrumented "
+                 "meshlabserver (the sanitizer runtime must come first); the meshlabserver "
+                 "tests run in the Release pass");
 #endif
     TempDirTest::SetUp();
     // MeshLab looks for plugins next to its real executable only (a symlinked binary does not
@@ -128,7 +129,7 @@ TEST_F(MeshlabServer, EveryMethodGivesTheCliMeshOnASmallVolume) {
 
 TEST_F(MeshlabServer, EngineGivesTheCliMeshForEveryMethod) {
   const fs::path engine = isotile::testing::shared_volume("engine_256x256x128_uint8.raw.gz");
-  if (!fs::exists(engine)) GTEST_SKIP() << "no shared data at " << engine;
+  ISOTILE_REQUIRE_SHARED(engine);
   for (const MethodCase& c : kMethods) {
     const ServerRun r = run(script({{"file", engine.string()},
                                     {"method", c.method},

@@ -186,7 +186,7 @@ TEST(SelfIntersections, ShiftedCopyHasManyAndCountIsThreadIndependent) {
 // can see them.
 TEST(SelfIntersectionsRealData, DcMassPointHasNoneWhereTheQefHasSome) {
   const auto path = testing::shared_volume("engine_256x256x128_uint8.raw.gz");
-  if (!std::filesystem::exists(path)) GTEST_SKIP() << path << " not found";
+  ISOTILE_REQUIRE_SHARED(path);
   const Volume vol = read_volume(path.string());
   const Mesh mass = dual_contouring(vol.view(), {.iso = 49.5});
   const Mesh qef = dual_contouring(vol.view(), {.iso = 49.5, .solver = DcSolver::Qef});

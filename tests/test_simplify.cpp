@@ -293,7 +293,7 @@ TEST(SurfaceDistance, IsZeroForTheSameMeshAndTheOffsetOfAPlane) {
 // quadric decimation, the reference, strays 5.1).
 TEST(SimplifyRealData, BonsaiMacetAtATenth) {
   const auto path = testing::shared_volume("bonsai_256x256x256_uint8.raw.gz");
-  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data at " << path;
+  ISOTILE_REQUIRE_SHARED(path);
   const Volume vol = read_volume(path.string());
   ExtractOptions o;
   o.method = Method::Macet;

@@ -6,8 +6,10 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -21,13 +23,21 @@
 #include "core/mesh/mesh.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume.h"
+#include "skip_support.h"
 
 namespace isotile::testing {
 
-// A real volume from ../shared/data (may not exist: callers skip with a message).
+// A real volume from ../shared/data (may not exist: callers skip with ISOTILE_SKIP).
 inline std::filesystem::path shared_volume(const char* name) {
   return std::filesystem::path(ISOTILE_SHARED_DATA) / name;
 }
+
+// Skips (or, where demanded, fails) the current test unless the shared volume exists.
+#define ISOTILE_REQUIRE_SHARED(path)                                     \
+  do {                                                                   \
+    if (!std::filesystem::exists(path))                                  \
+      ISOTILE_SKIP(SharedData, "no shared data at " << (path).string()); \
+  } while (0)
 
 // The edges with `faces` faces (1: the boundary; 3 or more: non-manifold, with faces = 0) as
 // sorted position pairs: where they run, whatever the vertex indices.
@@ -76,7 +86,13 @@ class TempDirTest : public ::testing::Test {
 };
 
 // Largest distance, in voxels, from a vertex of `m` to the field's exact surface.
+// An empty mesh is no answer: it fails the test (and reads as infinitely far), so an extractor
+// that returns nothing cannot pass a bound on its error.
 inline double max_distance(const FieldSpec& spec, const Mesh& m) {
+  if (m.positions.empty() || (m.triangles.empty() && m.quads.empty())) {
+    ADD_FAILURE() << "an empty mesh where a surface was expected";
+    return INFINITY;
+  }
   double worst = 0;
   for (const Vec3f& p : m.positions)
     worst = std::max(worst, distance_voxels(spec, {p[0], p[1], p[2]}));

@@ -173,7 +173,7 @@ TEST_F(TiledSimplify, DualContouringAndRejections) {
 // Bonsai through a gzip'd source (whole slabs): the shape targets hold out of core too.
 TEST_F(TiledSimplify, BonsaiInSlabs) {
   const fs::path bonsai = testing::shared_volume("bonsai_256x256x256_uint8.raw.gz");
-  if (!fs::exists(bonsai)) GTEST_SKIP() << bonsai << " not found";
+  ISOTILE_REQUIRE_SHARED(bonsai);
   TiledResult r;
   const Mesh m =
       run(bonsai.string(), options(Method::Macet, 49.5), 0.1, std::uint64_t{64} << 20, &r);

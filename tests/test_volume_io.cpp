@@ -21,6 +21,7 @@
 
 #include "core/errors.h"
 #include "core/volume/volume_io.h"
+#include "test_support.h"
 
 namespace isotile {
 namespace {
@@ -864,7 +865,7 @@ void check_real_volume(const std::string& file, const Index3& dims) {
 
 TEST(RealVolumes, SharedBucky) {
   const fs::path file = fs::path(ISOTILE_SHARED_DATA) / "bucky_32x32x32_uint8.raw.gz";
-  if (!fs::exists(file)) GTEST_SKIP() << "shared data not found at " << file.string();
+  ISOTILE_REQUIRE_SHARED(file);
   check_real_volume(file.string(), {32, 32, 32});
   const auto [lo, hi] = value_range(read_volume(file.string()).view());
   EXPECT_EQ(lo, 0);  // as the manifest states
