@@ -227,8 +227,8 @@ TEST_F(Cli, QualityMeasuresAWrittenMesh) {
 // cells (both vertex variants).
 TEST_F(Cli, WatertightMeansTheSameForEveryMethod) {
   for (const char* method : {"mc", "macet", "dc"}) {
-    const Result r = run(std::string("extract field:gyroid:40 -q -o g.ply --stats - --method ") +
-                         method);
+    const Result r =
+        run(std::string("extract field:gyroid:40 -q -o g.ply --stats - --method ") + method);
     ASSERT_EQ(r.code, 0) << r.err;
     const auto j = nlohmann::json::parse(r.out);
     EXPECT_GT(j["boundary_edges"].get<int>(), 100) << method;
@@ -236,8 +236,9 @@ TEST_F(Cli, WatertightMeansTheSameForEveryMethod) {
     EXPECT_EQ(j["watertight"], true) << method;
     EXPECT_EQ(j["nonmanifold_edges"], 0) << method;
   }
-  const Result cell = run("extract field:gyroid:40 -q -o g.ply --stats - --method dc "
-                          "--dc-vertices cell");
+  const Result cell =
+      run("extract field:gyroid:40 -q -o g.ply --stats - --method dc "
+          "--dc-vertices cell");
   ASSERT_EQ(cell.code, 0) << cell.err;
   EXPECT_EQ(nlohmann::json::parse(cell.out)["watertight"], true);
   const Result bad = run("extract field:gyroid:40 -q -o g.ply --method dc --dc-vertices one");

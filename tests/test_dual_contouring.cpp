@@ -715,7 +715,7 @@ TEST(DualContouring, SmoothSurfacesConvergeAsTheGridRefines) {
 // 0.01 (MC reaches 2e-4).
 void expect_real_volume_quality(const char* name) {
   const auto path = shared_volume(name);
-  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data at " << path;
+  ISOTILE_REQUIRE_SHARED(path);
   const Volume vol = read_volume(path.string());
   const Mesh m = dual_contouring(vol.view(), {.iso = 49.5});
   const QualityStats q = triangle_quality(m);

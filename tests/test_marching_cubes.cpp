@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -102,6 +103,72 @@ TEST(MarchingCubes, TwoCellsShareTheirCrossings) {
   EXPECT_EQ(canonical_rotation(m.triangles[0]), (Tri{0, 3, 2}));
   // Cell 1 sees its corner 0 inside: facing +x, (v1, v2, v3).
   EXPECT_EQ(canonical_rotation(m.triangles[1]), (Tri{1, 2, 3}));
+}
+
+// The ambiguous-face rule, pinned by hand-made cells: on a face whose inside corners lie
+// diagonally, the segments separate the two inside corners (and so join the two outside ones).
+// For every face and both of its diagonals: the two inside corners alone give two triangles,
+// each around one corner (its three edge midpoints), in two components; the complement (the two
+// outside) gives one hexagon of four triangles. Joining the inside corners instead would give one
+// quad in one component, and two separate triangles for the complement.
+TEST(MarchingCubes, AmbiguousFacesSeparateTheInsideCorners) {
+  using Point = std::array<float, 3>;
+  auto corner = [](int c) { return Point{float(c & 1), float((c >> 1) & 1), float((c >> 2) & 1)}; };
+  // The midpoints of the three edges at corner c: what a triangle cutting off c must use.
+  auto around = [&](int c) {
+    std::set<Point> out;
+    const Point p = corner(c);
+    for (int a = 0; a < 3; ++a) {
+      Point q = p;
+      q[a] = 0.5f;
+      out.insert(q);
+    }
+    return out;
+  };
+  int checked = 0;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+      // The face's corners (u, w) = (0,0), (1,1) and (1,0), (0,1).
+      const int base = side << axis;
+      const int diagonals[2][2] = {{base, base | (1 << u) | (1 << w)},
+                                   {base | (1 << u), base | (1 << w)}};
+      for (const auto& d : diagonals) {
+        std::vector<float> v(8, 0.0f);
+        v[d[0]] = v[d[1]] = 1.0f;
+        const VolumeView view = dense_view(v.data(), ScalarType::Float32, {2, 2, 2});
+        const Mesh two = mc(view, 0.5);
+        ASSERT_EQ(two.triangles.size(), 2u) << "corners " << d[0] << ", " << d[1];
+        std::set<std::set<Point>> got;
+        for (const Tri& t : two.triangles) {
+          std::set<Point> pts;
+          for (std::uint32_t i : t)
+            pts.insert({two.positions[i][0], two.positions[i][1], two.positions[i][2]});
+          got.insert(pts);
+        }
+        EXPECT_EQ(got, (std::set<std::set<Point>>{around(d[0]), around(d[1])}))
+            << "corners " << d[0] << ", " << d[1];
+        EXPECT_EQ(mesh_topology(two).components, 2u);
+
+        for (float& x : v) x = 1.0f - x;
+        const Mesh hexagon = mc(view, 0.5);
+        EXPECT_EQ(hexagon.triangles.size(), 4u) << "complement of " << d[0] << ", " << d[1];
+        EXPECT_EQ(hexagon.positions.size(), 6u);
+        EXPECT_EQ(mesh_topology(hexagon).components, 1u);
+        ++checked;
+      }
+    }
+  EXPECT_EQ(checked, 12);
+
+  // Across a shared ambiguous face both cells agree (no crack): x = 1 is the face between the
+  // cells of a 3 x 2 x 2 volume, with (1,0,0) and (1,1,1) inside.
+  std::vector<float> v(12, 0.0f);
+  v[1] = v[1 + 3 + 6] = 1.0f;
+  const VolumeView view = dense_view(v.data(), ScalarType::Float32, {3, 2, 2});
+  const Mesh m = mc(view, 0.5);
+  const TopologyStats t = mesh_topology(m, {.border_box = border_of(view)});
+  EXPECT_TRUE(t.watertight);
+  EXPECT_EQ(t.components, 2u);  // the two corners stay apart across the face too
 }
 
 TEST(MarchingCubes, SampleEqualToIsoIsInside) {
@@ -310,7 +377,7 @@ TEST(MarchingCubes, BrickModeRejectsAViewWithoutTheHalo) {
 
 TEST(MarchingCubesRealData, BonsaiIsWatertightWithThePapersQuality) {
   const auto path = shared_volume("bonsai_256x256x256_uint8.raw.gz");
-  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data at " << path;
+  ISOTILE_REQUIRE_SHARED(path);
   const Volume vol = read_volume(path.string());
   const Mesh m = mc(vol.view(), 49.5);
   const TopologyStats t = mesh_topology(m, {.border_box = border_of(vol.view())});

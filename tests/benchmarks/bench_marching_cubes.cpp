@@ -81,6 +81,22 @@ int main(int argc, char** argv) {
   cases.push_back(
       {"gyroid256", std::make_shared<Volume>(make_field_volume({FieldKind::Gyroid, 256})), 0.0});
 
+  // The two must make the same surface: triangle counts compared exactly, once per volume, before
+  // any timing (a mismatch fails the run).
+  int mismatches = 0;
+  std::printf("triangles (isotile / VTK):\n");
+  for (const Case& c : cases) {
+    const std::size_t ours = marching_cubes(c.volume->view(), {.iso = c.iso}).triangles.size();
+#ifdef ISOTILE_HAVE_VTK
+    const std::size_t theirs = bench::VtkFlyingEdges(c.volume->view()).run(c.iso);
+    std::printf("  %-10s %zu / %zu%s\n", c.name.c_str(), ours, theirs,
+                ours == theirs ? "" : "  MISMATCH");
+    mismatches += ours != theirs;
+#else
+    std::printf("  %-10s %zu / (no VTK)\n", c.name.c_str(), ours);
+#endif
+  }
+
   for (const Case& c : cases) {
     benchmark::RegisterBenchmark(("isotile_mc/" + c.name).c_str(),
                                  [c](benchmark::State& state) {
@@ -125,6 +141,11 @@ int main(int argc, char** argv) {
     if (a != g_median_ms.end() && b != g_median_ms.end())
       std::printf("  %-10s %8.2f ms vs %8.2f ms  ratio %.2f\n", c.name.c_str(), a->second,
                   b->second, a->second / b->second);
+  }
+  if (mismatches) {
+    std::fprintf(stderr, "bench_marching_cubes: %d volume(s) where the triangle counts differ\n",
+                 mismatches);
+    return 1;
   }
   return 0;
 }
