@@ -45,12 +45,13 @@ inline bool skip_is_failure(SkipKind k) {
 
 // Skips the current test with `message` (stream syntax), or fails it where the run demands
 // `kind` (a SkipKind enumerator's name).
-#define ISOTILE_SKIP(kind, message)                                              \
-  do {                                                                           \
-    std::ostringstream isotile_why_;                                             \
-    isotile_why_ << message;                                                     \
-    if (::isotile::testing::skip_is_failure(::isotile::testing::SkipKind::kind)) \
-      FAIL() << "cannot run (" #kind " is required by ISOTILE_STRICT_SKIPS): "   \
-             << isotile_why_.str();                                              \
-    GTEST_SKIP() << isotile_why_.str();                                          \
+#define ISOTILE_SKIP(kind, message)                                                    \
+  do {                                                                                 \
+    std::ostringstream isotile_why_;                                                   \
+    isotile_why_ << message;                                                           \
+    if (::isotile::testing::skip_is_failure(::isotile::testing::SkipKind::kind))       \
+      FAIL() << "cannot run ("                                                         \
+             << ::isotile::testing::skip_kind_name(::isotile::testing::SkipKind::kind) \
+             << " is required by ISOTILE_STRICT_SKIPS): " << isotile_why_.str();       \
+    GTEST_SKIP() << isotile_why_.str();                                                \
   } while (0)

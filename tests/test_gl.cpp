@@ -30,13 +30,13 @@ bool forcing_osmesa() {
   const char* env = std::getenv("ISOTILE_GL");
   return env && std::string(env) == "osmesa";
 }
-#define REQUIRE_GL()                                                            \
-  do {                                                                          \
-    std::string why;                                                            \
-    if (!gl::available(&why)) {                                                 \
-      if (forcing_osmesa()) ISOTILE_SKIP(Osmesa, "no OSMesa context: " << why); \
-      ISOTILE_SKIP(Gl, "no OpenGL context: " << why);                           \
-    }                                                                           \
+#define REQUIRE_GL()                                                 \
+  do {                                                               \
+    std::string why;                                                 \
+    if (!gl::available(&why)) {                                      \
+      if (forcing_osmesa()) ISOTILE_SKIP(Osmesa, "OSMesa: " << why); \
+      ISOTILE_SKIP(Gl, why);                                         \
+    }                                                                \
   } while (0)
 
 enum class Path { Gs, Hp };
