@@ -95,12 +95,36 @@ Volume noise(const Index3& n, std::uint32_t seed, int levels) {
   return v;
 }
 
+// The MC case of cell c, straight from the samples.
+int brute_case(const VolumeView& v, double iso, const std::array<std::int64_t, 3>& c) {
+  int cs = 0;
+  for (int k = 0; k < 8; ++k)
+    cs |= (v.value(c[0] + (k & 1), c[1] + ((k >> 1) & 1), c[2] + ((k >> 2) & 1)) >= iso) << k;
+  return cs;
+}
+
 TEST(DcPatches, RandomVolumesAreManifoldAndWatertight) {
-  std::uint64_t cell_nonmanifold = 0;
+  std::uint64_t cell_nonmanifold = 0, flipped = 0;
   for (int round = 0; round < 24; ++round) {
     const Index3 n{2 + (round * 7) % 31, 2 + (round * 5) % 23, 2 + (round * 3) % 17};
     const Volume v = noise(n, 1000 + round, 2 + round % 3);
     const double iso = 0.5 + round % 2;
+    // The repairs counted: every interior face whose two cells both join its segments.
+    std::uint64_t want = 0;
+    for (std::int64_t z = 0; z + 1 < n[2]; ++z)
+      for (std::int64_t y = 0; y + 1 < n[1]; ++y)
+        for (std::int64_t x = 0; x + 1 < n[0]; ++x)
+          for (int a = 0; a < 3; ++a) {
+            std::array<std::int64_t, 3> c{x, y, z}, d = c;
+            ++d[a];
+            if (d[a] + 1 >= n[a]) continue;
+            const int ca = brute_case(v.view(), iso, c), cb = brute_case(v.view(), iso, d);
+            want += ((dc::kConflictFaces[ca] >> (2 * a + 1)) & 1) &&
+                    ((dc::kConflictFaces[cb] >> (2 * a)) & 1);
+          }
+    EXPECT_EQ(dual_contouring_patch_repairs(v.view(), iso).flipped_faces, want)
+        << "round " << round;
+    flipped += want;
     for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Qef}) {
       DualContouringOptions o{.iso = iso, .solver = solver};
       const Mesh m = dual_contouring(v.view(), o);
@@ -119,6 +143,7 @@ TEST(DcPatches, RandomVolumesAreManifoldAndWatertight) {
     }
   }
   EXPECT_GT(cell_nonmanifold, 100u);  // what the patches are for
+  EXPECT_GT(flipped, 10u);            // the faces the repair is for
 }
 
 // Where MC's mesh is closed, so is the dual one, with the same Euler characteristic.

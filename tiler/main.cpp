@@ -292,6 +292,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
       j["quality"] = args.quality;
       j["macet_relax"] = options.macet_relax;
     }
+    if (options.method == Method::DualContouring) j["dc_vertices"] = args.dc_vertices;
     j["backend"] = backend_name(r.backend);
     j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
     j["triangles"] = r.triangles;
@@ -429,6 +430,14 @@ int run_extract(const ExtractArgs& args) {
   j.update(quality_json(q));
   j.update(topology_json(topo, true));
   j["bricks"] = 1;
+  if (options.method == Method::DualContouring) {
+    j["dc_vertices"] = args.dc_vertices;
+    if (options.dc_vertices == DcVertices::Patch) {
+      const DcPatchRepairs r = dual_contouring_patch_repairs(view, options.iso);
+      j["dc_flipped_faces"] = r.flipped_faces;
+      j["dc_border_cut_cells"] = r.border_cut_cells;
+    }
+  }
   if (args.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
   if (extracted) {
     j["simplify"] = args.simplify;

@@ -210,6 +210,37 @@ class Extractor {
     return out;
   }
 
+  DcPatchRepairs repairs() {
+    DcPatchRepairs out;
+    if (cells_.empty()) return out;
+    grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
+    classify<T>(view_, options_.iso, grid_);
+    for (int64_t k = vcells_.lo[2]; k < vcells_.hi[2]; ++k)
+      for (int64_t j = vcells_.lo[1]; j < vcells_.hi[1]; ++j) {
+        const uint64_t* rows[4];
+        cell_rows(j, k, rows);
+        for (int64_t w = 0; w < grid_.words; ++w) {
+          const CellWord cw(rows, w, grid_.words, grid_.nx);
+          for (uint64_t m = cw.mixed & bits_in(w, vcells_.lo[0], vcells_.hi[0]); m; m &= m - 1) {
+            const int b = std::countr_zero(m);
+            const int64_t i = w * 64 + b;
+            const int cs = cw.cell_case(b);
+            const bool border = on_border(i, j, k);
+            if (!dc::kConflictFaces[cs] && !border) continue;
+            const unsigned flips = flips_at(i, j, k, cs);
+            out.flipped_faces += static_cast<uint64_t>(std::popcount(flips & 0b101010u));
+            if (!border) continue;
+            const int64_t global[3] = {view_.box.lo[0] + i, view_.box.lo[1] + j,
+                                       view_.box.lo[2] + k};
+            const unsigned open = dc::border_faces(global, view_.global_dims);
+            out.border_cut_cells +=
+                dc::cell_patches(cs, flips, open).count != dc::cell_patches(cs, flips, 0).count;
+          }
+        }
+      }
+    return out;
+  }
+
   Mesh run() {
     Mesh mesh;
     if (cells_.empty()) return mesh;
@@ -321,14 +352,19 @@ class Extractor {
 
   // The patches of cell (i, j, k) of case cs (dual_contouring_patches.h). A neighbour beyond the
   // view counts as absent: brick mode's halo holds every neighbour inside the volume.
-  dc::CellPatches patches_at(int64_t i, int64_t j, int64_t k, int cs) const {
-    const unsigned flips = dc::face_flips(cs, [&](int f) {
+  // The faces of cell (i, j, k) of case cs that flip (dual_contouring_patches.h).
+  unsigned flips_at(int64_t i, int64_t j, int64_t k, int cs) const {
+    return dc::face_flips(cs, [&](int f) {
       const auto& d = dc::kFaceNeighbour[f];
       const int64_t p[3] = {i + d[0], j + d[1], k + d[2]};
       for (int a = 0; a < 3; ++a)
         if (p[a] < 0 || p[a] + 1 >= view_.dims[a]) return -1;
       return case_at(p[0], p[1], p[2]);
     });
+  }
+
+  dc::CellPatches patches_at(int64_t i, int64_t j, int64_t k, int cs) const {
+    const unsigned flips = flips_at(i, j, k, cs);
     const int64_t global[3] = {view_.box.lo[0] + i, view_.box.lo[1] + j, view_.box.lo[2] + k};
     const unsigned open = dc::border_faces(global, view_.global_dims);
     if (flips || open) return dc::cell_patches(cs, flips, open);
@@ -821,6 +857,15 @@ std::vector<std::uint64_t> dual_contouring_vertex_keys(const VolumeView& view,
   return visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
     return Extractor<T>(view, options).keys();
+  });
+}
+
+DcPatchRepairs dual_contouring_patch_repairs(const VolumeView& view, double iso) {
+  DualContouringOptions options;
+  options.iso = iso;
+  return visit_scalar(view.type, [&](auto tag) {
+    using T = decltype(tag);
+    return Extractor<T>(view, options).repairs();
   });
 }
 

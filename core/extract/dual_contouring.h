@@ -113,6 +113,15 @@ Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& option
 std::vector<std::uint64_t> dual_contouring_vertex_keys(const VolumeView& view,
                                                        const DualContouringOptions& options);
 
+// The local repairs DcVertices::Patch makes over the cells of `view` (dual_contouring_patches.h):
+// ambiguous faces resolved the other way because both cells joined their two segments (each face
+// counted once), and border cells whose patches were cut at the volume's border faces.
+struct DcPatchRepairs {
+  std::uint64_t flipped_faces = 0;
+  std::uint64_t border_cut_cells = 0;
+};
+DcPatchRepairs dual_contouring_patch_repairs(const VolumeView& view, double iso);
+
 namespace dc {
 
 // One Hermite sample of a cell: a crossing p and the unit normal n there (zero where the gradient
