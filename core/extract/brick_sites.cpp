@@ -84,7 +84,7 @@ int patch_count(const Classified& c, int64_t x, int64_t y, int64_t z, int cs) {
     const auto& d = dc::kFaceNeighbour[f];
     return case_at(c, x + d[0], y + d[1], z + d[2]);
   });
-  return flips || open ? dc::cell_patches(cs, flips, open).count : dc::kPatchTable.count[cs];
+  return dc::cell_patches_or_table(cs, flips, open).count;
 }
 
 template <class Fn>

@@ -366,13 +366,7 @@ class Extractor {
   dc::CellPatches patches_at(int64_t i, int64_t j, int64_t k, int cs) const {
     const unsigned flips = flips_at(i, j, k, cs);
     const int64_t global[3] = {view_.box.lo[0] + i, view_.box.lo[1] + j, view_.box.lo[2] + k};
-    const unsigned open = dc::border_faces(global, view_.global_dims);
-    if (flips || open) return dc::cell_patches(cs, flips, open);
-    dc::CellPatches out;
-    out.count = dc::kPatchTable.count[cs];
-    out.patch = dc::kPatchTable.patch[cs];
-    out.edges = dc::kPatchTable.edges[cs];
-    return out;
+    return dc::cell_patches_or_table(cs, flips, dc::border_faces(global, view_.global_dims));
   }
 
   void cell_rows(int64_t j, int64_t k, const uint64_t* rows[4]) const {

@@ -40,6 +40,16 @@ struct CellPatches {
 };
 CellPatches cell_patches(int cs, unsigned flips, unsigned open);
 
+// The same, from the table where nothing flips and no face is on the border (almost every cell).
+inline CellPatches cell_patches_or_table(int cs, unsigned flips, unsigned open) {
+  if (flips || open) return cell_patches(cs, flips, open);
+  CellPatches out;
+  out.count = kPatchTable.count[cs];
+  out.patch = kPatchTable.patch[cs];
+  out.edges = kPatchTable.edges[cs];
+  return out;
+}
+
 // The faces of a cell of case `cs` to flip, given the cases of its six face neighbours
 // (`neighbour(f)`: the case of the cell across face f, or -1 where there is none).
 template <class Neighbour>
