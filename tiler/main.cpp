@@ -697,9 +697,10 @@ int main(int argc, char** argv) {
   isotile::gl::register_gl_backends();
 #endif
 
-  CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids"};
+  // A fixed name: usage lines (and the man page generated from them) say "isotile", not argv[0].
+  CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids", "isotile"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "isotile 0.1.0");
+  app.set_version_flag("--version", "isotile " ISOTILE_VERSION);
   int threads = 0;
   app.add_option("--threads", threads, "Worker threads (default: all cores)")
       ->check(CLI::NonNegativeNumber);

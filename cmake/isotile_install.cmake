@@ -1,0 +1,130 @@
+# Install rules, by component (docs/install.md):
+#   cli      bin/isotile, its man page and bash completion
+#   dev      the static libraries, their public headers under include/isotile/, and the CMake
+#            package (find_package(isotile CONFIG): isotile::core, isotile::tiler, isotile::gl)
+#   meshlab  the MeshLab plugin, in MeshLab's own plugin folder (meshlab_plugin/CMakeLists.txt)
+# Included by the top-level CMakeLists.txt after every part has defined its targets.
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+set(ISOTILE_CMAKE_DIR "${CMAKE_INSTALL_LIBDIR}/cmake/isotile")
+set(ISOTILE_FIND_DEPENDENCIES "")
+set(ISOTILE_DEV_DEBIAN_DEPENDS "")
+
+# Exports one library as isotile::<NAME> in the dev component.
+#   HEADERS        its public headers, relative to the source root; installed under
+#                  include/isotile/ with the same paths, so `#include "core/mesh/mesh.h"` works
+#                  the same in the tree and installed
+#   FIND_PACKAGES  what its exported link interface names (a static library's private
+#                  dependencies are linked by its users too), one find_dependency() argument
+#                  string each, e.g. "TBB CONFIG"
+#   DEBIAN_DEPENDS the Debian -dev packages that provide those (libisotile-dev's Depends)
+#   INTERNAL       a helper target that is only exported because a library's link interface
+#                  names it (no component of its own, no headers)
+function(isotile_export_library target)
+  cmake_parse_arguments(arg "INTERNAL" "NAME" "HEADERS;FIND_PACKAGES;DEBIAN_DEPENDS" ${ARGN})
+  set_target_properties(${target} PROPERTIES EXPORT_NAME ${arg_NAME})
+  # Include folders inside the source or build tree mean nothing once installed.
+  get_target_property(dirs ${target} INTERFACE_INCLUDE_DIRECTORIES)
+  if(dirs)
+    set(wrapped "")
+    foreach(dir IN LISTS dirs)
+      if(dir MATCHES "^(${PROJECT_SOURCE_DIR}|${PROJECT_BINARY_DIR})(/|$)")
+        set(dir "$<BUILD_INTERFACE:${dir}>")
+      endif()
+      list(APPEND wrapped "${dir}")
+    endforeach()
+    set_target_properties(${target} PROPERTIES INTERFACE_INCLUDE_DIRECTORIES "${wrapped}")
+  endif()
+  set(headers "")
+  if(arg_HEADERS)
+    target_sources(${target} PUBLIC FILE_SET isotile_headers TYPE HEADERS
+                   BASE_DIRS "${PROJECT_SOURCE_DIR}" FILES ${arg_HEADERS})
+    set(headers FILE_SET isotile_headers DESTINATION "${CMAKE_INSTALL_INCLUDEDIR}/isotile"
+                COMPONENT dev)
+  endif()
+  install(TARGETS ${target} EXPORT isotileTargets
+          ARCHIVE DESTINATION "${CMAKE_INSTALL_LIBDIR}" COMPONENT dev ${headers}
+          INCLUDES DESTINATION "${CMAKE_INSTALL_INCLUDEDIR}/isotile")
+  foreach(pkg IN LISTS arg_FIND_PACKAGES)
+    string(APPEND ISOTILE_FIND_DEPENDENCIES "find_dependency(${pkg})\n")
+  endforeach()
+  if(NOT arg_INTERNAL)
+    string(APPEND ISOTILE_FIND_DEPENDENCIES "set(isotile_${arg_NAME}_FOUND TRUE)\n")
+  endif()
+  set(ISOTILE_FIND_DEPENDENCIES "${ISOTILE_FIND_DEPENDENCIES}" PARENT_SCOPE)
+  list(APPEND ISOTILE_DEV_DEBIAN_DEPENDS ${arg_DEBIAN_DEPENDS})
+  set(ISOTILE_DEV_DEBIAN_DEPENDS "${ISOTILE_DEV_DEBIAN_DEPENDS}" PARENT_SCOPE)
+endfunction()
+
+# The exported libraries: the one place to add another (docs/install.md). Dependencies in the
+# order the config must find them: TBB's own config before anything that could find OpenVDB's
+# FindTBB module.
+isotile_export_library(isotile_teem NAME teem INTERNAL DEBIAN_DEPENDS libteem-dev)
+isotile_export_library(isotile_core NAME core
+  HEADERS
+    core/errors.h
+    core/extract/dual_contouring.h
+    core/extract/extract.h
+    core/extract/macet.h
+    core/mesh/mesh.h
+    core/mesh/mesh_io.h
+    core/mesh/mesh_quality.h
+    core/mesh/mesh_topology.h
+    core/simplify/quadric.h
+    core/simplify/simplify.h
+    core/volume/scalar_type.h
+    core/volume/volume.h
+    core/volume/volume_io.h
+  FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenVDB OpenMesh
+  DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenvdb-dev libboost-iostreams-dev
+                 libopenmesh-dev libgmp-dev libmpfr-dev)
+isotile_export_library(isotile_tiler NAME tiler
+  HEADERS
+    tiler/brick_plan.h
+    tiler/input_options.h
+    tiler/tiled_extract.h
+    tiler/volume_source.h)
+if(TARGET isotile_gl)
+  isotile_export_library(isotile_glad NAME glad INTERNAL)
+  isotile_export_library(isotile_gl NAME gl
+    HEADERS shaders/gl_backends.h
+    FIND_PACKAGES "OpenGL COMPONENTS EGL"
+    DEBIAN_DEPENDS libegl-dev)
+endif()
+
+install(EXPORT isotileTargets NAMESPACE isotile:: DESTINATION "${ISOTILE_CMAKE_DIR}"
+        COMPONENT dev)
+configure_package_config_file(
+  "${CMAKE_CURRENT_LIST_DIR}/isotileConfig.cmake.in"
+  "${PROJECT_BINARY_DIR}/cmake/isotileConfig.cmake"
+  INSTALL_DESTINATION "${ISOTILE_CMAKE_DIR}")
+# 0.x: a new minor version may change the interface.
+write_basic_package_version_file("${PROJECT_BINARY_DIR}/cmake/isotileConfigVersion.cmake"
+                                 COMPATIBILITY SameMinorVersion)
+install(FILES "${PROJECT_BINARY_DIR}/cmake/isotileConfig.cmake"
+              "${PROJECT_BINARY_DIR}/cmake/isotileConfigVersion.cmake"
+        DESTINATION "${ISOTILE_CMAKE_DIR}" COMPONENT dev)
+
+# The command line, its man page and its bash completion, both generated from its own --help.
+install(TARGETS isotile RUNTIME DESTINATION "${CMAKE_INSTALL_BINDIR}" COMPONENT cli)
+find_program(ISOTILE_HELP2MAN help2man)
+if(ISOTILE_HELP2MAN)
+  set(docs "${PROJECT_BINARY_DIR}/cli-docs")
+  add_custom_command(
+    OUTPUT "${docs}/isotile.1.gz" "${docs}/isotile.bash"
+    COMMAND "${CMAKE_COMMAND}" "-DISOTILE=$<TARGET_FILE:isotile>" "-DHELP2MAN=${ISOTILE_HELP2MAN}"
+            "-DOUT=${docs}" -P "${CMAKE_CURRENT_LIST_DIR}/isotile_cli_docs.cmake"
+    DEPENDS isotile "${CMAKE_CURRENT_LIST_DIR}/isotile_cli_docs.cmake"
+    COMMENT "Generating the isotile man page and bash completion from its --help"
+    VERBATIM)
+  add_custom_target(isotile_cli_docs ALL DEPENDS "${docs}/isotile.1.gz" "${docs}/isotile.bash")
+  install(FILES "${docs}/isotile.1.gz" DESTINATION "${CMAKE_INSTALL_MANDIR}/man1" COMPONENT cli)
+  install(FILES "${docs}/isotile.bash" RENAME isotile
+          DESTINATION "${CMAKE_INSTALL_DATADIR}/bash-completion/completions" COMPONENT cli)
+else()
+  message(STATUS "isotile man page and bash completion: not built; missing help2man "
+                 "(Debian package help2man; ./setup.sh installs it)")
+endif()
+
+include("${CMAKE_CURRENT_LIST_DIR}/isotile_packaging.cmake")

@@ -1,0 +1,55 @@
+# Debian packages with CPack (docs/install.md): `cpack -G DEB` in the build folder, or
+# `cmake --build build --target package`, makes one .deb per install component:
+#   isotile                 cli      /usr/bin/isotile, man page, bash completion
+#   libisotile-dev          dev      static libraries, headers, CMake package
+#   meshlab-plugin-isotile  meshlab  the plugin in Debian MeshLab's plugin folder
+# Depends: what dpkg-shlibdeps finds in the binaries, plus what it cannot see (below).
+set(CPACK_GENERATOR DEB)
+set(CPACK_PACKAGE_NAME isotile)
+set(CPACK_PACKAGE_VERSION "${PROJECT_VERSION}")
+set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "High-quality isosurface meshes from volumes on uniform grids")
+set(CPACK_PACKAGE_HOMEPAGE_URL "")
+set(ISOTILE_PACKAGE_MAINTAINER "isotile maintainers <maintainers@isotile.invalid>" CACHE STRING
+    "Maintainer field of the Debian packages")
+set(CPACK_PACKAGE_CONTACT "${ISOTILE_PACKAGE_MAINTAINER}")
+set(CPACK_PACKAGE_FILE_NAME "isotile-${PROJECT_VERSION}")
+
+# Everything under /usr. DESTDIR staging keeps the meshlab component's absolute destination
+# (/usr/lib/<multiarch>/meshlab/plugins) inside the package instead of on the building machine.
+set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
+set(CPACK_SET_DESTDIR ON)
+set(CPACK_DEB_COMPONENT_INSTALL ON)
+set(CPACK_COMPONENTS_ALL cli dev)
+if(TARGET filter_isotile)
+  list(APPEND CPACK_COMPONENTS_ALL meshlab)
+endif()
+set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)  # name_version_arch.deb
+set(CPACK_DEBIAN_PACKAGE_RELEASE 1)
+set(CPACK_DEBIAN_PACKAGE_SECTION science)
+set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
+set(CPACK_DEBIAN_COMPRESSION_TYPE gzip)  # fast; the packages are built in CI
+
+set(CPACK_DEBIAN_CLI_PACKAGE_NAME isotile)
+set(CPACK_COMPONENT_CLI_DESCRIPTION
+    "isotile command line: Marching Cubes, Macet, Dual Contouring, out-of-core tiler, simplifier")
+# The GL backends dlopen OSMesa and need a Mesa EGL driver; without them the CPU extracts.
+set(CPACK_DEBIAN_CLI_PACKAGE_RECOMMENDS "libegl-mesa0, libgl1-mesa-dri, libosmesa6")
+
+set(CPACK_DEBIAN_DEV_PACKAGE_NAME libisotile-dev)
+set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
+set(CPACK_COMPONENT_DEV_DESCRIPTION
+    "isotile C++ library: static libraries, headers and CMake package (find_package(isotile))")
+# Static libraries: shlibdeps sees nothing; users link what the libraries link.
+list(REMOVE_DUPLICATES ISOTILE_DEV_DEBIAN_DEPENDS)
+list(JOIN ISOTILE_DEV_DEBIAN_DEPENDS ", " CPACK_DEBIAN_DEV_PACKAGE_DEPENDS)
+
+set(CPACK_DEBIAN_MESHLAB_PACKAGE_NAME meshlab-plugin-isotile)
+set(CPACK_DEBIAN_MESHLAB_PACKAGE_SECTION graphics)
+set(CPACK_COMPONENT_MESHLAB_DESCRIPTION
+    "isotile filters for MeshLab 2020.09: isosurface from a volume file, simplification")
+# The plugin API is MeshLab 2020.09's exactly; libmeshlab-common lives in MeshLab's private
+# folder, which shlibdeps is told about but where it finds no shlibs entry.
+set(CPACK_DEBIAN_MESHLAB_PACKAGE_DEPENDS "meshlab (>= 2020.09), meshlab (<< 2020.10)")
+set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS "/usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/meshlab")
+
+include(CPack)
