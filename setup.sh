@@ -36,6 +36,7 @@ packages=(
   libgtest-dev libopenmesh-dev
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgl1-mesa-dev libosmesa6-dev python3-glad
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
+  help2man
 )
 if [ "$bench" = 1 ]; then
   packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev)

@@ -17,6 +17,7 @@ set(CPACK_PACKAGE_FILE_NAME "isotile-${PROJECT_VERSION}")
 # Everything under /usr. DESTDIR staging keeps the meshlab component's absolute destination
 # (/usr/lib/<multiarch>/meshlab/plugins) inside the package instead of on the building machine.
 set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
+set(CPACK_INSTALL_PREFIX /usr)  # what DESTDIR staging installs under, whatever the build's prefix
 set(CPACK_SET_DESTDIR ON)
 set(CPACK_DEB_COMPONENT_INSTALL ON)
 set(CPACK_COMPONENTS_ALL cli dev)
