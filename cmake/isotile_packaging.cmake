@@ -7,8 +7,6 @@
 set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME isotile)
 set(CPACK_PACKAGE_VERSION "${PROJECT_VERSION}")
-set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "High-quality isosurface meshes from volumes on uniform grids")
-set(CPACK_PACKAGE_HOMEPAGE_URL "")
 set(ISOTILE_PACKAGE_MAINTAINER "isotile maintainers <maintainers@isotile.invalid>" CACHE STRING
     "Maintainer field of the Debian packages")
 set(CPACK_PACKAGE_CONTACT "${ISOTILE_PACKAGE_MAINTAINER}")
@@ -30,24 +28,30 @@ set(CPACK_DEBIAN_PACKAGE_SECTION science)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_COMPRESSION_TYPE gzip)  # fast; the packages are built in CI
 
+# Descriptions: the first line is the package's synopsis (no common summary, which CPack would
+# put first).
 set(CPACK_DEBIAN_CLI_PACKAGE_NAME isotile)
-set(CPACK_COMPONENT_CLI_DESCRIPTION
-    "isotile command line: Marching Cubes, Macet, Dual Contouring, out-of-core tiler, simplifier")
+set(CPACK_DEBIAN_CLI_DESCRIPTION "isosurface meshes from volumes on uniform grids (command line)
+The isotile program extracts isosurface meshes from volumes (raw, NRRD, OpenVDB) with Marching
+Cubes, Macet or Dual Contouring, on the CPU or in OpenGL, in core or brick by brick, simplifies
+them and measures their quality.")
 # The GL backends dlopen OSMesa and need a Mesa EGL driver; without them the CPU extracts.
 set(CPACK_DEBIAN_CLI_PACKAGE_RECOMMENDS "libegl-mesa0, libgl1-mesa-dri, libosmesa6")
 
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME libisotile-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
-set(CPACK_COMPONENT_DEV_DESCRIPTION
-    "isotile C++ library: static libraries, headers and CMake package (find_package(isotile))")
+set(CPACK_DEBIAN_DEV_DESCRIPTION "isosurface meshes from volumes on uniform grids (C++ library)
+Static libraries, headers and the CMake package of isotile: find_package(isotile) gives the
+targets isotile::core, isotile::tiler and isotile::gl.")
 # Static libraries: shlibdeps sees nothing; users link what the libraries link.
 list(REMOVE_DUPLICATES ISOTILE_DEV_DEBIAN_DEPENDS)
 list(JOIN ISOTILE_DEV_DEBIAN_DEPENDS ", " CPACK_DEBIAN_DEV_PACKAGE_DEPENDS)
 
 set(CPACK_DEBIAN_MESHLAB_PACKAGE_NAME meshlab-plugin-isotile)
 set(CPACK_DEBIAN_MESHLAB_PACKAGE_SECTION graphics)
-set(CPACK_COMPONENT_MESHLAB_DESCRIPTION
-    "isotile filters for MeshLab 2020.09: isosurface from a volume file, simplification")
+set(CPACK_DEBIAN_MESHLAB_DESCRIPTION "isosurface meshes from volumes on uniform grids (MeshLab filters)
+isotile's filters for MeshLab 2020.09: an isosurface from a volume file as a new layer, and
+shape-preserving simplification.")
 # The plugin API is MeshLab 2020.09's exactly; libmeshlab-common lives in MeshLab's private
 # folder, which shlibdeps is told about but where it finds no shlibs entry.
 set(CPACK_DEBIAN_MESHLAB_PACKAGE_DEPENDS "meshlab (>= 2020.09), meshlab (<< 2020.10)")
