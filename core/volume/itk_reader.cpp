@@ -164,8 +164,11 @@ struct FileHeader {
 };
 
 FileHeader read_header(itk::ImageIOBase& io, const std::string& file) {
-  if (!io.CanReadFile(file.c_str()))
-    throw InputError(file + ": not a readable " + std::string(io.GetNameOfClass()) + " file");
+  if (!io.CanReadFile(file.c_str())) {
+    std::string name = io.GetNameOfClass();  // e.g. TIFFImageIO
+    if (name.ends_with("ImageIO")) name.resize(name.size() - 7);
+    throw InputError(file + ": not a readable " + name + " file");
+  }
   io.SetFileName(file);
   try {
     io.ReadImageInformation();
