@@ -201,6 +201,32 @@ TEST(ItkRegions, PlainFilesAreReadByRegion) {
   fs::remove_all(dir);
 }
 
+// NIfTI's scl_slope and scl_inter are applied; such a file is read whole out of core.
+TEST(ItkRegions, NiftiRescaleIsApplied) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-scl-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume v(ScalarType::Int16, {5, 4, 3});
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    v.data<std::int16_t>()[i] = static_cast<std::int16_t>(i - 20);
+  const fs::path p = dir / "s.nii";
+  write_itk(p.string(), v.bytes(), v.type(), v.dims(), {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  std::string bytes = testing::slurp(p);
+  const float slope = 2.5f, inter = -5;
+  std::memcpy(bytes.data() + 112, &slope, 4);
+  std::memcpy(bytes.data() + 116, &inter, 4);
+  std::ofstream(p, std::ios::binary) << bytes;
+  const VolumeHeader h = read_volume_header(p.string());
+  EXPECT_TRUE(h.rescaled);
+  EXPECT_EQ(h.rescale_slope, 2.5);
+  EXPECT_EQ(h.rescale_intercept, -5);
+  const Volume r = read_volume(p.string());
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    EXPECT_EQ(r.view().value(i % 5, i / 5 % 4, i / 20), 2.5 * (i - 20) - 5) << i;
+  EXPECT_TRUE(open_volume_source(p.string(), {})->in_memory());
+  fs::remove_all(dir);
+}
+
 // --- MRC -----------------------------------------------------------------------------------
 
 struct MrcSpec {
@@ -248,7 +274,7 @@ void write_mrc(const fs::path& path, const Volume& v, const MrcSpec& s) {
       for (std::int64_t i = 0; i < n[0]; ++i) {
         const std::int64_t at =
             i * stride[s.map[0] - 1] + j * stride[s.map[1] - 1] + k * stride[s.map[2] - 1];
-        unsigned char x[4];
+        unsigned char x[8];
         if (s.mode == 12) {
           // The test fields' half-float values: exact for the integers used here.
           const float f = v.data<float>()[at];
@@ -328,6 +354,34 @@ TEST(Mrc, HalfFloatsAreWidened) {
   ASSERT_EQ(r.type(), ScalarType::Float32);
   for (std::int64_t i = 0; i < v.sample_count(); ++i)
     EXPECT_EQ(r.data<float>()[i], static_cast<float>(i) - 10);
+  fs::remove_all(dir);
+}
+
+// NRRD's space directions and origin, RAS turned into LPS as ITK does.
+TEST(Nrrd, SpaceDirectionsGiveTheWorldFrame) {
+  const fs::path dir = fs::temp_directory_path() / ("isotile-nrrd-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume raw = make_field_volume(*parse_field_spec("field:torus:20"));
+  std::ofstream(dir / "t.raw", std::ios::binary)
+      .write(reinterpret_cast<const char*>(raw.bytes()),
+             static_cast<std::streamsize>(raw.byte_size()));
+  std::ofstream(dir / "t.nhdr") << "NRRD0004\ntype: float\ndimension: 3\nsizes: 20 20 20\n"
+                                   "space: right-anterior-superior\n"
+                                   "space directions: (0,-1,0) (2,0,0) (0,0,1.5)\n"
+                                   "space origin: (10,20,30)\nendian: little\nencoding: raw\n"
+                                   "data file: t.raw\n\n";
+  const Volume v = read_volume((dir / "t.nhdr").string());
+  EXPECT_EQ(v.spacing(), (Vec3d{1, 2, 1.5}));
+  EXPECT_EQ(v.origin(), (Vec3d{10, 20, 30}));  // the grid frame: as before
+  ASSERT_TRUE(v.world());
+  EXPECT_EQ(v.world()->origin, (Vec3d{-10, -20, 30}));
+  // Columns: axis 0 towards RAS -y = LPS +y, axis 1 towards RAS +x = LPS -x, axis 2 +z.
+  EXPECT_EQ(v.world()->direction, (Mat3{0, -1, 0, 1, 0, 0, 0, 0, 1}));
+  Mesh m = mc(v.view(), 0);
+  apply_frame(mesh_frame(v.view()), m);
+  expect_mapped(mc(raw.view(), 0), m, v.spacing(), *v.world());
+  auto source = open_volume_source((dir / "t.nhdr").string(), {});
+  EXPECT_EQ(source->world->direction, v.world()->direction);
   fs::remove_all(dir);
 }
 

@@ -78,12 +78,12 @@ TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
   } cases[] = {
       {[](IsosurfaceParams& p) { p.file = ""; }, "'file' field is empty"},
       {[](IsosurfaceParams& p) { p.file = "/nonexistent/v_8x8x8_uint8.raw"; }, "no such file"},
-      {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "is a directory"},
+      {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "no DICOM series found"},
       {[](IsosurfaceParams& p) { p.dims = "41,x,41"; }, "dims must be three"},
       {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown type 'uint12'"},
       {[](IsosurfaceParams& p) { p.endian = "middle"; }, "endian must be"},
       {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "spacing must be three"},
-      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "DICOM"},
+      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "series applies to DICOM only"},
       {[](IsosurfaceParams& p) { p.method = 3; }, "method must be one of 0 Marching Cubes"},
       {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
       {[](IsosurfaceParams& p) {

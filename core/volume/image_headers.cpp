@@ -8,6 +8,7 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -116,8 +117,9 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
                      ", expected 348 or 540)");
   if (version == 2 && got < 540) throw InputError(path + ": NIfTI-2 header truncated");
   const unsigned char* magic = version == 1 ? h.data() + 344 : h.data() + 4;
-  const bool single = magic[0] == 'n' && magic[1] == '+' && magic[2] == (version == 1 ? '1' : '2');
-  const bool pair = magic[0] == 'n' && magic[1] == 'i' && magic[2] == (version == 1 ? '1' : '2');
+  const bool digit = magic[2] == (version == 1 ? '1' : '2') && magic[3] == '\0';
+  const bool single = magic[0] == 'n' && magic[1] == '+' && digit;
+  const bool pair = magic[0] == 'n' && magic[1] == 'i' && digit;
   if (!single && !pair) throw InputError(path + ": NIfTI magic string missing");
   if (pair)
     throw InputError(path +
@@ -140,6 +142,36 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     vox_offset = static_cast<double>(get<std::int64_t>(h.data() + 168, swap));
     slope = get<double>(h.data() + 176, swap);
     inter = get<double>(h.data() + 184, swap);
+  }
+  // ITK turns qform and sform into a direction matrix through VNL, which aborts the process on
+  // non-finite entries; a singular sform gives no direction at all.
+  {
+    const auto real = [&](std::size_t at1, std::size_t at2) {
+      return version == 1 ? static_cast<double>(get<float>(h.data() + at1, swap))
+                          : get<double>(h.data() + at2, swap);
+    };
+    std::array<double, 12> srow{};
+    for (int i = 0; i < 12; ++i) srow[i] = real(280 + 4 * i, 400 + 8 * i);
+    std::array<double, 6> quat{};
+    for (int i = 0; i < 6; ++i) quat[i] = real(256 + 4 * i, 352 + 8 * i);
+    bool finite = true;
+    for (double x : srow) finite = finite && std::isfinite(x);
+    for (double x : quat) finite = finite && std::isfinite(x);
+    for (int i = 0; i < 8; ++i) finite = finite && std::isfinite(real(76 + 4 * i, 104 + 8 * i));
+    if (!finite)
+      throw InputError(path + ": NIfTI geometry (pixdim, quatern, qoffset or srow) is not finite");
+    const int sform = version == 1 ? get<std::int16_t>(h.data() + 254, swap)
+                                   : get<std::int32_t>(h.data() + 348, swap);
+    if (sform > 0) {
+      const auto& m = srow;  // rows of 4: the 3x3 part is m[0..2], m[4..6], m[8..10]
+      const double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
+                         m[2] * (m[4] * m[9] - m[5] * m[8]);
+      double scale = 1;
+      for (int c = 0; c < 3; ++c)
+        scale *= std::sqrt(m[c] * m[c] + m[4 + c] * m[4 + c] + m[8 + c] * m[8 + c]);
+      if (!(std::abs(det) > 1e-6 * scale) || scale == 0)
+        throw InputError(path + ": NIfTI sform matrix is singular");
+    }
   }
   if (dim[0] < 2 || dim[0] > 7)
     throw InputError(path + ": NIfTI dim[0] is " + std::to_string(dim[0]) + " (1 to 7 axes)");
@@ -215,9 +247,19 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
     trim(value);
     std::istringstream v(value);
     if (key == "NDims") {
-      v >> ndims;
+      if (value.empty() || value.size() > 2 ||
+          value.find_first_not_of("0123456789") != std::string::npos)
+        throw InputError(path + ": MetaImage NDims is '" + value + "'");
+      ndims = std::stoi(value);
     } else if (key == "DimSize") {
-      for (std::int64_t d; v >> d;) dimsize.push_back(d);
+      // Whole tokens of digits only: ITK reads "3.4e38" as a number, where >> would stop at 3.
+      for (std::string item; v >> item;) {
+        if (item.empty() || item.size() > 18 ||
+            item.find_first_not_of("0123456789") != std::string::npos)
+          throw InputError(path + ": MetaImage DimSize holds '" + item +
+                           "', not a positive integer");
+        dimsize.push_back(std::stoll(item));
+      }
     } else if (key == "ElementType") {
       element_type = value;
     } else if (key == "CompressedData") {
@@ -226,6 +268,31 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
       msb = value == "True" || value == "true";
     } else if (key == "HeaderSize") {
       v >> header_size;
+    } else if (key == "ElementSpacing" || key == "ElementSize" || key == "TransformMatrix" ||
+               key == "Rotation" || key == "Orientation" || key == "Offset" || key == "Position" ||
+               key == "Origin" || key == "CenterOfRotation") {
+      // ITK builds its direction matrix through VNL, which aborts on non-finite entries.
+      std::vector<double> values;
+      for (std::string item; v >> item;) {
+        char* end = nullptr;
+        const double x = std::strtod(item.c_str(), &end);
+        if (end == item.c_str() || *end != '\0' || !std::isfinite(x))
+          throw InputError(path + ": MetaImage " + key + " holds '" + item +
+                           "', not a finite number");
+        values.push_back(x);
+      }
+      if ((key == "TransformMatrix" || key == "Rotation" || key == "Orientation")) {
+        if (values.size() != 9)
+          throw InputError(path + ": MetaImage " + key + " needs 9 numbers for a volume, has " +
+                           std::to_string(values.size()));
+        const auto& m = values;
+        const double det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+                           m[2] * (m[3] * m[7] - m[4] * m[6]);
+        if (!(std::abs(det) > 1e-6)) throw InputError(path + ": MetaImage " + key + " is singular");
+      }
+      if (key == "ElementSpacing")
+        for (double x : values)
+          if (!(x != 0)) throw InputError(path + ": MetaImage ElementSpacing holds 0");
     } else if (key == "ElementNumberOfChannels") {
       v >> channels;
     } else if (key == "ElementDataFile") {

@@ -123,6 +123,9 @@ IOComponent component_of(ScalarType t) {
 }
 
 itk::ImageIOBase::Pointer make_io(ItkInput::Kind kind) {
+  // ITK's warnings (e.g. "Analyze file is deprecated") would reach the user's terminal beside
+  // the one error line; what matters comes back as exceptions.
+  itk::Object::GlobalWarningDisplayOff();
   switch (kind) {
     case ItkInput::Kind::Nifti:
       return itk::NiftiImageIO::New().GetPointer();

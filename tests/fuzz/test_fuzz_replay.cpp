@@ -153,6 +153,10 @@ constexpr std::string_view kMeshWords[] = {
     "double", "int8", "uint32", "x", "nx", "vertex_indices", "end_header", "comment", "v", "vn",
     "vt", "f", "OFF", "NOFF", "COFF", "solid", "endsolid", "facet", "normal", "outer", "loop",
     "endloop", "endfacet"};
+constexpr std::string_view kImageWords[] = {
+    "NDims = ", "DimSize = ", "ElementType = ", "MET_FLOAT", "MET_SHORT", "MET_UCHAR",
+    "ElementDataFile = ", "LOCAL", "CompressedData = True", "HeaderSize = ", "BinaryDataByteOrderMSB = True",
+    "ElementNumberOfChannels = ", "TransformMatrix = ", "n+1", "ni1", "MAP "};
 constexpr std::string_view kNrrdWords[] = {
     "NRRD0004", "NRRD0005", "type:", "dimension:", "sizes:", "spacings:", "encoding:", "raw",
     "gzip", "bzip2", "ascii", "hex", "endian:", "big", "little", "data file:", "LIST", "space:",
@@ -464,6 +468,17 @@ TEST(FuzzReplay, NrrdReader) {
                     /*large_allocations=*/true,
                     /*ignore_leaks=*/true},
                    nrrd_seeds(), rng_seed(3), iterations(15000));
+}
+
+// NIfTI and MetaImage reach ITK only past isotile's header checks; MRC is isotile's own reader.
+TEST(FuzzReplay, ImageReaders) {
+  replay_mutations({"image",
+                    fuzz_image,
+                    true,
+                    {std::begin(kImageWords), std::end(kImageWords)},
+                    /*large_allocations=*/false,
+                    /*ignore_leaks=*/false},
+                   image_seeds(), rng_seed(5), iterations(4000));
 }
 
 // Random grids written by OpenVDB rather than mutated bytes: OpenVDB 10 does not survive mutated
