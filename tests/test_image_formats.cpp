@@ -173,6 +173,33 @@ INSTANTIATE_TEST_SUITE_P(Formats, ItkFormats,
                            return n;
                          });
 
+// Single-page TIFFs stacked from a directory (name order) or a numbered pattern.
+TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-tiffs-" + std::to_string(::getpid()));
+  fs::create_directories(dir / "slices");
+  const Volume raw = field_as("field:sphere:16", ScalarType::UInt16);
+  const std::size_t plane = static_cast<std::size_t>(16 * 16);
+  for (int k = 0; k < 16; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "s_%03d.tif", k + 1);
+    write_itk((dir / "slices" / name).string(), raw.data<std::uint16_t>() + k * plane,
+              ScalarType::UInt16, {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  }
+  for (const fs::path& input : {dir / "slices", dir / "slices" / "s_%03d.tif"}) {
+    SCOPED_TRACE(input.string());
+    const Volume v = read_volume(input.string());
+    ASSERT_EQ(v.dims(), raw.dims());
+    ASSERT_EQ(v.type(), ScalarType::UInt16);
+    EXPECT_EQ(std::memcmp(v.bytes(), raw.bytes(), raw.byte_size()), 0);
+  }
+  // A slice of another size is an error naming it.
+  write_itk((dir / "slices" / "s_017.tif").string(), raw.bytes(), ScalarType::UInt16, {8, 8, 1},
+            {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  EXPECT_THROW(read_volume((dir / "slices").string()), InputError);
+  fs::remove_all(dir);
+}
+
 // Plainly stored NIfTI and MetaImage are read box by box; gzip'd NIfTI is read whole.
 TEST(ItkRegions, PlainFilesAreReadByRegion) {
   REQUIRE_ITK();
@@ -466,6 +493,14 @@ TEST_F(DicomDir, SeveralSeriesAreListedAndOneIsChosen) {
   r = run("info . --json --series " + other);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("\"dims\": [\n    460,\n    512,\n    3\n  ]"), std::string::npos) << r.out;
+  // The real series' info: orientation letters from SOURCE.txt's ImageOrientationPatient (rows
+  // towards +y: P, columns towards -z: I, the normal towards -x: R), its value range.
+  r = run("info '" + series_.string() + "' --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"orientation\": \"PIR\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"format\": \"DICOM\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"max\": 939.0"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"rescaled\": false"), std::string::npos) << r.out;
   r = run("extract . -o out.ply --iso 60 -q --series 1.2.3");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("no DICOM series with UID 1.2.3"), std::string::npos) << r.err;
