@@ -270,10 +270,10 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
       const std::uint64_t bytes = checked_volume_bytes(h.type, h.dims);
       if (memory_budget > 0 && bytes > memory_budget)
         throw InputError(input + ": this " + h.format +
-                         " input cannot be read by region (compressed, rescaled, reordered or a "
-                         "stack of slices), and the whole volume (" +
-                         std::to_string(bytes >> 20) + " MiB) does not fit --memory (" +
-                         std::to_string(memory_budget >> 20) + " MiB)");
+                         " input cannot be read by region (its samples are not stored plainly in "
+                         "one file), and the whole volume (" +
+                         std::to_string(bytes) + " bytes) does not fit --memory (" +
+                         std::to_string(memory_budget) + " bytes)");
       source = std::make_unique<InMemorySource>(read_volume(input, raw));
     }
     source->name = input;
