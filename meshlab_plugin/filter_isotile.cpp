@@ -175,9 +175,12 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
   }
   const ml::IsosurfaceParams d;
   par.addParam(RichOpenFile("file", "",
-                            QStringList() << "*.raw *.gz *.nrrd *.nhdr *.vdb"
+                            QStringList() << "*.raw *.gz *.nrrd *.nhdr *.vdb *.nii *.mha *.mhd "
+                                             "*.tif *.tiff *.mrc *.map *.ccp4 *.dcm"
                                           << "*",
-                            "Volume file", "raw, raw.gz, NRRD/NHDR or OpenVDB volume"));
+                            "Volume file",
+                            "raw, raw.gz, NRRD/NHDR, OpenVDB, NIfTI, MetaImage, TIFF (multi-page), "
+                            "MRC/CCP4, or any file of a DICOM series"));
   par.addParam(RichString("dims", "", "Dimensions",
                           "Raw files whose name does not say: samples along x,y,z, e.g. "
                           "256,256,128; empty otherwise"));
@@ -190,8 +193,8 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                           "Sample spacing x,y,z, e.g. 0.5,0.5,1 (overrides the file's); empty: "
                           "the file's, or 1"));
   par.addParam(RichString("series", "", "DICOM series",
-                          "DICOM series UID where a directory holds several (DICOM is not "
-                          "supported yet: leave empty)"));
+                          "DICOM series UID where the file's directory holds several; empty: "
+                          "the series of the file chosen"));
   par.addParam(
       RichFloat("iso", static_cast<float>(d.iso), "Isovalue", "Samples at or above it are inside"));
   par.addParam(RichEnum("method", d.method, choices(ml::kMethodNames, 3), "Method",

@@ -10,6 +10,7 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
+#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
@@ -99,25 +100,20 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     throw InputError(
         "no volume file chosen (the 'file' field is empty): choose one with its '...' button; "
         "MeshLab 2020.09 ignores a path typed into the box");
-  if (!p.series.empty())
-    throw InputError(
-        "series: DICOM series are not supported yet (isotile reads raw, raw.gz, "
-        "NRRD and VDB volumes); leave 'series' empty");
   if (p.file.rfind("field:", 0) != 0) {
     std::error_code ec;
-    if (fs::is_directory(p.file, ec))
-      throw InputError(p.file +
-                       " is a directory: DICOM series are not supported yet; choose a raw, "
-                       "raw.gz, NRRD or VDB file");
-    if (!fs::exists(p.file, ec)) throw IoError(p.file + ": no such file");
+    // A numbered TIFF pattern (slice_%03d.tif) names no file itself.
+    if (!fs::exists(p.file, ec) && p.file.find('%') == std::string::npos)
+      throw IoError(p.file + ": no such file");
   }
   if (!(p.simplify > 0 && p.simplify <= 1))
     throw InputError("simplify is the fraction of faces kept, in (0, 1] (1: off); got " +
                      std::to_string(p.simplify));
   ExtractOptions o = extract_options(p);
   const Backend backend = resolve_backend(o);  // InputError naming what is missing
-  const RawOptions raw = parse_input_text(
+  RawOptions raw = parse_input_text(
       {.dims = p.dims, .type = p.type, .spacing = p.spacing, .origin = "", .endian = p.endian}, "");
+  raw.series = p.series;
   const std::uint64_t memory =
       p.memory.empty() || p.memory == "0" ? 0 : parse_memory_size(p.memory);
 
@@ -135,6 +131,8 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
       so.ratio = p.simplify;
       r.mesh = simplify(r.mesh, so);
     }
+    // Into the volume's world frame (its orientation), as `isotile extract` writes it.
+    apply_frame(mesh_frame(volume.view()), r.mesh);
   } else {
     // Brick by brick within the budget, through the tiler's streamed file: what the CLI's
     // --memory does. MeshLab then holds the whole result.
@@ -142,8 +140,9 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     const fs::path dir = temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir);
     RemoveOnExit tmp{dir / ("isotile-meshlab-" + std::to_string(::getpid()) + "-" +
                             std::to_string(counter++) + ".ply")};
-    auto source = open_volume_source(p.file, raw);
+    auto source = open_volume_source(p.file, raw, memory);
     TiledOptions to;
+    to.frame = mesh_frame(source->origin, source->world);
     to.extract = o;
     to.memory = memory;
     to.format = MeshFormat::Ply;

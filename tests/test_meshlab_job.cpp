@@ -9,7 +9,12 @@
 #include <string>
 
 #include "core/errors.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_topology.h"
+#include "core/volume/itk_reader.h"
+#include "core/volume/volume_io.h"
+#include "skip_support.h"
 
 namespace isotile::meshlab {
 namespace {
@@ -55,7 +60,7 @@ TEST(MeshlabJob, BricksAndSimplification) {
   IsosurfaceParams p = nucleon();
   const IsosurfaceResult whole = run_isosurface(p, "", {});
   p.memory = "256KiB";
-  const IsosurfaceResult bricked = run_isosurface(p, testing::TempDir(), {});
+  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
   EXPECT_EQ(bricked.mesh.positions, whole.mesh.positions);
@@ -66,7 +71,7 @@ TEST(MeshlabJob, BricksAndSimplification) {
   EXPECT_NEAR(static_cast<double>(simplified.mesh.triangles.size()),
               0.2 * whole.mesh.triangles.size(), 0.02 * 0.2 * whole.mesh.triangles.size());
   // No intermediate file left in the temporary folder.
-  for (const auto& e : std::filesystem::directory_iterator(testing::TempDir()))
+  for (const auto& e : std::filesystem::directory_iterator(::testing::TempDir()))
     EXPECT_EQ(e.path().filename().string().rfind("isotile-meshlab-", 0), std::string::npos)
         << e.path();
 }
@@ -78,12 +83,12 @@ TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
   } cases[] = {
       {[](IsosurfaceParams& p) { p.file = ""; }, "'file' field is empty"},
       {[](IsosurfaceParams& p) { p.file = "/nonexistent/v_8x8x8_uint8.raw"; }, "no such file"},
-      {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "is a directory"},
+      {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "no DICOM series found"},
       {[](IsosurfaceParams& p) { p.dims = "41,x,41"; }, "dims must be three"},
       {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown type 'uint12'"},
       {[](IsosurfaceParams& p) { p.endian = "middle"; }, "endian must be"},
       {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "spacing must be three"},
-      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "DICOM"},
+      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "series applies to DICOM only"},
       {[](IsosurfaceParams& p) { p.method = 3; }, "method must be one of 0 Marching Cubes"},
       {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
       {[](IsosurfaceParams& p) {
@@ -116,6 +121,37 @@ TEST(MeshlabJob, SimplifyFilterTargets) {
   EXPECT_NEAR(static_cast<double>(faces.triangles.size()), 500, 10);
   EXPECT_EQ(mesh_topology(faces).euler, mesh_topology(r.mesh).euler);
   EXPECT_THROW(run_simplify(r.mesh, {.ratio = 0}, nullptr), InputError);
+}
+
+// A file of a DICOM series reads the series; the mesh comes in its world frame, in core and in
+// bricks alike.
+TEST(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
+  const std::filesystem::path file =
+      std::filesystem::path(ISOTILE_SHARED_DATA) / "dicom_uih_t1_head_slab/00000060.dcm";
+  if (!std::filesystem::exists(file)) ISOTILE_SKIP(SharedData, "no shared data at " << file);
+  if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK");
+  IsosurfaceParams p;
+  p.file = file.string();
+  p.iso = 300;
+  const Volume v = read_volume(p.file);
+  ExtractOptions o;
+  o.iso = 300;
+  Mesh expected = extract(v.view(), o);
+  apply_frame(mesh_frame(v.view()), expected);
+  ASSERT_GT(expected.triangles.size(), 1000u);
+  const IsosurfaceResult whole = run_isosurface(p, "", {});
+  EXPECT_EQ(whole.mesh.positions, expected.positions);
+  EXPECT_EQ(whole.mesh.triangles, expected.triangles);
+  // The series cannot be read by region: a budget below the whole volume (35 MiB) is refused.
+  p.memory = "16MiB";
+  EXPECT_NE(message_of(p).find("does not fit --memory"), std::string::npos);
+  p.memory = "64MiB";
+  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
+  EXPECT_GT(bricked.bricks, 1);
+  EXPECT_EQ(bricked.mesh.positions, expected.positions);
+  p.memory = "";
+  p.series = "1.2.3";
+  EXPECT_NE(message_of(p).find("no DICOM series with UID 1.2.3"), std::string::npos);
 }
 
 }  // namespace

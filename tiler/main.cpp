@@ -29,12 +29,14 @@
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/atomic_file.h"
+#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
 #include "core/mesh/mesh_topology.h"
 #include "core/mesh/self_intersections.h"
 #include "core/mesh/surface_distance.h"
 #include "core/simplify/simplify.h"
+#include "core/volume/itk_reader.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
 #ifdef ISOTILE_HAVE_GL
@@ -75,12 +77,14 @@ double peak_rss_mb() {
 // Options describing how to read a raw input, shared by `extract` and `info`.
 struct InputArgs {
   std::string input;
-  std::string dims, type, spacing, origin, endian = "little";
+  std::string dims, type, spacing, origin, endian = "little", series;
 
   void add_to(CLI::App& app) {
     app.add_option("INPUT", input,
-                   "Volume file (raw, raw.gz, nrrd, nhdr, vdb) or a procedural field "
-                   "field:NAME:N (sphere, torus, gyroid, csg-box, marschner-lobb)")
+                   "Volume file (raw, raw.gz, nrrd, nhdr, vdb, nii, nii.gz, mha, mhd, tif, mrc, "
+                   "map, DICOM file), a DICOM or TIFF directory, a numbered TIFF pattern "
+                   "(slice_%03d.tif) or a procedural field field:NAME:N (sphere, torus, gyroid, "
+                   "csg-box, marschner-lobb)")
         ->required();
     app.add_option("--dims", dims, "Raw input: samples along x,y,z, e.g. 256,256,128");
     app.add_option("--type", type,
@@ -90,11 +94,15 @@ struct InputArgs {
                    "World position x,y,z of the first sample (overrides the file's)");
     app.add_option("--endian", endian, "Raw input byte order")
         ->check(CLI::IsMember({"little", "big"}));
+    app.add_option("--series", series,
+                   "DICOM: the SeriesInstanceUID to read where the directory holds several");
   }
 
   RawOptions raw_options() const {
-    return parse_input_text(
+    RawOptions o = parse_input_text(
         {.dims = dims, .type = type, .spacing = spacing, .origin = origin, .endian = endian});
+    o.series = series;
+    return o;
   }
 };
 
@@ -185,7 +193,8 @@ struct ExtractArgs {
   double macet_relax = 0.0;
   bool quads = false;
   bool check_intersections = false;
-  std::string memory;   // empty: in core
+  std::string memory;  // empty: in core
+  std::string frame = "world";
   double simplify = 1;  // fraction of faces kept; 1: off
 };
 
@@ -267,11 +276,12 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     progress(std::string(pass) + ": " + std::to_string(done) + "/" + std::to_string(total) +
              " bricks");
   };
-  auto source = open_volume_source(args.in.input, args.in.raw_options());
+  auto source = open_volume_source(args.in.input, args.in.raw_options(), to.memory);
+  if (args.frame == "world") to.frame = mesh_frame(source->origin, source->world);
   progress("extracting " + args.in.input + " (" + std::to_string(source->dims[0]) + "x" +
            std::to_string(source->dims[1]) + "x" + std::to_string(source->dims[2]) + " " +
            std::string(scalar_name(source->type)) + ") brick by brick within " + args.memory +
-           (source->in_memory() ? " (this format is read whole first)" : ""));
+           (source->in_memory() ? " (this input cannot be read by region: read whole first)" : ""));
   const TiledResult r = extract_tiled(*source, to, args.output);
   progress(
       (to.simplify < 1
@@ -295,6 +305,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     if (options.method == Method::DualContouring) j["dc_vertices"] = args.dc_vertices;
     j["backend"] = backend_name(r.backend);
     j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+    j["frame"] = to.frame.active ? "world" : "grid";
     j["triangles"] = r.triangles;
     j["vertices"] = r.vertices;
     j.update(quality_json(r.quality));
@@ -306,6 +317,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["brick_grid"] = r.plan.count;
     j["bricks_extracted"] = r.bricks_extracted;
     j["memory_budget"] = to.memory;
+    j["region_reads"] = !source->in_memory();
     j["largest_brick_bytes"] = r.largest_brick_bytes;
     j["seconds"] = {{"count", r.seconds_count},
                     {"extract", r.seconds_extract},
@@ -402,7 +414,16 @@ int run_extract(const ExtractArgs& args) {
 
   progress("writing " + args.output);
   t0 = Clock::now();
-  write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  // Positions go out in the volume's world frame; the measures below stay in the grid frame
+  // (the volume border is a box there), as a streamed run's do.
+  const MeshFrame frame = args.frame == "world" ? mesh_frame(view) : MeshFrame{};
+  if (frame.active) {
+    Mesh world = mesh;
+    apply_frame(frame, world);
+    write_mesh(world, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  } else {
+    write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  }
   const double t_write = seconds_since(t0);
 
   if (args.stats.empty()) {
@@ -425,6 +446,7 @@ int run_extract(const ExtractArgs& args) {
   }
   j["backend"] = backend_name(backend);
   j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+  j["frame"] = frame.active ? "world" : "grid";
   j["triangles"] = mesh.triangles.size() + 2 * mesh.quads.size();
   j["vertices"] = mesh.positions.size();
   j.update(quality_json(q));
@@ -522,8 +544,51 @@ int run_simplify(const SimplifyArgs& args) {
 
 // --- info ----------------------------------------------------------------------------------
 
+// Where each index axis points in LPS world space: the letter of its largest component
+// (L/R along x, P/A along y, S/I along z), e.g. "LPS" for an axis-aligned NIfTI/DICOM axial scan.
+std::string axis_letters(const Mat3& d) {
+  std::string out;
+  for (int a = 0; a < 3; ++a) {
+    int best = 0;
+    for (int r = 1; r < 3; ++r)
+      if (std::abs(d[3 * r + a]) > std::abs(d[3 * best + a])) best = r;
+    const bool plus = d[3 * best + a] > 0;
+    out += "LPS"[best] == 'L'   ? (plus ? 'L' : 'R')
+           : "LPS"[best] == 'P' ? (plus ? 'P' : 'A')
+                                : (plus ? 'S' : 'I');
+  }
+  return out;
+}
+
 int run_info(const InputArgs& in, bool as_json) {
-  const Volume volume = read_volume(in.input, in.raw_options());
+  const RawOptions raw = in.raw_options();
+  const InputKind kind = input_kind(in.input);
+  // A directory of several DICOM series: list them, for --series.
+  if (kind == InputKind::Dicom && raw.series.empty() && std::filesystem::is_directory(in.input)) {
+    const std::vector<DicomSeriesInfo> series = list_dicom_series(in.input);
+    if (series.size() > 1) {
+      json list = json::array();
+      for (const DicomSeriesInfo& s : series)
+        list.push_back({{"uid", s.uid},
+                        {"description", s.description},
+                        {"dims", {s.columns, s.rows, s.files}}});
+      if (as_json) {
+        std::cout << json{{"input", in.input}, {"series", list}}.dump(2) << "\n";
+        return 0;
+      }
+      std::printf("input    %s: %zu DICOM series (choose one with --series UID)\n",
+                  in.input.c_str(), series.size());
+      for (const DicomSeriesInfo& s : series)
+        std::printf("  %s  %lld x %lld x %lld  %s\n", s.uid.c_str(),
+                    static_cast<long long>(s.columns), static_cast<long long>(s.rows),
+                    static_cast<long long>(s.files), s.description.c_str());
+      return 0;
+    }
+  }
+  const bool has_header =
+      kind != InputKind::Raw && kind != InputKind::Field && kind != InputKind::Vdb;
+  const VolumeHeader header = has_header ? read_volume_header(in.input, raw) : VolumeHeader{};
+  const Volume volume = read_volume(in.input, raw);
   const VolumeView v = volume.view();
   const auto [lo, hi] = value_range(v);
   constexpr int kBins = 16;
@@ -542,13 +607,28 @@ int run_info(const InputArgs& in, bool as_json) {
   });
   for (const auto& h : slabs)
     for (int b = 0; b < kBins; ++b) hist[b] += h[b];
+  const WorldFrame world = v.world ? *v.world : WorldFrame{v.origin, kIdentity3};
 
   json j;
   j["input"] = in.input;
   j["dims"] = v.dims;
   j["type"] = scalar_name(v.type);
+  j["format"] = has_header ? header.format : std::string(input_kind_name(kind));
   j["spacing"] = v.spacing;
   j["origin"] = v.origin;
+  // The world frame the mesh is written in (extract --frame world).
+  j["world_origin"] = world.origin;
+  j["direction"] = {{world.direction[0], world.direction[1], world.direction[2]},
+                    {world.direction[3], world.direction[4], world.direction[5]},
+                    {world.direction[6], world.direction[7], world.direction[8]}};
+  j["orientation"] = axis_letters(world.direction);
+  j["rescaled"] = header.rescaled;
+  if (header.rescaled)
+    j["rescale"] = {{"slope", header.rescale_slope}, {"intercept", header.rescale_intercept}};
+  if (!header.series_uid.empty()) {
+    j["series_uid"] = header.series_uid;
+    j["series_description"] = header.series_description;
+  }
   j["bytes"] = volume.byte_size();
   j["min"] = lo;
   j["max"] = hi;
@@ -568,7 +648,20 @@ int run_info(const InputArgs& in, bool as_json) {
   std::printf("type     %s (%zu bytes)\n", std::string(scalar_name(v.type)).c_str(),
               volume.byte_size());
   std::printf("spacing  %g, %g, %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
+  std::printf("format   %s\n", j["format"].get<std::string>().c_str());
+  if (!header.series_uid.empty())
+    std::printf("series   %s  %s\n", header.series_uid.c_str(), header.series_description.c_str());
   std::printf("origin   %g, %g, %g\n", v.origin[0], v.origin[1], v.origin[2]);
+  std::printf(
+      "world    origin %g, %g, %g; axes toward %s (LPS); direction columns (%g, %g, %g) "
+      "(%g, %g, %g) (%g, %g, %g)\n",
+      world.origin[0], world.origin[1], world.origin[2], axis_letters(world.direction).c_str(),
+      world.direction[0], world.direction[3], world.direction[6], world.direction[1],
+      world.direction[4], world.direction[7], world.direction[2], world.direction[5],
+      world.direction[8]);
+  if (header.rescaled)
+    std::printf("rescale  value = stored x %g + %g (range and histogram in these units)\n",
+                header.rescale_slope, header.rescale_intercept);
   std::printf("range    %g .. %g\n", lo, hi);
   std::printf("histogram\n");
   for (int b = 0; b < kBins; ++b)
@@ -769,6 +862,11 @@ int main(int argc, char** argv) {
       ->check(
           CLI::Range(0.0, 1.0).description("in (0, 1]") &
           CLI::Validator([](std::string& s) { return std::stod(s) > 0 ? "" : "must be > 0"; }, ""));
+  extract_cmd
+      ->add_option("--frame", ex.frame,
+                   "Mesh coordinates: world (default; the file's orientation, LPS for medical "
+                   "images) or grid (origin + spacing x index, no direction cosines)")
+      ->check(CLI::IsMember({"world", "grid"}));
   extract_cmd->add_option("--memory", ex.memory,
                           "Out of core: extract brick by brick, each brick's working set within "
                           "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "

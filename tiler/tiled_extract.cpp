@@ -266,9 +266,9 @@ class TiledExtraction {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, owned.size()), [&](const auto& r) {
       for (std::size_t o = r.begin(); o != r.end(); ++o) {
         char* p = records.data() + o * vertex_bytes_;
-        for (float c : mesh.positions[owned[o]]) p = put_le(p, c);
+        for (float c : frame_position(opt_.frame, mesh.positions[owned[o]])) p = put_le(p, c);
         if (ex_.normals)
-          for (float c : mesh.normals[owned[o]]) p = put_le(p, c);
+          for (float c : frame_normal(opt_.frame, mesh.normals[owned[o]])) p = put_le(p, c);
       }
     });
     write_runs(file, records, vertex_bytes_, owned.size(),
@@ -294,30 +294,35 @@ class TiledExtraction {
       throw Error("brick contract broken: the extractor made " + std::to_string(total) +
                   " faces where " + std::to_string(first.size()) + " were counted");
     const auto& P = mesh.positions;
+    const MeshFrame& fr = opt_.frame;
+    // The written corners: in the world frame, and mirrored faces reversed (as apply_frame does).
+    const auto W = [&](std::uint32_t v) { return frame_position(fr, P[v]); };
     std::vector<char> records(total * face_bytes_);
     std::vector<double> q(opt_.quality ? total * (quads_ ? 2 : 1) : 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, total), [&](const auto& r) {
       for (std::size_t f = r.begin(); f != r.end(); ++f) {
         char* p = records.data() + f * face_bytes_;
         if (quads_) {
-          const Quad& v = mesh.quads[f];
+          Quad v = mesh.quads[f];
           if (!q.empty()) {
             const auto pair = quad_quality(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
             q[2 * f] = pair[0];
             q[2 * f + 1] = pair[1];
           }
+          if (fr.flip) std::swap(v[1], v[3]);
           if (opt_.format == MeshFormat::Ply)
             put_face(p, v.data(), 4, index);
           else
-            put_stl_triangle(put_stl_triangle(p, P[v[0]], P[v[1]], P[v[2]]), P[v[0]], P[v[2]],
-                             P[v[3]]);
+            put_stl_triangle(put_stl_triangle(p, W(v[0]), W(v[1]), W(v[2])), W(v[0]), W(v[2]),
+                             W(v[3]));
         } else {
-          const Tri& t = mesh.triangles[f];
+          Tri t = mesh.triangles[f];
           if (!q.empty()) q[f] = radius_ratio(P[t[0]], P[t[1]], P[t[2]]);
+          if (fr.flip) std::swap(t[1], t[2]);
           if (opt_.format == MeshFormat::Ply)
             put_face(p, t.data(), 3, index);
           else
-            put_stl_triangle(p, P[t[0]], P[t[1]], P[t[2]]);
+            put_stl_triangle(p, W(t[0]), W(t[1]), W(t[2]));
         }
       }
     });

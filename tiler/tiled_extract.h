@@ -19,6 +19,7 @@
 #include <string_view>
 
 #include "core/extract/extract.h"
+#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
 #include "core/simplify/simplify.h"
@@ -35,6 +36,9 @@ struct TiledOptions {
   // Below 1: simplify to this fraction of the faces, brick by brick (tiler/tiled_simplify.h).
   double simplify = 1;
   double simplify_min_quality = 0.3;  // SimplifyOptions::min_quality
+  // Maps the written positions, normals and windings into the volume's world frame (inactive:
+  // the grid frame), exactly as the in-core writes do; statistics stay in the grid frame.
+  MeshFrame frame;
   // Called after each brick of each pass ("count", "extract").
   std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
 };

@@ -22,6 +22,10 @@ namespace isotile {
 
 namespace {
 
+Vec3f to_float(const Vec3d& p) {
+  return {static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
+}
+
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
@@ -491,9 +495,9 @@ class TiledSimplification {
         index[v] = interior_++;
         records.resize(records.size() + vbytes);
         char* r = records.data() + records.size() - vbytes;
-        for (double x : p.positions[v]) r = put_le(r, static_cast<float>(x));
+        for (float x : frame_position(opt_.frame, to_float(p.positions[v]))) r = put_le(r, x);
         if (normals_) {
-          const Vec3f n = unit(normal[v]);
+          const Vec3f n = frame_normal(opt_.frame, unit(normal[v]));
           for (float x : n) r = put_le(r, x);
         }
       }
@@ -502,18 +506,20 @@ class TiledSimplification {
     if (opt_.format == MeshFormat::Stl) {
       std::vector<char> tris(p.triangles.size() * kStlTriangleBytes);
       char* r = tris.data();
-      for (const Tri& t : p.triangles) {
+      for (Tri t : p.triangles) {
+        if (opt_.frame.flip) std::swap(t[1], t[2]);
         Vec3f q[3];
-        for (int i = 0; i < 3; ++i)
-          for (int a = 0; a < 3; ++a) q[i][a] = static_cast<float>(p.positions[t[i]][a]);
+        for (int i = 0; i < 3; ++i) q[i] = frame_position(opt_.frame, to_float(p.positions[t[i]]));
         r = put_stl_triangle(r, q[0], q[1], q[2]);
       }
       faces_.append(tris.data(), tris.size());
     } else {
       std::vector<std::uint64_t> ids;
       ids.reserve(3 * p.triangles.size());
-      for (const Tri& t : p.triangles)
+      for (Tri t : p.triangles) {
+        if (opt_.frame.flip) std::swap(t[1], t[2]);
         for (std::uint32_t v : t) ids.push_back(index[v]);
+      }
       faces_.append(ids.data(), ids.size() * sizeof(std::uint64_t));
     }
     result.triangles += p.triangles.size();
@@ -561,9 +567,9 @@ class TiledSimplification {
     for (const SharedVertex& v : shared_) {
       char buf[24];
       char* r = buf;
-      for (double x : v.position) r = put_le(r, static_cast<float>(x));
+      for (float x : frame_position(opt_.frame, to_float(v.position))) r = put_le(r, x);
       if (normals_)
-        for (float x : unit(v.normal)) r = put_le(r, x);
+        for (float x : frame_normal(opt_.frame, unit(v.normal))) r = put_le(r, x);
       records.insert(records.end(), buf, r);
     }
     if (!records.empty()) file.write(records.data(), records.size());

@@ -226,6 +226,7 @@ class InMemorySource final : public VolumeSource {
     dims = volume_.dims();
     spacing = volume_.spacing();
     origin = volume_.origin();
+    world = volume_.world();
   }
   bool in_memory() const override { return true; }
   void read(const Box3& box, void* out) override {
@@ -254,11 +255,36 @@ bool ends_with(const std::string& s, const char* suffix) {
 
 }  // namespace
 
-std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw) {
+std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw,
+                                                 std::uint64_t memory_budget) {
   const bool native_big = std::endian::native == std::endian::big;
   std::unique_ptr<VolumeSource> source;
-  const bool nrrd = ends_with(input, ".nrrd") || ends_with(input, ".nhdr");
-  const bool vdb = ends_with(input, ".vdb");
+  const InputKind kind = input_kind(input);
+  if (kind == InputKind::Mrc || is_itk_kind(kind)) {
+    const VolumeHeader h = read_volume_header(input, raw);
+    if (h.plain) {
+      source = std::make_unique<RawFileSource>(
+          PlainLayout{h.plain->file, h.plain->offset, h.plain->type, h.plain->dims,
+                      (h.plain->endian == Endian::Big) != native_big});
+    } else {
+      const std::uint64_t bytes = checked_volume_bytes(h.type, h.dims);
+      if (memory_budget > 0 && bytes > memory_budget)
+        throw InputError(input + ": this " + h.format +
+                         " input cannot be read by region (its samples are not stored plainly in "
+                         "one file), and the whole volume (" +
+                         std::to_string(bytes) + " bytes) does not fit --memory (" +
+                         std::to_string(memory_budget) + " bytes)");
+      source = std::make_unique<InMemorySource>(read_volume(input, raw));
+    }
+    source->name = input;
+    source->spacing = h.spacing;
+    source->origin = h.origin;
+    source->world = h.world;
+    return source;
+  }
+  const bool nrrd = kind == InputKind::Nrrd;
+  const bool vdb = kind == InputKind::Vdb;
+  if (!raw.series.empty()) throw InputError(input + ": --series applies to DICOM only");
   if (parse_field_spec(input) || nrrd || vdb) {
     if (raw.dims || raw.type || raw.endian == Endian::Big)
       throw InputError(input + ": --dims, --type and big-endian apply only to raw files");
@@ -277,6 +303,7 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
         source = std::make_unique<RawFileSource>(layout);
       source->spacing = d->spacing;
       source->origin = d->origin;
+      source->world = d->world;
     } else {
       source = std::make_unique<InMemorySource>(read_nrrd(input));
     }
@@ -294,7 +321,10 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
   }
   source->name = input;
   if (raw.spacing) source->spacing = *raw.spacing;
-  if (raw.origin) source->origin = *raw.origin;
+  if (raw.origin) {
+    source->origin = *raw.origin;
+    if (source->world) source->world->origin = *raw.origin;
+  }
   return source;
 }
 
@@ -308,6 +338,7 @@ VolumeView brick_view(const VolumeSource& source, const Box3& box, const void* d
   v.origin = source.origin;
   v.box = box;
   v.global_dims = source.dims;
+  v.world = source.world;
   return v;
 }
 

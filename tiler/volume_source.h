@@ -9,6 +9,10 @@
 //   NRRD               the header through teem; one raw data file (attached or detached) by
 //                      positioned reads, one gzip data file in slabs; anything else read whole
 //   VDB                the sparse tree in memory, each box densified from it
+//   MRC, NIfTI (.nii), MetaImage, when stored plainly (uncompressed, unscaled; MRC in X, Y, Z
+//                      axis order)  positioned reads like raw files
+//   anything else (gzip'd NIfTI, compressed MetaImage, TIFF, DICOM, rescaled NIfTI, MRC in
+//                      another axis order)  read whole: in_memory() says so
 #pragma once
 
 #include <memory>
@@ -27,6 +31,7 @@ class VolumeSource {
   Index3 dims{0, 0, 0};
   Vec3d spacing{1, 1, 1};
   Vec3d origin{0, 0, 0};
+  std::optional<WorldFrame> world;  // see VolumeView::world
 
   // True when boxes can only be read as whole x-y slabs in ascending z (per pass; rewind() starts
   // a new pass).
@@ -47,7 +52,10 @@ class VolumeSource {
 };
 
 // Opens any input read_volume() accepts. Spacing and origin in `raw` override the file's.
-std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw);
+// `memory_budget` (0: none): a source that must read the whole volume refuses, with a message
+// saying so, when the volume alone would not fit it.
+std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw,
+                                                 std::uint64_t memory_budget = 0);
 
 // A view of `data` (which holds `box` of the source's volume, dense) placed in the global grid.
 VolumeView brick_view(const VolumeSource& source, const Box3& box, const void* data);

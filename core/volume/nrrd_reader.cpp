@@ -97,6 +97,37 @@ Vec3d nrrd_origin(const Nrrd& nrrd) {
   return origin;
 }
 
+// The world frame of a NRRD with a 3D space: its space directions (unit columns) and space
+// origin, turned into LPS when the space is a RAS or LAS one (as ITK's NRRD reader does).
+std::optional<WorldFrame> nrrd_world(const Nrrd& nrrd, unsigned first) {
+  if (nrrd.spaceDim != 3) return std::nullopt;
+  WorldFrame w;
+  for (int a = 0; a < 3; ++a) {
+    const NrrdAxisInfo& axis = nrrd.axis[first + a];
+    double len = 0;
+    for (int r = 0; r < 3; ++r) {
+      if (!std::isfinite(axis.spaceDirection[r])) return std::nullopt;
+      len += axis.spaceDirection[r] * axis.spaceDirection[r];
+    }
+    len = std::sqrt(len);
+    if (len == 0) return std::nullopt;
+    for (int r = 0; r < 3; ++r) w.direction[3 * r + a] = axis.spaceDirection[r] / len;
+  }
+  w.origin = nrrd_origin(nrrd);
+  Vec3d sign{1, 1, 1};
+  if (nrrd.space == nrrdSpaceRightAnteriorSuperior ||
+      nrrd.space == nrrdSpaceRightAnteriorSuperiorTime)
+    sign = {-1, -1, 1};
+  else if (nrrd.space == nrrdSpaceLeftAnteriorSuperior ||
+           nrrd.space == nrrdSpaceLeftAnteriorSuperiorTime)
+    sign = {1, -1, 1};
+  for (int r = 0; r < 3; ++r) {
+    w.origin[r] *= sign[r];
+    for (int c = 0; c < 3; ++c) w.direction[3 * r + c] *= sign[r];
+  }
+  return w;
+}
+
 }  // namespace
 
 namespace {
@@ -114,6 +145,7 @@ struct HeaderInfo {
   Index3 dims;
   Vec3d spacing;
   Vec3d origin;
+  std::optional<WorldFrame> world;
 };
 
 HeaderInfo header_info(const std::string& path, const Nrrd& nrrd) {
@@ -127,7 +159,7 @@ HeaderInfo header_info(const std::string& path, const Nrrd& nrrd) {
   if (!type)
     throw InputError(path + ": NRRD sample type '" + airEnumStr(nrrdType, nrrd.type) +
                      "' is not supported (int8 to uint32, float or double)");
-  HeaderInfo h{*type, {}, {}, nrrd_origin(nrrd)};
+  HeaderInfo h{*type, {}, {}, nrrd_origin(nrrd), nrrd_world(nrrd, first)};
   for (int a = 0; a < 3; ++a) {
     const NrrdAxisInfo& axis = nrrd.axis[first + a];
     h.dims[a] = static_cast<std::int64_t>(axis.size);
@@ -156,6 +188,7 @@ Volume read_nrrd(const std::string& path) {
   }
   const HeaderInfo h = header_info(path, *nrrd);
   Volume volume(h.type, h.dims, h.spacing, h.origin);
+  volume.set_world(h.world);
   const std::size_t have = nrrdElementNumber(nrrd.get()) * nrrdElementSize(nrrd.get());
   if (have != volume.byte_size() || nrrd->data == nullptr)
     throw InputError(path + ": NRRD holds " + std::to_string(have) + " bytes of data, expected " +
@@ -183,6 +216,7 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
   out.dims = h.dims;
   out.spacing = h.spacing;
   out.origin = h.origin;
+  out.world = h.world;
   out.endian = nio->endian == airEndianBig ? Endian::Big : Endian::Little;
   if (nio->lineSkip != 0 || nio->dataFNArr->len > 1) return std::nullopt;
   if (nio->encoding == nrrdEncodingGzip)

@@ -105,7 +105,9 @@ Volume::Volume(ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin)
 }
 
 VolumeView Volume::view() const {
-  return dense_view(data_.get(), type_, dims_, spacing_, origin_);
+  VolumeView v = dense_view(data_.get(), type_, dims_, spacing_, origin_);
+  v.world = world_;
+  return v;
 }
 
 }  // namespace isotile

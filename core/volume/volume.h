@@ -5,13 +5,16 @@
 // a larger (global) grid: `box` is the part of the global grid it covers, so its local sample
 // (0, 0, 0) is global sample box.lo. World position of global sample g is origin + spacing * g,
 // for every brick alike, so positions computed from global indices agree bit for bit across
-// bricks. All indices are 64-bit.
+// bricks (the grid frame: what the extractors compute). A volume read from a file that states
+// its orientation also carries a WorldFrame: the mesh's positions are mapped into it when they
+// are written (core/mesh/mesh_frame.h). All indices are 64-bit.
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 
 #include "core/volume/scalar_type.h"
 
@@ -19,6 +22,18 @@ namespace isotile {
 
 using Index3 = std::array<std::int64_t, 3>;
 using Vec3d = std::array<double, 3>;
+// Row-major 3x3 matrix.
+using Mat3 = std::array<double, 9>;
+inline constexpr Mat3 kIdentity3{1, 0, 0, 0, 1, 0, 0, 0, 1};
+
+// Where a grid lies in a file's world space (ITK's convention, LPS for medical images): global
+// sample g is at origin + direction * (spacing * g), where column a of `direction` is the unit
+// world vector of index axis a. The grid frame (origin + spacing * g) is the special case of the
+// identity direction and the same origin.
+struct WorldFrame {
+  Vec3d origin{0, 0, 0};
+  Mat3 direction = kIdentity3;
+};
 
 // Half-open box of global sample indices [lo, hi).
 struct Box3 {
@@ -32,12 +47,13 @@ struct Box3 {
 struct VolumeView {
   const void* data = nullptr;
   ScalarType type = ScalarType::Float32;
-  Index3 dims{0, 0, 0};         // samples along x, y, z
-  Index3 strides{0, 0, 0};      // in samples, not bytes
-  Vec3d spacing{1, 1, 1};       // world distance between neighbouring samples
-  Vec3d origin{0, 0, 0};        // world position of global sample (0, 0, 0)
-  Box3 box{};                   // global samples this view covers; box.hi - box.lo == dims
-  Index3 global_dims{0, 0, 0};  // dims of the whole volume this view is part of
+  Index3 dims{0, 0, 0};             // samples along x, y, z
+  Index3 strides{0, 0, 0};          // in samples, not bytes
+  Vec3d spacing{1, 1, 1};           // world distance between neighbouring samples
+  Vec3d origin{0, 0, 0};            // world position of global sample (0, 0, 0)
+  Box3 box{};                       // global samples this view covers; box.hi - box.lo == dims
+  Index3 global_dims{0, 0, 0};      // dims of the whole volume this view is part of
+  std::optional<WorldFrame> world;  // unset: the grid frame is the world
 
   std::int64_t sample_count() const { return dims[0] * dims[1] * dims[2]; }
   std::int64_t offset(std::int64_t i, std::int64_t j, std::int64_t k) const {
@@ -78,6 +94,8 @@ class Volume {
   const Vec3d& origin() const { return origin_; }
   void set_spacing(const Vec3d& s) { spacing_ = s; }
   void set_origin(const Vec3d& o) { origin_ = o; }
+  const std::optional<WorldFrame>& world() const { return world_; }
+  void set_world(const std::optional<WorldFrame>& w) { world_ = w; }
   std::int64_t sample_count() const { return dims_[0] * dims_[1] * dims_[2]; }
   std::size_t byte_size() const { return bytes_; }
   std::byte* bytes() { return data_.get(); }
@@ -98,6 +116,7 @@ class Volume {
   Index3 dims_{0, 0, 0};
   Vec3d spacing_{1, 1, 1};
   Vec3d origin_{0, 0, 0};
+  std::optional<WorldFrame> world_;
 };
 
 // Number of bytes of dims[0]*dims[1]*dims[2] samples of `type`. Throws InputError when a dim is

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <string>
@@ -13,7 +14,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
+#include <fstream>
+
 #include "core/errors.h"
+#include "core/volume/image_headers.h"
+#include "core/volume/itk_reader.h"
 #include "core/volume/procedural_fields.h"
 
 namespace isotile {
@@ -25,6 +30,64 @@ std::string lower_extension(const std::string& path) {
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return ext;
+}
+
+bool ends_with_ci(const std::string& s, const char* suffix) {
+  const std::size_t n = std::strlen(suffix);
+  if (s.size() < n) return false;
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
+  return true;
+}
+
+// DICOM Part 10 files carry "DICM" after a 128-byte preamble.
+bool has_dicom_marker(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char b[132];
+  if (!f.read(b, sizeof b)) return false;
+  return std::memcmp(b + 128, "DICM", 4) == 0;
+}
+
+bool is_tiff_name(const std::string& s) {
+  return ends_with_ci(s, ".tif") || ends_with_ci(s, ".tiff");
+}
+
+ItkInput itk_input(const std::string& input, InputKind kind, const RawOptions& raw) {
+  ItkInput in;
+  in.path = input;
+  in.series = raw.series;
+  switch (kind) {
+    case InputKind::Nifti:
+      in.kind = ItkInput::Kind::Nifti;
+      break;
+    case InputKind::MetaImage:
+      in.kind = ItkInput::Kind::MetaImage;
+      break;
+    case InputKind::Tiff:
+      in.kind = ItkInput::Kind::Tiff;
+      break;
+    case InputKind::TiffStack:
+      in.kind = ItkInput::Kind::TiffStack;
+      break;
+    default:
+      in.kind = ItkInput::Kind::Dicom;
+      break;
+  }
+  return in;
+}
+
+// Checks made before ITK or GDCM sees the file (they are not hardened against malformed input).
+ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
+  if (kind == InputKind::Nifti) return check_nifti_header(input);
+  if (kind == InputKind::MetaImage) return check_metaimage_header(input);
+  if (kind == InputKind::Tiff) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(input, ec);
+    if (ec) throw IoError("cannot open " + input + ": " + ec.message());
+    if (size < 8)
+      throw InputError(input + ": not a TIFF file (" + std::to_string(size) + " bytes)");
+  }
+  return {};
 }
 
 // Options that only a raw file can use would otherwise be dropped without a word.
@@ -103,22 +166,156 @@ Range typed_range(const VolumeView& view) {
       });
 }
 
+// --spacing and --origin replace what the file says; the origin moves the world frame too.
+void apply_overrides(const RawOptions& raw, Vec3d& spacing, Vec3d& origin,
+                     std::optional<WorldFrame>& world) {
+  if (raw.spacing) spacing = *raw.spacing;
+  if (raw.origin) {
+    origin = *raw.origin;
+    if (world) world->origin = *raw.origin;
+  }
+}
+
 }  // namespace
+
+InputKind input_kind(const std::string& input) {
+  if (parse_field_spec(input)) return InputKind::Field;
+  std::error_code ec;
+  if (std::filesystem::is_directory(input, ec)) {
+    for (const auto& e : std::filesystem::directory_iterator(input, ec))
+      if (e.is_regular_file() && is_tiff_name(e.path().string())) return InputKind::TiffStack;
+    return InputKind::Dicom;
+  }
+  if (is_tiff_name(input))
+    return input.find('%') != std::string::npos ? InputKind::TiffStack : InputKind::Tiff;
+  const std::string ext = lower_extension(input);
+  if (ext == ".nrrd" || ext == ".nhdr") return InputKind::Nrrd;
+  if (ext == ".vdb") return InputKind::Vdb;
+  if (ext == ".mrc" || ext == ".map" || ext == ".ccp4" || ext == ".mrcs") return InputKind::Mrc;
+  if (ext == ".nii" || ends_with_ci(input, ".nii.gz")) return InputKind::Nifti;
+  if (ext == ".mha" || ext == ".mhd") return InputKind::MetaImage;
+  if (ext == ".dcm" || ext == ".ima") return InputKind::Dicom;
+  if (!parse_raw_name(input) && has_dicom_marker(input)) return InputKind::Dicom;
+  return InputKind::Raw;
+}
+
+const char* input_kind_name(InputKind kind) {
+  switch (kind) {
+    case InputKind::Field:
+      return "field";
+    case InputKind::Raw:
+      return "raw";
+    case InputKind::Nrrd:
+      return "NRRD";
+    case InputKind::Vdb:
+      return "VDB";
+    case InputKind::Mrc:
+      return "MRC";
+    case InputKind::Nifti:
+      return "NIfTI";
+    case InputKind::MetaImage:
+      return "MetaImage";
+    case InputKind::Tiff:
+    case InputKind::TiffStack:
+      return "TIFF";
+    case InputKind::Dicom:
+      return "DICOM";
+  }
+  return "?";
+}
+
+bool is_itk_kind(InputKind kind) {
+  return kind == InputKind::Nifti || kind == InputKind::MetaImage || kind == InputKind::Tiff ||
+         kind == InputKind::TiffStack || kind == InputKind::Dicom;
+}
+
+VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw) {
+  const InputKind kind = input_kind(input);
+  VolumeHeader h;
+  h.format = input_kind_name(kind);
+  if (kind != InputKind::Raw) reject_raw_only_options(input, raw, h.format.c_str());
+  if (!raw.series.empty() && kind != InputKind::Dicom)
+    throw InputError(input + ": --series applies to DICOM only");
+  if (kind == InputKind::Mrc) {
+    h = read_mrc_header(input);
+  } else if (is_itk_kind(kind)) {
+    const ImageHeaderCheck check = check_before_itk(input, kind);
+    const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
+    h.type = info.type;
+    h.dims = info.dims;
+    h.spacing = info.spacing;
+    h.origin = info.origin;
+    h.world = WorldFrame{info.origin, info.direction};
+    h.rescaled = info.rescaled || check.rescaled;
+    h.rescale_slope = check.rescaled ? check.rescale_slope : info.rescale_slope;
+    h.rescale_intercept = check.rescaled ? check.rescale_intercept : info.rescale_intercept;
+    h.series_uid = info.series_uid;
+    h.series_description = info.series_description;
+    if (check.plain && check.plain->type == info.type && check.plain->dims == info.dims)
+      h.plain = check.plain;
+  } else if (kind == InputKind::Nrrd) {
+    if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(input)) {
+      h.type = d->type;
+      h.dims = d->dims;
+      h.spacing = d->spacing;
+      h.origin = d->origin;
+      h.world = d->world;
+      if (!d->gzip) h.plain = PlainData{d->data_file, d->offset, d->type, d->dims, d->endian};
+    } else {
+      const Volume v = read_nrrd(input);
+      h.type = v.type();
+      h.dims = v.dims();
+      h.spacing = v.spacing();
+      h.origin = v.origin();
+      h.world = v.world();
+    }
+  } else {
+    // Fields, raw and VDB: their headers are their names or need the data anyway.
+    const Volume v = read_volume(input, raw);
+    h.type = v.type();
+    h.dims = v.dims();
+    h.spacing = v.spacing();
+    h.origin = v.origin();
+    return h;
+  }
+  apply_overrides(raw, h.spacing, h.origin, h.world);
+  return h;
+}
 
 Volume read_volume(const std::string& input, const RawOptions& raw) {
   if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
     reject_raw_only_options(input, raw, "procedural field");
+    if (!raw.series.empty()) throw InputError(input + ": --series applies to DICOM only");
     return make_field_volume(*spec);
   }
-  const std::string ext = lower_extension(input);
-  const bool nrrd = ext == ".nrrd" || ext == ".nhdr";
-  const bool vdb = ext == ".vdb";
-  if (!nrrd && !vdb) return read_raw(input, raw);
+  const InputKind kind = input_kind(input);
+  if (!raw.series.empty() && kind != InputKind::Dicom)
+    throw InputError(input + ": --series applies to DICOM only");
+  if (kind == InputKind::Raw) return read_raw(input, raw);
 
-  reject_raw_only_options(input, raw, nrrd ? "NRRD file" : "VDB file");
-  Volume volume = nrrd ? read_nrrd(input) : read_vdb(input);
-  if (raw.spacing) volume.set_spacing(*raw.spacing);
-  if (raw.origin) volume.set_origin(*raw.origin);
+  reject_raw_only_options(input, raw, input_kind_name(kind));
+  Volume volume;
+  if (kind == InputKind::Nrrd) {
+    volume = read_nrrd(input);
+  } else if (kind == InputKind::Vdb) {
+    volume = read_vdb(input);
+  } else if (kind == InputKind::Mrc) {
+    volume = read_mrc(input);
+  } else {
+    check_before_itk(input, kind);
+    const ItkInput in = itk_input(input, kind, raw);
+    const ItkImageInfo info = read_itk_info(in);
+    volume = Volume(info.type, info.dims, info.spacing, info.origin);
+    volume.set_world(WorldFrame{info.origin, info.direction});
+    read_itk_data(in, info, volume.bytes());
+    check_finite(volume.view(), input);
+  }
+  Vec3d spacing = volume.spacing(), origin = volume.origin();
+  std::optional<WorldFrame> world = volume.world();
+  apply_overrides(raw, spacing, origin, world);
+  volume.set_spacing(spacing);
+  volume.set_origin(origin);
+  volume.set_world(world);
   return volume;
 }
 

@@ -1,6 +1,9 @@
 // Reading volumes from files and from procedural field specs.
 //
 // Formats, chosen by name:
+//   *.nii, *.nii.gz, *.mha, *.mhd, *.tif, *.tiff, DICOM files and directories, numbered TIFF
+//   patterns (slice_%03d.tif)    through ITK (core/volume/itk_reader.h)
+//   *.mrc, *.map, *.ccp4, *.mrcs MRC2014 / CCP4 maps
 //   field:NAME:N                 procedural field (see procedural_fields.h), N^3 samples
 //   *.nrrd, *.nhdr               NRRD through teem (attached or detached data, raw or gzip)
 //   *.vdb                        OpenVDB: first float or double grid, active bounding box densified
@@ -30,6 +33,7 @@ struct RawOptions {
   std::optional<Vec3d> spacing;
   std::optional<Vec3d> origin;
   Endian endian = Endian::Little;
+  std::string series;  // DICOM: the SeriesInstanceUID to read where a directory holds several
 };
 
 // What a raw file's name says, if it follows NAME_XxYxZ_TYPE.raw[.gz].
@@ -46,6 +50,42 @@ struct RawLayout {
 };
 RawLayout resolve_raw_layout(const std::string& path, const RawOptions& options);
 
+// What an input is, from its name (and, for a directory or a file without a known extension,
+// a look at its contents: TIFF slices, or DICOM's "DICM" marker).
+enum class InputKind { Field, Raw, Nrrd, Vdb, Mrc, Nifti, MetaImage, Tiff, TiffStack, Dicom };
+InputKind input_kind(const std::string& input);
+const char* input_kind_name(InputKind kind);
+bool is_itk_kind(InputKind kind);
+
+// Samples stored plainly (uncompressed, unscaled) in one file from byte `offset` on: such
+// inputs are read box by box out of core.
+struct PlainData {
+  std::string file;
+  std::uint64_t offset = 0;
+  ScalarType type = ScalarType::UInt8;
+  Index3 dims{0, 0, 0};
+  Endian endian = Endian::Little;
+};
+
+// An input's header: what `isotile info` shows besides the samples, and how the tiler can read
+// it. Reading the header only costs little for every format (a DICOM series reads each file's
+// header).
+struct VolumeHeader {
+  std::string
+      format;  // "raw", "NRRD", "VDB", "MRC", "NIfTI", "MetaImage", "TIFF", "DICOM", "field"
+  ScalarType type = ScalarType::Float32;
+  Index3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+  std::optional<WorldFrame> world;
+  bool rescaled = false;  // values are stored * slope + intercept
+  double rescale_slope = 1;
+  double rescale_intercept = 0;
+  std::string series_uid, series_description;  // DICOM
+  std::optional<PlainData> plain;              // readable box by box
+};
+VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw = {});
+
 // Reads any supported input (dispatches on the name as described above).
 Volume read_volume(const std::string& input, const RawOptions& raw = {});
 
@@ -53,6 +93,10 @@ Volume read_volume(const std::string& input, const RawOptions& raw = {});
 Volume read_raw(const std::string& path, const RawOptions& options);  // plain or .gz
 Volume read_nrrd(const std::string& path);
 Volume read_vdb(const std::string& path);
+// MRC2014 / CCP4 maps (core/volume/mrc_reader.cpp): header validated against the file size,
+// axis order (mapc, mapr, maps), start fields, cell and origin honoured.
+Volume read_mrc(const std::string& path);
+VolumeHeader read_mrc_header(const std::string& path);
 
 // An OpenVDB grid kept as its sparse tree and densified box by box (the out-of-core tiler reads
 // .vdb input this way). Its volume is the grid's active bounding box; boxes are in that volume's
@@ -79,6 +123,7 @@ struct NrrdDataLayout {
   Index3 dims{0, 0, 0};
   Vec3d spacing{1, 1, 1};
   Vec3d origin{0, 0, 0};
+  std::optional<WorldFrame> world;
 };
 std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
 

@@ -24,6 +24,7 @@
 #include <utility>
 
 #include "core/mesh/mesh_io.h"
+#include "core/volume/itk_reader.h"
 #include "core/volume/scalar_type.h"
 #include "tests/fuzz/fuzz_targets.h"
 
@@ -675,6 +676,100 @@ Seed random_vdb_seed(std::uint32_t seed) {
   }
   const std::string text = read_text(path);
   return {"vdb_random_" + std::to_string(seed), Bytes(text.begin(), text.end()), true};
+}
+
+std::vector<Seed> image_seeds() {
+  std::vector<Seed> seeds;
+  // MRC: a little-endian float map in X, Y, Z order, a big-endian int16 map in another axis
+  // order with start fields and an extended header, and a mode 12 map.
+  struct Mrc {
+    const char* name;
+    int mode, map[3], start[3], nsymbt;
+    bool big;
+    std::uint8_t selector;
+  };
+  for (const Mrc& m : {Mrc{"mrc_float_xyz", 2, {1, 2, 3}, {0, 0, 0}, 0, false, 0},
+                       Mrc{"ccp4_int16_zxy_be", 1, {3, 1, 2}, {-3, 2, 5}, 16, true, 3},
+                       Mrc{"mrc_half", 12, {1, 2, 3}, {0, 0, 0}, 0, false, 0},
+                       Mrc{"mrc_uint16", 6, {2, 3, 1}, {1, 1, 1}, 0, false, 0},
+                       Mrc{"mrc_int8", 0, {1, 2, 3}, {0, 0, 0}, 4, false, 3}}) {
+    const int n[3] = {3, 4, 5};
+    std::string h(1024 + m.nsymbt, '\0');
+    const auto put = [&](std::size_t at, auto v) {
+      char b[sizeof(v)];
+      std::memcpy(b, &v, sizeof(v));
+      if (m.big == (std::endian::native == std::endian::little)) std::reverse(b, b + sizeof(v));
+      std::memcpy(h.data() + at, b, sizeof(v));
+    };
+    for (int c = 0; c < 3; ++c) {
+      put(4 * c, std::int32_t{n[c]});
+      put(16 + 4 * c, std::int32_t{m.start[c]});
+      put(28 + 4 * c, std::int32_t{n[m.map[c] - 1]});
+      put(40 + 4 * c, 1.5f * static_cast<float>(n[c]));
+      put(52 + 4 * c, 90.0f);
+      put(64 + 4 * c, std::int32_t{m.map[c]});
+      put(196 + 4 * c, 2.5f * static_cast<float>(c));
+    }
+    put(12, std::int32_t{m.mode});
+    put(92, std::int32_t{m.nsymbt});
+    std::memcpy(h.data() + 208, "MAP ", 4);
+    h[212] = m.big ? 0x11 : 0x44;
+    h[213] = m.big ? 0x11 : 0x41;
+    const std::size_t size = m.mode == 0 ? 1 : m.mode == 2 ? 4 : 2;
+    for (int i = 0; i < n[0] * n[1] * n[2]; ++i) {
+      const int v = (i * 37) % 101 - 50;
+      std::string b(size, '\0');
+      if (m.mode == 0) b[0] = static_cast<char>(v);
+      if (m.mode == 1) {
+        const auto x = static_cast<std::int16_t>(v);
+        std::memcpy(b.data(), &x, 2);
+      }
+      if (m.mode == 6) {
+        const auto x = static_cast<std::uint16_t>(v + 50);
+        std::memcpy(b.data(), &x, 2);
+      }
+      if (m.mode == 2) {
+        const auto x = static_cast<float>(v);
+        std::memcpy(b.data(), &x, 4);
+      }
+      if (m.mode == 12) {
+        const std::uint16_t x = 0x3c00;  // 1.0
+        std::memcpy(b.data(), &x, 2);
+      }
+      if (m.big == (std::endian::native == std::endian::little)) std::reverse(b.begin(), b.end());
+      h += b;
+    }
+    seeds.push_back({m.name, with_selector(m.selector, h)});
+  }
+  // NIfTI and MetaImage as ITK writes them.
+  if (itk_available()) {
+    ScratchDir dir;
+    std::vector<float> f(4 * 3 * 5);
+    std::vector<std::int16_t> i16(f.size());
+    for (std::size_t i = 0; i < f.size(); ++i) {
+      f[i] = static_cast<float>((i * 37) % 101) - 50;
+      i16[i] = static_cast<std::int16_t>(f[i]);
+    }
+    const Mat3 d{0, -1, 0, 1, 0, 0, 0, 0, 1};
+    struct Itk {
+      const char* name;
+      const char* file;
+      std::uint8_t selector;
+      bool int16;
+    };
+    for (const Itk& w :
+         {Itk{"nifti_float", "a.nii", 1, false}, Itk{"nifti_int16", "b.nii", 1, true},
+          Itk{"mha_float", "c.mha", 2, false}, Itk{"mha_int16", "d.mha", 2, true}}) {
+      const fs::path p = dir / w.file;
+      if (w.int16)
+        write_itk(p.string(), i16.data(), ScalarType::Int16, {4, 3, 5}, {1, 2, 3}, {5, 6, 7}, d);
+      else
+        write_itk(p.string(), f.data(), ScalarType::Float32, {4, 3, 5}, {1, 2, 3}, {5, 6, 7}, d);
+      seeds.push_back({w.name, with_selector(w.selector, read_text(p))});
+    }
+  }
+  seeds.push_back({"mrc_truncated", with_selector(0, std::string(100, '\0')), false});
+  return seeds;
 }
 
 }  // namespace isotile::fuzz

@@ -25,6 +25,8 @@ std::vector<Seed> mesh_seeds();
 std::vector<Seed> raw_seeds();
 std::vector<Seed> nrrd_seeds();
 std::vector<Seed> vdb_seeds();
+// MRC maps written in code; NIfTI and MetaImage written by ITK (where the build has it).
+std::vector<Seed> image_seeds();
 
 // A structure-aware VDB input for fuzz_vdb, drawn from `seed`: one to three grids of random types,
 // names, transforms, compression, active voxels, tiles and values (NaN, Inf and huge ones

@@ -228,4 +228,17 @@ int fuzz_vdb(const std::uint8_t* data, std::size_t size) {
   }
 }
 
+int fuzz_image(const std::uint8_t* data, std::size_t size) {
+  static const char* const kNames[] = {"input.mrc", "input.nii", "input.mha", "input.map"};
+  const std::uint8_t sel = size > 0 ? data[0] : 0;
+  Files files;
+  const fs::path path = files.add(kNames[sel & 3], data + (size > 0), size - (size > 0));
+  try {
+    check_volume("fuzz_image", read_volume(path.string()));
+    return 0;
+  } catch (const Error&) {
+    return 1;
+  }
+}
+
 }  // namespace isotile::fuzz

@@ -17,6 +17,9 @@
 //              .nhdr header up to and including the first "\n\n" followed by the bytes of its
 //              data file, which is written as "data.bin" beside it ("data file: data.bin").
 //   fuzz_vdb   all bytes: the .vdb file.
+//   fuzz_image byte 0: bits 0-1 the format (0 .mrc, 1 .nii, 2 .mha, 3 .map); bytes 1..: the
+//              file, read through read_volume (isotile's MRC reader; ITK's NIfTI and MetaImage
+//              readers behind isotile's header checks).
 //
 // Each target returns 0 when the reader returned a value that passed the checks and 1 when it
 // threw isotile::Error (the libFuzzer drivers ignore this and return 0). Not thread-safe: one
@@ -43,6 +46,7 @@ int fuzz_mesh(const std::uint8_t* data, std::size_t size);
 int fuzz_raw(const std::uint8_t* data, std::size_t size);
 int fuzz_nrrd(const std::uint8_t* data, std::size_t size);
 int fuzz_vdb(const std::uint8_t* data, std::size_t size);
+int fuzz_image(const std::uint8_t* data, std::size_t size);
 
 // What fuzz_raw passes to read_raw for layout `index` (0-7, bits 5-7 of the first byte) and
 // sample type `type`: the file name, and the dims and type given as options (absent where the

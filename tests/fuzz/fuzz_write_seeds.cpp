@@ -1,5 +1,5 @@
 // Writes the seeds of every fuzz target (fuzz_seeds.h) as starting corpora for the libFuzzer
-// drivers: DIR/mesh, DIR/raw, DIR/nrrd and DIR/vdb, one file per seed.
+// drivers: DIR/mesh, DIR/raw, DIR/nrrd, DIR/vdb and DIR/image, one file per seed.
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -22,7 +22,8 @@ int main(int argc, char** argv) {
         {"mesh", isotile::fuzz::mesh_seeds},
         {"raw", isotile::fuzz::raw_seeds},
         {"nrrd", isotile::fuzz::nrrd_seeds},
-        {"vdb", isotile::fuzz::vdb_seeds}};
+        {"vdb", isotile::fuzz::vdb_seeds},
+        {"image", isotile::fuzz::image_seeds}};
     for (const auto& [name, seeds] : targets) {
       const fs::path dir = fs::path(argv[1]) / name;
       fs::create_directories(dir);

@@ -1,0 +1,360 @@
+// NIfTI-1/2 and MetaImage headers, read and checked without ITK.
+#include "core/volume/image_headers.h"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// deflate cannot shrink data by more than about 1032:1: a compressed file much smaller than
+// that of the samples its header claims is corrupt, and must not make anyone allocate them.
+constexpr std::uint64_t kMaxDeflateRatio = 1032;
+
+std::uint64_t file_size_of(const std::string& path) {
+  std::error_code ec;
+  const std::uintmax_t n = fs::file_size(path, ec);
+  if (ec) throw IoError("cannot open " + path + ": " + ec.message());
+  return n;
+}
+
+std::string dims_text(const Index3& d) {
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
+}
+
+template <class T>
+T get(const unsigned char* p, bool swap) {
+  T v;
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, p, sizeof(T));
+  if (swap) std::reverse(b, b + sizeof(T));
+  std::memcpy(&v, b, sizeof(T));
+  return v;
+}
+
+std::optional<ScalarType> nifti_type(int datatype) {
+  switch (datatype) {
+    case 2:
+      return ScalarType::UInt8;
+    case 4:
+      return ScalarType::Int16;
+    case 8:
+      return ScalarType::Int32;
+    case 16:
+      return ScalarType::Float32;
+    case 64:
+      return ScalarType::Float64;
+    case 256:
+      return ScalarType::Int8;
+    case 512:
+      return ScalarType::UInt16;
+    case 768:
+      return ScalarType::UInt32;
+    default:
+      return std::nullopt;
+  }
+}
+
+bool ends_with_ci(const std::string& s, const std::string& suffix) {
+  if (s.size() < suffix.size()) return false;
+  for (std::size_t i = 0; i < suffix.size(); ++i)
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - suffix.size() + i])) != suffix[i])
+      return false;
+  return true;
+}
+
+}  // namespace
+
+ImageHeaderCheck check_nifti_header(const std::string& path) {
+  const bool gz = ends_with_ci(path, ".gz");
+  const std::uint64_t size = file_size_of(path);
+  std::array<unsigned char, 540> h{};
+  std::size_t got = 0;
+  if (gz) {
+    gzFile f = gzopen(path.c_str(), "rb");
+    if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    const int n = gzread(f, h.data(), static_cast<unsigned>(h.size()));
+    gzclose(f);
+    got = n > 0 ? static_cast<std::size_t>(n) : 0;
+  } else {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    f.read(reinterpret_cast<char*>(h.data()), static_cast<std::streamsize>(h.size()));
+    got = static_cast<std::size_t>(f.gcount());
+  }
+  if (got < 348)
+    throw InputError(path + ": NIfTI header truncated (" + std::to_string(got) + " bytes)");
+  const std::int32_t raw_size = get<std::int32_t>(h.data(), false);
+  bool swap = false;
+  int version = 0;
+  for (bool s : {false, true}) {
+    const std::int32_t v = get<std::int32_t>(h.data(), s);
+    if (v == 348) version = 1;
+    if (v == 540) version = 2;
+    if (version) {
+      swap = s;
+      break;
+    }
+  }
+  if (!version)
+    throw InputError(path + ": not a NIfTI file (sizeof_hdr is " + std::to_string(raw_size) +
+                     ", expected 348 or 540)");
+  if (version == 2 && got < 540) throw InputError(path + ": NIfTI-2 header truncated");
+  const unsigned char* magic = version == 1 ? h.data() + 344 : h.data() + 4;
+  const bool digit = magic[2] == (version == 1 ? '1' : '2') && magic[3] == '\0';
+  const bool single = magic[0] == 'n' && magic[1] == '+' && digit;
+  const bool pair = magic[0] == 'n' && magic[1] == 'i' && digit;
+  if (!single && !pair) throw InputError(path + ": NIfTI magic string missing");
+  if (pair)
+    throw InputError(path +
+                     ": a NIfTI header whose samples are in a separate .img file; "
+                     "convert it to a single .nii");
+  std::array<std::int64_t, 8> dim{};
+  int datatype = 0, bitpix = 0;
+  double vox_offset = 0, slope = 0, inter = 0;
+  if (version == 1) {
+    for (int i = 0; i < 8; ++i) dim[i] = get<std::int16_t>(h.data() + 40 + 2 * i, swap);
+    datatype = get<std::int16_t>(h.data() + 70, swap);
+    bitpix = get<std::int16_t>(h.data() + 72, swap);
+    vox_offset = get<float>(h.data() + 108, swap);
+    slope = get<float>(h.data() + 112, swap);
+    inter = get<float>(h.data() + 116, swap);
+  } else {
+    datatype = get<std::int16_t>(h.data() + 12, swap);
+    bitpix = get<std::int16_t>(h.data() + 14, swap);
+    for (int i = 0; i < 8; ++i) dim[i] = get<std::int64_t>(h.data() + 16 + 8 * i, swap);
+    vox_offset = static_cast<double>(get<std::int64_t>(h.data() + 168, swap));
+    slope = get<double>(h.data() + 176, swap);
+    inter = get<double>(h.data() + 184, swap);
+  }
+  // ITK turns qform and sform into a direction matrix through VNL, which aborts the process on
+  // non-finite entries; a singular sform gives no direction at all.
+  {
+    const auto real = [&](std::size_t at1, std::size_t at2) {
+      return version == 1 ? static_cast<double>(get<float>(h.data() + at1, swap))
+                          : get<double>(h.data() + at2, swap);
+    };
+    std::array<double, 12> srow{};
+    for (int i = 0; i < 12; ++i) srow[i] = real(280 + 4 * i, 400 + 8 * i);
+    std::array<double, 6> quat{};
+    for (int i = 0; i < 6; ++i) quat[i] = real(256 + 4 * i, 352 + 8 * i);
+    bool finite = true;
+    for (double x : srow) finite = finite && std::isfinite(x);
+    for (double x : quat) finite = finite && std::isfinite(x);
+    for (int i = 0; i < 8; ++i) finite = finite && std::isfinite(real(76 + 4 * i, 104 + 8 * i));
+    if (!finite)
+      throw InputError(path + ": NIfTI geometry (pixdim, quatern, qoffset or srow) is not finite");
+    const int sform = version == 1 ? get<std::int16_t>(h.data() + 254, swap)
+                                   : get<std::int32_t>(h.data() + 348, swap);
+    if (sform > 0) {
+      const auto& m = srow;  // rows of 4: the 3x3 part is m[0..2], m[4..6], m[8..10]
+      const double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
+                         m[2] * (m[4] * m[9] - m[5] * m[8]);
+      double scale = 1;
+      for (int c = 0; c < 3; ++c)
+        scale *= std::sqrt(m[c] * m[c] + m[4 + c] * m[4 + c] + m[8 + c] * m[8 + c]);
+      if (!(std::abs(det) > 1e-6 * scale) || scale == 0)
+        throw InputError(path + ": NIfTI sform matrix is singular");
+    }
+  }
+  if (dim[0] < 2 || dim[0] > 7)
+    throw InputError(path + ": NIfTI dim[0] is " + std::to_string(dim[0]) + " (1 to 7 axes)");
+  Index3 dims{1, 1, 1};
+  for (int a = 1; a <= dim[0]; ++a) {
+    if (dim[a] <= 0)
+      throw InputError(path + ": NIfTI axis " + std::to_string(a) + " has size " +
+                       std::to_string(dim[a]));
+    if (a <= 3)
+      dims[a - 1] = dim[a];
+    else if (dim[a] != 1)
+      throw InputError(path + ": NIfTI axis " + std::to_string(a) + " has size " +
+                       std::to_string(dim[a]) + "; a volume needs 3 axes (no time series)");
+  }
+  const std::optional<ScalarType> type = nifti_type(datatype);
+  if (!type)
+    throw InputError(path + ": NIfTI datatype " + std::to_string(datatype) +
+                     " is not supported (int8 to uint32, float or double)");
+  if (bitpix != 0 && static_cast<std::size_t>(bitpix) != 8 * scalar_size(*type))
+    throw InputError(path + ": NIfTI bitpix " + std::to_string(bitpix) +
+                     " does not match datatype " + std::to_string(datatype));
+  const std::uint64_t bytes = checked_volume_bytes(*type, dims);
+  const std::uint64_t header = version == 1 ? 348 : 540;
+  if (!std::isfinite(vox_offset) || vox_offset < static_cast<double>(header) || vox_offset > 1e15)
+    throw InputError(path + ": NIfTI vox_offset " + std::to_string(vox_offset) + " is invalid");
+  const auto offset = static_cast<std::uint64_t>(vox_offset);
+  if (!gz && size < offset + bytes)
+    throw InputError(path + ": file holds " + std::to_string(size) + " bytes but " +
+                     dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples need " +
+                     std::to_string(bytes) + " after " + std::to_string(offset) + " header bytes");
+  if (gz && size * kMaxDeflateRatio < bytes)
+    throw InputError(path + ": " + std::to_string(size) + " compressed bytes cannot hold " +
+                     dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
+  ImageHeaderCheck out;
+  if (std::isfinite(slope) && slope != 0 && (slope != 1 || (std::isfinite(inter) && inter != 0))) {
+    out.rescaled = true;
+    out.rescale_slope = slope;
+    out.rescale_intercept = std::isfinite(inter) ? inter : 0;
+  }
+  // Trailing bytes past the samples are allowed by ITK; box reads want the exact layout.
+  if (!gz && !out.rescaled && size == offset + bytes)
+    out.plain = PlainData{
+        path, offset, *type, dims,
+        swap == (std::endian::native == std::endian::little) ? Endian::Big : Endian::Little};
+  return out;
+}
+
+ImageHeaderCheck check_metaimage_header(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  const std::uint64_t size = file_size_of(path);
+  // A header is a few hundred bytes; past 64 KiB without ElementDataFile it is not one.
+  constexpr std::uint64_t kMaxHeader = 1 << 16;
+  std::string line, data_file;
+  int ndims = 0;
+  std::vector<std::int64_t> dimsize;
+  std::string element_type;
+  bool compressed = false, msb = false, found = false;
+  std::int64_t header_size = 0, channels = 1;
+  std::uint64_t header_end = 0;
+  while (std::getline(f, line)) {
+    header_end += line.size() + 1;
+    if (header_end > kMaxHeader) break;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const std::size_t eq = line.find('=');
+    if (eq == std::string::npos) continue;
+    std::string key = line.substr(0, eq), value = line.substr(eq + 1);
+    const auto trim = [](std::string& s) {
+      s.erase(0, s.find_first_not_of(" \t"));
+      s.erase(s.find_last_not_of(" \t") + 1);
+    };
+    trim(key);
+    trim(value);
+    std::istringstream v(value);
+    if (key == "NDims") {
+      if (value.empty() || value.size() > 2 ||
+          value.find_first_not_of("0123456789") != std::string::npos)
+        throw InputError(path + ": MetaImage NDims is '" + value + "'");
+      ndims = std::stoi(value);
+    } else if (key == "DimSize") {
+      // Whole tokens of digits only: ITK reads "3.4e38" as a number, where >> would stop at 3.
+      for (std::string item; v >> item;) {
+        if (item.empty() || item.size() > 18 ||
+            item.find_first_not_of("0123456789") != std::string::npos)
+          throw InputError(path + ": MetaImage DimSize holds '" + item +
+                           "', not a positive integer");
+        dimsize.push_back(std::stoll(item));
+      }
+    } else if (key == "ElementType") {
+      element_type = value;
+    } else if (key == "CompressedData") {
+      compressed = value == "True" || value == "true";
+    } else if (key == "BinaryDataByteOrderMSB" || key == "ElementByteOrderMSB") {
+      msb = value == "True" || value == "true";
+    } else if (key == "HeaderSize") {
+      v >> header_size;
+    } else if (key == "ElementSpacing" || key == "ElementSize" || key == "TransformMatrix" ||
+               key == "Rotation" || key == "Orientation" || key == "Offset" || key == "Position" ||
+               key == "Origin" || key == "CenterOfRotation") {
+      // ITK builds its direction matrix through VNL, which aborts on non-finite entries.
+      std::vector<double> values;
+      for (std::string item; v >> item;) {
+        char* end = nullptr;
+        const double x = std::strtod(item.c_str(), &end);
+        if (end == item.c_str() || *end != '\0' || !std::isfinite(x))
+          throw InputError(path + ": MetaImage " + key + " holds '" + item +
+                           "', not a finite number");
+        values.push_back(x);
+      }
+      if ((key == "TransformMatrix" || key == "Rotation" || key == "Orientation")) {
+        if (values.size() != 9)
+          throw InputError(path + ": MetaImage " + key + " needs 9 numbers for a volume, has " +
+                           std::to_string(values.size()));
+        const auto& m = values;
+        const double det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+                           m[2] * (m[3] * m[7] - m[4] * m[6]);
+        if (!(std::abs(det) > 1e-6)) throw InputError(path + ": MetaImage " + key + " is singular");
+      }
+      if (key == "ElementSpacing")
+        for (double x : values)
+          if (!(x != 0)) throw InputError(path + ": MetaImage ElementSpacing holds 0");
+    } else if (key == "ElementNumberOfChannels") {
+      v >> channels;
+    } else if (key == "ElementDataFile") {
+      data_file = value;
+      found = true;
+      break;
+    }
+  }
+  if (!found)
+    throw InputError(path + ": not a MetaImage header (no ElementDataFile line" +
+                     std::string(header_end > kMaxHeader ? " in its first 64 KiB)" : ")"));
+  while (ndims > 3 && static_cast<int>(dimsize.size()) >= ndims && dimsize[ndims - 1] == 1) --ndims;
+  if (ndims != 3 || dimsize.size() < 3)
+    throw InputError(path + ": MetaImage with NDims " + std::to_string(ndims) + " and " +
+                     std::to_string(dimsize.size()) + " DimSize values; a volume needs 3");
+  const Index3 dims{dimsize[0], dimsize[1], dimsize[2]};
+  static const std::pair<const char*, ScalarType> kTypes[] = {
+      {"MET_UCHAR", ScalarType::UInt8},   {"MET_CHAR", ScalarType::Int8},
+      {"MET_USHORT", ScalarType::UInt16}, {"MET_SHORT", ScalarType::Int16},
+      {"MET_UINT", ScalarType::UInt32},   {"MET_INT", ScalarType::Int32},
+      {"MET_FLOAT", ScalarType::Float32}, {"MET_DOUBLE", ScalarType::Float64}};
+  std::optional<ScalarType> type;
+  for (const auto& [name, t] : kTypes)
+    if (element_type == name) type = t;
+  if (!type)
+    throw InputError(path + ": MetaImage ElementType '" + element_type +
+                     "' is not supported (MET_CHAR to MET_UINT, MET_FLOAT, MET_DOUBLE)");
+  if (channels != 1)
+    throw InputError(path + ": " + std::to_string(channels) +
+                     " channels per sample; a volume needs one");
+  const std::uint64_t bytes = checked_volume_bytes(*type, dims);
+  ImageHeaderCheck out;
+  const Endian endian = msb ? Endian::Big : Endian::Little;
+  std::string file = path;
+  std::uint64_t offset = header_end, available = size > header_end ? size - header_end : 0;
+  if (data_file != "LOCAL") {
+    if (data_file == "LIST" || data_file.find('%') != std::string::npos ||
+        data_file.find(' ') != std::string::npos)
+      throw InputError(path + ": MetaImage data in several files (ElementDataFile " + data_file +
+                       ") is not supported");
+    fs::path p = data_file;
+    if (p.is_relative()) p = fs::path(path).parent_path() / p;
+    file = p.string();
+    const std::uint64_t n = file_size_of(file);
+    if (header_size < -1)
+      throw InputError(path + ": MetaImage HeaderSize " + std::to_string(header_size));
+    offset =
+        header_size == -1 ? (n >= bytes ? n - bytes : 0) : static_cast<std::uint64_t>(header_size);
+    available = n > offset ? n - offset : 0;
+  }
+  if (compressed) {
+    if (available * kMaxDeflateRatio < bytes)
+      throw InputError(path + ": " + std::to_string(available) + " compressed bytes cannot hold " +
+                       dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
+    return out;
+  }
+  if (available < bytes)
+    throw InputError(file + ": holds " + std::to_string(available) + " bytes of samples but " +
+                     dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples need " +
+                     std::to_string(bytes));
+  if (available == bytes) out.plain = PlainData{file, offset, *type, dims, endian};
+  return out;
+}
+
+}  // namespace isotile

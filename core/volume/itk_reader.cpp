@@ -1,0 +1,553 @@
+// ITK's image IO behind plain buffers. The ImageIO classes are used directly, without ITK's
+// templated reader pipeline: headers and samples go straight into the caller's buffer (no second
+// copy of the volume), and this file stays cheap to compile.
+#include "core/volume/itk_reader.h"
+
+#include <itkGDCMImageIO.h>
+#include <itkGDCMSeriesFileNames.h>
+#include <itkImageIOBase.h>
+#include <itkMetaDataObject.h>
+#include <itkMetaImageIO.h>
+#include <itkNiftiImageIO.h>
+#include <itkTIFFImageIO.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+
+#include "core/errors.h"
+
+// ITK's own copy of libtiff (libitktiff) warns on stderr about every private tag it does not
+// know, e.g. ImageJ's 50838/50839 on each page; its header is not installed.
+extern "C" {
+using ItkTiffHandler = void (*)(const char*, const char*, va_list);
+ItkTiffHandler itk_TIFFSetWarningHandler(ItkTiffHandler);
+}
+
+namespace isotile {
+
+namespace {
+
+namespace fs = std::filesystem;
+using IOComponent = itk::IOComponentEnum;
+
+void quiet_libtiff() {
+  static std::once_flag once;
+  std::call_once(once, [] { itk_TIFFSetWarningHandler(nullptr); });
+}
+
+// ITK's exception text spans several lines (file, line, location, description): the CLI prints
+// one, so keep the description.
+std::string itk_message(const itk::ExceptionObject& e) {
+  std::string text = e.GetDescription() ? e.GetDescription() : e.what();
+  for (char& c : text)
+    if (c == '\n' || c == '\r') c = ' ';
+  while (!text.empty() && text.back() == ' ') text.pop_back();
+  return text;
+}
+
+std::size_t type_size(ScalarType t) {
+  switch (t) {
+    case ScalarType::Int8:
+    case ScalarType::UInt8:
+      return 1;
+    case ScalarType::Int16:
+    case ScalarType::UInt16:
+      return 2;
+    case ScalarType::Int32:
+    case ScalarType::UInt32:
+    case ScalarType::Float32:
+      return 4;
+    case ScalarType::Float64:
+      return 8;
+  }
+  return 1;
+}
+
+ScalarType scalar_of(IOComponent c, std::size_t size, const std::string& what) {
+  switch (c) {
+    case IOComponent::UCHAR:
+      return ScalarType::UInt8;
+    case IOComponent::CHAR:
+      return ScalarType::Int8;
+    case IOComponent::USHORT:
+      return ScalarType::UInt16;
+    case IOComponent::SHORT:
+      return ScalarType::Int16;
+    case IOComponent::UINT:
+      return ScalarType::UInt32;
+    case IOComponent::INT:
+      return ScalarType::Int32;
+    case IOComponent::ULONG:
+      if (size == 4) return ScalarType::UInt32;
+      break;
+    case IOComponent::LONG:
+      if (size == 4) return ScalarType::Int32;
+      break;
+    case IOComponent::FLOAT:
+      return ScalarType::Float32;
+    case IOComponent::DOUBLE:
+      return ScalarType::Float64;
+    default:
+      break;
+  }
+  throw InputError(what + ": sample type '" + itk::ImageIOBase::GetComponentTypeAsString(c) +
+                   "' is not supported (int8 to uint32, float or double)");
+}
+
+IOComponent component_of(ScalarType t) {
+  switch (t) {
+    case ScalarType::Int8:
+      return IOComponent::CHAR;
+    case ScalarType::UInt8:
+      return IOComponent::UCHAR;
+    case ScalarType::Int16:
+      return IOComponent::SHORT;
+    case ScalarType::UInt16:
+      return IOComponent::USHORT;
+    case ScalarType::Int32:
+      return IOComponent::INT;
+    case ScalarType::UInt32:
+      return IOComponent::UINT;
+    case ScalarType::Float32:
+      return IOComponent::FLOAT;
+    case ScalarType::Float64:
+      return IOComponent::DOUBLE;
+  }
+  return IOComponent::UCHAR;
+}
+
+itk::ImageIOBase::Pointer make_io(ItkInput::Kind kind) {
+  // ITK's warnings (e.g. "Analyze file is deprecated") would reach the user's terminal beside
+  // the one error line; what matters comes back as exceptions.
+  itk::Object::GlobalWarningDisplayOff();
+  switch (kind) {
+    case ItkInput::Kind::Nifti:
+      return itk::NiftiImageIO::New().GetPointer();
+    case ItkInput::Kind::MetaImage:
+      return itk::MetaImageIO::New().GetPointer();
+    case ItkInput::Kind::Tiff:
+    case ItkInput::Kind::TiffStack:
+      quiet_libtiff();
+      return itk::TIFFImageIO::New().GetPointer();
+    case ItkInput::Kind::Dicom:
+      return itk::GDCMImageIO::New().GetPointer();
+  }
+  return nullptr;
+}
+
+const char* format_name(ItkInput::Kind kind) {
+  switch (kind) {
+    case ItkInput::Kind::Nifti:
+      return "NIfTI";
+    case ItkInput::Kind::MetaImage:
+      return "MetaImage";
+    case ItkInput::Kind::Tiff:
+    case ItkInput::Kind::TiffStack:
+      return "TIFF";
+    case ItkInput::Kind::Dicom:
+      return "DICOM";
+  }
+  return "?";
+}
+
+// One file's header as ITK sees it, reduced to at most 3 axes (trailing axes of size 1 dropped).
+struct FileHeader {
+  ScalarType type = ScalarType::UInt8;
+  unsigned axes = 0;
+  Index3 dims{1, 1, 1};
+  Vec3d spacing{1, 1, 1};
+  Vec3d origin{0, 0, 0};
+  Mat3 direction = kIdentity3;
+};
+
+FileHeader read_header(itk::ImageIOBase& io, const std::string& file) {
+  if (!io.CanReadFile(file.c_str())) {
+    std::string name = io.GetNameOfClass();  // e.g. TIFFImageIO
+    if (name.ends_with("ImageIO")) name.resize(name.size() - 7);
+    throw InputError(file + ": not a readable " + name + " file");
+  }
+  io.SetFileName(file);
+  try {
+    io.ReadImageInformation();
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(file + ": " + itk_message(e));
+  }
+  if (io.GetNumberOfComponents() != 1)
+    throw InputError(file + ": " + std::to_string(io.GetNumberOfComponents()) +
+                     " components per sample (e.g. colour); a volume needs one");
+  FileHeader h;
+  h.type = scalar_of(io.GetComponentType(), io.GetComponentSize(), file);
+  unsigned n = io.GetNumberOfDimensions();
+  while (n > 3 && io.GetDimensions(n - 1) == 1) --n;
+  if (n > 3 || n == 0)
+    throw InputError(file + ": " + std::to_string(n) + " axes; a volume needs 3");
+  h.axes = n;
+  for (unsigned a = 0; a < n; ++a) {
+    h.dims[a] = static_cast<std::int64_t>(io.GetDimensions(a));
+    h.spacing[a] = io.GetSpacing(a);
+    h.origin[a] = io.GetOrigin(a);
+    const std::vector<double> d = io.GetDirection(a);
+    for (unsigned r = 0; r < 3 && r < d.size(); ++r) h.direction[3 * r + a] = d[r];
+  }
+  if (n == 2) {
+    // A slice: its normal completes a right-handed frame.
+    const Mat3& m = h.direction;
+    h.direction[2] = m[3] * m[7] - m[6] * m[4];
+    h.direction[5] = m[6] * m[1] - m[0] * m[7];
+    h.direction[8] = m[0] * m[4] - m[3] * m[1];
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (h.dims[a] <= 0) throw InputError(file + ": an axis of size 0");
+    if (!std::isfinite(h.spacing[a]) || h.spacing[a] <= 0)
+      throw InputError(file + ": spacing " + std::to_string(h.spacing[a]) + " along axis " +
+                       std::to_string(a) + " (must be positive)");
+    if (!std::isfinite(h.origin[a])) throw InputError(file + ": the origin is not finite");
+  }
+  for (double c : h.direction)
+    if (!std::isfinite(c)) throw InputError(file + ": the direction cosines are not finite");
+  return h;
+}
+
+void read_samples(itk::ImageIOBase& io, const std::string& file, const FileHeader& h, void* out) {
+  itk::ImageIORegion region(h.axes);
+  for (unsigned a = 0; a < h.axes; ++a) {
+    region.SetIndex(a, 0);
+    region.SetSize(a, static_cast<itk::SizeValueType>(h.dims[a]));
+  }
+  io.SetIORegion(region);
+  try {
+    io.Read(out);
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(file + ": " + itk_message(e));
+  }
+}
+
+double dot(const Vec3d& a, const Vec3d& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+std::string series_tag(itk::GDCMImageIO& io, const char* key) {
+  std::string value;
+  itk::ExposeMetaData<std::string>(io.GetMetaDataDictionary(), key, value);
+  while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
+  return value;
+}
+
+itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
+  auto names = itk::GDCMSeriesFileNames::New();
+  names->SetUseSeriesDetails(false);
+  names->SetRecursive(false);
+  try {
+    names->SetDirectory(dir);
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(dir + ": " + itk_message(e));
+  }
+  return names;
+}
+
+// A stack of 2D files (DICOM slices, TIFF pages), ordered in z.
+ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
+  const bool dicom = input.kind == ItkInput::Kind::Dicom;
+  auto io = make_io(input.kind);
+  std::vector<FileHeader> h;
+  h.reserve(files.size());
+  for (const std::string& f : files) h.push_back(read_header(*io, f));
+  ItkImageInfo info;
+  info.format = format_name(input.kind);
+  if (files.size() == 1) {
+    // One file holding the whole volume (multi-frame DICOM, multi-page TIFF).
+    if (h[0].axes < 3 || h[0].dims[2] < 2)
+      throw InputError(input.path + ": one " + info.format +
+                       " slice; a volume needs several (give the directory or the series)");
+    info.type = h[0].type;
+    info.dims = h[0].dims;
+    info.spacing = h[0].spacing;
+    info.origin = h[0].origin;
+    info.direction = h[0].direction;
+  } else {
+    const FileHeader first = h[0];
+    for (std::size_t k = 0; k < files.size(); ++k) {
+      if (h[k].dims[2] != 1 || h[k].dims[0] != first.dims[0] || h[k].dims[1] != first.dims[1])
+        throw InputError(files[k] + ": slice of " + std::to_string(h[k].dims[0]) + "x" +
+                         std::to_string(h[k].dims[1]) + "x" + std::to_string(h[k].dims[2]) +
+                         " where " + files[0] + " has " + std::to_string(first.dims[0]) + "x" +
+                         std::to_string(first.dims[1]) + "x1");
+      if (h[k].type != first.type)
+        throw InputError(files[k] + ": sample type differs from " + files[0] +
+                         "'s (different rescale slopes or pixel formats in one series)");
+    }
+    info.type = first.type;
+    info.dims = {first.dims[0], first.dims[1], static_cast<std::int64_t>(files.size())};
+    info.spacing = first.spacing;
+    info.direction = first.direction;
+    info.origin = first.origin;
+    if (dicom) {
+      // Slices must lie evenly along the normal of their planes: other stacks (uneven spacing,
+      // a tilted gantry) would need resampling, which would silently change the data.
+      const Vec3d normal{first.direction[2], first.direction[5], first.direction[8]};
+      std::vector<double> d(files.size());
+      const auto positions = [&] {
+        for (std::size_t k = 0; k < files.size(); ++k) {
+          for (int c = 0; c < 3; ++c)
+            if (std::abs(h[k].direction[3 * c] - first.direction[3 * c]) > 1e-4 ||
+                std::abs(h[k].direction[3 * c + 1] - first.direction[3 * c + 1]) > 1e-4)
+              throw InputError(files[k] + ": slice orientation differs from " + files[0] + "'s");
+          const Vec3d off{h[k].origin[0] - h[0].origin[0], h[k].origin[1] - h[0].origin[1],
+                          h[k].origin[2] - h[0].origin[2]};
+          d[k] = dot(off, normal);
+        }
+      };
+      positions();
+      if (d.back() < d.front()) {
+        // Ordered against the normal: the first slice along it comes first.
+        std::reverse(files.begin(), files.end());
+        std::reverse(h.begin(), h.end());
+        positions();
+        info.origin = h[0].origin;
+      }
+      const double total = d.back() - d.front();
+      const double step = total / static_cast<double>(files.size() - 1);
+      for (std::size_t k = 1; k < files.size(); ++k) {
+        const double s = d[k] - d[k - 1];
+        if (s <= 1e-6 * std::max(1.0, std::abs(step)))
+          throw InputError(
+              input.path + ": slices " + files[k - 1] + " and " + files[k] +
+              " lie at the same position (duplicates or several stacks in one series)");
+        if (std::abs(s - step) > 1e-3 * step + 1e-4)
+          throw InputError(input.path + ": non-uniform slice spacing (" + std::to_string(s) +
+                           " mm between " + fs::path(files[k - 1]).filename().string() + " and " +
+                           fs::path(files[k]).filename().string() + ", " + std::to_string(step) +
+                           " mm on average); isotile does not resample");
+      }
+      const Vec3d last{h.back().origin[0] - h[0].origin[0], h.back().origin[1] - h[0].origin[1],
+                       h.back().origin[2] - h[0].origin[2]};
+      const double along = dot(last, normal);
+      const double across = std::sqrt(std::max(0.0, dot(last, last) - along * along));
+      if (across > 1e-3 * std::abs(along) + 1e-3)
+        throw InputError(input.path + ": the slices are not stacked along their normal (gantry " +
+                         "tilt of " + std::to_string(std::atan2(across, along) * 180 / M_PI) +
+                         " degrees); isotile does not resample");
+      info.spacing[2] = step;
+    }
+  }
+  info.files = std::move(files);
+  if (dicom) {
+    auto& gdcm = static_cast<itk::GDCMImageIO&>(*io);
+    read_header(gdcm, info.files.front());
+    info.rescale_slope = gdcm.GetRescaleSlope();
+    info.rescale_intercept = gdcm.GetRescaleIntercept();
+    info.rescaled = info.rescale_slope != 1 || info.rescale_intercept != 0;
+    info.series_description = series_tag(gdcm, "0008|103e");
+  }
+  return info;
+}
+
+std::vector<std::string> sorted_files(const fs::path& dir, bool (*keep)(const fs::path&)) {
+  std::vector<std::string> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec))
+    if (e.is_regular_file() && keep(e.path())) out.push_back(e.path().string());
+  if (ec) throw IoError("cannot list " + dir.string() + ": " + ec.message());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+bool tiff_name(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  return ext == ".tif" || ext == ".tiff";
+}
+
+// Numbered slices: `pattern` holds one printf integer conversion; slices are numbered from 0 or
+// 1 on, as long as the files exist.
+std::vector<std::string> pattern_files(const std::string& pattern) {
+  std::vector<std::string> out;
+  for (int first : {0, 1}) {
+    for (int i = first;; ++i) {
+      char name[4096];
+      if (std::snprintf(name, sizeof name, pattern.c_str(), i) >= static_cast<int>(sizeof name))
+        break;
+      if (!fs::is_regular_file(name)) break;
+      out.push_back(name);
+    }
+    if (!out.empty()) break;
+  }
+  if (out.empty()) throw IoError("cannot open " + pattern + ": no file matches the pattern");
+  return out;
+}
+
+std::vector<std::string> stack_files(const ItkInput& input) {
+  if (input.kind == ItkInput::Kind::TiffStack) {
+    if (fs::is_directory(input.path)) {
+      auto files = sorted_files(input.path, tiff_name);
+      if (files.empty()) throw InputError(input.path + ": no .tif files in the directory");
+      return files;
+    }
+    return pattern_files(input.path);
+  }
+  // DICOM: the directory, or the directory of the file given.
+  const bool dir = fs::is_directory(input.path);
+  const std::string where = dir ? input.path : fs::path(input.path).parent_path().string();
+  auto names = scan_series(where.empty() ? "." : where);
+  const std::vector<std::string> uids = names->GetSeriesUIDs();
+  if (uids.empty()) throw InputError(input.path + ": no DICOM series found");
+  std::string uid = input.series;
+  if (!uid.empty()) {
+    if (std::find(uids.begin(), uids.end(), uid) == uids.end())
+      throw InputError(input.path + ": no DICOM series with UID " + uid + " (there are " +
+                       std::to_string(uids.size()) + "; `isotile info` lists them)");
+  } else if (!dir) {
+    // The series of the file given.
+    const fs::path self = fs::weakly_canonical(input.path);
+    for (const std::string& u : uids)
+      for (const std::string& f : names->GetFileNames(u))
+        if (fs::weakly_canonical(f) == self) uid = u;
+    if (uid.empty()) throw InputError(input.path + ": not part of a DICOM series GDCM can read");
+  } else if (uids.size() > 1) {
+    std::string list;
+    for (const std::string& u : uids) list += (list.empty() ? "" : ", ") + u;
+    throw InputError(
+        input.path + ": " + std::to_string(uids.size()) +
+        " DICOM series; choose one with --series UID (`isotile info` lists them): " + list);
+  } else {
+    uid = uids.front();
+  }
+  return names->GetFileNames(uid);
+}
+
+}  // namespace
+
+bool itk_available() {
+  return true;
+}
+
+bool is_dicom_file(const std::string& path) {
+  auto io = itk::GDCMImageIO::New();
+  return io->CanReadFile(path.c_str());
+}
+
+std::vector<DicomSeriesInfo> list_dicom_series(const std::string& directory) {
+  auto names = scan_series(directory);
+  std::vector<DicomSeriesInfo> out;
+  auto io = itk::GDCMImageIO::New();
+  for (const std::string& uid : names->GetSeriesUIDs()) {
+    const std::vector<std::string> files = names->GetFileNames(uid);
+    DicomSeriesInfo s;
+    s.uid = uid;
+    s.files = static_cast<std::int64_t>(files.size());
+    if (!files.empty()) {
+      const FileHeader h = read_header(*io, files.front());
+      s.columns = h.dims[0];
+      s.rows = h.dims[1];
+      s.description = series_tag(*io, "0008|103e");
+    }
+    out.push_back(s);
+  }
+  return out;
+}
+
+ItkImageInfo read_itk_info(const ItkInput& input) {
+  try {
+    if (input.kind == ItkInput::Kind::Dicom || input.kind == ItkInput::Kind::TiffStack) {
+      ItkImageInfo info = stack_info(input, stack_files(input));
+      if (input.kind == ItkInput::Kind::Dicom) {
+        info.series_uid = input.series;
+        if (info.series_uid.empty()) {
+          auto io = itk::GDCMImageIO::New();
+          read_header(*io, info.files.front());
+          info.series_uid = series_tag(*io, "0020|000e");
+        }
+      }
+      return info;
+    }
+    auto io = make_io(input.kind);
+    const FileHeader h = read_header(*io, input.path);
+    if (h.axes < 3 || h.dims[2] < 2) {
+      if (input.kind == ItkInput::Kind::Tiff)
+        throw InputError(input.path +
+                         ": one TIFF page; a volume needs several (a multi-page file, a directory "
+                         "of slices or a pattern such as slice_%03d.tif)");
+      throw InputError(input.path + ": a 2D image; a volume needs 3 axes");
+    }
+    ItkImageInfo info;
+    info.format = format_name(input.kind);
+    info.type = h.type;
+    info.dims = h.dims;
+    info.spacing = h.spacing;
+    info.origin = h.origin;
+    info.direction = h.direction;
+    return info;
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(input.path + ": " + itk_message(e));
+  }
+}
+
+void read_itk_data(const ItkInput& input, const ItkImageInfo& info, void* out) {
+  try {
+    auto io = make_io(input.kind);
+    if (info.files.size() <= 1 && input.kind != ItkInput::Kind::Dicom &&
+        input.kind != ItkInput::Kind::TiffStack) {
+      const FileHeader h = read_header(*io, input.path);
+      if (h.dims != info.dims || h.type != info.type)
+        throw InputError(input.path + ": the file changed while it was read");
+      read_samples(*io, input.path, h, out);
+      return;
+    }
+    const std::size_t plane =
+        static_cast<std::size_t>(info.dims[0] * info.dims[1]) * type_size(info.type);
+    auto* dst = static_cast<char*>(out);
+    for (const std::string& f : info.files) {
+      const FileHeader h = read_header(*io, f);
+      if (h.type != info.type || h.dims[0] != info.dims[0] || h.dims[1] != info.dims[1])
+        throw InputError(f + ": the file changed while it was read");
+      read_samples(*io, f, h, dst);
+      dst += plane * static_cast<std::size_t>(h.dims[2]);
+    }
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(input.path + ": " + itk_message(e));
+  }
+}
+
+void write_itk(const std::string& path, const void* data, ScalarType type, const Index3& dims,
+               const Vec3d& spacing, const Vec3d& origin, const Mat3& direction) {
+  const std::string name = fs::path(path).filename().string();
+  itk::ImageIOBase::Pointer io;
+  if (name.find(".nii") != std::string::npos)
+    io = itk::NiftiImageIO::New().GetPointer();
+  else if (tiff_name(path)) {
+    quiet_libtiff();
+    io = itk::TIFFImageIO::New().GetPointer();
+  } else
+    io = itk::MetaImageIO::New().GetPointer();
+  io->SetNumberOfDimensions(3);
+  io->SetFileName(path);
+  io->SetComponentType(component_of(type));
+  io->SetPixelType(itk::IOPixelEnum::SCALAR);
+  io->SetNumberOfComponents(1);
+  itk::ImageIORegion region(3);
+  for (unsigned a = 0; a < 3; ++a) {
+    io->SetDimensions(a, static_cast<itk::SizeValueType>(dims[a]));
+    io->SetSpacing(a, spacing[a]);
+    io->SetOrigin(a, origin[a]);
+    io->SetDirection(a, std::vector<double>{direction[a], direction[3 + a], direction[6 + a]});
+    region.SetIndex(a, 0);
+    region.SetSize(a, static_cast<itk::SizeValueType>(dims[a]));
+  }
+  io->SetIORegion(region);
+  io->SetUseCompression(name.size() > 3 && name.substr(name.size() - 3) == ".gz");
+  try {
+    io->WriteImageInformation();
+    io->Write(data);
+  } catch (const itk::ExceptionObject& e) {
+    throw IoError("cannot write " + path + ": " + itk_message(e));
+  }
+}
+
+}  // namespace isotile

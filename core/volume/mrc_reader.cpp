@@ -1,0 +1,247 @@
+// MRC2014 / CCP4 maps (cryo-EM, crystallography), following the MRC2014 specification
+// (https://www.ccpem.ac.uk/mrc_format/mrc2014.php): a 1024-byte header, an optional extended
+// header of NSYMBT bytes, then the samples with columns fastest.
+//
+// The header is validated against the file's size before anything is allocated. Axis order:
+// columns, rows and sections run along the axes MAPC, MAPR and MAPS (1 = X, 2 = Y, 3 = Z); the
+// volume is returned in X, Y, Z order. Voxel size = cell length / MX (MY, MZ). The first sample
+// lies at ORIGIN + start * voxel size, where start is NXSTART, NYSTART, NZSTART taken through
+// the same axis order (cryo-EM maps put the offset in ORIGIN, crystallographic maps in the start
+// fields; where both are given they add). Non-orthogonal cells (angles other than 90 degrees)
+// become the volume's direction cosines.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/volume/volume_io.h"
+
+namespace isotile {
+
+namespace {
+
+constexpr std::size_t kHeaderBytes = 1024;
+
+struct MrcLayout {
+  VolumeHeader header;
+  std::int64_t n[3];  // columns, rows, sections as stored
+  int axis[3];        // volume axis (0 X, 1 Y, 2 Z) of columns, rows, sections
+  int mode = 2;
+  bool swap = false;
+  std::uint64_t offset = 0;
+};
+
+template <class T>
+T get(const unsigned char* p, bool swap) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, p, sizeof(T));
+  if (swap) std::reverse(b, b + sizeof(T));
+  T v;
+  std::memcpy(&v, b, sizeof(T));
+  return v;
+}
+
+float half_to_float(std::uint16_t h) {
+  const std::uint32_t sign = (h & 0x8000u) << 16;
+  std::uint32_t exp = (h >> 10) & 0x1f, mant = h & 0x3ff;
+  std::uint32_t bits;
+  if (exp == 0x1f) {
+    bits = sign | 0x7f800000u | (mant << 13);
+  } else if (exp == 0) {
+    if (mant == 0) {
+      bits = sign;
+    } else {
+      int e = -1;
+      do {
+        ++e;
+        mant <<= 1;
+      } while (!(mant & 0x400));
+      bits = sign | static_cast<std::uint32_t>(127 - 15 - e) << 23 | (mant & 0x3ff) << 13;
+    }
+  } else {
+    bits = sign | (exp + 127 - 15) << 23 | mant << 13;
+  }
+  return std::bit_cast<float>(bits);
+}
+
+MrcLayout mrc_layout(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  std::error_code ec;
+  const std::uint64_t size = std::filesystem::file_size(path, ec);
+  if (ec) throw IoError("cannot open " + path + ": " + ec.message());
+  unsigned char h[kHeaderBytes];
+  f.read(reinterpret_cast<char*>(h), kHeaderBytes);
+  if (static_cast<std::size_t>(f.gcount()) != kHeaderBytes)
+    throw InputError(path + ": MRC header truncated (" + std::to_string(f.gcount()) +
+                     " of 1024 bytes)");
+  MrcLayout m;
+  // MACHST says the byte order; old files leave it empty, so a plausible mode decides then.
+  const bool little_stamp = h[212] == 0x44 && (h[213] == 0x41 || h[213] == 0x44);
+  const bool big_stamp = h[212] == 0x11 && h[213] == 0x11;
+  const bool native_little = std::endian::native == std::endian::little;
+  if (little_stamp || big_stamp) {
+    m.swap = little_stamp != native_little;
+  } else {
+    const auto mode_ok = [&](bool s) {
+      const std::int32_t mode = get<std::int32_t>(h + 12, s);
+      return mode >= 0 && mode <= 16;
+    };
+    m.swap = !mode_ok(false) && mode_ok(true);
+  }
+  const auto i32 = [&](std::size_t at) { return get<std::int32_t>(h + at, m.swap); };
+  const auto f32 = [&](std::size_t at) { return static_cast<double>(get<float>(h + at, m.swap)); };
+  m.mode = i32(12);
+  ScalarType type;
+  std::size_t stored = 0;
+  switch (m.mode) {
+    case 0:
+      type = ScalarType::Int8;
+      stored = 1;
+      break;
+    case 1:
+      type = ScalarType::Int16;
+      stored = 2;
+      break;
+    case 2:
+      type = ScalarType::Float32;
+      stored = 4;
+      break;
+    case 6:
+      type = ScalarType::UInt16;
+      stored = 2;
+      break;
+    case 12:
+      type = ScalarType::Float32;  // half floats, widened
+      stored = 2;
+      break;
+    default:
+      throw InputError(path + ": MRC mode " + std::to_string(m.mode) +
+                       " is not supported (0 int8, 1 int16, 2 float32, 6 uint16, 12 float16; "
+                       "complex modes 3 and 4 are not volumes of values)");
+  }
+  const int map[3] = {i32(64), i32(68), i32(72)};
+  bool seen[3] = {false, false, false};
+  for (int c = 0; c < 3; ++c) {
+    if (map[c] < 1 || map[c] > 3 || seen[map[c] - 1])
+      throw InputError(path + ": MRC axis order MAPC, MAPR, MAPS = " + std::to_string(map[0]) +
+                       ", " + std::to_string(map[1]) + ", " + std::to_string(map[2]) +
+                       " is not a permutation of 1, 2, 3");
+    seen[map[c] - 1] = true;
+    m.axis[c] = map[c] - 1;
+  }
+  Index3 dims{};
+  Vec3d start{};
+  for (int c = 0; c < 3; ++c) {
+    m.n[c] = i32(4 * c);
+    if (m.n[c] <= 0)
+      throw InputError(path + ": MRC size " + std::to_string(m.n[c]) + " along " +
+                       (c == 0   ? "columns"
+                        : c == 1 ? "rows"
+                                 : "sections") +
+                       " (must be positive)");
+    dims[m.axis[c]] = m.n[c];
+    start[m.axis[c]] = i32(16 + 4 * c);
+  }
+  const std::int32_t nsymbt = i32(92);
+  if (nsymbt < 0)
+    throw InputError(path + ": MRC extended header size NSYMBT is " + std::to_string(nsymbt));
+  const std::uint64_t bytes = checked_volume_bytes(type, dims) / scalar_size(type) * stored;
+  m.offset = kHeaderBytes + static_cast<std::uint64_t>(nsymbt);
+  if (size != m.offset + bytes)
+    throw InputError(path + ": file holds " + std::to_string(size) + " bytes but the MRC header (" +
+                     std::to_string(m.n[0]) + "x" + std::to_string(m.n[1]) + "x" +
+                     std::to_string(m.n[2]) + ", mode " + std::to_string(m.mode) + ", " +
+                     std::to_string(nsymbt) + " extended header bytes) says " +
+                     std::to_string(m.offset + bytes));
+  VolumeHeader& v = m.header;
+  v.format = "MRC";
+  v.type = type;
+  v.dims = dims;
+  const std::int32_t sampling[3] = {i32(28), i32(32), i32(36)};
+  for (int a = 0; a < 3; ++a) {
+    const double cell = f32(40 + 4 * a);
+    v.spacing[a] = 1;
+    if (sampling[a] > 0 && std::isfinite(cell) && cell > 0) v.spacing[a] = cell / sampling[a];
+  }
+  double angle[3];
+  for (int a = 0; a < 3; ++a) {
+    angle[a] = f32(52 + 4 * a);
+    if (!std::isfinite(angle[a]) || angle[a] <= 0 || angle[a] >= 180) angle[a] = 90;
+  }
+  Vec3d origin{f32(196), f32(200), f32(204)};
+  for (double& o : origin)
+    if (!std::isfinite(o)) o = 0;
+  for (int a = 0; a < 3; ++a) v.origin[a] = origin[a] + start[a] * v.spacing[a];
+  if (angle[0] != 90 || angle[1] != 90 || angle[2] != 90) {
+    // Cell axes a, b, c in Cartesian coordinates (a along x, b in the x-y plane).
+    const double rad = M_PI / 180;
+    const double ca = std::cos(angle[0] * rad), cb = std::cos(angle[1] * rad),
+                 cg = std::cos(angle[2] * rad), sg = std::sin(angle[2] * rad);
+    const double cy = (ca - cb * cg) / sg;
+    const double cz2 = 1 - cb * cb - cy * cy;
+    if (cz2 <= 0) throw InputError(path + ": MRC cell angles do not form a cell");
+    const Mat3 d{1, cg, cb, 0, sg, cy, 0, 0, std::sqrt(cz2)};
+    WorldFrame w;
+    w.direction = d;
+    // The start offset runs along the cell's axes too.
+    for (int r = 0; r < 3; ++r)
+      w.origin[r] = origin[r] + d[3 * r] * start[0] * v.spacing[0] +
+                    d[3 * r + 1] * start[1] * v.spacing[1] + d[3 * r + 2] * start[2] * v.spacing[2];
+    v.world = w;
+  }
+  const bool in_order = m.axis[0] == 0 && m.axis[1] == 1 && m.axis[2] == 2;
+  if (in_order && m.mode != 12)
+    v.plain = PlainData{path, m.offset, type, dims,
+                        m.swap != !native_little ? Endian::Big : Endian::Little};
+  return m;
+}
+
+}  // namespace
+
+VolumeHeader read_mrc_header(const std::string& path) {
+  return mrc_layout(path).header;
+}
+
+Volume read_mrc(const std::string& path) {
+  const MrcLayout m = mrc_layout(path);
+  const VolumeHeader& h = m.header;
+  Volume volume(h.type, h.dims, h.spacing, h.origin);
+  volume.set_world(h.world);
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  f.seekg(static_cast<std::streamoff>(m.offset));
+  const std::size_t stored = m.mode == 12 ? 2 : scalar_size(h.type);
+  const std::size_t out_size = scalar_size(h.type);
+  // One section at a time, scattered into X, Y, Z order.
+  const std::size_t section = static_cast<std::size_t>(m.n[0] * m.n[1]);
+  std::vector<unsigned char> buf(section * stored);
+  Index3 stride{1, h.dims[0], h.dims[0] * h.dims[1]};
+  const std::int64_t sc = stride[m.axis[0]], sr = stride[m.axis[1]], ss = stride[m.axis[2]];
+  auto* out = reinterpret_cast<unsigned char*>(volume.bytes());
+  for (std::int64_t s = 0; s < m.n[2]; ++s) {
+    f.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
+    if (static_cast<std::size_t>(f.gcount()) != buf.size())
+      throw IoError("cannot read " + path + ": file is shorter than its header says");
+    for (std::int64_t r = 0; r < m.n[1]; ++r)
+      for (std::int64_t c = 0; c < m.n[0]; ++c) {
+        const unsigned char* src = buf.data() + static_cast<std::size_t>(r * m.n[0] + c) * stored;
+        unsigned char* dst = out + static_cast<std::size_t>(c * sc + r * sr + s * ss) * out_size;
+        if (m.mode == 12) {
+          const float v = half_to_float(get<std::uint16_t>(src, m.swap));
+          std::memcpy(dst, &v, 4);
+        } else {
+          std::memcpy(dst, src, stored);
+          if (m.swap) std::reverse(dst, dst + stored);
+        }
+      }
+  }
+  check_finite(volume.view(), path);
+  return volume;
+}
+
+}  // namespace isotile

@@ -1,0 +1,640 @@
+// The formats users have (NIfTI, MetaImage, TIFF, DICOM through ITK; MRC/CCP4 by the project's
+// own reader): volumes written from the procedural fields must give the raw volume's triangles,
+// with positions mapped through the header's transform; real files from ../shared/data; corrupt
+// and truncated headers give one clear error line.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "cli_support.h"
+#include "core/errors.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_frame.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/itk_reader.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
+#include "test_support.h"
+#include "tiler/volume_source.h"
+
+// ITK 5.2's NIfTI writer (write_itk, which writes the test volumes) leaks the two file names
+// niftiio makes; reading leaks nothing.
+extern "C" __attribute__((used)) const char* __lsan_default_suppressions() {
+  return "leak:nifti_makeimgname\nleak:nifti_makehdrname\n";
+}
+
+namespace isotile {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::CliResult;
+using testing::CliTest;
+
+#define REQUIRE_ITK()                                             \
+  do {                                                            \
+    if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK"); \
+  } while (0)
+
+// A rotation about (1, 2, 3) by 0.4 rad, optionally mirrored in x (determinant -1).
+Mat3 test_direction(bool mirror) {
+  Vec3d k{1, 2, 3};
+  const double len = std::sqrt(14.0);
+  for (double& c : k) c /= len;
+  const double c = std::cos(0.4), s = std::sin(0.4), t = 1 - c;
+  Mat3 r{t * k[0] * k[0] + c,        t * k[0] * k[1] - s * k[2], t * k[0] * k[2] + s * k[1],
+         t * k[0] * k[1] + s * k[2], t * k[1] * k[1] + c,        t * k[1] * k[2] - s * k[0],
+         t * k[0] * k[2] - s * k[1], t * k[1] * k[2] + s * k[0], t * k[2] * k[2] + c};
+  if (mirror)
+    for (int row = 0; row < 3; ++row) r[3 * row] = -r[3 * row];
+  return r;
+}
+
+// The field sampled as the given type: floats as they are, integers as round(1000 v) + 20000.
+Volume field_as(const char* spec, ScalarType type) {
+  Volume f = make_field_volume(*parse_field_spec(spec));
+  if (type == ScalarType::Float32) return f;
+  Volume out(type, f.dims());
+  const float* src = f.data<float>();
+  for (std::int64_t i = 0; i < f.sample_count(); ++i) {
+    const double v = std::round(1000.0 * src[i]) + 20000;
+    if (type == ScalarType::UInt16)
+      out.data<std::uint16_t>()[i] = static_cast<std::uint16_t>(v);
+    else
+      out.data<std::int16_t>()[i] = static_cast<std::int16_t>(v - 20000);
+  }
+  return out;
+}
+
+double iso_for(ScalarType type) {
+  return type == ScalarType::Float32 ? 0.0 : type == ScalarType::UInt16 ? 20000.5 : 0.5;
+}
+
+Mesh mc(const VolumeView& v, double iso) {
+  ExtractOptions o;
+  o.iso = iso;
+  o.backend = Backend::Cpu;
+  o.normals = true;
+  return extract(v, o);
+}
+
+// Twice the signed volume enclosed (x6): positive when the faces face outwards.
+double signed_volume(const Mesh& m) {
+  double s = 0;
+  for (const Tri& t : m.triangles) {
+    const Vec3f &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
+    s += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+         a[2] * (b[0] * c[1] - b[1] * c[0]);
+  }
+  return s;
+}
+
+// The raw mesh's vertices (index units: spacing 1, origin 0) through the header's transform
+// must be the file's mesh's vertices, its triangles the same (reversed where it mirrors).
+void expect_mapped(const Mesh& raw, const Mesh& file, const Vec3d& spacing,
+                   const WorldFrame& world) {
+  ASSERT_EQ(raw.positions.size(), file.positions.size());
+  ASSERT_EQ(raw.triangles.size(), file.triangles.size());
+  ASSERT_GT(raw.triangles.size(), 100u);
+  const Mat3& d = world.direction;
+  const double det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) +
+                     d[2] * (d[3] * d[7] - d[4] * d[6]);
+  double worst = 0;
+  for (std::size_t i = 0; i < raw.positions.size(); ++i)
+    for (int r = 0; r < 3; ++r) {
+      double w = world.origin[r];
+      for (int c = 0; c < 3; ++c) w += d[3 * r + c] * spacing[c] * raw.positions[i][c];
+      worst = std::max(worst, std::abs(w - file.positions[i][r]));
+    }
+  EXPECT_LT(worst, 1e-4);
+  for (std::size_t t = 0; t < raw.triangles.size(); ++t) {
+    Tri expect = raw.triangles[t];
+    if (det < 0) std::swap(expect[1], expect[2]);
+    ASSERT_EQ(expect, file.triangles[t]) << "triangle " << t;
+  }
+  // Faces still face out of the inside (the sphere's inside is where the field is high).
+  EXPECT_GT(signed_volume(file) * (signed_volume(raw) > 0 ? 1 : -1), 0);
+}
+
+struct FormatCase {
+  const char* name;  // file name
+  ScalarType type;
+  bool mirror;
+  bool oriented;  // whether the format stores origin and direction
+};
+
+class ItkFormats : public ::testing::TestWithParam<FormatCase> {};
+
+TEST_P(ItkFormats, FieldGivesTheRawTrianglesInTheHeadersFrame) {
+  REQUIRE_ITK();
+  const FormatCase c = GetParam();
+  const fs::path dir =
+      fs::temp_directory_path() / ("isotile-formats-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path path = dir / c.name;
+  const Volume raw = field_as("field:torus:28", c.type);
+  const Vec3d spacing{0.7, 1.1, 1.3}, origin{10.5, -20.25, 5};
+  const Mat3 dir3 = test_direction(c.mirror);
+  write_itk(path.string(), raw.bytes(), c.type, raw.dims(), spacing, origin, dir3);
+
+  const Volume v = read_volume(path.string());
+  ASSERT_EQ(v.dims(), raw.dims());
+  ASSERT_EQ(v.type(), c.type);
+  ASSERT_EQ(std::memcmp(v.bytes(), raw.bytes(), raw.byte_size()), 0);
+  ASSERT_TRUE(v.world());
+  // TIFF keeps x and y resolution only.
+  for (int a = 0; a < (c.oriented ? 3 : 2); ++a) EXPECT_NEAR(v.spacing()[a], spacing[a], 1e-6);
+  if (c.oriented) {
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(v.world()->origin[a], origin[a], 1e-5);
+    for (int i = 0; i < 9; ++i) EXPECT_NEAR(v.world()->direction[i], dir3[i], 1e-5) << i;
+  }
+  Mesh m = mc(v.view(), iso_for(c.type));
+  apply_frame(mesh_frame(v.view()), m);
+  expect_mapped(mc(raw.view(), iso_for(c.type)), m, v.spacing(), *v.world());
+
+  // The header alone says the same; the tiler reads the same samples.
+  const VolumeHeader h = read_volume_header(path.string());
+  EXPECT_EQ(h.dims, raw.dims());
+  auto source = open_volume_source(path.string(), {});
+  std::vector<std::byte> box(raw.byte_size());
+  source->read({{0, 0, 0}, raw.dims()}, box.data());
+  EXPECT_EQ(std::memcmp(box.data(), raw.bytes(), raw.byte_size()), 0);
+  fs::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(Formats, ItkFormats,
+                         ::testing::Values(FormatCase{"f.nii", ScalarType::Float32, false, true},
+                                           FormatCase{"f.nii.gz", ScalarType::Int16, true, true},
+                                           FormatCase{"f.mha", ScalarType::Float32, true, true},
+                                           FormatCase{"f.mhd", ScalarType::UInt16, false, true},
+                                           FormatCase{"f.tif", ScalarType::UInt16, false, false}),
+                         [](const auto& info) {
+                           std::string n = info.param.name;
+                           for (char& ch : n)
+                             if (ch == '.') ch = '_';
+                           return n;
+                         });
+
+// Single-page TIFFs stacked from a directory (name order) or a numbered pattern.
+TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-tiffs-" + std::to_string(::getpid()));
+  fs::create_directories(dir / "slices");
+  const Volume raw = field_as("field:sphere:16", ScalarType::UInt16);
+  const std::size_t plane = static_cast<std::size_t>(16 * 16);
+  for (int k = 0; k < 16; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "s_%03d.tif", k + 1);
+    write_itk((dir / "slices" / name).string(), raw.data<std::uint16_t>() + k * plane,
+              ScalarType::UInt16, {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  }
+  for (const fs::path& input : {dir / "slices", dir / "slices" / "s_%03d.tif"}) {
+    SCOPED_TRACE(input.string());
+    const Volume v = read_volume(input.string());
+    ASSERT_EQ(v.dims(), raw.dims());
+    ASSERT_EQ(v.type(), ScalarType::UInt16);
+    EXPECT_EQ(std::memcmp(v.bytes(), raw.bytes(), raw.byte_size()), 0);
+  }
+  // A slice of another size is an error naming it.
+  write_itk((dir / "slices" / "s_017.tif").string(), raw.bytes(), ScalarType::UInt16, {8, 8, 1},
+            {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  EXPECT_THROW(read_volume((dir / "slices").string()), InputError);
+  fs::remove_all(dir);
+}
+
+// Plainly stored NIfTI and MetaImage are read box by box; gzip'd NIfTI is read whole.
+TEST(ItkRegions, PlainFilesAreReadByRegion) {
+  REQUIRE_ITK();
+  const fs::path dir =
+      fs::temp_directory_path() / ("isotile-regions-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume raw = field_as("field:sphere:20", ScalarType::Float32);
+  for (const char* name : {"r.nii", "r.mha", "r.nii.gz"}) {
+    const fs::path p = dir / name;
+    write_itk(p.string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1}, {0, 0, 0}, kIdentity3);
+    auto source = open_volume_source(p.string(), {});
+    const bool gz = std::string(name).ends_with(".gz");
+    EXPECT_EQ(source->in_memory(), gz) << name;
+    const Box3 box{{3, 4, 5}, {11, 9, 17}};
+    std::vector<float> got(8 * 5 * 12);
+    source->read(box, got.data());
+    for (std::int64_t k = 0; k < 12; ++k)
+      for (std::int64_t j = 0; j < 5; ++j)
+        for (std::int64_t i = 0; i < 8; ++i)
+          ASSERT_EQ(got[(k * 5 + j) * 8 + i], raw.view().value(3 + i, 4 + j, 5 + k)) << name;
+    if (gz) {
+      // Read whole: refused when the volume does not fit the budget.
+      EXPECT_THROW(open_volume_source(p.string(), {}, 1000), InputError);
+    }
+  }
+  fs::remove_all(dir);
+}
+
+// NIfTI's scl_slope and scl_inter are applied; such a file is read whole out of core.
+TEST(ItkRegions, NiftiRescaleIsApplied) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-scl-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume v(ScalarType::Int16, {5, 4, 3});
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    v.data<std::int16_t>()[i] = static_cast<std::int16_t>(i - 20);
+  const fs::path p = dir / "s.nii";
+  write_itk(p.string(), v.bytes(), v.type(), v.dims(), {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  std::string bytes = testing::slurp(p);
+  const float slope = 2.5f, inter = -5;
+  std::memcpy(bytes.data() + 112, &slope, 4);
+  std::memcpy(bytes.data() + 116, &inter, 4);
+  std::ofstream(p, std::ios::binary) << bytes;
+  const VolumeHeader h = read_volume_header(p.string());
+  EXPECT_TRUE(h.rescaled);
+  EXPECT_EQ(h.rescale_slope, 2.5);
+  EXPECT_EQ(h.rescale_intercept, -5);
+  const Volume r = read_volume(p.string());
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    EXPECT_EQ(r.view().value(i % 5, i / 5 % 4, i / 20), 2.5 * (i - 20) - 5) << i;
+  EXPECT_TRUE(open_volume_source(p.string(), {})->in_memory());
+  fs::remove_all(dir);
+}
+
+// --- MRC -----------------------------------------------------------------------------------
+
+struct MrcSpec {
+  int mode = 2;
+  int map[3] = {1, 2, 3};
+  int start[3] = {0, 0, 0};
+  float origin[3] = {0, 0, 0};
+  float cell_scale = 1;  // cell length = n * scale (voxel size = scale with mx = n)
+  int nsymbt = 0;
+  bool big_endian = false;
+};
+
+template <class T>
+void put(std::vector<unsigned char>& b, std::size_t at, T v, bool big) {
+  unsigned char x[sizeof(T)];
+  std::memcpy(x, &v, sizeof(T));
+  if (big) std::reverse(x, x + sizeof(T));
+  std::memcpy(b.data() + at, x, sizeof(T));
+}
+
+// Writes `v` (X, Y, Z) as an MRC file whose columns, rows and sections run along spec.map.
+void write_mrc(const fs::path& path, const Volume& v, const MrcSpec& s) {
+  const bool big = s.big_endian;
+  std::vector<unsigned char> h(1024 + s.nsymbt, 0);
+  std::int64_t n[3];
+  for (int c = 0; c < 3; ++c) n[c] = v.dims()[s.map[c] - 1];
+  for (int c = 0; c < 3; ++c) put<std::int32_t>(h, 4 * c, static_cast<std::int32_t>(n[c]), big);
+  put<std::int32_t>(h, 12, s.mode, big);
+  for (int c = 0; c < 3; ++c) put<std::int32_t>(h, 16 + 4 * c, s.start[c], big);
+  for (int a = 0; a < 3; ++a)
+    put<std::int32_t>(h, 28 + 4 * a, static_cast<std::int32_t>(v.dims()[a]), big);
+  for (int a = 0; a < 3; ++a)
+    put<float>(h, 40 + 4 * a, static_cast<float>(v.dims()[a]) * s.cell_scale * (a + 1), big);
+  for (int a = 0; a < 3; ++a) put<float>(h, 52 + 4 * a, 90.0f, big);
+  for (int c = 0; c < 3; ++c) put<std::int32_t>(h, 64 + 4 * c, s.map[c], big);
+  put<std::int32_t>(h, 92, s.nsymbt, big);
+  for (int a = 0; a < 3; ++a) put<float>(h, 196 + 4 * a, s.origin[a], big);
+  std::memcpy(h.data() + 208, "MAP ", 4);
+  h[212] = big ? 0x11 : 0x44;
+  h[213] = big ? 0x11 : 0x41;
+  const std::size_t size = s.mode == 12 ? 2 : scalar_size(v.type());
+  Index3 stride{1, v.dims()[0], v.dims()[0] * v.dims()[1]};
+  for (std::int64_t k = 0; k < n[2]; ++k)
+    for (std::int64_t j = 0; j < n[1]; ++j)
+      for (std::int64_t i = 0; i < n[0]; ++i) {
+        const std::int64_t at =
+            i * stride[s.map[0] - 1] + j * stride[s.map[1] - 1] + k * stride[s.map[2] - 1];
+        unsigned char x[8];
+        if (s.mode == 12) {
+          // The test fields' half-float values: exact for the integers used here.
+          const float f = v.data<float>()[at];
+          const auto bits = std::bit_cast<std::uint32_t>(f);
+          std::uint16_t half = static_cast<std::uint16_t>(
+              ((bits >> 16) & 0x8000) |
+              (f == 0 ? 0 : ((((bits >> 23) & 0xff) - 127 + 15) << 10) | ((bits >> 13) & 0x3ff)));
+          std::memcpy(x, &half, 2);
+        } else {
+          std::memcpy(x, v.bytes() + at * size, size);
+        }
+        if (big) std::reverse(x, x + size);
+        h.insert(h.end(), x, x + size);
+      }
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(h.data()), static_cast<std::streamsize>(h.size()));
+}
+
+TEST(Mrc, AxisOrderStartCellAndOriginFollowMrc2014) {
+  const fs::path dir = fs::temp_directory_path() / ("isotile-mrc-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume raw = make_field_volume(*parse_field_spec("field:torus:24"));
+  const Volume raw16 = field_as("field:torus:24", ScalarType::Int16);
+  struct Case {
+    const char* name;
+    MrcSpec spec;
+    const Volume* volume;
+  };
+  MrcSpec permuted;
+  permuted.map[0] = 3, permuted.map[1] = 1, permuted.map[2] = 2;
+  permuted.start[0] = -5, permuted.start[1] = 7, permuted.start[2] = 2;
+  permuted.origin[0] = 1.5f, permuted.origin[2] = -3;
+  permuted.cell_scale = 0.5f;
+  permuted.nsymbt = 80;
+  MrcSpec big16;
+  big16.mode = 1;
+  big16.big_endian = true;
+  big16.start[2] = -12;
+  for (const Case& c : {Case{"plain.mrc", MrcSpec{}, &raw}, Case{"permuted.map", permuted, &raw},
+                        Case{"big16.ccp4", big16, &raw16}}) {
+    SCOPED_TRACE(c.name);
+    const fs::path p = dir / c.name;
+    write_mrc(p, *c.volume, c.spec);
+    const Volume v = read_volume(p.string());
+    ASSERT_EQ(v.dims(), c.volume->dims());
+    ASSERT_EQ(v.type(), c.volume->type());
+    ASSERT_EQ(std::memcmp(v.bytes(), c.volume->bytes(), v.byte_size()), 0);
+    // Start along X, Y, Z: the start fields go with columns, rows, sections.
+    Vec3d start{};
+    for (int col = 0; col < 3; ++col) start[c.spec.map[col] - 1] = c.spec.start[col];
+    for (int a = 0; a < 3; ++a) {
+      const double voxel = c.spec.cell_scale * (a + 1);
+      EXPECT_NEAR(v.spacing()[a], voxel, 1e-6);
+      EXPECT_NEAR(v.origin()[a], c.spec.origin[a] + start[a] * voxel, 1e-5);
+    }
+    const double iso = iso_for(c.volume->type());
+    Mesh m = mc(v.view(), iso);
+    apply_frame(mesh_frame(v.view()), m);
+    expect_mapped(mc(c.volume->view(), iso), m, v.spacing(), WorldFrame{v.origin(), kIdentity3});
+    // In X, Y, Z order and uncompressed: the tiler reads it by region; otherwise whole.
+    auto source = open_volume_source(p.string(), {});
+    EXPECT_EQ(source->in_memory(), c.spec.map[0] != 1);
+  }
+  fs::remove_all(dir);
+}
+
+TEST(Mrc, HalfFloatsAreWidened) {
+  const fs::path dir = fs::temp_directory_path() / ("isotile-mrc12-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume v(ScalarType::Float32, {4, 3, 2});
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    v.data<float>()[i] = static_cast<float>(i) - 10;
+  MrcSpec s;
+  s.mode = 12;
+  write_mrc(dir / "h.mrc", v, s);
+  const Volume r = read_volume((dir / "h.mrc").string());
+  ASSERT_EQ(r.type(), ScalarType::Float32);
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    EXPECT_EQ(r.data<float>()[i], static_cast<float>(i) - 10);
+  fs::remove_all(dir);
+}
+
+// NRRD's space directions and origin, RAS turned into LPS as ITK does.
+TEST(Nrrd, SpaceDirectionsGiveTheWorldFrame) {
+  const fs::path dir = fs::temp_directory_path() / ("isotile-nrrd-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume raw = make_field_volume(*parse_field_spec("field:torus:20"));
+  std::ofstream(dir / "t.raw", std::ios::binary)
+      .write(reinterpret_cast<const char*>(raw.bytes()),
+             static_cast<std::streamsize>(raw.byte_size()));
+  std::ofstream(dir / "t.nhdr") << "NRRD0004\ntype: float\ndimension: 3\nsizes: 20 20 20\n"
+                                   "space: right-anterior-superior\n"
+                                   "space directions: (0,-1,0) (2,0,0) (0,0,1.5)\n"
+                                   "space origin: (10,20,30)\nendian: little\nencoding: raw\n"
+                                   "data file: t.raw\n\n";
+  const Volume v = read_volume((dir / "t.nhdr").string());
+  EXPECT_EQ(v.spacing(), (Vec3d{1, 2, 1.5}));
+  EXPECT_EQ(v.origin(), (Vec3d{10, 20, 30}));  // the grid frame: as before
+  ASSERT_TRUE(v.world());
+  EXPECT_EQ(v.world()->origin, (Vec3d{-10, -20, 30}));
+  // Columns: axis 0 towards RAS -y = LPS +y, axis 1 towards RAS +x = LPS -x, axis 2 +z.
+  EXPECT_EQ(v.world()->direction, (Mat3{0, -1, 0, 1, 0, 0, 0, 0, 1}));
+  Mesh m = mc(v.view(), 0);
+  apply_frame(mesh_frame(v.view()), m);
+  expect_mapped(mc(raw.view(), 0), m, v.spacing(), *v.world());
+  auto source = open_volume_source((dir / "t.nhdr").string(), {});
+  EXPECT_EQ(source->world->direction, v.world()->direction);
+  fs::remove_all(dir);
+}
+
+// --- real files ------------------------------------------------------------------------------
+
+const char* kDicomUid = "1.2.156.112605.14038013508437.20180925052418.3.14156.1";
+
+TEST(RealData, DicomSeriesGeometryFromItsHeaders) {
+  REQUIRE_ITK();
+  const fs::path dir = testing::shared_volume("dicom_uih_t1_head_slab");
+  ISOTILE_REQUIRE_SHARED(dir);
+  // Expected values from the series' SOURCE.txt (measured with pydicom, not with isotile).
+  const VolumeHeader h = read_volume_header(dir.string());
+  EXPECT_EQ(h.format, "DICOM");
+  EXPECT_EQ(h.type, ScalarType::UInt16);
+  EXPECT_EQ(h.dims, (Index3{460, 512, 80}));
+  EXPECT_NEAR(h.spacing[0], 0.5, 1e-9);
+  EXPECT_NEAR(h.spacing[1], 0.5, 1e-9);
+  EXPECT_NEAR(h.spacing[2], 1.0, 1e-4);
+  EXPECT_EQ(h.series_uid, kDicomUid);
+  EXPECT_EQ(h.series_description, "t1_gre_fsp_3d_sag");
+  ASSERT_TRUE(h.world);
+  const Mat3& d = h.world->direction;
+  // Rows along ImageOrientationPatient's first vector, columns along its second, slices along
+  // the normal; the first slice along the normal is 00000120.dcm at x = +25.50.
+  EXPECT_NEAR(d[0], 0.0679929852, 1e-6);
+  EXPECT_NEAR(d[3], 0.99768579, 1e-6);
+  EXPECT_NEAR(d[7], -1, 1e-9);
+  EXPECT_NEAR(d[2], -0.998, 1e-3);
+  EXPECT_NEAR(d[5], 0.068, 1e-3);
+  EXPECT_NEAR(h.world->origin[0], 25.50, 0.01);
+  // Any file of the series reads the series.
+  const VolumeHeader one = read_volume_header((dir / "00000077.dcm").string());
+  EXPECT_EQ(one.dims, h.dims);
+  EXPECT_EQ(one.world->origin, h.world->origin);
+  const Volume v = read_volume(dir.string());
+  EXPECT_EQ(value_range(v.view()), (std::pair<double, double>{0, 939}));
+}
+
+TEST(RealData, TiffStackWithImageJTags) {
+  REQUIRE_ITK();
+  const fs::path file = testing::shared_volume("tiff_arabidopsis_embryo/arabidopsis-embryo.tif");
+  ISOTILE_REQUIRE_SHARED(file);
+  const Volume v = read_volume(file.string());
+  EXPECT_EQ(v.dims(), (Index3{109, 112, 106}));
+  EXPECT_EQ(v.type(), ScalarType::UInt8);
+  EXPECT_EQ(value_range(v.view()), (std::pair<double, double>{0, 255}));
+}
+
+// Copies of a few slices of the real series in a directory of the test's own.
+class DicomDir : public CliTest {
+ protected:
+  fs::path series_ = testing::shared_volume("dicom_uih_t1_head_slab");
+  void copy(int number, const std::string& as = "", bool other_series = false) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%08d.dcm", number);
+    std::string bytes = testing::slurp(series_ / name);
+    if (other_series) {
+      // Same length, another UID: a second series in the directory.
+      const std::string uid = kDicomUid;
+      for (std::size_t at = bytes.find(uid); at != std::string::npos; at = bytes.find(uid, at + 1))
+        bytes[at + uid.size() - 1] = '2';
+    }
+    std::ofstream(dir_ / (as.empty() ? name : as), std::ios::binary) << bytes;
+  }
+};
+
+TEST_F(DicomDir, SeveralSeriesAreListedAndOneIsChosen) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  for (int n = 50; n < 54; ++n) copy(n);
+  for (int n = 60; n < 63; ++n) copy(n, "", true);
+  const std::string other = std::string(kDicomUid).substr(0, std::strlen(kDicomUid) - 1) + "2";
+  CliResult r = run("extract . -o out.ply --iso 60 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("2 DICOM series; choose one with --series"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(other), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  r = run("info . --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("t1_gre_fsp_3d_sag"), std::string::npos);
+  r = run("info . --json --series " + other);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"dims\": [\n    460,\n    512,\n    3\n  ]"), std::string::npos) << r.out;
+  // The real series' info: orientation letters from SOURCE.txt's ImageOrientationPatient (rows
+  // towards +y: P, columns towards -z: I, the normal towards -x: R), its value range.
+  r = run("info '" + series_.string() + "' --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"orientation\": \"PIR\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"format\": \"DICOM\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"max\": 939.0"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"rescaled\": false"), std::string::npos) << r.out;
+  r = run("extract . -o out.ply --iso 60 -q --series 1.2.3");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("no DICOM series with UID 1.2.3"), std::string::npos) << r.err;
+}
+
+TEST_F(DicomDir, UnevenOrDuplicateSlicesAreErrors) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  copy(50);
+  copy(51);
+  copy(53);  // 52 missing: a 2 mm step among 1 mm steps
+  CliResult r = run("extract . -o out.ply --iso 60 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("non-uniform slice spacing"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  fs::remove(dir_ / "00000053.dcm");
+  copy(51, "copy_of_51.dcm");
+  r = run("extract . -o out.ply --iso 60 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("lie at the same position"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+}
+
+// The real series in core and out of core: the same bytes, in world coordinates.
+TEST_F(DicomDir, WorldMeshInCoreEqualsStreamed) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  for (int n = 60; n < 72; ++n) copy(n);
+  CliResult r = run("extract . -o a.ply --iso 60 --normals -q --stats a.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = run("extract . -o b.ply --iso 60 --normals -q --memory 8MiB --threads 1 --stats b.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(testing::slurp(dir_ / "a.ply"), testing::slurp(dir_ / "b.ply"));
+  EXPECT_NE(testing::slurp(dir_ / "b.json").find("\"region_reads\": false"), std::string::npos);
+  r = run("extract . -o g.ply --iso 60 -q --frame grid");
+  ASSERT_EQ(r.code, 0) << r.err;
+  // The world mesh is the grid mesh turned by the series' ImageOrientationPatient (SOURCE.txt):
+  // grid x along the row vector, grid y along the column vector, grid z along their normal.
+  const Mesh world = read_mesh(dir_ / "a.ply"), grid = read_mesh(dir_ / "g.ply");
+  ASSERT_EQ(world.positions.size(), grid.positions.size());
+  ASSERT_GT(world.positions.size(), 1000u);
+  const Vec3d row{0.0679929852, 0.99768579, 0}, col{0, 0, -1};
+  const Vec3d normal{row[1] * col[2] - row[2] * col[1], row[2] * col[0] - row[0] * col[2],
+                     row[0] * col[1] - row[1] * col[0]};
+  double worst = 0;
+  for (std::size_t i = 1; i < world.positions.size(); ++i) {
+    Vec3d dw, dg;
+    for (int a = 0; a < 3; ++a) {
+      dw[a] = world.positions[i][a] - world.positions[0][a];
+      dg[a] = grid.positions[i][a] - grid.positions[0][a];
+    }
+    const auto dot = [](const Vec3d& a, const Vec3d& b) {
+      return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    };
+    worst = std::max({worst, std::abs(dot(dw, row) - dg[0]), std::abs(dot(dw, col) - dg[1]),
+                      std::abs(dot(dw, normal) - dg[2])});
+  }
+  EXPECT_LT(worst, 1e-3);
+}
+
+// --- bad input -------------------------------------------------------------------------------
+
+class BadHeaders : public CliTest {
+ protected:
+  void expect_one_line(const std::string& file, const std::string& what) {
+    const CliResult r = run("extract " + file + " -o out.ply --iso 0.5 -q");
+    EXPECT_EQ(r.code, 1) << file;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << file << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("isotile: error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << file << ": " << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+  }
+  std::string write(const std::string& name, const std::string& bytes) {
+    std::ofstream(dir_ / name, std::ios::binary) << bytes;
+    return name;
+  }
+};
+
+TEST_F(BadHeaders, NiftiAndMetaImage) {
+  REQUIRE_ITK();
+  const Volume raw = make_field_volume(*parse_field_spec("field:sphere:12"));
+  write_itk((dir_ / "good.nii").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1}, {0, 0, 0},
+            kIdentity3);
+  write_itk((dir_ / "good.mha").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1}, {0, 0, 0},
+            kIdentity3);
+  const std::string nii = testing::slurp(dir_ / "good.nii");
+  const std::string mha = testing::slurp(dir_ / "good.mha");
+  expect_one_line(write("short.nii", nii.substr(0, 200)), "NIfTI header truncated");
+  expect_one_line(write("cut.nii", nii.substr(0, nii.size() - 100)), "samples need");
+  std::string big = nii;
+  const std::int16_t huge = 30000;
+  std::memcpy(big.data() + 42, &huge, 2);
+  expect_one_line(write("big.nii", big), "samples need");
+  std::string type = nii;
+  const std::int16_t complex = 32;
+  std::memcpy(type.data() + 70, &complex, 2);
+  expect_one_line(write("type.nii", type), "datatype 32 is not supported");
+  expect_one_line(write("junk.nii", std::string(400, 'x')), "not a NIfTI file");
+  expect_one_line(write("cut.mha", mha.substr(0, mha.size() - 10)), "samples need");
+  std::string dims = mha;
+  dims.replace(dims.find("DimSize = 12 12 12"), 18, "DimSize = 12 12 99");
+  expect_one_line(write("dims.mha", dims), "samples need");
+  expect_one_line(write("noend.mha", "ObjectType = Image\nNDims = 3\n"), "no ElementDataFile");
+  std::string et = mha;
+  et.replace(et.find("MET_FLOAT"), 9, "MET_LONG_LONG");
+  expect_one_line(write("type.mha", et), "ElementType 'MET_LONG_LONG' is not supported");
+  expect_one_line(write("junk.tif", std::string(64, 'x')), "not a readable TIFF file");
+}
+
+TEST_F(BadHeaders, Mrc) {
+  const Volume raw = make_field_volume(*parse_field_spec("field:sphere:12"));
+  write_mrc(dir_ / "good.mrc", raw, MrcSpec{});
+  const std::string mrc = testing::slurp(dir_ / "good.mrc");
+  expect_one_line(write("short.mrc", mrc.substr(0, 500)), "MRC header truncated");
+  expect_one_line(write("cut.mrc", mrc.substr(0, mrc.size() - 4)), "the MRC header");
+  std::string mode = mrc;
+  mode[12] = 4;
+  expect_one_line(write("mode.mrc", mode), "MRC mode 4 is not supported");
+  std::string map = mrc;
+  map[64] = 2;
+  expect_one_line(write("map.mrc", map), "is not a permutation");
+  std::string n = mrc;
+  n[2] = 0x40;  // nx of 4 million
+  expect_one_line(write("n.mrc", n), "the MRC header");
+  std::string ext = mrc;
+  ext[95] = static_cast<char>(0x80);  // NSYMBT negative
+  expect_one_line(write("ext.mrc", ext), "NSYMBT");
+}
+
+}  // namespace
+}  // namespace isotile
