@@ -81,6 +81,18 @@ isotile_export_library(isotile_core NAME core
   FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenVDB OpenMesh
   DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenvdb-dev libboost-iostreams-dev
                  libopenmesh-dev libgmp-dev libmpfr-dev)
+# The ITK readers' library, linked privately by core: consumers of the static core need ITK's
+# libraries too. Debian's ITK config runs FindHDF5, whose checks need the C language: enabled for
+# the consumer, so that a C++-only project can use the package.
+if(ISOTILE_ITK)
+  string(APPEND ISOTILE_FIND_DEPENDENCIES
+         "if(NOT CMAKE_C_COMPILER_LOADED)\n  enable_language(C)\nendif()\n")
+  isotile_export_library(isotile_itk NAME itk INTERNAL
+    FIND_PACKAGES "ITK 5.2 CONFIG COMPONENTS ITKIOImageBase ITKIONIFTI ITKIOMeta ITKIOGDCM ITKIOTIFF"
+    DEBIAN_DEPENDS libinsighttoolkit5-dev)
+else()
+  isotile_export_library(isotile_itk NAME itk INTERNAL)
+endif()
 isotile_export_library(isotile_tiler NAME tiler
   HEADERS
     tiler/brick_plan.h
