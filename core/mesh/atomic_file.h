@@ -21,6 +21,8 @@ class AtomicFile {
   AtomicFile& operator=(const AtomicFile&) = delete;
 
   std::FILE* stream() { return file_; }
+  // Where the data goes until commit(): other writers of the same file (MPI ranks) open it there.
+  const std::filesystem::path& temp_path() const { return temp_; }
   // Writes n bytes; throws IoError on a short write (e.g. disk full).
   void write(const void* data, std::size_t n);
   // Writes n bytes at byte `offset`, wherever the stream is (a file written out of order, e.g.
