@@ -41,29 +41,39 @@ double peak_rss_mb() {
 constexpr double kCellCost = 0.05;
 
 std::string describe(const Box3& c) {
-  auto range = [&](int a) { return std::to_string(c.lo[a]) + "-" + std::to_string(c.hi[a]); };
+  auto range = [&](int a) {
+    return "[" + std::to_string(c.lo[a]) + ", " + std::to_string(c.hi[a]) + ")";
+  };
   return "cells " + range(0) + " x " + range(1) + " x " + range(2);
 }
 
-// Test hook (tests/test_mpi.cpp only): ISOTILE_MPI_TEST_FAIL=RANK:BRICK:PASS makes that rank
-// fail on that brick, PASS being `count` or `extract` (an IoError, as an unreadable brick gives)
-// or `kill` (the rank dies of SIGKILL in the extract pass, as a crashed node would).
+// The other ranks' hold on rank 0's temporary: removed on SIGINT/SIGTERM too (the launcher
+// sends SIGTERM to every rank when one dies, which may be rank 0).
+class TrackedTemporary {
+ public:
+  explicit TrackedTemporary(const std::string& path) : slot_(track_temporary(path)) {}
+  ~TrackedTemporary() { untrack_temporary(slot_); }
+  TrackedTemporary(const TrackedTemporary&) = delete;
+  TrackedTemporary& operator=(const TrackedTemporary&) = delete;
+
+ private:
+  int slot_;
+};
+
+// Test hook (tests/test_mpi.cpp only): ISOTILE_MPI_TEST_FAIL=BRICK:PASS makes the rank that
+// runs that brick fail on it, PASS being `count` or `extract` (an IoError, as an unreadable brick
+// gives) or `kill` (the rank dies of SIGKILL in the extract pass, as a crashed node would).
 struct InjectedFailure {
-  int rank = -1;
   std::int64_t brick = -1;
   std::string pass;
 };
 std::optional<InjectedFailure> injected_failure() {
   const char* v = std::getenv("ISOTILE_MPI_TEST_FAIL");
   if (!v || !*v) return std::nullopt;
-  InjectedFailure f;
   const std::string s(v);
-  const auto a = s.find(':'), b = s.find(':', a + 1);
-  if (a == std::string::npos || b == std::string::npos) return std::nullopt;
-  f.rank = std::atoi(s.substr(0, a).c_str());
-  f.brick = std::atoll(s.substr(a + 1, b - a - 1).c_str());
-  f.pass = s.substr(b + 1);
-  return f;
+  const auto a = s.find(':');
+  if (a == std::string::npos) return std::nullopt;
+  return InjectedFailure{std::atoll(s.substr(0, a).c_str()), s.substr(a + 1)};
 }
 
 class Ranks {
@@ -255,7 +265,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   RankTimes mine;
   const std::optional<InjectedFailure> inject = injected_failure();
   auto injected = [&](std::int64_t b, const char* pass) {
-    if (!inject || inject->rank != me || inject->brick != b || inject->pass != pass) return;
+    if (!inject || inject->brick != b || inject->pass != pass) return;
     if (inject->pass == "kill") std::raise(SIGKILL);
     throw IoError("injected failure (ISOTILE_MPI_TEST_FAIL)");
   };
@@ -349,6 +359,8 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   MPI_Bcast(&temp_len, 1, MPI_INT, 0, MPI_COMM_WORLD);
   temp.resize(static_cast<std::size_t>(temp_len));
   MPI_Bcast(temp.data(), temp_len, MPI_CHAR, 0, MPI_COMM_WORLD);
+  std::optional<TrackedTemporary> tracked;
+  if (me != 0) tracked.emplace(temp);
   std::unique_ptr<MpiFile> mf;
   mpi.phase([&] { mf = std::make_unique<MpiFile>(temp, output); });
 

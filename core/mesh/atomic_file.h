@@ -40,7 +40,12 @@ class AtomicFile {
   int slot_ = -1;
 };
 
-// Async-signal-safe: unlinks every temporary of a live AtomicFile.
+// Async-signal-safe: unlinks every temporary of a live AtomicFile, and every tracked one.
 void remove_pending_temporaries() noexcept;
+
+// Tracks a temporary another process's AtomicFile created and this one writes into too (an MPI
+// rank), so that this process's SIGINT/SIGTERM removes it as well; -1 when the table is full.
+int track_temporary(const std::filesystem::path& path) noexcept;
+void untrack_temporary(int slot) noexcept;
 
 }  // namespace isotile
