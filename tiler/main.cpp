@@ -281,6 +281,7 @@ json distributed_json(const DistributedResult& d) {
   j["load_imbalance"] = d.load_imbalance;
   j["load_imbalance_planned"] = d.planned_imbalance;
   j["brick_seconds"] = {{"count", d.brick_seconds_count}, {"extract", d.brick_seconds_extract}};
+  j["brick_faces"] = d.brick_faces;
   j["peak_rss_mb"] = rss;  // the largest rank's
   return j;
 }

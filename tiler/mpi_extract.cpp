@@ -35,10 +35,10 @@ double peak_rss_mb() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;
 }
 
-// A brick's extract cost per cell, in units of one face: the cells' classification, the halo's
-// samples and the reading against the faces' vertex keys, sorting and records. Measured with
-// tests/benchmarks/bench_mpi.sh (docs/tiler.md#distributed-runs-mpi).
-constexpr double kCellCost = 0.05;
+// A brick's extract cost per cell, in units of one face: reading and classifying its samples
+// against a face's vertex keys, sorting and records. tests/benchmarks/bench_mpi.sh fits the
+// per-brick extract seconds to both: bonsai, MC, 216 bricks of 43^3 cells gave 0.099.
+constexpr double kCellCost = 0.1;
 
 std::string describe(const Box3& c) {
   auto range = [&](int a) {
@@ -453,6 +453,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     out.planned_imbalance = planned_mean > 0 ? planned_max / planned_mean : 1;
     out.brick_seconds_count = std::move(count_seconds);
     out.brick_seconds_extract = std::move(extract_seconds);
+    out.brick_faces = bricks->brick_faces();
   }
   return out;
 }

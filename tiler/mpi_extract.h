@@ -64,6 +64,7 @@ struct DistributedResult {
   // Rank 0 only: every rank's times, and per brick the measured seconds of each pass.
   std::vector<RankTimes> rank_times;
   std::vector<double> brick_seconds_count, brick_seconds_extract;
+  std::vector<std::uint64_t> brick_faces;  // counted, per brick (the balance model's input)
   // Slowest rank's extract time over the mean (1: perfect); the same for the model's costs.
   double load_imbalance = 1, planned_imbalance = 1;
 };
