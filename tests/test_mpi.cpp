@@ -133,6 +133,14 @@ TEST_F(MpiCli, DualContouringMatchesSingleProcess) {
                                 "stl");
 }
 
+TEST_F(MpiCli, GlBackendRunsOnEveryRank) {
+  // Each rank makes its own OpenGL context (llvmpipe here, one GPU per rank on a cluster).
+  const CliResult probe = run("-q extract field:gyroid:40 --backend hp -o probe.ply");
+  if (probe.code != 0) ISOTILE_SKIP(Gl, "no OpenGL context: " << probe.err);
+  fs::remove(dir_ / "probe.ply");
+  expect_same_as_single_process("field:gyroid:40", "--backend hp --memory 96KiB", {2});
+}
+
 TEST_F(MpiCli, RawAndNrrdInputsAreReadInPlaceByEachRank) {
   write_raw(dir_ / "v.raw", 36);
   expect_same_as_single_process("v.raw --dims 36,36,36 --type uint16 --endian big --iso 2000",
