@@ -36,6 +36,8 @@ if [ -z "$INPUT" ]; then
 fi
 MPIRUN="mpirun --allow-run-as-root --oversubscribe --mca pml ob1 --mca btl self,vader"
 
+cut -d' ' -f1-3 /proc/loadavg > "$OUT/load.before"
+
 timed() {  # name command...
   name=$1
   shift
@@ -48,6 +50,7 @@ for k in 1 2; do
     --memory "$BUDGET" -o "$OUT/mpi$k.ply" --stats "$OUT/mpi$k.json"
   cmp "$OUT/plain.ply" "$OUT/mpi$k.ply"
 done
+cut -d' ' -f1-3 /proc/loadavg > "$OUT/load.after"
 
 python3 - "$OUT" <<'EOF'
 import json, math, sys
@@ -58,7 +61,9 @@ s2 = json.load(open(f"{out}/mpi2.json"))
 print(f"input {s1['input']} {s1['dims']} iso {s1['iso']}, {s1['method']}, budget "
       f"{s1['memory_budget']} B: {s1['bricks']} bricks of {s1['brick_cells']} cells, "
       f"{s1['triangles']} triangles; files identical")
-print("measured here (wall seconds, shared 2-core machine, 1 TBB thread per rank):")
+load = [open(f"{out}/load.{w}").read().strip() for w in ("before", "after")]
+print(f"measured here (wall seconds, shared 2-core machine, 1 TBB thread per rank; load average "
+      f"{load[0]} before, {load[1]} after):")
 print(f"  1 process, 1 thread        {t['plain']:7.2f} s")
 print(f"  1 process, 2 threads       {t['plain2']:7.2f} s")
 print(f"  mpirun -np 1               {t['mpi1']:7.2f} s  (MPI start-up and MPI-IO: "
