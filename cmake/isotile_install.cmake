@@ -70,6 +70,7 @@ isotile_export_library(isotile_core NAME core
     core/extract/extract.h
     core/extract/macet.h
     core/mesh/mesh.h
+    core/mesh/mesh_frame.h
     core/mesh/mesh_io.h
     core/mesh/mesh_quality.h
     core/mesh/mesh_topology.h
@@ -93,12 +94,18 @@ if(ISOTILE_ITK)
 else()
   isotile_export_library(isotile_itk NAME itk INTERNAL)
 endif()
+# The tiler links MPI's C library when built with distributed extraction.
+set(tiler_mpi "")
+if(ISOTILE_HAVE_MPI)
+  set(tiler_mpi FIND_PACKAGES "MPI COMPONENTS C" DEBIAN_DEPENDS libopenmpi-dev)
+endif()
 isotile_export_library(isotile_tiler NAME tiler
   HEADERS
     tiler/brick_plan.h
     tiler/input_options.h
     tiler/tiled_extract.h
-    tiler/volume_source.h)
+    tiler/volume_source.h
+  ${tiler_mpi})
 if(TARGET isotile_gl)
   isotile_export_library(isotile_glad NAME glad INTERNAL)
   isotile_export_library(isotile_gl NAME gl

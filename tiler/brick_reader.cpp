@@ -1,6 +1,7 @@
 #include "tiler/brick_reader.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "core/volume/volume_io.h"
@@ -133,7 +134,9 @@ void QualityAccumulator::add(double q) {
   if (q < 1e-6) ++degenerate_;
   min_ = std::min(min_, q);
   max_ = std::max(max_, q);
-  sum_ += q;
+  const auto fixed = static_cast<std::uint64_t>(std::ldexp(std::clamp(q, 0.0, 8.0), 60));
+  sum_lo_ += fixed;
+  if (sum_lo_ < fixed) ++sum_hi_;
   const int n = static_cast<int>(bins_.size());
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
 }
@@ -158,7 +161,9 @@ QualityStats QualityAccumulator::stats() const {
   if (triangles_ == 0) return s;
   s.min = min_;
   s.max = max_;
-  s.mean = sum_ / static_cast<double>(triangles_);
+  const double sum =
+      std::ldexp(static_cast<double>(sum_hi_), 4) + std::ldexp(static_cast<double>(sum_lo_), -60);
+  s.mean = sum / static_cast<double>(triangles_);
   s.q001 = quantile(0.001);
   s.q01 = quantile(0.01);
   s.median = quantile(0.5);
@@ -166,6 +171,43 @@ QualityStats QualityAccumulator::stats() const {
   for (std::size_t i = 0; i < n; ++i)
     s.histogram[std::min<std::size_t>(19, i * 20 / n)] += bins_[i];
   return s;
+}
+
+std::vector<std::uint64_t> QualityAccumulator::counters() const {
+  std::vector<std::uint64_t> c{triangles_,    degenerate_,           sum_lo_ & 0xffffffffu,
+                               sum_lo_ >> 32, sum_hi_ & 0xffffffffu, sum_hi_ >> 32};
+  c.insert(c.end(), bins_.begin(), bins_.end());
+  return c;
+}
+
+std::uint64_t QualityAccumulator::min_bits() const {
+  return std::bit_cast<std::uint64_t>(min_);
+}
+
+std::uint64_t QualityAccumulator::max_bits() const {
+  return std::bit_cast<std::uint64_t>(max_);
+}
+
+QualityAccumulator QualityAccumulator::from_parts(const std::vector<std::uint64_t>& c,
+                                                  std::uint64_t min_bits, std::uint64_t max_bits) {
+  QualityAccumulator a;
+  a.triangles_ = c[0];
+  a.degenerate_ = c[1];
+  // Each limb is a sum of 32-bit values over the processes: carry what overflowed 32 bits.
+  std::uint64_t limb[4];
+  std::uint64_t carry = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::uint64_t v = c[2 + static_cast<std::size_t>(i)];
+    const std::uint64_t low = (v & 0xffffffffu) + (carry & 0xffffffffu);
+    limb[i] = low & 0xffffffffu;
+    carry = (v >> 32) + (carry >> 32) + (low >> 32);
+  }
+  a.sum_lo_ = limb[0] | (limb[1] << 32);
+  a.sum_hi_ = limb[2] | (limb[3] << 32);
+  a.min_ = std::bit_cast<double>(min_bits);
+  a.max_ = std::bit_cast<double>(max_bits);
+  std::copy(c.begin() + 6, c.end(), a.bins_.begin());
+  return a;
 }
 
 }  // namespace isotile

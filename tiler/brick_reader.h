@@ -68,16 +68,29 @@ class BrickReader {
 };
 
 // Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
-// exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5).
+// exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5). The sum
+// behind the mean is kept in 2^-60 units in 128 bits: integer addition does not depend on the
+// order, so the statistics come out the same whichever process counted which triangles.
 class QualityAccumulator {
  public:
   void add(double q);
   QualityStats stats() const;
 
+  // For adding accumulators of several processes: the counters (triangles, degenerate, the sum
+  // in four 32-bit limbs, the bins), to be added element by element, and the bits of the
+  // minimum and maximum (non-negative doubles order like their bits), to be reduced by min and
+  // max.
+  std::vector<std::uint64_t> counters() const;
+  std::uint64_t min_bits() const;
+  std::uint64_t max_bits() const;
+  static QualityAccumulator from_parts(const std::vector<std::uint64_t>& counters,
+                                       std::uint64_t min_bits, std::uint64_t max_bits);
+
  private:
   double quantile(double p) const;
   std::uint64_t triangles_ = 0, degenerate_ = 0;
-  double min_ = 1, max_ = 0, sum_ = 0;
+  double min_ = 1, max_ = 0;
+  std::uint64_t sum_lo_ = 0, sum_hi_ = 0;  // sum of q in 2^-60 units
   std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(1 << 16);
 };
 

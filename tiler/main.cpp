@@ -44,7 +44,11 @@
 #include "shaders/gl_context.h"
 #endif
 #include "tiler/input_options.h"
+#include "tiler/mpi_launch.h"
 #include "tiler/tiled_extract.h"
+#ifdef ISOTILE_HAVE_MPI
+#include "tiler/mpi_extract.h"
+#endif
 
 namespace {
 
@@ -53,6 +57,14 @@ using json = nlohmann::ordered_json;
 using Clock = std::chrono::steady_clock;
 
 bool g_quiet = false;
+
+#ifdef ISOTILE_HAVE_MPI
+// Set when started by an MPI launcher (tiler/mpi_launch.h); only rank 0 reports.
+std::optional<MpiSession> g_mpi;
+// Inside extract_distributed: an error that is not an AgreedError is this rank's alone, and the
+// other ranks wait for it in a collective, so the job is aborted.
+bool g_distributed = false;
+#endif
 
 void progress(const std::string& message) {
   if (!g_quiet) std::fprintf(stderr, "isotile: %s\n", message.c_str());
@@ -256,6 +268,34 @@ json simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& after
   return j;
 }
 
+#ifdef ISOTILE_HAVE_MPI
+// A distributed run's keys besides the single-process ones (docs/cli.md): every rank's times
+// and bricks, the load imbalance, and each brick's measured seconds per pass.
+json distributed_json(const DistributedResult& d) {
+  json j;
+  j["ranks"] = d.ranks;
+  json per_rank = json::array();
+  double rss = 0;
+  for (const RankTimes& t : d.rank_times) {
+    per_rank.push_back({{"seconds_count", t.seconds_count},
+                        {"seconds_extract", t.seconds_extract},
+                        {"bricks_counted", t.bricks_counted},
+                        {"bricks_extracted", t.bricks_extracted},
+                        {"triangles", t.triangles},
+                        {"planned_cost", t.planned_cost},
+                        {"peak_rss_mb", t.peak_rss_mb}});
+    rss = std::max(rss, t.peak_rss_mb);
+  }
+  j["per_rank"] = per_rank;
+  j["load_imbalance"] = d.load_imbalance;
+  j["load_imbalance_planned"] = d.planned_imbalance;
+  j["brick_seconds"] = {{"count", d.brick_seconds_count}, {"extract", d.brick_seconds_extract}};
+  j["brick_faces"] = d.brick_faces;
+  j["peak_rss_mb"] = rss;  // the largest rank's
+  return j;
+}
+#endif
+
 // Out of core: brick by brick within --memory, streamed into the output file.
 int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, MeshFormat format,
                       Clock::time_point t_total) {
@@ -276,13 +316,42 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     progress(std::string(pass) + ": " + std::to_string(done) + "/" + std::to_string(total) +
              " bricks");
   };
-  auto source = open_volume_source(args.in.input, args.in.raw_options(), to.memory);
-  if (args.frame == "world") to.frame = mesh_frame(source->origin, source->world);
-  progress("extracting " + args.in.input + " (" + std::to_string(source->dims[0]) + "x" +
-           std::to_string(source->dims[1]) + "x" + std::to_string(source->dims[2]) + " " +
-           std::string(scalar_name(source->type)) + ") brick by brick within " + args.memory +
-           (source->in_memory() ? " (this input cannot be read by region: read whole first)" : ""));
-  const TiledResult r = extract_tiled(*source, to, args.output);
+  TiledResult r;
+  Index3 dims{0, 0, 0};
+  ScalarType type = ScalarType::Float32;
+  json distributed;
+  const bool world = args.frame == "world";
+  bool region_reads = true;
+#ifdef ISOTILE_HAVE_MPI
+  if (g_mpi) {
+    progress("extracting " + args.in.input + " brick by brick within " + args.memory + " on " +
+             std::to_string(g_mpi->size) + " MPI ranks");
+    g_distributed = true;
+    const DistributedResult d =
+        extract_distributed(args.in.input, args.in.raw_options(), to, world, args.output);
+    g_distributed = false;
+    if (g_mpi->rank != 0) return 0;
+    r = d.tiled;
+    dims = d.dims;
+    type = d.type;
+    region_reads = !d.source_in_memory;
+    to.frame.active = d.world_frame;  // for the stats' "frame" only: the ranks wrote the mesh
+    distributed = distributed_json(d);
+  } else
+#endif
+  {
+    auto source = open_volume_source(args.in.input, args.in.raw_options(), to.memory);
+    if (world) to.frame = mesh_frame(source->origin, source->world);
+    dims = source->dims;
+    type = source->type;
+    region_reads = !source->in_memory();
+    progress("extracting " + args.in.input + " (" + std::to_string(dims[0]) + "x" +
+             std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
+             std::string(scalar_name(type)) + ") brick by brick within " + args.memory +
+             (source->in_memory() ? " (this input cannot be read by region: read whole first)"
+                                  : ""));
+    r = extract_tiled(*source, to, args.output);
+  }
   progress(
       (to.simplify < 1
            ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
@@ -294,8 +363,8 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     json j;
     j["input"] = args.in.input;
     j["output"] = args.output;
-    j["dims"] = source->dims;
-    j["type"] = scalar_name(source->type);
+    j["dims"] = dims;
+    j["type"] = scalar_name(type);
     j["iso"] = options.iso;
     j["method"] = method_name(options.method);
     if (options.method == Method::Macet) {
@@ -317,7 +386,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["brick_grid"] = r.plan.count;
     j["bricks_extracted"] = r.bricks_extracted;
     j["memory_budget"] = to.memory;
-    j["region_reads"] = !source->in_memory();
+    j["region_reads"] = region_reads;
     j["largest_brick_bytes"] = r.largest_brick_bytes;
     j["seconds"] = {{"count", r.seconds_count},
                     {"extract", r.seconds_extract},
@@ -339,6 +408,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
       j["seconds"]["seams"] = r.seconds_seams;
     }
     j["peak_rss_mb"] = peak_rss_mb();
+    if (!distributed.is_null()) j.update(distributed);
     write_text(args.stats, j.dump(2) + "\n");
   }
   progress("done in " + fmt_seconds(seconds_since(t_total)));
@@ -775,6 +845,26 @@ int run_gl_info(bool as_json) {
 #endif
 }
 
+// One error line. Under MPI only rank 0 prints: an error outside the distributed run comes from
+// the arguments, which every rank shares, and one inside it is agreed on by all ranks, with the
+// failing rank named. An error only this rank has inside the run (not agreed) aborts the job, as
+// the other ranks wait for this one.
+int fail(const char* what, bool agreed) {
+#ifdef ISOTILE_HAVE_MPI
+  if (g_mpi) {
+    if (g_distributed && !agreed && g_mpi->size > 1) {
+      std::fprintf(stderr, "isotile: error: rank %d of %d: %s\n", g_mpi->rank, g_mpi->size, what);
+      g_mpi->abort(1);
+    }
+    if (g_mpi->rank != 0) return 1;
+  }
+#else
+  (void)agreed;
+#endif
+  std::fprintf(stderr, "isotile: error: %s\n", what);
+  return 1;
+}
+
 extern "C" void on_signal(int sig) {
   remove_pending_temporaries();
   std::signal(sig, SIG_DFL);
@@ -786,6 +876,26 @@ extern "C" void on_signal(int sig) {
 int main(int argc, char** argv) {
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
+  if (launched_by_mpi()) {
+#ifdef ISOTILE_HAVE_MPI
+    try {
+      g_mpi.emplace(&argc, &argv);
+    } catch (const isotile::Error& e) {
+      std::fprintf(stderr, "isotile: error: %s\n", e.what());
+      return 1;
+    }
+    if (g_mpi->rank != 0) g_quiet = true;
+#else
+    if (launcher_task_count() > 1) {
+      std::fprintf(stderr,
+                   "isotile: error: started by an MPI launcher with %ld tasks, but this isotile "
+                   "was built without MPI (ISOTILE_MPI=OFF): every task would write the whole "
+                   "mesh\n",
+                   launcher_task_count());
+      return 1;
+    }
+#endif
+  }
 #ifdef ISOTILE_HAVE_GL
   isotile::gl::register_gl_backends();
 #endif
@@ -936,9 +1046,22 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+#ifdef ISOTILE_HAVE_MPI
+    if (g_mpi && g_mpi->rank != 0) return e.get_exit_code() == 0 ? 0 : 2;
+#endif
     // --help and --version exit 0; every usage error exits 2, whatever CLI11's own code is.
     return app.exit(e) == 0 ? 0 : 2;
   }
+
+#ifdef ISOTILE_HAVE_MPI
+  if (g_mpi && g_mpi->size > 1 && !(*extract_cmd && !ex.memory.empty())) {
+    if (g_mpi->rank == 0)
+      std::fprintf(stderr,
+                   "isotile: error: under an MPI launcher only `extract --memory SIZE` runs "
+                   "distributed; run other commands without mpirun\n");
+    return 2;
+  }
+#endif
 
   std::optional<tbb::global_control> limit;
   if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
@@ -961,15 +1084,16 @@ int main(int argc, char** argv) {
                      std::filesystem::absolute(demo_output).c_str());
       return rc;
     }
+#ifdef ISOTILE_HAVE_MPI
+  } catch (const isotile::AgreedError& e) {
+    return fail(e.what(), true);
+#endif
   } catch (const isotile::Error& e) {
-    std::fprintf(stderr, "isotile: error: %s\n", e.what());
-    return 1;
+    return fail(e.what(), false);
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "isotile: error: out of memory\n");
-    return 1;
+    return fail("out of memory", false);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "isotile: error: %s\n", e.what());
-    return 1;
+    return fail(e.what(), false);
   }
   return 0;
 }

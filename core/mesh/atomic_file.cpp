@@ -163,4 +163,16 @@ void remove_pending_temporaries() noexcept {
   }
 }
 
+int track_temporary(const std::filesystem::path& path) noexcept {
+  try {
+    return claim_slot(path.string());
+  } catch (...) {
+    return -1;
+  }
+}
+
+void untrack_temporary(int slot) noexcept {
+  release_slot(slot);
+}
+
 }  // namespace isotile

@@ -21,6 +21,8 @@ class AtomicFile {
   AtomicFile& operator=(const AtomicFile&) = delete;
 
   std::FILE* stream() { return file_; }
+  // Where the data goes until commit(): other writers of the same file (MPI ranks) open it there.
+  const std::filesystem::path& temp_path() const { return temp_; }
   // Writes n bytes; throws IoError on a short write (e.g. disk full).
   void write(const void* data, std::size_t n);
   // Writes n bytes at byte `offset`, wherever the stream is (a file written out of order, e.g.
@@ -38,7 +40,12 @@ class AtomicFile {
   int slot_ = -1;
 };
 
-// Async-signal-safe: unlinks every temporary of a live AtomicFile.
+// Async-signal-safe: unlinks every temporary of a live AtomicFile, and every tracked one.
 void remove_pending_temporaries() noexcept;
+
+// Tracks a temporary another process's AtomicFile created and this one writes into too (an MPI
+// rank), so that this process's SIGINT/SIGTERM removes it as well; -1 when the table is full.
+int track_temporary(const std::filesystem::path& path) noexcept;
+void untrack_temporary(int slot) noexcept;
 
 }  // namespace isotile
