@@ -35,8 +35,14 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   src += defines;
   src += "#line 1\n";
   src += embedded_glsl("mc_common.glsl");
+  // Dual Contouring's shaders share its Hermite data, placement and diagonal rule.
+  if (s.file.starts_with("dc_")) {
+    src += embedded_glsl("dc_common.glsl");
+    src += embedded_glsl("dc_quad_split.glsl");
+  }
   // HistoPyramid output passes share the traversal.
-  if (s.file.starts_with("hp_") && s.file != "hp_classify.comp" && s.file != "hp_reduce.comp")
+  if ((s.file.starts_with("hp_") || s.file.starts_with("dc_hp_")) && s.file != "hp_classify.comp" &&
+      s.file != "hp_reduce.comp" && s.file != "dc_hp_classify.comp")
     src += embedded_glsl("hp_common.glsl");
   const std::string_view body = embedded_glsl(s.file);
   if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");
