@@ -33,5 +33,7 @@ std::string dc_gl_unsupported(const DualContouringOptions& o);
 // context can be made, CapacityError when the mesh needs more than 2^32 - 1 vertices or one x-y
 // slab does not fit the device.
 Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& options, McStats* stats = nullptr);
+Mesh dc_geometry_shader(const VolumeView& view, const DcGlOptions& options,
+                        McStats* stats = nullptr);
 
 }  // namespace isotile::gl

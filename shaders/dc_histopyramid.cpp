@@ -23,7 +23,7 @@
 
 #include "core/errors.h"
 #include "dc_gl.h"
-#include "dc_gl_tables.h"
+#include "dc_gl_shared.h"
 #include "gl_context.h"
 #include "gl_program.h"
 #include "hp_pyramid.h"
@@ -41,7 +41,8 @@ Box3 vertex_cells(const VolumeView& view, const Box3& f) {
 
 }  // namespace
 
-Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stats) {
+Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
+                   bool geometry_shader) {
   if (const std::string why = dc_gl_unsupported(o.dc); !why.empty()) throw InputError(why);
   if (o.dc.particle_steps < 0)
     throw InputError("dual contouring: particle_steps must be >= 0, got " +
@@ -77,7 +78,7 @@ Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stat
   bind_case_tables();
   bind_dc_tables();
   std::uint64_t vertex_base = 0;
-  int slab_count = 0;
+  int slab_count = 0, passes = 0;
   while (!slabs.empty()) {
     const Box3 cells = slabs.front();
     slabs.pop_front();
@@ -200,7 +201,12 @@ Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stat
       mesh.quads.resize(f0 + n_quads);
     else
       mesh.triangles.resize(f0 + 2 * n_quads);
-    if (n_quads > 0) {
+    if (n_quads > 0 && geometry_shader) {
+      pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
+      std::uint32_t* out = o.dc.keep_quads ? mesh.quads[f0].data() : mesh.triangles[f0].data();
+      passes += dc_gs_faces(defines, uniforms, pyr, elements, n_quads, o.dc.keep_quads,
+                            o.capture_bytes ? o.capture_bytes : budget / 2, out);
+    } else if (n_quads > 0) {
       prog = program({{GL_COMPUTE_SHADER, "dc_hp_quads.comp"}}, defines);
       uniforms(prog);
       pyr.set_uniforms(prog);
@@ -221,6 +227,8 @@ Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stat
         else
           out.read(0, n * per_quad, mesh.triangles.data() + f0 + 2 * first);
       }
+    }
+    if (n_quads > 0) {
       if (vertex_base > 0) {
         const auto vb = static_cast<std::uint32_t>(vertex_base);
         if (o.dc.keep_quads)
@@ -241,8 +249,15 @@ Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stat
     ++slab_count;
   }
   glUseProgram(0);
-  if (stats) stats->bricks = slab_count;
+  if (stats) {
+    stats->bricks = slab_count;
+    stats->capture_passes = passes;
+  }
   return mesh;
+}
+
+Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& o, McStats* stats) {
+  return dc_extract_gl(view, o, stats, false);
 }
 
 }  // namespace isotile::gl

@@ -105,6 +105,10 @@ DcGlOptions dc_gl_options(const ExtractOptions& o) {
   return d;
 }
 
+Mesh run_dc_gs(const VolumeView& view, const ExtractOptions& o) {
+  return dc_geometry_shader(view, dc_gl_options(o));
+}
+
 Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o) {
   return dc_histopyramid(view, dc_gl_options(o));
 }
@@ -123,7 +127,7 @@ std::string probe(bool* hardware, bool hardware_only) {
 }  // namespace
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, nullptr, nullptr}, probe);
+  register_backend(Backend::GeometryShader, {run_gs, nullptr, run_dc_gs}, probe);
   register_backend(Backend::HistoPyramid, {run_hp, nullptr, run_dc_hp}, probe);
 }
 

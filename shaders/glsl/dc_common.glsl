@@ -9,7 +9,7 @@
 // (bits 8-10, axis a at 8 + a) and its vertex count (bits 11-13).
 
 // The tables of core/extract/dual_contouring_table.h and dual_contouring_patches.h, uploaded from
-// the CPU's constexpr arrays (dc_gl_tables.cpp).
+// the CPU's constexpr arrays (dc_gl_shared.cpp).
 layout(std430, binding = 7) readonly buffer DcTables {
   uint dc_patch_map[256];   // per case: the patch of each crossed edge, 2 bits per edge
   uint dc_patch_info[256];  // per case: patch count (bits 0-7), conflict faces (bits 8-13)

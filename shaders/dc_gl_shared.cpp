@@ -1,5 +1,5 @@
 // The Dual Contouring tables for the GL paths, built from the CPU's constexpr arrays.
-#include "dc_gl_tables.h"
+#include "dc_gl_shared.h"
 
 #include <array>
 #include <cstdint>
