@@ -30,9 +30,10 @@ int dc_gs_faces(const std::string& defines, const std::function<void(GLuint)>& u
   const std::uint64_t corners = keep_quads ? 1 : 3;
   const std::uint64_t per_quad = keep_quads ? 4 : 2;  // primitives
   const std::uint64_t prim_bytes = corners * 8;
-  // One element's faces always fit: three quads.
-  const std::uint64_t limit =
-      std::max<std::uint64_t>(std::min(capture_bytes, kMaxCaptureBytes) / prim_bytes, 3 * per_quad);
+  // One element's faces (three quads) and one more primitive always fit, so that an overflow
+  // always keeps at least the first element drawn.
+  const std::uint64_t limit = std::max<std::uint64_t>(
+      std::min(capture_bytes, kMaxCaptureBytes) / prim_bytes, 3 * per_quad + 1);
   const std::uint64_t total = n_quads * per_quad;
   std::uint64_t cap = std::min(limit, total);
 

@@ -56,14 +56,15 @@ void bind_dc_tables() {
   tables->bind(GL_SHADER_STORAGE_BUFFER, 7);
 }
 
-std::string dc_defines(const DualContouringOptions& o) {
-  std::string d;
+std::string dc_defines(const DualContouringOptions& o, DcPass pass) {
+  std::string d = "#define DC_CODES\n";
+  if (pass == DcPass::Pyramid) return d;
   if (o.vertices == DcVertices::Patch) d += "#define DC_PATCH\n";
+  if (pass == DcPass::Faces && o.keep_quads) d += "#define KEEP_QUADS\n";
+  if (pass != DcPass::Vertices) return d;
   if (o.solver == DcSolver::Particle) d += "#define DC_PARTICLE\n";
   if (o.hermite == DcHermite::Eno) d += "#define DC_ENO\n";
   if (o.normals) d += "#define NORMALS\n";
-  if (o.keep_quads) d += "#define KEEP_QUADS\n";
-  d += "#define DC_CODES\n";
   return d;
 }
 

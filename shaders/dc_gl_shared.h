@@ -18,8 +18,11 @@ namespace isotile::gl {
 // Binds the tables at storage-buffer binding 7 (uploaded once per context).
 void bind_dc_tables();
 
-// The defines of dc_common.glsl for `o` (solver, Hermite data, vertices, normals).
-std::string dc_defines(const DualContouringOptions& o);
+// The defines of dc_common.glsl each pass needs, no more (every variant is a program compiled
+// at run time): the pyramid's, the classification's (vertices), the vertex pass's (vertices,
+// solver, Hermite data, normals) and the face passes' (vertices, quads).
+enum class DcPass { Pyramid, Classify, Vertices, Faces };
+std::string dc_defines(const DualContouringOptions& o, DcPass pass);
 
 // The vertex cells [vlo, vlo + vdims) of a slab, the view's sample box and the solver's numbers.
 void set_dc_uniforms(GLuint prog, const Box3& vertex_cells, const VolumeView& view,

@@ -73,7 +73,6 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
                                                sample_bytes, halo, budget, o.max_brick_cells_z);
   std::deque<Box3> slabs(planned.begin(), planned.end());
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
-  const std::string defines_dc = dc_defines(o.dc);
 
   bind_case_tables();
   bind_dc_tables();
@@ -86,8 +85,11 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     const Box3 region = slab_region(view, cells, halo);
     StageTimer timer;
     const Samples samples = upload_samples(view, region);
-    const std::string defines = samples.defines + defines_dc;
-    std::string base_defines = defines;
+    const std::string pyramid = samples.defines + dc_defines(o.dc, DcPass::Pyramid);
+    const std::string classify = samples.defines + dc_defines(o.dc, DcPass::Classify);
+    const std::string vertices = samples.defines + dc_defines(o.dc, DcPass::Vertices);
+    const std::string faces = samples.defines + dc_defines(o.dc, DcPass::Faces);
+    std::string base_defines = pyramid;
     base_defines += "#define BASE\n";
     const GridUniforms grid{region, cells, view.global_dims, o.dc.iso, view.origin, view.spacing};
     const std::uint64_t elements =
@@ -108,14 +110,14 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     timer.lap(stats ? &stats->seconds_upload : nullptr);
 
     // (1) classify
-    GLuint prog = program({{GL_COMPUTE_SHADER, "dc_hp_classify.comp"}}, defines);
+    GLuint prog = program({{GL_COMPUTE_SHADER, "dc_hp_classify.comp"}}, classify);
     uniforms(prog);
     glUseProgram(prog);
     dispatch((elements + 1) / 2);
 
     // (2) the pyramid, then vertex offsets per node
     const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, base_defines);
-    const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
+    const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, pyramid);
     for (int l = 1; l <= pyr.levels; ++l) {
       prog = l == 1 ? base : upper;
       set_uniform_u(prog, "u_count", pyr.count[l]);
@@ -127,7 +129,7 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     }
     const Buffer offsets(pyr.nodes * 4);
     offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
-    prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, defines);
+    prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, pyramid);
     pyr.set_uniforms(prog);
     glUseProgram(prog);
     for (int l = pyr.levels; l >= 1; --l) {
@@ -157,7 +159,7 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     std::uint64_t shared = 0;
     const bool last = slabs.empty();
     if (!last && n_vertices > 0) {
-      prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, defines);
+      prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, pyramid);
       pyr.set_uniforms(prog);
       set_uniform_u(
           prog, "u_element",
@@ -182,7 +184,7 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     if (o.dc.normals) mesh.normals.resize(v0 + n_vertices);
     const Buffer pos(n_vertices * 12), nrm(o.dc.normals ? n_vertices * 12 : 4);
     if (n_vertices > 0) {
-      prog = program({{GL_COMPUTE_SHADER, "dc_hp_vertices.comp"}}, defines);
+      prog = program({{GL_COMPUTE_SHADER, "dc_hp_vertices.comp"}}, vertices);
       uniforms(prog);
       pyr.set_uniforms(prog);
       set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(n_vertices));
@@ -204,10 +206,10 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     if (n_quads > 0 && geometry_shader) {
       pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
       std::uint32_t* out = o.dc.keep_quads ? mesh.quads[f0].data() : mesh.triangles[f0].data();
-      passes += dc_gs_faces(defines, uniforms, pyr, elements, n_quads, o.dc.keep_quads,
+      passes += dc_gs_faces(faces, uniforms, pyr, elements, n_quads, o.dc.keep_quads,
                             o.capture_bytes ? o.capture_bytes : budget / 2, out);
     } else if (n_quads > 0) {
-      prog = program({{GL_COMPUTE_SHADER, "dc_hp_quads.comp"}}, defines);
+      prog = program({{GL_COMPUTE_SHADER, "dc_hp_quads.comp"}}, faces);
       uniforms(prog);
       pyr.set_uniforms(prog);
       glUseProgram(prog);

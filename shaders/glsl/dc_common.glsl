@@ -59,78 +59,96 @@ int dc_face_corner(int f, int i) {
   return (cu << u) | (cv << v) | (side << axis);
 }
 
-int dc_find(inout int root[12], int e) {
-  while (root[e] != e) e = root[e];
+// Twelve 4-bit fields in two words (edges 0-7, 8-11): local arrays indexed at run time become
+// branch ladders on llvmpipe, which made the union-find below take seconds to compile.
+uint dc_nib(uint lo, uint hi, int i) { return i < 8 ? (lo >> (4 * i)) & 15u : (hi >> (4 * (i - 8))) & 15u; }
+void dc_set_nib(inout uint lo, inout uint hi, int i, uint v) {
+  if (i < 8)
+    lo = (lo & ~(15u << (4 * i))) | (v << (4 * i));
+  else
+    hi = (hi & ~(15u << (4 * (i - 8)))) | (v << (4 * (i - 8)));
+}
+
+int dc_find(uint lo, uint hi, int e) {
+  for (int r = int(dc_nib(lo, hi, e)); r != e; r = int(dc_nib(lo, hi, e))) e = r;
   return e;
 }
-void dc_join(inout int root[12], int a, int b) {
-  a = dc_find(root, a);
-  b = dc_find(root, b);
-  if (a != b) root[max(a, b)] = min(a, b);
+void dc_join(inout uint lo, inout uint hi, int a, int b) {
+  a = dc_find(lo, hi, a);
+  b = dc_find(lo, hi, b);
+  if (a != b) dc_set_nib(lo, hi, max(a, b), uint(min(a, b)));
+}
+
+// The four edges of face f in cyclic order (edge i joins corners i and i + 1), 4 bits each.
+uint dc_face_edges(int f) {
+  uint out_edges = 0u;
+  for (int i = 0; i < 4; ++i)
+    out_edges |= uint(dc_edge_between(dc_face_corner(f, i), dc_face_corner(f, (i + 1) % 4))) << (4 * i);
+  return out_edges;
 }
 
 // dc::cell_patches: the patch count of a cell of case cs with faces `flips` resolved the other
 // way and faces `open` on the volume border; `map` gets each crossed edge's patch (2 bits each).
-// Patches are numbered by their lowest edge, as on the CPU, so only the partition matters.
+// Patches are numbered by their lowest edge, as on the CPU, so only the partition matters. Loops
+// run over set bits (of unknown count): unrolled, they took llvmpipe seconds to compile.
 uint dc_patches(uint cs, uint flips, uint open, out uint map) {
   if (flips == 0u && open == 0u) {
     map = dc_patch_map[cs];
     return dc_patch_info[cs] & 0xffu;
   }
   uint mask = case_edge_mask(cs);
-  int root[12];
-  for (int e = 0; e < 12; ++e) root[e] = e;
+  uint rlo = 0x76543210u, rhi = 0xba98u;  // every edge its own root
   uint on_border = 0u;
-  for (int f = 0; f < 6; ++f) {
-    int fe[4], fc[4];
-    for (int i = 0; i < 4; ++i) fc[i] = dc_face_corner(f, i);
-    for (int i = 0; i < 4; ++i) fe[i] = dc_edge_between(fc[i], fc[(i + 1) % 4]);
+  for (uint fm = 63u; fm != 0u; fm &= fm - 1u) {
+    int f = findLSB(fm);
+    uint fe = dc_face_edges(f);
     if (((open >> f) & 1u) != 0u) {
-      for (int i = 0; i < 4; ++i) on_border |= 1u << fe[i];
+      for (int i = 0; i < 4; ++i) on_border |= 1u << ((fe >> (4 * i)) & 15u);
       continue;
     }
-    int crossed[4];
-    int n = 0;
+    uint crossed = 0u;  // of the face's four edges
     for (int i = 0; i < 4; ++i)
-      if (((mask >> fe[i]) & 1u) != 0u) crossed[n++] = fe[i];
-    if (n == 2) dc_join(root, crossed[0], crossed[1]);
-    if (n != 4) continue;
+      if (((mask >> ((fe >> (4 * i)) & 15u)) & 1u) != 0u) crossed |= 1u << i;
+    if (bitCount(crossed) == 2) {
+      int i0 = findLSB(crossed), i1 = findMSB(crossed);
+      dc_join(rlo, rhi, int((fe >> (4 * i0)) & 15u), int((fe >> (4 * i1)) & 15u));
+    }
+    if (crossed != 15u) continue;
     bool cut_inside = ((flips >> f) & 1u) == 0u;
     for (int i = 0; i < 4; ++i) {
-      bool inside = ((cs >> fc[i]) & 1u) != 0u;
-      if (inside == cut_inside) dc_join(root, fe[(i + 3) % 4], fe[i]);
+      // Corner i lies between edges i - 1 and i.
+      bool inside = ((cs >> dc_face_corner(f, i)) & 1u) != 0u;
+      if (inside == cut_inside)
+        dc_join(rlo, rhi, int((fe >> (4 * ((i + 3) % 4))) & 15u), int((fe >> (4 * i)) & 15u));
     }
   }
   if (open != 0u) {
     // Pieces whose crossed edges all lie on the border join the first piece that has one off it
     // (or, where none has, one another).
-    bool live[12];
-    for (int e = 0; e < 12; ++e) live[e] = false;
-    for (int e = 0; e < 12; ++e)
-      if (((mask >> e) & 1u) != 0u && ((on_border >> e) & 1u) == 0u) live[dc_find(root, e)] = true;
+    uint live = 0u;  // by root
+    for (uint m = mask & ~on_border; m != 0u; m &= m - 1u)
+      live |= 1u << dc_find(rlo, rhi, findLSB(m));
     int first_live = -1, first_dead = -1;
-    bool dead[12];
-    for (int e = 0; e < 12; ++e) {
-      dead[e] = false;
-      if (((mask >> e) & 1u) == 0u) continue;
-      int r = dc_find(root, e);
-      dead[e] = !live[r];
-      if (live[r] && first_live < 0) first_live = r;
-      if (!live[r] && first_dead < 0) first_dead = r;
+    uint dead = 0u;  // by edge
+    for (uint m = mask; m != 0u; m &= m - 1u) {
+      int e = findLSB(m);
+      int r = dc_find(rlo, rhi, e);
+      bool is_live = ((live >> r) & 1u) != 0u;
+      if (!is_live) dead |= 1u << e;
+      if (is_live && first_live < 0) first_live = r;
+      if (!is_live && first_dead < 0) first_dead = r;
     }
     int keep = first_live >= 0 ? first_live : first_dead;
-    for (int e = 0; e < 12; ++e)
-      if (dead[e]) dc_join(root, e, keep);
+    for (uint m = dead; m != 0u; m &= m - 1u) dc_join(rlo, rhi, findLSB(m), keep);
   }
-  int number[12];
-  for (int e = 0; e < 12; ++e) number[e] = -1;
+  uint nlo = 0u, nhi = 0u;  // per root: its patch + 1
   uint count = 0u;
   map = 0u;
-  for (int e = 0; e < 12; ++e) {
-    if (((mask >> e) & 1u) == 0u) continue;
-    int r = dc_find(root, e);
-    if (number[r] < 0) number[r] = int(count++);
-    map |= uint(number[r] & 3) << (2 * e);
+  for (uint m = mask; m != 0u; m &= m - 1u) {
+    int e = findLSB(m);
+    int r = dc_find(rlo, rhi, e);
+    if (dc_nib(nlo, nhi, r) == 0u) dc_set_nib(nlo, nhi, r, ++count);
+    map |= ((dc_nib(nlo, nhi, r) - 1u) & 3u) << (2 * e);
   }
   return count;
 }
@@ -145,9 +163,8 @@ int dc_case_in_view(ivec3 c) {
 // border of the volume.
 uint dc_cell_patches(ivec3 c, uint cs, out uint map) {
   uint flips = 0u;
-  uint conflict = (dc_patch_info[cs] >> 8) & 63u;
-  for (int f = 0; f < 6; ++f) {
-    if (((conflict >> f) & 1u) == 0u) continue;
+  for (uint m = (dc_patch_info[cs] >> 8) & 63u; m != 0u; m &= m - 1u) {
+    int f = findLSB(m);
     ivec3 d = ivec3(0);
     d[f / 2] = (f % 2) == 0 ? -1 : 1;
     int other = dc_case_in_view(c + d);
@@ -324,17 +341,21 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
   h.p[axis] = t;
 #if defined(DC_PARTICLE) || defined(DC_QEF)
   precise dvec3 n;
-  for (int a = 0; a < 3; ++a) {
-    if (a == axis) {
-      n[a] = slope;
-    } else if (side == 0) {
-      n[a] = dc_eno_component(s0, a);
-    } else if (side == 1) {
-      n[a] = dc_eno_component(s1, a);
-    } else {
-      double g0 = dc_eno_component(s0, a), g1 = dc_eno_component(s1, a);
-      n[a] = g0 + t * (g1 - g0);
+  n[axis] = slope;
+  // Across the edge: that side's end (side 0 or 1) or both ends interpolated. One call site in
+  // loops of unknown length: inlined once, not six times.
+  for (uint am = 7u ^ (1u << axis); am != 0u; am &= am - 1u) {
+    int a = findLSB(am);
+    double g0 = 0.0LF, g1 = 0.0LF;
+    for (int end = side == 1 ? 1 : 0; end <= (side == 0 ? 0 : 1); ++end) {
+      double g = dc_eno_component(end == 0 ? s0 : s1, a);
+      if (end == 0)
+        g0 = g;
+      else
+        g1 = g;
     }
+    precise double mixed = g0 + t * (g1 - g0);
+    n[a] = side == 0 ? g0 : side == 1 ? g1 : mixed;
   }
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
   double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;
@@ -366,8 +387,10 @@ dvec3 dc_place(ivec3 c, uint edges) {
   precise dmat3 A = dmat3(0.0LF);  // A[col][row]
   precise dvec3 b = dvec3(0.0LF);
   int count = 0;
-  for (int e = 0; e < 12; ++e) {
-    if (((edges >> e) & 1u) == 0u) continue;
+  // Over the set bits, in ascending order as the CPU sums them; a loop of unknown length is not
+  // unrolled (twelve inlined copies of dc_plane made llvmpipe compile for seconds).
+  for (uint m = edges; m != 0u; m &= m - 1u) {
+    int e = findLSB(m);
     DcPlane h = dc_plane(c, e, v);
     ++count;
     mass += h.p;
@@ -410,7 +433,8 @@ dvec3 dc_place(ivec3 c, uint edges) {
 // The outward unit normal at cell-local x of cell c, in world units (the CPU's vertex_normal).
 vec3 dc_vertex_normal(ivec3 c, dvec3 x) {
   precise dvec3 n = dvec3(0.0LF);
-  for (int k = 0; k < 8; ++k) {
+  for (uint km = 255u; km != 0u; km &= km - 1u) {  // corners in order; not unrolled
+    int k = findLSB(km);
     dvec3 g = dc_gradient(c + ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1));
     precise double w = 1.0LF;
     for (int a = 0; a < 3; ++a) w *= ((k >> a) & 1) != 0 ? x[a] : 1.0LF - x[a];

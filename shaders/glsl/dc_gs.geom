@@ -27,11 +27,12 @@ void main() {
   uint e = v_elem[0];
   uint code = code_of(e);
   uint axes = (code >> 8) & 7u;
-  uint rank = 0u;
-  for (int axis = 0; axis < 3; ++axis) {
-    if (((axes >> axis) & 1u) == 0u) continue;
+  // A loop of unknown length: unrolled three times over, the shader took seconds to compile on
+  // llvmpipe.
+  uint n = uint(bitCount(axes));
+  for (uint rank = 0u; rank < n; ++rank) {
     uint q[4];
-    dc_quad_corners(e, code, axis, rank++, q);
+    dc_quad_corners(e, code, dc_axis_of_rank(axes, rank), rank, q);
 #ifdef KEEP_QUADS
     for (uint v = 0u; v < 4u; ++v) emit(q[v], e);
 #else

@@ -33,7 +33,8 @@ void main() {
   uint w = invocation();
   uint n = dc_element_count();
   if (2u * w >= n) return;
-  uint lo = dc_element_code(2u * w);
-  uint hi = 2u * w + 1u < n ? dc_element_code(2u * w + 1u) : 0u;
-  codes[w] = lo | (hi << 16);
+  // A loop of unknown length, so that dc_element_code is inlined once (it is large).
+  uint word = 0u;
+  for (uint e = 2u * w; e < min(2u * w + 2u, n); ++e) word |= dc_element_code(e) << (16u * (e & 1u));
+  codes[w] = word;
 }
