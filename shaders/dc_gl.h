@@ -8,7 +8,6 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
 
 #include "core/extract/dual_contouring.h"
 #include "core/mesh/mesh.h"
@@ -26,12 +25,9 @@ struct DcGlOptions {
   std::uint64_t capture_bytes = 0;
 };
 
-// "" when the GL paths implement `o`, else what they lack, named as the CLI names it.
-std::string dc_gl_unsupported(const DualContouringOptions& o);
-
-// Throw InputError for an option the GL paths do not implement (dc_gl_unsupported) or when no
-// context can be made, CapacityError when the mesh needs more than 2^32 - 1 vertices or one x-y
-// slab does not fit the device.
+// Every option of DualContouringOptions runs on GL. Throw InputError for invalid options (as the
+// CPU) or when no context can be made, CapacityError when the mesh needs more than 2^32 - 1
+// vertices or one x-y slab does not fit the device.
 Mesh dc_histopyramid(const VolumeView& view, const DcGlOptions& options, McStats* stats = nullptr);
 Mesh dc_geometry_shader(const VolumeView& view, const DcGlOptions& options,
                         McStats* stats = nullptr);

@@ -14,13 +14,6 @@
 
 namespace isotile::gl {
 
-std::string dc_gl_unsupported(const DualContouringOptions& o) {
-  if (o.solver == DcSolver::Qef)
-    return "the QEF solver (--dc-solver qef) is not implemented on the GL backends; use "
-           "--backend cpu or --dc-solver mass|particle";
-  return {};
-}
-
 void bind_dc_tables() {
   static std::unique_ptr<Buffer> tables;
   if (!tables) {
@@ -63,6 +56,7 @@ std::string dc_defines(const DualContouringOptions& o, DcPass pass) {
   if (pass == DcPass::Faces && o.keep_quads) d += "#define KEEP_QUADS\n";
   if (pass != DcPass::Vertices) return d;
   if (o.solver == DcSolver::Particle) d += "#define DC_PARTICLE\n";
+  if (o.solver == DcSolver::Qef) d += "#define DC_QEF\n";
   if (o.hermite == DcHermite::Eno) d += "#define DC_ENO\n";
   if (o.normals) d += "#define NORMALS\n";
   return d;
@@ -85,6 +79,8 @@ void set_dc_uniforms(GLuint prog, const Box3& vertex_cells, const VolumeView& vi
   d1("u_rate", o.particle_rate);
   d1("u_tol2", o.particle_tolerance * o.particle_tolerance);
   glProgramUniform1i(prog, glGetUniformLocation(prog, "u_steps"), o.particle_steps);
+  d1("u_qef_cutoff", o.qef_eigen_cutoff);
+  glProgramUniform1i(prog, glGetUniformLocation(prog, "u_jacobi_sweeps"), dc::kJacobiSweeps);
   check("setting the Dual Contouring uniforms");
 }
 

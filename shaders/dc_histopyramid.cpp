@@ -43,7 +43,6 @@ Box3 vertex_cells(const VolumeView& view, const Box3& f) {
 
 Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
                    bool geometry_shader) {
-  if (const std::string why = dc_gl_unsupported(o.dc); !why.empty()) throw InputError(why);
   if (o.dc.particle_steps < 0)
     throw InputError("dual contouring: particle_steps must be >= 0, got " +
                      std::to_string(o.dc.particle_steps));

@@ -64,7 +64,7 @@ TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
 }
 
 // Dual Contouring on both GL backends, in core and brick by brick through the tiler, writes the
-// in-core CPU file; the QEF solver, not on GL, is one error line naming it.
+// in-core CPU file, with the default options and with the QEF.
 TEST_F(GlCli, DualContouringWritesTheCpuFile) {
   REQUIRE_GL_CLI();
   const std::string in = "extract field:marschner-lobb:30 --method dc -q ";
@@ -80,10 +80,14 @@ TEST_F(GlCli, DualContouringWritesTheCpuFile) {
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_GT(nlohmann::json::parse(slurp(dir_ / "s.json"))["bricks"].get<int>(), 8);
     EXPECT_TRUE(slurp(dir_ / ("tiled_" + name)) == cpu) << b;
-    const Result qef = run(in + "--dc-solver qef --backend " + b + " -o q.ply");
-    EXPECT_EQ(qef.code, 1);
-    EXPECT_EQ(std::count(qef.err.begin(), qef.err.end(), '\n'), 1) << qef.err;
-    EXPECT_NE(qef.err.find("--dc-solver qef"), std::string::npos) << qef.err;
+  }
+  // The QEF solver (Jacobi sweeps on both sides) with ENO Hermite data, kept quads, normals.
+  const std::string qef = in + "--dc-solver qef --dc-hermite eno --quads --normals ";
+  ASSERT_EQ(run(qef + "--backend cpu -o qef_cpu.ply").code, 0);
+  for (const char* b : {"gs", "hp"}) {
+    const std::string name = std::string("qef_") + b + ".ply";
+    ASSERT_EQ(run(qef + "--backend " + b + " -o " + name).code, 0);
+    EXPECT_TRUE(slurp(dir_ / name) == slurp(dir_ / "qef_cpu.ply")) << b;
   }
 }
 

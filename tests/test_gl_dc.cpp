@@ -1,7 +1,7 @@
 // Dual Contouring on the OpenGL backends (HistoPyramid, geometry shader) against the CPU
 // reference (core/extract/dual_contouring.h): the same vertices in key order, the same faces in
 // the same order, positions within 1e-4 voxel (bit-equal on llvmpipe), for every vertex variant,
-// solver and Hermite choice the GL paths implement, whole-volume, in slabs, in brick mode, with a
+// solver and Hermite choice, whole-volume, in slabs, in brick mode, with a
 // capture buffer that overflows. Small volumes: llvmpipe runs the shaders on the CPU.
 #include <gtest/gtest.h>
 
@@ -87,20 +87,20 @@ void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
   EXPECT_LE(worst_n, 1e-5) << what;
 }
 
-// Every variant the GL paths implement: both vertex variants, the mass point and the particle
-// minimizer, both Hermite choices; quads and normals on some. (Each variant is a set of programs
-// compiled at run time, which llvmpipe takes a while over: the other tests reuse these.)
+// Every variant: both vertex variants, the three solvers, both Hermite choices; quads and normals
+// on some. (Each variant is a set of programs compiled at run time, which llvmpipe takes a while
+// over: the other tests reuse these.)
 std::vector<DualContouringOptions> variants(double iso) {
   std::vector<DualContouringOptions> out;
   for (DcVertices vert : {DcVertices::Patch, DcVertices::Cell})
-    for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle})
+    for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
       for (DcHermite hermite : {DcHermite::Central, DcHermite::Eno}) {
         DualContouringOptions o;
         o.iso = iso;
         o.vertices = vert;
         o.solver = solver;
         o.hermite = hermite;
-        o.normals = solver == DcSolver::Particle;
+        o.normals = solver != DcSolver::MassPoint;
         o.keep_quads = solver == DcSolver::MassPoint && hermite == DcHermite::Eno;
         out.push_back(o);
       }
@@ -163,7 +163,8 @@ TEST_P(GlDc, NoiseEqualsCpu) {
   const VolumeView view = dense_view(noise.data(), ScalarType::UInt8, dims);
   ASSERT_GT(dual_contouring_patch_repairs(view, 127.5).flipped_faces, 0u);
   ASSERT_GT(dual_contouring_patch_repairs(view, 127.5).border_cut_cells, 0u);
-  for (const DualContouringOptions& o : {variants(127.5)[0], variants(127.5)[4]}) {
+  for (const DualContouringOptions& o :
+       {variants(127.5)[0], variants(127.5)[4], variants(127.5)[6]}) {
     const Mesh cpu = dual_contouring(view, o);
     expect_same_mesh(run(GetParam(), view, gl_options(o)), cpu, view, "noise " + describe(o));
   }
@@ -275,18 +276,16 @@ TEST_P(GlDc, EmptyAndTinyVolumes) {
   }
 }
 
-// What the GL paths do not implement is one clear error naming it, never another mesh.
-TEST_P(GlDc, QefIsRefusedByName) {
+// Invalid options are the CPU's errors.
+TEST_P(GlDc, InvalidOptionsAreErrors) {
   REQUIRE_GL();
   const Volume vol = make_field_volume({FieldKind::Sphere, 12});
   DualContouringOptions o;
-  o.solver = DcSolver::Qef;
-  try {
-    run(GetParam(), vol.view(), gl_options(o));
-    FAIL() << "the QEF solver ran on GL";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("--dc-solver qef"), std::string::npos) << e.what();
-  }
+  o.particle_steps = -1;
+  EXPECT_THROW(run(GetParam(), vol.view(), gl_options(o)), InputError);
+  o.particle_steps = 10;
+  o.particle_rate = 0;
+  EXPECT_THROW(run(GetParam(), vol.view(), gl_options(o)), InputError);
 }
 
 INSTANTIATE_TEST_SUITE_P(Gl, GlDc, ::testing::Values(Path::Gs, Path::Hp),

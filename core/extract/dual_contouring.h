@@ -45,8 +45,8 @@ namespace isotile {
 //              trilinear interpolation of the corner forces F_k = sum_i (n_i . (P_i - V_k)) n_i.
 //              F is affine, so this is projected gradient descent on Ju et al.'s QEF; few steps
 //              stay near the mass point (smooth, well-shaped), many steps reach sharp features.
-//   Qef:       Ju et al.'s QEF minimised by a truncated eigen decomposition about the mass point,
-//              then clamped to the cell.
+//   Qef:       Ju et al.'s QEF minimised by a truncated eigen decomposition (Jacobi sweeps,
+//              dc::symmetric_eigen) about the mass point, then clamped to the cell.
 //   MassPoint: the mean of the cell's crossings (SurfaceNets-like; best triangles, no features).
 enum class DcSolver { Particle, Qef, MassPoint };
 
@@ -150,8 +150,18 @@ CellQef accumulate(const HermitePlane* planes, int count, bool with_normals);
 // DcSolver::Particle for n cells at once; out[i] is what place_vertex gives for cell i.
 void run_particles(const CellQef* cells, int n, const DualContouringOptions& options,
                    std::array<double, 3>* out);
-// DcSolver::Qef.
+// DcSolver::Qef, over symmetric_eigen's decomposition of A.
 std::array<double, 3> solve_qef(const CellQef& cell, const DualContouringOptions& options);
+
+// The eigenvalues of a symmetric 3x3 matrix in ascending order and their unit eigenvectors, by
+// at most kJacobiSweeps cyclic Jacobi sweeps: plain IEEE double arithmetic and sqrt, which the GL
+// paths repeat step for step (a closed form would need acos and cos, which GLSL lacks in double).
+inline constexpr int kJacobiSweeps = 6;
+struct SymmetricEigen {
+  double value[3];
+  double vector[3][3];  // vector[e]: the eigenvector of value[e]
+};
+SymmetricEigen symmetric_eigen(const double a[3][3]);
 
 }  // namespace dc
 

@@ -379,6 +379,72 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
 
 double dc_clamp01(double v) { return dc_min(1.0LF, dc_max(0.0LF, v)); }
 
+#ifdef DC_QEF
+// dc::solve_qef: the QEF's least squares about the mass point over the eigen directions whose
+// eigenvalue is above u_qef_cutoff of the largest, from dc::symmetric_eigen's Jacobi sweeps
+// (core/extract/dual_contouring.cpp), step for step.
+uniform double u_qef_cutoff;
+uniform int u_jacobi_sweeps;
+
+dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
+  // m[c][r] = A's row r, column c; v's columns are the eigenvectors.
+  precise dmat3 m = A;
+  precise dmat3 v = dmat3(1.0LF);
+  for (int sweep = 0; sweep < u_jacobi_sweeps; ++sweep) {
+    bool rotated = false;
+    for (int pair = 0; pair < 3; ++pair) {
+      int p = pair == 2 ? 1 : 0, q = pair == 0 ? 1 : 2;
+      double apq = m[q][p];
+      precise double negligible = 1e-18LF * (abs(m[p][p]) + abs(m[q][q]));
+      if (!(abs(apq) > negligible)) continue;
+      rotated = true;
+      precise double theta = (m[q][q] - m[p][p]) / (2.0LF * apq);
+      precise double t = 1.0LF / (abs(theta) + sqrt(theta * theta + 1.0LF));
+      if (theta < 0.0LF) t = -t;
+      precise double c = 1.0LF / sqrt(t * t + 1.0LF);
+      precise double s = t * c;
+      for (int k = 0; k < 3; ++k) {  // columns p and q
+        precise double mkp = m[p][k], mkq = m[q][k];
+        m[p][k] = c * mkp - s * mkq;
+        m[q][k] = s * mkp + c * mkq;
+      }
+      for (int k = 0; k < 3; ++k) {  // rows p and q
+        precise double mpk = m[k][p], mqk = m[k][q];
+        m[k][p] = c * mpk - s * mqk;
+        m[k][q] = s * mpk + c * mqk;
+      }
+      for (int k = 0; k < 3; ++k) {
+        precise double vkp = v[p][k], vkq = v[q][k];
+        v[p][k] = c * vkp - s * vkq;
+        v[q][k] = s * vkp + c * vkq;
+      }
+    }
+    if (!rotated) break;
+  }
+  // Ascending eigenvalues: a three-element sort by the CPU's comparisons.
+  int order[3] = int[3](0, 1, 2);
+  double lambda[3] = double[3](m[0][0], m[1][1], m[2][2]);
+  if (lambda[order[1]] < lambda[order[0]]) { int x = order[0]; order[0] = order[1]; order[1] = x; }
+  if (lambda[order[2]] < lambda[order[1]]) { int x = order[1]; order[1] = order[2]; order[2] = x; }
+  if (lambda[order[1]] < lambda[order[0]]) { int x = order[0]; order[0] = order[1]; order[1] = x; }
+  precise dvec3 residual;
+  for (int r = 0; r < 3; ++r)
+    residual[r] = b[r] - ((A[0][r] * mass[0] + A[1][r] * mass[1]) + A[2][r] * mass[2]);
+  precise dvec3 x = mass;
+  double largest = lambda[order[2]];
+  precise double floor_value = u_qef_cutoff * largest;
+  if (largest > 0.0LF)
+    for (int i = 0; i < 3; ++i) {
+      double l = lambda[order[i]];
+      if (!(l > floor_value && l > 0.0LF)) continue;
+      dvec3 u = v[order[i]];
+      precise double d = ((u[0] * residual[0] + u[1] * residual[1]) + u[2] * residual[2]) / l;
+      for (int a = 0; a < 3; ++a) x[a] += u[a] * d;
+    }
+  return dvec3(dc_clamp01(x[0]), dc_clamp01(x[1]), dc_clamp01(x[2]));
+}
+#endif
+
 // The dual vertex (cell-local) of the crossed edges `edges` of cell c.
 dvec3 dc_place(ivec3 c, uint edges) {
   double v[8];
@@ -403,7 +469,9 @@ dvec3 dc_place(ivec3 c, uint edges) {
 #endif
   }
   mass /= double(count);
-#ifdef DC_PARTICLE
+#ifdef DC_QEF
+  return dc_solve_qef(mass, A, b);
+#elif defined(DC_PARTICLE)
   // x <- clamp(x + c (b - A x)) as the affine map (I - c A) x + c b, stopping once a step moves
   // less than the tolerance (measured after the clamp).
   precise dmat3 M;
