@@ -81,11 +81,12 @@ struct DualContouringOptions {
   // The mass point by default. Measured at iso 49.5 (radius ratio min / mean): bonsai 0.015 /
   // 0.809 against particle-10 0.0002 / 0.806 and QEF 0 / 0.796; engine 0.012 / 0.836 against
   // 0.007 / 0.836 and 0.001 / 0.836. It is also the fastest: 1.6-1.8x MC's time against 3.4-4.1x
-  // (particle-10) and 5-6x (QEF). The Hermite solvers gain accuracy, less than hoped at sharp
-  // features with the paper's Hermite data, which blur within a voxel of a sharp edge: on
-  // csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21 voxels (MC: 0.13), to
-  // 0.019 with DcHermite::Eno. On smooth surfaces three particle steps cut the mean error 5x, to
-  // MC's (sphere N = 64: 0.010 to 0.002 voxels).
+  // (particle-10) and 5-6x (QEF with a closed-form eigen solver; the Jacobi sweeps that replaced
+  // it for the GL paths' sake give the same meshes about 1.3-2x slower). The Hermite solvers gain
+  // accuracy, less than hoped at sharp features with the paper's Hermite data, which blur within a
+  // voxel of a sharp edge: on csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21
+  // voxels (MC: 0.13), to 0.019 with DcHermite::Eno. On smooth surfaces three particle steps cut
+  // the mean error 5x, to MC's (sphere N = 64: 0.010 to 0.002 voxels).
   DcSolver solver = DcSolver::MassPoint;
   int particle_steps = 10;           // at most this many steps...
   double particle_rate = 0.05;       // c in x <- clamp(x + c F(x)); stable below 2 / 12
