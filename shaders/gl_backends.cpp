@@ -7,6 +7,7 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
+#include "dc_gl.h"
 #include "gl_context.h"
 #include "gl_program.h"
 
@@ -92,6 +93,26 @@ Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
   return mc_histopyramid(view, mc_options(o));
 }
 
+DcGlOptions dc_gl_options(const ExtractOptions& o) {
+  DcGlOptions d;
+  d.dc.iso = o.iso;
+  d.dc.solver = o.dc_solver;
+  d.dc.keep_quads = o.keep_quads;
+  d.dc.normals = o.normals;
+  d.dc.hermite = o.dc_hermite;
+  d.dc.vertices = o.dc_vertices;
+  d.dc.cells = o.cells;
+  return d;
+}
+
+Mesh run_dc_gs(const VolumeView& view, const ExtractOptions& o) {
+  return dc_geometry_shader(view, dc_gl_options(o));
+}
+
+Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o) {
+  return dc_histopyramid(view, dc_gl_options(o));
+}
+
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
 // only prefers the GPU paths on a real GPU. For `auto` (hardware_only) a machine without a GPU is
 // told apart without making a context (starting llvmpipe costs about 0.3 s).
@@ -106,8 +127,8 @@ std::string probe(bool* hardware, bool hardware_only) {
 }  // namespace
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, nullptr, nullptr}, probe);
-  register_backend(Backend::HistoPyramid, {run_hp, nullptr, nullptr}, probe);
+  register_backend(Backend::GeometryShader, {run_gs, nullptr, run_dc_gs}, probe);
+  register_backend(Backend::HistoPyramid, {run_hp, nullptr, run_dc_hp}, probe);
 }
 
 }  // namespace isotile::gl

@@ -35,9 +35,15 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   src += defines;
   src += "#line 1\n";
   src += embedded_glsl("mc_common.glsl");
+  // Dual Contouring's shaders share its Hermite data and placement; its output passes the
+  // HistoPyramid traversal (vertex indices) and its face passes the quads' corners and diagonal.
+  const bool dc = s.file.starts_with("dc_");
+  if (dc) src += embedded_glsl("dc_common.glsl");
   // HistoPyramid output passes share the traversal.
-  if (s.file.starts_with("hp_") && s.file != "hp_classify.comp" && s.file != "hp_reduce.comp")
+  if ((s.file.starts_with("hp_") && s.file != "hp_classify.comp" && s.file != "hp_reduce.comp") ||
+      (dc && s.file != "dc_hp_classify.comp" && s.file != "dc_gs.vert"))
     src += embedded_glsl("hp_common.glsl");
+  if (s.file == "dc_hp_quads.comp" || s.file == "dc_gs.geom") src += embedded_glsl("dc_faces.glsl");
   const std::string_view body = embedded_glsl(s.file);
   if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");
   src += body;

@@ -23,45 +23,9 @@
 #include "gl_backends.h"
 #include "gl_context.h"
 #include "gl_program.h"
+#include "hp_pyramid.h"
 
 namespace isotile::gl {
-
-namespace {
-
-constexpr int kMaxLevels = 16;
-
-void set_u(GLuint prog, const char* name, std::uint32_t v) {
-  glProgramUniform1ui(prog, glGetUniformLocation(prog, name), v);
-}
-
-struct Pyramid {
-  int levels = 0;                                  // L; level L is the single top node
-  std::array<std::uint32_t, kMaxLevels> count{};   // nodes per level (level 0: elements)
-  std::array<std::uint32_t, kMaxLevels> offset{};  // start of level l >= 1 in the buffer
-  std::uint64_t nodes = 0;                         // levels 1..L together
-
-  explicit Pyramid(std::uint64_t elements) {
-    count[0] = static_cast<std::uint32_t>(elements);
-    std::uint64_t n = elements;
-    do {
-      n = (n + 7) / 8;
-      ++levels;
-      count[levels] = static_cast<std::uint32_t>(n);
-      offset[levels] = static_cast<std::uint32_t>(nodes);
-      nodes += n;
-    } while (n > 1);
-  }
-
-  void set_uniforms(GLuint prog) const {
-    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_levels"), levels);
-    glProgramUniform1uiv(prog, glGetUniformLocation(prog, "u_level_offset"), kMaxLevels,
-                         offset.data());
-    glProgramUniform1uiv(prog, glGetUniformLocation(prog, "u_level_count"), kMaxLevels,
-                         count.data());
-  }
-};
-
-}  // namespace
 
 Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats) {
   Scope scope;
@@ -119,10 +83,10 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
     for (int l = 1; l <= pyr.levels; ++l) {
       prog = l == 1 ? base : upper;
       set_grid_uniforms(prog, grid);
-      set_u(prog, "u_count", pyr.count[l]);
-      set_u(prog, "u_src_count", pyr.count[l - 1]);
-      set_u(prog, "u_src_offset", l >= 2 ? pyr.offset[l - 1] : 0);
-      set_u(prog, "u_dst_offset", pyr.offset[l]);
+      set_uniform_u(prog, "u_count", pyr.count[l]);
+      set_uniform_u(prog, "u_src_count", pyr.count[l - 1]);
+      set_uniform_u(prog, "u_src_offset", l >= 2 ? pyr.offset[l - 1] : 0);
+      set_uniform_u(prog, "u_dst_offset", pyr.offset[l]);
       glUseProgram(prog);
       dispatch(pyr.count[l]);
     }
@@ -150,7 +114,7 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
       prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, defines);
       set_grid_uniforms(prog, grid);
       pyr.set_uniforms(prog);
-      set_u(prog, "u_element", static_cast<std::uint32_t>(d[0] * d[1] * (d[2] - 1)));
+      set_uniform_u(prog, "u_element", static_cast<std::uint32_t>(d[0] * d[1] * (d[2] - 1)));
       const Buffer result(4);
       result.bind(GL_SHADER_STORAGE_BUFFER, 3);
       glUseProgram(prog);
@@ -184,8 +148,8 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
       nrm.bind(GL_SHADER_STORAGE_BUFFER, 4);
       for (std::uint64_t first = 0; first < n_vertices; first += cap) {
         const std::uint64_t n = std::min(cap, n_vertices - first);
-        set_u(prog, "u_first", static_cast<std::uint32_t>(first));
-        set_u(prog, "u_count", static_cast<std::uint32_t>(n));
+        set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
+        set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(n));
         dispatch(n);
         pos.read(0, n * 12, mesh.positions.data() + v0 + first);
         if (o.normals) nrm.read(0, n * 12, mesh.normals.data() + v0 + first);
@@ -201,8 +165,8 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
       tri.bind(GL_SHADER_STORAGE_BUFFER, 3);
       for (std::uint64_t first = 0; first < n_triangles; first += cap) {
         const std::uint64_t n = std::min(cap, n_triangles - first);
-        set_u(prog, "u_first", static_cast<std::uint32_t>(first));
-        set_u(prog, "u_count", static_cast<std::uint32_t>(n));
+        set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
+        set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(n));
         dispatch(n);
         tri.read(0, n * 12, mesh.triangles.data() + t0 + first);
       }

@@ -63,6 +63,34 @@ TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
   }
 }
 
+// Dual Contouring on both GL backends, in core and brick by brick through the tiler, writes the
+// in-core CPU file, with the default options and with the QEF.
+TEST_F(GlCli, DualContouringWritesTheCpuFile) {
+  REQUIRE_GL_CLI();
+  const std::string in = "extract field:marschner-lobb:30 --method dc -q ";
+  ASSERT_EQ(run(in + "--backend cpu -o cpu.ply").code, 0);
+  const std::string cpu = slurp(dir_ / "cpu.ply");
+  EXPECT_GT(cpu.size(), 10000u);
+  for (const char* b : {"gs", "hp"}) {
+    const std::string name = std::string(b) + ".ply";
+    ASSERT_EQ(run(in + "--backend " + b + " -o " + name).code, 0);
+    EXPECT_TRUE(slurp(dir_ / name) == cpu) << b;
+    const Result r =
+        run(in + "--memory 40KiB --backend " + b + " -o tiled_" + name + " --stats s.json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_GT(nlohmann::json::parse(slurp(dir_ / "s.json"))["bricks"].get<int>(), 8);
+    EXPECT_TRUE(slurp(dir_ / ("tiled_" + name)) == cpu) << b;
+  }
+  // The QEF solver (Jacobi sweeps on both sides) with ENO Hermite data, kept quads, normals.
+  const std::string qef = in + "--dc-solver qef --dc-hermite eno --quads --normals ";
+  ASSERT_EQ(run(qef + "--backend cpu -o qef_cpu.ply").code, 0);
+  for (const char* b : {"gs", "hp"}) {
+    const std::string name = std::string("qef_") + b + ".ply";
+    ASSERT_EQ(run(qef + "--backend " + b + " -o " + name).code, 0);
+    EXPECT_TRUE(slurp(dir_ / name) == slurp(dir_ / "qef_cpu.ply")) << b;
+  }
+}
+
 TEST_F(GlCli, GlInfoDescribesTheDevice) {
   REQUIRE_GL_CLI();
   const Result r = run("gl-info --json");

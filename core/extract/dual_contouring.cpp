@@ -3,7 +3,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include <Eigen/Dense>
 #include <algorithm>
 #include <bit>
 #include <cassert>
@@ -12,6 +11,7 @@
 #include <limits>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "core/errors.h"
@@ -101,30 +101,83 @@ void run_particles(const CellQef* cells, int n, const DualContouringOptions& opt
   }
 }
 
+SymmetricEigen symmetric_eigen(const double a[3][3]) {
+  // Cyclic Jacobi rotations (as Numerical Recipes' jacobi), at most kJacobiSweeps sweeps: only
+  // +, -, *, / and sqrt, so a GPU with IEEE doubles repeats it bit for bit
+  // (shaders/glsl/dc_common.glsl mirrors it). A 3x3 matrix converges in about four sweeps.
+  double m[3][3], v[3][3];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      m[r][c] = a[r][c];
+      v[r][c] = r == c ? 1.0 : 0.0;
+    }
+  constexpr int kPairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+  for (int sweep = 0; sweep < kJacobiSweeps; ++sweep) {
+    // A rotation for an off-diagonal element below 1e-18 of its diagonal changes the eigenvalues
+    // by less than their rounding; once a sweep finds none, the matrix is diagonal.
+    bool rotated = false;
+    for (const auto& pq : kPairs) {
+      const int p = pq[0], q = pq[1];
+      const double apq = m[p][q];
+      if (!(std::fabs(apq) > 1e-18 * (std::fabs(m[p][p]) + std::fabs(m[q][q])))) continue;
+      rotated = true;
+      const double theta = (m[q][q] - m[p][p]) / (2.0 * apq);
+      double t = 1.0 / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
+      if (theta < 0) t = -t;
+      const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
+      for (int k = 0; k < 3; ++k) {  // columns p and q
+        const double mkp = m[k][p], mkq = m[k][q];
+        m[k][p] = c * mkp - s * mkq;
+        m[k][q] = s * mkp + c * mkq;
+      }
+      for (int k = 0; k < 3; ++k) {  // rows p and q
+        const double mpk = m[p][k], mqk = m[q][k];
+        m[p][k] = c * mpk - s * mqk;
+        m[q][k] = s * mpk + c * mqk;
+      }
+      for (int k = 0; k < 3; ++k) {
+        const double vkp = v[k][p], vkq = v[k][q];
+        v[k][p] = c * vkp - s * vkq;
+        v[k][q] = s * vkp + c * vkq;
+      }
+    }
+    if (!rotated) break;
+  }
+  int order[3] = {0, 1, 2};
+  const double lambda[3] = {m[0][0], m[1][1], m[2][2]};
+  if (lambda[order[1]] < lambda[order[0]]) std::swap(order[0], order[1]);
+  if (lambda[order[2]] < lambda[order[1]]) std::swap(order[1], order[2]);
+  if (lambda[order[1]] < lambda[order[0]]) std::swap(order[0], order[1]);
+  SymmetricEigen out;
+  for (int i = 0; i < 3; ++i) {
+    out.value[i] = lambda[order[i]];
+    for (int k = 0; k < 3; ++k) out.vector[i][k] = v[k][order[i]];
+  }
+  return out;
+}
+
 std::array<double, 3> solve_qef(const CellQef& q, const DualContouringOptions& options) {
   // Least squares about the mass point, ignoring directions whose eigenvalue is small relative to
-  // the largest (the planes barely constrain them), as Ju et al. and libfive do. The closed-form
-  // 3x3 eigen solver is several times faster than the iterative one, and the truncation keeps
-  // its weak spot (nearly equal small eigenvalues) out of the result.
-  Eigen::Matrix3d a;
-  Eigen::Vector3d residual, mass(q.mass[0], q.mass[1], q.mass[2]);
-  for (int r = 0; r < 3; ++r) {
-    residual(r) = q.b[r];
-    for (int c = 0; c < 3; ++c) a(r, c) = q.a[r][c];
-  }
-  residual -= a * mass;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
-  eigen.computeDirect(a);
-  const Eigen::Vector3d& lambda = eigen.eigenvalues();  // ascending
-  Eigen::Vector3d x = mass;
-  const double floor = options.qef_eigen_cutoff * lambda(2);
-  if (lambda(2) > 0)
-    for (int e = 0; e < 3; ++e)
-      if (lambda(e) > floor && lambda(e) > 0) {
-        const Eigen::Vector3d u = eigen.eigenvectors().col(e);
-        x += u * (u.dot(residual) / lambda(e));
-      }
-  return {clamp01(x(0)), clamp01(x(1)), clamp01(x(2))};
+  // the largest (the planes barely constrain them), as Ju et al. and libfive do; the truncation
+  // also keeps nearly equal small eigenvalues, where eigenvectors are ill-determined, out of the
+  // result.
+  const SymmetricEigen eigen = symmetric_eigen(q.a);
+  double residual[3];
+  for (int r = 0; r < 3; ++r)
+    residual[r] =
+        q.b[r] - ((q.a[r][0] * q.mass[0] + q.a[r][1] * q.mass[1]) + q.a[r][2] * q.mass[2]);
+  std::array<double, 3> x = q.mass;
+  const double largest = eigen.value[2];
+  const double floor = options.qef_eigen_cutoff * largest;
+  if (largest > 0)
+    for (int e = 0; e < 3; ++e) {
+      const double lambda = eigen.value[e];
+      if (!(lambda > floor && lambda > 0)) continue;
+      const auto& u = eigen.vector[e];
+      const double d = ((u[0] * residual[0] + u[1] * residual[1]) + u[2] * residual[2]) / lambda;
+      for (int a = 0; a < 3; ++a) x[a] += u[a] * d;
+    }
+  return {clamp01(x[0]), clamp01(x[1]), clamp01(x[2])};
 }
 
 std::array<double, 3> place_vertex(const HermitePlane* planes, int count,

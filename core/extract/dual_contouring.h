@@ -45,8 +45,8 @@ namespace isotile {
 //              trilinear interpolation of the corner forces F_k = sum_i (n_i . (P_i - V_k)) n_i.
 //              F is affine, so this is projected gradient descent on Ju et al.'s QEF; few steps
 //              stay near the mass point (smooth, well-shaped), many steps reach sharp features.
-//   Qef:       Ju et al.'s QEF minimised by a truncated eigen decomposition about the mass point,
-//              then clamped to the cell.
+//   Qef:       Ju et al.'s QEF minimised by a truncated eigen decomposition (Jacobi sweeps,
+//              dc::symmetric_eigen) about the mass point, then clamped to the cell.
 //   MassPoint: the mean of the cell's crossings (SurfaceNets-like; best triangles, no features).
 enum class DcSolver { Particle, Qef, MassPoint };
 
@@ -81,11 +81,12 @@ struct DualContouringOptions {
   // The mass point by default. Measured at iso 49.5 (radius ratio min / mean): bonsai 0.015 /
   // 0.809 against particle-10 0.0002 / 0.806 and QEF 0 / 0.796; engine 0.012 / 0.836 against
   // 0.007 / 0.836 and 0.001 / 0.836. It is also the fastest: 1.6-1.8x MC's time against 3.4-4.1x
-  // (particle-10) and 5-6x (QEF). The Hermite solvers gain accuracy, less than hoped at sharp
-  // features with the paper's Hermite data, which blur within a voxel of a sharp edge: on
-  // csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21 voxels (MC: 0.13), to
-  // 0.019 with DcHermite::Eno. On smooth surfaces three particle steps cut the mean error 5x, to
-  // MC's (sphere N = 64: 0.010 to 0.002 voxels).
+  // (particle-10) and 5-6x (QEF with a closed-form eigen solver; the Jacobi sweeps that replaced
+  // it for the GL paths' sake give the same meshes about 1.3-2x slower). The Hermite solvers gain
+  // accuracy, less than hoped at sharp features with the paper's Hermite data, which blur within a
+  // voxel of a sharp edge: on csg-box (N = 64) they cut the worst vertex error from 0.27 to 0.21
+  // voxels (MC: 0.13), to 0.019 with DcHermite::Eno. On smooth surfaces three particle steps cut
+  // the mean error 5x, to MC's (sphere N = 64: 0.010 to 0.002 voxels).
   DcSolver solver = DcSolver::MassPoint;
   int particle_steps = 10;           // at most this many steps...
   double particle_rate = 0.05;       // c in x <- clamp(x + c F(x)); stable below 2 / 12
@@ -150,8 +151,18 @@ CellQef accumulate(const HermitePlane* planes, int count, bool with_normals);
 // DcSolver::Particle for n cells at once; out[i] is what place_vertex gives for cell i.
 void run_particles(const CellQef* cells, int n, const DualContouringOptions& options,
                    std::array<double, 3>* out);
-// DcSolver::Qef.
+// DcSolver::Qef, over symmetric_eigen's decomposition of A.
 std::array<double, 3> solve_qef(const CellQef& cell, const DualContouringOptions& options);
+
+// The eigenvalues of a symmetric 3x3 matrix in ascending order and their unit eigenvectors, by
+// at most kJacobiSweeps cyclic Jacobi sweeps: plain IEEE double arithmetic and sqrt, which the GL
+// paths repeat step for step (a closed form would need acos and cos, which GLSL lacks in double).
+inline constexpr int kJacobiSweeps = 6;
+struct SymmetricEigen {
+  double value[3];
+  double vector[3][3];  // vector[e]: the eigenvector of value[e]
+};
+SymmetricEigen symmetric_eigen(const double a[3][3]);
 
 }  // namespace dc
 

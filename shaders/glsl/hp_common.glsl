@@ -9,10 +9,10 @@ uniform uint u_level_offset[16];  // level l >= 1 starts at pyramid[u_level_offs
 uniform uint u_level_count[16];   // nodes of level l; level 0: the elements
 
 uint code_of(uint e) { return (codes[e >> 1] >> (16u * (e & 1u))) & 0xffffu; }
-uint vertex_count_of(uint code) { return uint(bitCount(code >> 8)); }
-// which = 0: vertices, 1: triangles.
+uint vertex_count_of(uint code) { return hp_vertex_count(code); }
+// which = 0: vertices, 1: faces (triangles; Dual Contouring's quads).
 uint leaf_count(uint code, int which) {
-  return which == 0 ? vertex_count_of(code) : tri_count(code & 0xffu);
+  return which == 0 ? hp_vertex_count(code) : hp_face_count(code);
 }
 
 // Descends from the top node to the element holding output number k (of kind `which`); k becomes

@@ -20,7 +20,7 @@ void main() {
     if (q >= u_src_count) break;
 #ifdef BASE
     uint code = (codes[q >> 1] >> (16u * (q & 1u))) & 0xffffu;
-    sum += uvec2(bitCount(code >> 8), tri_count(code & 0xffu));
+    sum += uvec2(hp_vertex_count(code), hp_face_count(code));
 #else
     sum += pyramid[u_src_offset + q];
 #endif

@@ -65,6 +65,17 @@ uint tri_count(uint cs) { return tri_table[cs].w >> 24; }
 uint tri_edge(uint cs, uint i) { return (tri_table[cs][i >> 2] >> (8u * (i & 3u))) & 0xffu; }
 uint case_edge_mask(uint cs) { return edge_mask[cs >> 2][cs & 3u]; }
 
+// What a HistoPyramid element's 16-bit code counts: Marching Cubes' crossed edges (bits 8-10) and
+// its cell's triangles; with DC_CODES, Dual Contouring's vertices (bits 11-13) and quads (one per
+// bit 8-10; dc_common.glsl). The pyramid passes are the same for both.
+#ifdef DC_CODES
+uint hp_vertex_count(uint code) { return (code >> 11) & 7u; }
+uint hp_face_count(uint code) { return uint(bitCount((code >> 8) & 7u)); }
+#else
+uint hp_vertex_count(uint code) { return uint(bitCount(code >> 8)); }
+uint hp_face_count(uint code) { return tri_count(code & 0xffu); }
+#endif
+
 // Elements: the samples of the closed box, numbered x fastest. Element e's code holds the case of
 // the cell whose lower corner it is (bits 0-7; 0 outside the cell box) and its crossed edges
 // (bits 8-10, axis a at bit 8 + a): the edges from it to its +x, +y, +z neighbours that lie in

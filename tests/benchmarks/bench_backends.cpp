@@ -1,9 +1,13 @@
-// Marching Cubes on the three backends (CPU, GL geometry shader, GL HistoPyramid), side by side in
-// one run on the same in-memory volumes, after checking that all three give the same mesh.
+// Marching Cubes and Dual Contouring on the three backends (CPU, GL geometry shader, GL
+// HistoPyramid), side by side in one run on the same in-memory volumes, after checking that all
+// three give the same mesh.
 //
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
 //   cmake --build build-bench --target bench_backends
-//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R]
+//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--methods mc,dc]
+//
+// Dual Contouring runs with the CLI's defaults (patch vertices, mass point, central Hermite data)
+// and, as a second row per volume, the paper's particle minimizer (10 steps).
 //
 // Times are wall-clock medians of R runs (default 5) of the whole extraction call as a user sees
 // it: upload, passes, read-back, (GS) weld. Each GL path runs once before timing, so shader
@@ -22,9 +26,11 @@
 #include <string>
 #include <vector>
 
+#include "core/extract/dual_contouring.h"
 #include "core/extract/marching_cubes.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "shaders/dc_gl.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 
@@ -50,17 +56,51 @@ double median_seconds(int repeat, const std::function<Mesh()>& run, Mesh& out) {
 }
 
 bool same(const Mesh& a, const Mesh& b) {
-  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals;
+  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals &&
+         a.quads == b.quads;
+}
+
+// Dual Contouring's rows: the CPU and both GL paths per volume and solver.
+void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
+  std::printf("\nDual Contouring (patch vertices, central Hermite data)\n");
+  std::printf("%-12s %-9s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "solver", "triangles",
+              "cpu ms", "gs ms", "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  for (const Case& c : cases)
+    for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle}) {
+      const VolumeView v = c.volume->view();
+      DualContouringOptions o;
+      o.iso = c.iso;
+      o.solver = solver;
+      gl::DcGlOptions g;
+      g.dc = o;
+      Mesh cpu, gs, hp;
+      const double t_cpu = median_seconds(
+          repeat, [&] { return dual_contouring(v, o); }, cpu);
+      gl::dc_geometry_shader(v, g);  // compile the shaders outside the timing
+      const double t_gs = median_seconds(
+          repeat, [&] { return gl::dc_geometry_shader(v, g); }, gs);
+      gl::dc_histopyramid(v, g);
+      const double t_hp = median_seconds(
+          repeat, [&] { return gl::dc_histopyramid(v, g); }, hp);
+      std::printf("%-12s %-9s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
+                  solver == DcSolver::MassPoint ? "mass" : "particle", cpu.triangles.size(),
+                  1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu, t_hp / t_cpu,
+                  same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+    }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   int threads = 2, repeat = 5;
+  std::string methods = "mc,dc";
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
+    if (std::strcmp(argv[i], "--methods") == 0 && i + 1 < argc) methods = argv[++i];
   }
+  const bool run_mc = methods.find("mc") != std::string::npos;
+  const bool run_dc = methods.find("dc") != std::string::npos;
   setenv("LP_NUM_THREADS", std::to_string(threads).c_str(), 1);
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
   std::string why;
@@ -89,6 +129,9 @@ int main(int argc, char** argv) {
       std::printf("skipping %s: %s not found\n", name, (shared / file).c_str());
   }
 
+  if (run_dc) bench_dual_contouring(cases, repeat);
+  if (!run_mc) return 0;
+  std::printf("\nMarching Cubes\n");
   std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
               "hp ms", "gs/cpu", "hp/cpu", "same mesh");
   struct Stages {

@@ -1,0 +1,45 @@
+// The HistoPyramid's count pyramid as both HistoPyramid extractors lay it out (mc_histopyramid.cpp
+// describes it): levels of nodes summing eight consecutive nodes of the level below.
+#pragma once
+
+#include <glad/gl.h>
+
+#include <array>
+#include <cstdint>
+
+namespace isotile::gl {
+
+inline constexpr int kMaxPyramidLevels = 16;
+
+inline void set_uniform_u(GLuint prog, const char* name, std::uint32_t v) {
+  glProgramUniform1ui(prog, glGetUniformLocation(prog, name), v);
+}
+
+struct Pyramid {
+  int levels = 0;                                         // L; level L is the single top node
+  std::array<std::uint32_t, kMaxPyramidLevels> count{};   // nodes per level (level 0: elements)
+  std::array<std::uint32_t, kMaxPyramidLevels> offset{};  // start of level l >= 1 in the buffer
+  std::uint64_t nodes = 0;                                // levels 1..L together
+
+  explicit Pyramid(std::uint64_t elements) {
+    count[0] = static_cast<std::uint32_t>(elements);
+    std::uint64_t n = elements;
+    do {
+      n = (n + 7) / 8;
+      ++levels;
+      count[levels] = static_cast<std::uint32_t>(n);
+      offset[levels] = static_cast<std::uint32_t>(nodes);
+      nodes += n;
+    } while (n > 1);
+  }
+
+  void set_uniforms(GLuint prog) const {
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_levels"), levels);
+    glProgramUniform1uiv(prog, glGetUniformLocation(prog, "u_level_offset"), kMaxPyramidLevels,
+                         offset.data());
+    glProgramUniform1uiv(prog, glGetUniformLocation(prog, "u_level_count"), kMaxPyramidLevels,
+                         count.data());
+  }
+};
+
+}  // namespace isotile::gl
