@@ -9,6 +9,7 @@
 #include "core/extract/extract.h"
 #include "gl_context.h"
 #include "gl_program.h"
+#include "macet_gl.h"
 
 namespace isotile::gl {
 
@@ -92,6 +93,24 @@ Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
   return mc_histopyramid(view, mc_options(o));
 }
 
+MacetGlOptions macet_options(const ExtractOptions& o) {
+  MacetGlOptions m;
+  m.macet.iso = o.iso;
+  m.macet.normals = o.normals;
+  m.macet.quality = o.quality;
+  m.macet.relax = o.macet_relax;
+  m.macet.cells = o.cells;
+  return m;
+}
+
+Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet_geometry_shader(view, macet_options(o));
+}
+
+Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet_histopyramid(view, macet_options(o));
+}
+
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
 // only prefers the GPU paths on a real GPU. For `auto` (hardware_only) a machine without a GPU is
 // told apart without making a context (starting llvmpipe costs about 0.3 s).
@@ -106,8 +125,8 @@ std::string probe(bool* hardware, bool hardware_only) {
 }  // namespace
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, nullptr, nullptr}, probe);
-  register_backend(Backend::HistoPyramid, {run_hp, nullptr, nullptr}, probe);
+  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, nullptr}, probe);
+  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, nullptr}, probe);
 }
 
 }  // namespace isotile::gl

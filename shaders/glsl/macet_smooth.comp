@@ -1,0 +1,124 @@
+// Macet pass 2, the one smoothing pass (macet.cpp's smooth_all), a Jacobi step from the pushed
+// displacements (DispIn) into DispOut: one invocation per region sample. Each grid vertex moves
+// within its tangent plane by the (1 - t)-weighted mean of the umbrella Laplacians of the
+// crossings on its edges. A crossing's umbrella sum is gathered here over the cells around its
+// edge in the order the CPU scatters it (cell slabs of even global z first, then odd; within a
+// slab y, x; triangles in table order), so every sum is added up in the CPU's order.
+
+// The MC edge number (0..11) of the edge from cell corner `o` along `axis`.
+int cell_edge(ivec3 o, int axis) {
+  for (int e = 0; e < 12; ++e)
+    if (edge_info[e].w == axis && edge_info[e].xyz == o) return e;
+  return -1;
+}
+
+void umbrella(ivec3 s, int axis, out dvec3 sum, out uint count) {
+  sum = dvec3(0.0LF);
+  count = 0u;
+  int b = (axis + 1) % 3, c = (axis + 2) % 3;
+  // The four cells around the edge, sorted by (z parity, z, y, x).
+  ivec3 cells[4];
+  int n = 0;
+  for (int db = 0; db < 2; ++db)
+    for (int dc = 0; dc < 2; ++dc) {
+      ivec3 cell = s;
+      cell[b] -= db;
+      cell[c] -= dc;
+      cells[n++] = cell;
+    }
+  for (int i = 1; i < 4; ++i)
+    for (int j = i; j > 0; --j) {
+      ivec3 p = cells[j - 1], q = cells[j];
+      ivec4 kp = ivec4(p.z & 1, p.z, p.y, p.x), kq = ivec4(q.z & 1, q.z, q.y, q.x);
+      bool after = kp.x != kq.x ? kp.x > kq.x
+                   : kp.y != kq.y ? kp.y > kq.y
+                   : kp.z != kq.z ? kp.z > kq.z
+                                  : kp.w > kq.w;
+      if (!after) break;
+      cells[j - 1] = q;
+      cells[j] = p;
+    }
+  for (int i = 0; i < 4; ++i) {
+    ivec3 cell = cells[i];
+    if (!in_region(cell) || !in_region(cell + 1)) continue;
+    uint cs = cell_case(cell);
+    uint nt = tri_count(cs);
+    if (nt == 0u) continue;
+    int self = cell_edge(s - cell, axis);
+    for (uint t = 0u; t < nt; ++t)
+      for (uint v = 0u; v < 3u; ++v) {
+        if (int(tri_edge(cs, 3u * t + v)) != self) continue;
+        ivec4 e1 = edge_info[tri_edge(cs, 3u * t + (v + 1u) % 3u)];
+        ivec4 e2 = edge_info[tri_edge(cs, 3u * t + (v + 2u) % 3u)];
+        double t1, t2;
+        dvec3 x1, x2;
+        linear_crossing(cell + e1.xyz, e1.w, t1, x1);
+        linear_crossing(cell + e2.xyz, e2.w, t2, x2);
+        for (int k = 0; k < 3; ++k) {
+          precise double pair = x1[k] + x2[k];
+          precise double acc = sum[k] + pair;
+          sum[k] = acc;
+        }
+        count += 2u;
+      }
+  }
+}
+
+void main() {
+  uint r = invocation();
+  uvec3 d = uvec3(u_region_dims);
+  if (r >= d.x * d.y * d.z) return;
+  ivec3 g = region_sample(r);
+  if (!grid_vertex(g)) return;
+  dvec4 old = disp_in[r];
+  bool in0 = inside(g);
+  precise dvec3 acc = dvec3(0.0LF);
+  precise double weight = 0.0LF;
+  for (int a = 0; a < 3; ++a)
+    for (int dir = -1; dir <= 1; dir += 2) {
+      ivec3 q = g;
+      q[a] += dir;
+      if (q[a] < u_region_lo[a] || q[a] >= region_hi()[a] || inside(q) == in0) continue;
+      ivec3 s = dir > 0 ? g : q;
+      double t;
+      dvec3 x, sum;
+      uint count;
+      linear_crossing(s, a, t, x);
+      umbrella(s, a, sum, count);
+      precise double follow = dir > 0 ? 1.0LF - t : t;
+      double wt = clamp(follow, 0.0LF, 1.0LF);
+      double n = double(count);
+      for (int c = 0; c < 3; ++c) {
+        precise double lap = sum[c] / n - x[c];
+        precise double term = wt * (n > 0.0LF ? lap : 0.0LF);
+        acc[c] = acc[c] + term;
+      }
+      weight = weight + wt;
+    }
+  if (weight <= 0.0LF) {
+    disp_out[r] = old;
+    return;
+  }
+  for (int c = 0; c < 3; ++c) acc[c] = acc[c] / weight;
+  dvec3 gr = sample_gradient(g);
+  precise double g2 = gr.x * gr.x + gr.y * gr.y + gr.z * gr.z;
+  if (g2 > 0.0LF) {
+    precise double along = (acc.x * gr.x + acc.y * gr.y + acc.z * gr.z) / g2;
+    for (int c = 0; c < 3; ++c) acc[c] = acc[c] - along * gr[c];
+  }
+  dvec3 from = old.xyz;
+  precise dvec3 to;
+  for (int c = 0; c < 3; ++c) to[c] = from[c] + acc[c];
+  precise double len2 = to.x * to.x + to.y * to.y + to.z * to.z;
+  double len = sqrt(len2);
+  if (len > MACET_SMOOTH_CAP) {
+    precise double scale = MACET_SMOOTH_CAP / len;
+    for (int c = 0; c < 3; ++c) to[c] = to[c] * scale;
+  }
+  precise dvec3 step;
+  for (int c = 0; c < 3; ++c) step[c] = to[c] - from[c];
+  dvec3 disp = from;
+  double value = old.w;
+  try_move(g, from, step, MACET_SMOOTH_GUARD, disp, value);
+  disp_out[r] = dvec4(disp, value);
+}
