@@ -1,9 +1,10 @@
-// Marching Cubes on the three backends (CPU, GL geometry shader, GL HistoPyramid), side by side in
-// one run on the same in-memory volumes, after checking that all three give the same mesh.
+// Marching Cubes and Macet (Fast) on the three backends (CPU, GL geometry shader, GL
+// HistoPyramid), side by side in one run on the same in-memory volumes, after checking that all
+// three give the same mesh.
 //
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
 //   cmake --build build-bench --target bench_backends
-//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R]
+//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--method mc|macet|all]
 //
 // Times are wall-clock medians of R runs (default 5) of the whole extraction call as a user sees
 // it: upload, passes, read-back, (GS) weld. Each GL path runs once before timing, so shader
@@ -22,11 +23,13 @@
 #include <string>
 #include <vector>
 
+#include "core/extract/macet.h"
 #include "core/extract/marching_cubes.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/macet_gl.h"
 
 namespace {
 
@@ -57,9 +60,16 @@ bool same(const Mesh& a, const Mesh& b) {
 
 int main(int argc, char** argv) {
   int threads = 2, repeat = 5;
+  std::string method = "all";
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
+    if (std::strcmp(argv[i], "--method") == 0 && i + 1 < argc) method = argv[++i];
+  }
+  if (method != "all" && method != "mc" && method != "macet") {
+    std::fprintf(stderr, "bench_backends: --method must be mc, macet or all, got %s\n",
+                 method.c_str());
+    return 2;
   }
   setenv("LP_NUM_THREADS", std::to_string(threads).c_str(), 1);
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
@@ -89,37 +99,73 @@ int main(int argc, char** argv) {
       std::printf("skipping %s: %s not found\n", name, (shared / file).c_str());
   }
 
-  std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
-              "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  // Each method's rows: the CPU extractor and the two GL paths, same options.
+  struct Runner {
+    const char* method;
+    std::function<Mesh(const VolumeView&, double)> cpu;
+    std::function<Mesh(const VolumeView&, double, gl::McStats*)> gs, hp;
+  };
+  std::vector<Runner> runners;
+  if (method == "all" || method == "mc")
+    runners.push_back(
+        {"mc", [](const VolumeView& v, double iso) { return marching_cubes(v, {.iso = iso}); },
+         [](const VolumeView& v, double iso, gl::McStats* s) {
+           return gl::mc_geometry_shader(v, {.iso = iso}, s);
+         },
+         [](const VolumeView& v, double iso, gl::McStats* s) {
+           return gl::mc_histopyramid(v, {.iso = iso}, s);
+         }});
+  if (method == "all" || method == "macet") {
+    auto o = [](double iso) {
+      gl::MacetGlOptions m;
+      m.macet.iso = iso;
+      return m;
+    };
+    runners.push_back({"macet",
+                       [](const VolumeView& v, double iso) { return macet(v, {.iso = iso}); },
+                       [o](const VolumeView& v, double iso, gl::McStats* s) {
+                         return gl::macet_geometry_shader(v, o(iso), s);
+                       },
+                       [o](const VolumeView& v, double iso, gl::McStats* s) {
+                         return gl::macet_histopyramid(v, o(iso), s);
+                       }});
+  }
+
   struct Stages {
     std::string name;
     gl::McStats gs, hp;
   };
   std::vector<Stages> stages;
-  for (const Case& c : cases) {
-    const VolumeView v = c.volume->view();
-    Mesh cpu, gs, hp;
-    const double t_cpu = median_seconds(
-        repeat, [&] { return marching_cubes(v, {.iso = c.iso}); }, cpu);
-    gl::mc_geometry_shader(v, {.iso = c.iso});  // compile the shaders outside the timing
-    const double t_gs = median_seconds(
-        repeat, [&] { return gl::mc_geometry_shader(v, {.iso = c.iso}); }, gs);
-    gl::mc_histopyramid(v, {.iso = c.iso});
-    const double t_hp = median_seconds(
-        repeat, [&] { return gl::mc_histopyramid(v, {.iso = c.iso}); }, hp);
-    std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
-                cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
-                t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
-    gl::McStats sg, sh;
-    gl::mc_geometry_shader(v, {.iso = c.iso}, &sg);
-    gl::mc_histopyramid(v, {.iso = c.iso}, &sh);
-    stages.push_back({c.name, sg, sh});
+  for (const Runner& r : runners) {
+    std::printf("\nmethod %s\n", r.method);
+    std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
+                "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+    for (const Case& c : cases) {
+      const VolumeView v = c.volume->view();
+      Mesh cpu, gs, hp;
+      const double t_cpu = median_seconds(
+          repeat, [&] { return r.cpu(v, c.iso); }, cpu);
+      r.gs(v, c.iso, nullptr);  // compile the shaders outside the timing
+      const double t_gs = median_seconds(
+          repeat, [&] { return r.gs(v, c.iso, nullptr); }, gs);
+      r.hp(v, c.iso, nullptr);
+      const double t_hp = median_seconds(
+          repeat, [&] { return r.hp(v, c.iso, nullptr); }, hp);
+      std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
+                  cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
+                  t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+      gl::McStats sg, sh;
+      r.gs(v, c.iso, &sg);
+      r.hp(v, c.iso, &sh);
+      stages.push_back({std::string(r.method) + " " + c.name, sg, sh});
+    }
   }
-  // Where the GL time goes: one more run of each with glFinish between stages.
+  // Where the GL time goes: one more run of each with glFinish between stages. Macet's grid-vertex
+  // passes (and Max's search) count as counting.
   std::printf("\nstages in ms (upload / count / output), one run each\n");
-  std::printf("%-12s %26s %26s\n", "volume", "gs", "hp");
+  std::printf("%-18s %26s %26s\n", "method volume", "gs", "hp");
   for (const auto& [name, sg, sh] : stages)
-    std::printf("%-12s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
+    std::printf("%-18s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
                 1e3 * sg.seconds_upload, 1e3 * sg.seconds_count, 1e3 * sg.seconds_output,
                 1e3 * sh.seconds_upload, 1e3 * sh.seconds_count, 1e3 * sh.seconds_output);
   return 0;
