@@ -15,31 +15,19 @@ int cell_edge(ivec3 o, int axis) {
 void umbrella(ivec3 s, int axis, out dvec3 sum, out uint count) {
   sum = dvec3(0.0LF);
   count = 0u;
-  int b = (axis + 1) % 3, c = (axis + 2) % 3;
-  // The four cells around the edge, sorted by (z parity, z, y, x).
-  ivec3 cells[4];
-  int n = 0;
-  for (int db = 0; db < 2; ++db)
-    for (int dc = 0; dc < 2; ++dc) {
-      ivec3 cell = s;
-      cell[b] -= db;
-      cell[c] -= dc;
-      cells[n++] = cell;
-    }
-  for (int i = 1; i < 4; ++i)
-    for (int j = i; j > 0; --j) {
-      ivec3 p = cells[j - 1], q = cells[j];
-      ivec4 kp = ivec4(p.z & 1, p.z, p.y, p.x), kq = ivec4(q.z & 1, q.z, q.y, q.x);
-      bool after = kp.x != kq.x ? kp.x > kq.x
-                   : kp.y != kq.y ? kp.y > kq.y
-                   : kp.z != kq.z ? kp.z > kq.z
-                                  : kp.w > kq.w;
-      if (!after) break;
-      cells[j - 1] = q;
-      cells[j] = p;
-    }
+  // The four cells around the edge in (z parity, z, y, x) order: for an x or y edge, the cell
+  // slab of even z first, then the other; within a slab y then x (an x edge's cells differ in y,
+  // a y edge's in x, a z edge's in both).
+  int z_first = axis == 2 ? 0 : ((s.z & 1) == 0 ? 0 : 1);  // subtract from z first
   for (int i = 0; i < 4; ++i) {
-    ivec3 cell = cells[i];
+    ivec3 cell = s;
+    if (axis == 2) {
+      cell.y -= 1 - (i >> 1);
+      cell.x -= 1 - (i & 1);
+    } else {
+      cell.z -= (i >> 1) == 0 ? z_first : 1 - z_first;
+      cell[1 - axis] -= 1 - (i & 1);
+    }
     if (!in_region(cell) || !in_region(cell + 1)) continue;
     uint cs = cell_case(cell);
     uint nt = tri_count(cs);
