@@ -42,7 +42,7 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   // Macet's field, root finding and vertex (shaders/macet_gl.cpp defines MACET), and its moves.
   if (defines.find("#define MACET\n") != std::string::npos)
     src += embedded_glsl("macet_common.glsl");
-  if (s.file == "macet_push.comp" || s.file == "macet_smooth.comp")
+  if (s.file == "macet_push.comp" || s.file == "macet_smooth.comp" || s.file == "macet_linear.comp")
     src += embedded_glsl("macet_move.glsl");
   const std::string_view body = embedded_glsl(s.file);
   if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");

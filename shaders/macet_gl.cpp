@@ -104,8 +104,9 @@ void local_search(const VolumeView& region, const MacetOptions& o, std::vector<d
 EdgeMethod macet_method(const VolumeView& view, const MacetOptions& o) {
   EdgeMethod m;
   m.halo = macet_halo(o);
-  m.bytes_per_sample = 2 * kDispBytes;
-  m.largest_per_sample = kDispBytes;
+  // Two displacement buffers and, during the smoothing, the linear crossings (three per sample).
+  m.bytes_per_sample = 5 * kDispBytes;
+  m.largest_per_sample = 3 * kDispBytes;
   m.defines = macet_defines();
   m.table = CaseTable::Macet;
   m.prepare = [view, o](const Samples&, const GridUniforms& grid, const std::string& defines) {
@@ -122,11 +123,20 @@ EdgeMethod macet_method(const VolumeView& view, const MacetOptions& o) {
     glUseProgram(prog);
     dispatch(n);
     disp[1].bind(GL_SHADER_STORAGE_BUFFER, 6);
-    disp[0].bind(GL_SHADER_STORAGE_BUFFER, 7);
-    prog = program({{GL_COMPUTE_SHADER, "macet_smooth.comp"}}, defines);
-    set_grid_uniforms(prog, grid);
-    glUseProgram(prog);
-    dispatch(n);
+    {
+      // The crossings' linear estimates, read by the smoothing only.
+      const Buffer linear(3 * n * kDispBytes);
+      linear.bind(GL_SHADER_STORAGE_BUFFER, 8);
+      prog = program({{GL_COMPUTE_SHADER, "macet_linear.comp"}}, defines);
+      set_grid_uniforms(prog, grid);
+      glUseProgram(prog);
+      dispatch(n);
+      disp[0].bind(GL_SHADER_STORAGE_BUFFER, 7);
+      prog = program({{GL_COMPUTE_SHADER, "macet_smooth.comp"}}, defines);
+      set_grid_uniforms(prog, grid);
+      glUseProgram(prog);
+      dispatch(n);
+    }
     check("displacing Macet's grid vertices");
     if (o.quality == MacetQuality::Max) {
       std::vector<double> host(4 * n);

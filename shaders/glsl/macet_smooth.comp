@@ -3,7 +3,11 @@
 // within its tangent plane by the (1 - t)-weighted mean of the umbrella Laplacians of the
 // crossings on its edges. A crossing's umbrella sum is gathered here over the cells around its
 // edge in the order the CPU scatters it (cell slabs of even global z first, then odd; within a
-// slab y, x; triangles in table order), so every sum is added up in the CPU's order.
+// slab y, x; triangles in table order), so every sum is added up in the CPU's order. The
+// crossings' linear estimates come from macet_linear.comp.
+layout(std430, binding = 8) readonly buffer Linear { dvec4 linear_in[]; };
+
+dvec4 linear_at(ivec3 s, int axis) { return linear_in[3u * region_index(s) + uint(axis)]; }
 
 // The MC edge number (0..11) of the edge from cell corner `o` along `axis`.
 int cell_edge(ivec3 o, int axis) {
@@ -38,10 +42,7 @@ void umbrella(ivec3 s, int axis, out dvec3 sum, out uint count) {
         if (int(tri_edge(cs, 3u * t + v)) != self) continue;
         ivec4 e1 = edge_info[tri_edge(cs, 3u * t + (v + 1u) % 3u)];
         ivec4 e2 = edge_info[tri_edge(cs, 3u * t + (v + 2u) % 3u)];
-        double t1, t2;
-        dvec3 x1, x2;
-        linear_crossing(cell + e1.xyz, e1.w, t1, x1);
-        linear_crossing(cell + e2.xyz, e2.w, t2, x2);
+        dvec3 x1 = linear_at(cell + e1.xyz, e1.w).xyz, x2 = linear_at(cell + e2.xyz, e2.w).xyz;
         for (int k = 0; k < 3; ++k) {
           precise double pair = x1[k] + x2[k];
           precise double acc = sum[k] + pair;
@@ -68,10 +69,10 @@ void main() {
       q[a] += dir;
       if (q[a] < u_region_lo[a] || q[a] >= region_hi()[a] || inside(q) == in0) continue;
       ivec3 s = dir > 0 ? g : q;
-      double t;
-      dvec3 x, sum;
+      dvec4 lin = linear_at(s, a);
+      double t = lin.w;
+      dvec3 x = lin.xyz, sum;
       uint count;
-      linear_crossing(s, a, t, x);
       umbrella(s, a, sum, count);
       precise double follow = dir > 0 ? 1.0LF - t : t;
       double wt = clamp(follow, 0.0LF, 1.0LF);
