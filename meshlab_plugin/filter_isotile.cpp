@@ -220,7 +220,7 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                         "holds several sheets)"));
   par.addParam(RichEnum("backend", d.backend, choices(ml::kBackendNames, 4), "Backend",
                         "Auto (the GPU where there is one, else the CPU), CPU, or OpenGL: "
-                        "geometry shader or HistoPyramid (Marching Cubes only)"));
+                        "geometry shader or HistoPyramid (Marching Cubes and Macet)"));
   par.addParam(RichString("memory", QString::fromStdString(d.memory), "Memory budget",
                           "Extract brick by brick within this working set, e.g. 512MiB; 0: in "
                           "core. MeshLab still holds the whole result"));

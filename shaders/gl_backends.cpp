@@ -10,6 +10,7 @@
 #include "dc_gl.h"
 #include "gl_context.h"
 #include "gl_program.h"
+#include "macet_gl.h"
 
 namespace isotile::gl {
 
@@ -113,6 +114,24 @@ Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o) {
   return dc_histopyramid(view, dc_gl_options(o));
 }
 
+MacetGlOptions macet_options(const ExtractOptions& o) {
+  MacetGlOptions m;
+  m.macet.iso = o.iso;
+  m.macet.normals = o.normals;
+  m.macet.quality = o.quality;
+  m.macet.relax = o.macet_relax;
+  m.macet.cells = o.cells;
+  return m;
+}
+
+Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet_geometry_shader(view, macet_options(o));
+}
+
+Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o) {
+  return macet_histopyramid(view, macet_options(o));
+}
+
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
 // only prefers the GPU paths on a real GPU. For `auto` (hardware_only) a machine without a GPU is
 // told apart without making a context (starting llvmpipe costs about 0.3 s).
@@ -127,8 +146,8 @@ std::string probe(bool* hardware, bool hardware_only) {
 }  // namespace
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, nullptr, run_dc_gs}, probe);
-  register_backend(Backend::HistoPyramid, {run_hp, nullptr, run_dc_hp}, probe);
+  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe);
+  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe);
 }
 
 }  // namespace isotile::gl

@@ -13,6 +13,7 @@
 #include <memory>
 
 #include "core/errors.h"
+#include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
 
 namespace isotile::gl {
@@ -44,6 +45,11 @@ std::string stage_source(const Stage& s, const std::string& defines) {
       (dc && s.file != "dc_hp_classify.comp" && s.file != "dc_gs.vert"))
     src += embedded_glsl("hp_common.glsl");
   if (s.file == "dc_hp_quads.comp" || s.file == "dc_gs.geom") src += embedded_glsl("dc_faces.glsl");
+  // Macet's field, root finding and vertex (shaders/macet_gl.cpp defines MACET), and its moves.
+  if (defines.find("#define MACET\n") != std::string::npos)
+    src += embedded_glsl("macet_common.glsl");
+  if (s.file == "macet_push.comp" || s.file == "macet_smooth.comp" || s.file == "macet_linear.comp")
+    src += embedded_glsl("macet_move.glsl");
   const std::string_view body = embedded_glsl(s.file);
   if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");
   src += body;
@@ -144,34 +150,43 @@ void dispatch(std::uint64_t n) {
   glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
 }
 
-void bind_case_tables() {
-  static std::unique_ptr<Buffer> tables;
-  if (!tables) {
-    // std140 layout of `Tables` in mc_common.glsl.
-    struct {
-      std::array<std::uint32_t, 256 * 4> tri{};
-      std::array<std::uint32_t, 256> mask{};
-      std::array<std::int32_t, 12 * 4> edge{};
-    } t;
-    const auto& ct = mc::kCaseTable;
-    for (int c = 0; c < 256; ++c) {
-      std::uint8_t bytes[16];
-      std::memset(bytes, 0xff, sizeof bytes);
-      for (int i = 0; i < 3 * mc::kMaxTrianglesPerCase; ++i)
-        bytes[i] = static_cast<std::uint8_t>(ct.triangles[c][i]);
-      bytes[15] = ct.triangle_count[c];
-      std::memcpy(&t.tri[4 * c], bytes, 16);  // little-endian, as GL's uint is on the host
-      t.mask[c] = ct.edge_mask[c];
-    }
-    for (int e = 0; e < 12; ++e) {
-      const int lo = mc::kEdgeCorners[e][0];
-      t.edge[4 * e + 0] = lo & 1;
-      t.edge[4 * e + 1] = (lo >> 1) & 1;
-      t.edge[4 * e + 2] = (lo >> 2) & 1;
-      t.edge[4 * e + 3] = e / 4;
-    }
-    tables = std::make_unique<Buffer>(sizeof t, &t);
+namespace {
+
+// The std140 layout of `Tables` in mc_common.glsl, filled from a case table with MC's fields.
+template <class Table>
+std::unique_ptr<Buffer> table_buffer(const Table& ct) {
+  struct {
+    std::array<std::uint32_t, 256 * 4> tri{};
+    std::array<std::uint32_t, 256> mask{};
+    std::array<std::int32_t, 12 * 4> edge{};
+  } t;
+  for (int c = 0; c < 256; ++c) {
+    std::uint8_t bytes[16];
+    std::memset(bytes, 0xff, sizeof bytes);
+    for (int i = 0; i < 3 * mc::kMaxTrianglesPerCase; ++i)
+      bytes[i] = static_cast<std::uint8_t>(ct.triangles[c][i]);
+    bytes[15] = ct.triangle_count[c];
+    std::memcpy(&t.tri[4 * c], bytes, 16);  // little-endian, as GL's uint is on the host
+    t.mask[c] = ct.edge_mask[c];
   }
+  for (int e = 0; e < 12; ++e) {
+    const int lo = mc::kEdgeCorners[e][0];
+    t.edge[4 * e + 0] = lo & 1;
+    t.edge[4 * e + 1] = (lo >> 1) & 1;
+    t.edge[4 * e + 2] = (lo >> 2) & 1;
+    t.edge[4 * e + 3] = e / 4;
+  }
+  return std::make_unique<Buffer>(sizeof t, &t);
+}
+
+}  // namespace
+
+void bind_case_tables(CaseTable which) {
+  static std::unique_ptr<Buffer> mc_tables, macet_tables;
+  std::unique_ptr<Buffer>& tables = which == CaseTable::Macet ? macet_tables : mc_tables;
+  if (!tables)
+    tables = which == CaseTable::Macet ? table_buffer(detail::macet_case_table(true))
+                                       : table_buffer(mc::kCaseTable);
   tables->bind(GL_UNIFORM_BUFFER, 0);
 }
 

@@ -6,10 +6,12 @@
 #include <glad/gl.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "core/mesh/mesh.h"
 #include "core/volume/volume.h"
 
 namespace isotile::gl {
@@ -54,9 +56,12 @@ class Buffer {
 // their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.
 void dispatch(std::uint64_t n);
 
-// The Marching Cubes case tables (core/extract/marching_cubes_tables.h) as the std140 uniform block
-// `Tables` of mc_common.glsl, bound at uniform binding 0. Uploaded once per context.
-void bind_case_tables();
+// A method's case tables as the std140 uniform block `Tables` of mc_common.glsl, bound at uniform
+// binding 0, uploaded once per context from core's own tables: Marching Cubes'
+// (core/extract/marching_cubes_tables.h) or Macet's (core/extract/macet_table.h: MC's polygons
+// and crossed edges, other triangulations).
+enum class CaseTable { MarchingCubes, Macet };
+void bind_case_tables(CaseTable which = CaseTable::MarchingCubes);
 
 // Samples of `view` in the global box `region` (inside view.box), x fastest, as float when every
 // value of the type converts exactly (8- and 16-bit integers, float32), else as double: the
@@ -100,6 +105,30 @@ std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double b
 // The global samples a slab of cells needs: its cells' corners and the far ends of the edges of
 // its closed box, plus `halo` samples around (gradients), clipped to the view.
 Box3 slab_region(const VolumeView& view, const Box3& cells, int halo);
+
+// What a method whose vertices sit on MC's crossed edges (Marching Cubes itself, Macet) brings to
+// the two Marching Cubes paths: the classification, the count pyramid, the capture and the weld
+// depend on the inside bits only, so they serve both; the method adds its table, its vertex
+// (selected in the shaders by `defines`) and passes that run before the output passes.
+struct EdgeMethod {
+  int halo = 0;                   // samples around a slab's cells that its region must hold
+  double bytes_per_sample = 0;    // device bytes per region sample for `prepare`'s buffers
+  double largest_per_sample = 0;  // of those, the largest single buffer's
+  std::string defines;            // appended to every program's defines
+  CaseTable table = CaseTable::MarchingCubes;
+  // Runs once a slab's samples are uploaded and bound (binding 0) and the tables bound; leaves
+  // what the vertex shaders read bound and returns the buffers, kept until the slab is done.
+  std::function<std::vector<Buffer>(const Samples&, const GridUniforms&, const std::string&)>
+      prepare;
+};
+
+// The drivers of mc_histopyramid.cpp and mc_geometry_shader.cpp for any EdgeMethod.
+struct McOptions;
+struct McStats;
+Mesh histopyramid_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
+                       const EdgeMethod& method);
+Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
+                          const EdgeMethod& method);
 
 // Adds the seconds since the last lap to *into (after glFinish), when into is not null.
 class StageTimer {

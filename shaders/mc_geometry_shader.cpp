@@ -45,11 +45,18 @@ std::uint64_t first_guess(const Box3& cells) {
 }  // namespace
 
 Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* stats) {
+  EdgeMethod mc;
+  mc.halo = o.normals ? 1 : 0;
+  return geometry_shader_mesh(view, o, stats, mc);
+}
+
+Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
+                          const EdgeMethod& method) {
   Scope scope;
   Mesh mesh;
   for (int a = 0; a < 3; ++a)
     if (view.dims[a] < 2) return mesh;
-  const int halo = o.normals ? 1 : 0;
+  const int halo = method.halo;
   const bool wide = !(view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
                       view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
                       view.type == ScalarType::Float32);
@@ -58,8 +65,9 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);
   if (box.empty()) return mesh;
-  const std::vector<Box3> slabs =
-      plan_slabs(view, box, sample_bytes, sample_bytes, halo, budget / 2, o.max_brick_cells_z);
+  const std::vector<Box3> slabs = plan_slabs(view, box, sample_bytes + method.bytes_per_sample,
+                                             std::max(sample_bytes, method.largest_per_sample),
+                                             halo, budget / 2, o.max_brick_cells_z);
 
   // Captured per corner: key, cell, position (and normal): 32-bit words.
   const std::size_t words = o.normals ? 8 : 5;
@@ -75,7 +83,7 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
   GLuint queries[2];
   glCreateQueries(GL_PRIMITIVES_GENERATED, 1, &queries[0]);
   glCreateQueries(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, 1, &queries[1]);
-  bind_case_tables();
+  bind_case_tables(method.table);
   glEnable(GL_RASTERIZER_DISCARD);
   glBindVertexArray(vao);
 
@@ -94,11 +102,18 @@ Mesh mc_geometry_shader(const VolumeView& view, const McOptions& o, McStats* sta
       StageTimer timer;
       const Samples samples = upload_samples(view, region);
       timer.lap(stats ? &stats->seconds_upload : nullptr);
-      const std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
+      std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
+      defines += method.defines;
+      const GridUniforms grid{region, cells, view.global_dims, o.iso, view.origin, view.spacing};
+      samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
+      // The method's own compute passes (Macet: its displaced grid vertices), kept until the slab
+      // is done.
+      const std::vector<Buffer> kept =
+          method.prepare ? method.prepare(samples, grid, defines) : std::vector<Buffer>{};
       const GLuint prog =
           program({{GL_VERTEX_SHADER, "gs_mc.vert"}, {GL_GEOMETRY_SHADER, "gs_mc.geom"}}, defines,
                   varyings);
-      set_grid_uniforms(prog, {region, cells, view.global_dims, o.iso, view.origin, view.spacing});
+      set_grid_uniforms(prog, grid);
       glUseProgram(prog);
       samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
       const Index3 d = {cells.extent(0) + 1, cells.extent(1) + 1, cells.extent(2) + 1};

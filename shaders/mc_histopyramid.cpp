@@ -15,6 +15,7 @@
 // (docs/gl.md, "HistoPyramid layout: measured"; tests/benchmarks/bench_hp_layouts.cpp).
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <limits>
 #include <string>
@@ -28,12 +29,19 @@
 namespace isotile::gl {
 
 Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats) {
+  EdgeMethod mc;
+  mc.halo = o.normals ? 1 : 0;
+  return histopyramid_mesh(view, o, stats, mc);
+}
+
+Mesh histopyramid_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
+                       const EdgeMethod& method) {
   Scope scope;
   const DeviceInfo& dev = device();
   Mesh mesh;
   for (int a = 0; a < 3; ++a)
     if (view.dims[a] < 2) return mesh;
-  const int halo = o.normals ? 1 : 0;
+  const int halo = method.halo;
   const bool wide = !(view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
                       view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
                       view.type == ScalarType::Float32);
@@ -43,12 +51,14 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
   // and 1/7 more for the upper levels).
   const Box3 box = cells_to_extract(view, o.cells);
   if (box.empty()) return mesh;
-  const std::vector<Box3> slabs = plan_slabs(view, box, sample_bytes + 2 + 8.0 / 7.0, sample_bytes,
-                                             halo, budget, o.max_brick_cells_z);
+  const std::vector<Box3> slabs = plan_slabs(
+      view, box, sample_bytes + 2 + 8.0 / 7.0 + method.bytes_per_sample,
+      std::max(sample_bytes, method.largest_per_sample), halo, budget, o.max_brick_cells_z);
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
-  const std::string normals = o.normals ? "#define NORMALS\n" : "";
+  std::string normals = o.normals ? "#define NORMALS\n" : "";
+  normals += method.defines;
 
-  bind_case_tables();
+  bind_case_tables(method.table);
   std::uint64_t vertex_base = 0;
   for (std::size_t si = 0; si < slabs.size(); ++si) {
     const Box3& cells = slabs[si];
@@ -70,6 +80,10 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
     levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
 
     timer.lap(stats ? &stats->seconds_upload : nullptr);
+    // The method's own passes (Macet: its displaced grid vertices); kept until the slab is done.
+    const std::vector<Buffer> kept =
+        method.prepare ? method.prepare(samples, grid, defines) : std::vector<Buffer>{};
+    samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
 
     // (1) classify
     GLuint prog = program({{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);

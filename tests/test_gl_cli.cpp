@@ -91,6 +91,31 @@ TEST_F(GlCli, DualContouringWritesTheCpuFile) {
   }
 }
 
+// Macet on the GL backends, in core and brick by brick through the tiler (Fast with normals, and
+// Max with relaxation, whose search runs on the CPU between the GL passes; Max's halo of 52
+// samples makes bricks of a small volume as slow as the whole, so Max runs in core here and in
+// slabs in test_gl_macet): the CPU's file.
+TEST_F(GlCli, MacetGlRunsWriteTheCpuFile) {
+  REQUIRE_GL_CLI();
+  for (const std::string m : {"--normals", "--quality max --macet-relax 0.3"}) {
+    const bool max = m.find("max") != std::string::npos;
+    const std::string base = "extract field:torus:24 --method macet -q " + m;
+    ASSERT_EQ(run(base + " --backend cpu -o cpu.ply").code, 0);
+    const std::string cpu = slurp(dir_ / "cpu.ply");
+    EXPECT_GT(cpu.size(), 10000u);
+    for (const char* b : {"gs", "hp"})
+      for (const char* memory : {"", " --memory 60KiB"}) {
+        if (max && *memory) continue;
+        const Result r = run(base + memory + " --backend " + b + " -o gl.ply --stats gl.json");
+        ASSERT_EQ(r.code, 0) << r.err;
+        const auto j = nlohmann::json::parse(slurp(dir_ / "gl.json"));
+        EXPECT_EQ(j["backend"], b);
+        if (*memory) EXPECT_GT(j["bricks"].get<int>(), 1) << m << " " << b;
+        EXPECT_TRUE(slurp(dir_ / "gl.ply") == cpu) << m << " " << b << memory;
+      }
+  }
+}
+
 TEST_F(GlCli, GlInfoDescribesTheDevice) {
   REQUIRE_GL_CLI();
   const Result r = run("gl-info --json");

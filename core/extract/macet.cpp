@@ -27,22 +27,6 @@ using std::int64_t;
 using std::uint32_t;
 using std::uint64_t;
 
-// Fast mode, step 1, the push: a crossing closer than kReach (in edge lengths) to a grid vertex
-// pushes the vertex straight back along that edge by the shortfall; the pushes of its edges add
-// up, capped at kPushCap voxels. Step 2, one smoothing pass through the end points: each grid
-// vertex moves within its tangent plane by the (1 - t)-weighted mean of the umbrella Laplacians of
-// the crossings on its edges (t: the crossing's distance from the vertex in edge lengths), capped
-// at kSmoothCap voxels in all. Every move is halved (up to kHalvings times, then dropped) until
-// the displaced vertex keeps its side and stays at least kGuard (push) or kSmoothGuard (smoothing)
-// times as far from the isovalue as its sample. docs/macet.md has the measurements behind these
-// values.
-constexpr double kReach = 0.4;
-constexpr double kPushCap = 0.45;
-constexpr double kSmoothCap = 0.6;
-constexpr double kGuard = 1.0;
-constexpr double kSmoothGuard = 0.7;
-constexpr int kHalvings = 4;
-
 template <class T>
 class Extractor {
  public:
@@ -136,7 +120,7 @@ class Extractor {
     const bool in = f >= 0;
     const P3 v = field_.global(i, j, k);
     const int64_t vi[3] = {i, j, k};
-    for (int h = 0; h <= kHalvings; ++h) {
+    for (int h = 0; h <= kMacetHalvings; ++h) {
       const P3 q = field_.displaced(vi, {from[0] + step[0], from[1] + step[1], from[2] + step[2]});
       const double val = field_.value(q);
       if ((val >= 0) == in && std::abs(val) >= guard * std::abs(f)) {
@@ -149,7 +133,7 @@ class Extractor {
     return false;
   }
 
-  // Step 1 for the grid vertex at (i, j, k); see kReach.
+  // Step 1 for the grid vertex at (i, j, k); see kMacetReach (macet_field.h).
   void push(int64_t i, int64_t j, int64_t k, P3& disp, double& value) const {
     const double f = field_.sample(i, j, k) - field_.iso;
     const bool in = f >= 0;
@@ -162,14 +146,14 @@ class Extractor {
         const double g = field_.sample(q[0], q[1], q[2]) - field_.iso;
         if ((g >= 0) == in) continue;
         const double t = f / (f - g);  // the crossing, in edge lengths from this vertex
-        if (t < kReach) d[a] -= dir * (kReach - t);
+        if (t < kMacetReach) d[a] -= dir * (kMacetReach - t);
       }
     const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    if (len > kPushCap)
-      for (double& c : d) c *= kPushCap / len;
+    if (len > kMacetPushCap)
+      for (double& c : d) c *= kMacetPushCap / len;
     disp = {0, 0, 0};
     value = f;
-    if (len > 0) try_move(i, j, k, {0, 0, 0}, d, kGuard, disp, value);
+    if (len > 0) try_move(i, j, k, {0, 0, 0}, d, kMacetGuard, disp, value);
   }
 
   // Calls fn(i, j, k, index) for every grid vertex, rows in parallel.
@@ -303,9 +287,9 @@ class Extractor {
       const P3 from = gv_.disp[idx];
       P3 d{from[0] + acc[0], from[1] + acc[1], from[2] + acc[2]};
       const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      if (len > kSmoothCap)
-        for (double& c : d) c *= kSmoothCap / len;
-      try_move(i, j, k, from, {d[0] - from[0], d[1] - from[1], d[2] - from[2]}, kSmoothGuard,
+      if (len > kMacetSmoothCap)
+        for (double& c : d) c *= kMacetSmoothCap / len;
+      try_move(i, j, k, from, {d[0] - from[0], d[1] - from[1], d[2] - from[2]}, kMacetSmoothGuard,
                gv_.disp[idx], gv_.value[idx]);
     });
   }

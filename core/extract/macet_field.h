@@ -26,6 +26,23 @@ namespace isotile::detail {
 
 using P3 = std::array<double, 3>;
 
+// Fast mode, step 1, the push: a crossing closer than kMacetReach (in edge lengths) to a grid
+// vertex pushes the vertex straight back along that edge by the shortfall; the pushes of its edges
+// add up, capped at kMacetPushCap voxels. Step 2, one smoothing pass through the end points: each
+// grid vertex moves within its tangent plane by the (1 - t)-weighted mean of the umbrella
+// Laplacians of the crossings on its edges (t: the crossing's distance from the vertex in edge
+// lengths), capped at kMacetSmoothCap voxels in all. Every move is halved (up to kMacetHalvings
+// times, then dropped) until the displaced vertex keeps its side and stays at least kMacetGuard
+// (push) or kMacetSmoothGuard (smoothing) times as far from the isovalue as its sample.
+// docs/macet.md has the measurements behind these values. The GL backends (shaders/macet_gl.cpp)
+// hand these same constants to their shaders.
+inline constexpr double kMacetReach = 0.4;
+inline constexpr double kMacetPushCap = 0.45;
+inline constexpr double kMacetSmoothCap = 0.6;
+inline constexpr double kMacetGuard = 1.0;
+inline constexpr double kMacetSmoothGuard = 0.7;
+inline constexpr int kMacetHalvings = 4;
+
 template <class T>
 struct Field {
   Field(const VolumeView& v, double iso_value) : view(v), data(v.typed<T>()), iso(iso_value) {

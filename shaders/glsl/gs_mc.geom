@@ -1,6 +1,6 @@
 // Geometry-shader path: emits the cell's triangles in table order, captured by transform
 // feedback. Each vertex carries its edge's key within the brick (element index of the edge's lower
-// sample * 3 + axis) for welding, and its cell's index so that a capture that ran out of room can
+// sample * 3 + axis) for welding (MACET: Macet's vertex, macet_common.glsl), and its cell's index so that a capture that ran out of room can
 // be resumed at a cell boundary.
 layout(points) in;
 layout(triangle_strip, max_vertices = 15) out;
@@ -24,7 +24,11 @@ void main() {
       ivec4 info = edge_info[tri_edge(cs, 3u * t + v)];
       ivec3 s = v_cell[0] + info.xyz;
       vec3 p, nrm;
+#ifdef MACET
+      macet_edge_vertex(s, info.w, p, nrm);
+#else
       edge_vertex(s, info.w, p, nrm);
+#endif
       tf_key = element_index(s) * 3u + uint(info.w);
       tf_cell = v_index[0];
       tf_pos = p;

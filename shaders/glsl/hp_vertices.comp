@@ -1,4 +1,5 @@
-// HistoPyramid pass 3: one invocation per output vertex, in key order.
+// HistoPyramid pass 3: one invocation per output vertex, in key order (MACET: Macet's vertex on
+// the edge, macet_common.glsl).
 layout(std430, binding = 3) writeonly buffer Positions { float out_pos[]; };
 #ifdef NORMALS
 layout(std430, binding = 4) writeonly buffer Normals { float out_nrm[]; };
@@ -20,7 +21,11 @@ void main() {
     --k;
   }
   vec3 p, n;
+#ifdef MACET
+  macet_edge_vertex(element_sample(e), axis, p, n);
+#else
   edge_vertex(element_sample(e), axis, p, n);
+#endif
   for (int c = 0; c < 3; ++c) out_pos[3u * i + uint(c)] = p[c];
 #ifdef NORMALS
   for (int c = 0; c < 3; ++c) out_nrm[3u * i + uint(c)] = n[c];

@@ -1,10 +1,10 @@
-// Marching Cubes and Dual Contouring on the three backends (CPU, GL geometry shader, GL
+// Marching Cubes, Macet (Fast) and Dual Contouring on the three backends (CPU, GL geometry shader, GL
 // HistoPyramid), side by side in one run on the same in-memory volumes, after checking that all
 // three give the same mesh.
 //
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
 //   cmake --build build-bench --target bench_backends
-//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--methods mc,dc]
+//   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--methods mc,macet,dc]
 //
 // Dual Contouring runs with the CLI's defaults (patch vertices, mass point, central Hermite data)
 // and, as a second row per volume, the paper's particle minimizer (10 steps).
@@ -27,12 +27,14 @@
 #include <vector>
 
 #include "core/extract/dual_contouring.h"
+#include "core/extract/macet.h"
 #include "core/extract/marching_cubes.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
 #include "shaders/dc_gl.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/macet_gl.h"
 
 namespace {
 
@@ -93,13 +95,14 @@ void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
 
 int main(int argc, char** argv) {
   int threads = 2, repeat = 5;
-  std::string methods = "mc,dc";
+  std::string methods = "mc,macet,dc";
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
     if (std::strcmp(argv[i], "--methods") == 0 && i + 1 < argc) methods = argv[++i];
   }
   const bool run_mc = methods.find("mc") != std::string::npos;
+  const bool run_macet = methods.find("macet") != std::string::npos;
   const bool run_dc = methods.find("dc") != std::string::npos;
   setenv("LP_NUM_THREADS", std::to_string(threads).c_str(), 1);
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
@@ -130,39 +133,73 @@ int main(int argc, char** argv) {
   }
 
   if (run_dc) bench_dual_contouring(cases, repeat);
-  if (!run_mc) return 0;
-  std::printf("\nMarching Cubes\n");
-  std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
-              "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  // Each method's rows: the CPU extractor and the two GL paths, same options.
+  struct Runner {
+    const char* method;
+    std::function<Mesh(const VolumeView&, double)> cpu;
+    std::function<Mesh(const VolumeView&, double, gl::McStats*)> gs, hp;
+  };
+  std::vector<Runner> runners;
+  if (run_mc)
+    runners.push_back(
+        {"mc", [](const VolumeView& v, double iso) { return marching_cubes(v, {.iso = iso}); },
+         [](const VolumeView& v, double iso, gl::McStats* s) {
+           return gl::mc_geometry_shader(v, {.iso = iso}, s);
+         },
+         [](const VolumeView& v, double iso, gl::McStats* s) {
+           return gl::mc_histopyramid(v, {.iso = iso}, s);
+         }});
+  if (run_macet) {
+    auto o = [](double iso) {
+      gl::MacetGlOptions m;
+      m.macet.iso = iso;
+      return m;
+    };
+    runners.push_back({"macet",
+                       [](const VolumeView& v, double iso) { return macet(v, {.iso = iso}); },
+                       [o](const VolumeView& v, double iso, gl::McStats* s) {
+                         return gl::macet_geometry_shader(v, o(iso), s);
+                       },
+                       [o](const VolumeView& v, double iso, gl::McStats* s) {
+                         return gl::macet_histopyramid(v, o(iso), s);
+                       }});
+  }
+
   struct Stages {
     std::string name;
     gl::McStats gs, hp;
   };
   std::vector<Stages> stages;
-  for (const Case& c : cases) {
-    const VolumeView v = c.volume->view();
-    Mesh cpu, gs, hp;
-    const double t_cpu = median_seconds(
-        repeat, [&] { return marching_cubes(v, {.iso = c.iso}); }, cpu);
-    gl::mc_geometry_shader(v, {.iso = c.iso});  // compile the shaders outside the timing
-    const double t_gs = median_seconds(
-        repeat, [&] { return gl::mc_geometry_shader(v, {.iso = c.iso}); }, gs);
-    gl::mc_histopyramid(v, {.iso = c.iso});
-    const double t_hp = median_seconds(
-        repeat, [&] { return gl::mc_histopyramid(v, {.iso = c.iso}); }, hp);
-    std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
-                cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
-                t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
-    gl::McStats sg, sh;
-    gl::mc_geometry_shader(v, {.iso = c.iso}, &sg);
-    gl::mc_histopyramid(v, {.iso = c.iso}, &sh);
-    stages.push_back({c.name, sg, sh});
+  for (const Runner& r : runners) {
+    std::printf("\nmethod %s\n", r.method);
+    std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
+                "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+    for (const Case& c : cases) {
+      const VolumeView v = c.volume->view();
+      Mesh cpu, gs, hp;
+      const double t_cpu = median_seconds(
+          repeat, [&] { return r.cpu(v, c.iso); }, cpu);
+      r.gs(v, c.iso, nullptr);  // compile the shaders outside the timing
+      const double t_gs = median_seconds(
+          repeat, [&] { return r.gs(v, c.iso, nullptr); }, gs);
+      r.hp(v, c.iso, nullptr);
+      const double t_hp = median_seconds(
+          repeat, [&] { return r.hp(v, c.iso, nullptr); }, hp);
+      std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
+                  cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
+                  t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+      gl::McStats sg, sh;
+      r.gs(v, c.iso, &sg);
+      r.hp(v, c.iso, &sh);
+      stages.push_back({std::string(r.method) + " " + c.name, sg, sh});
+    }
   }
-  // Where the GL time goes: one more run of each with glFinish between stages.
+  // Where the GL time goes: one more run of each with glFinish between stages. Macet's grid-vertex
+  // passes (and Max's search) count as counting.
   std::printf("\nstages in ms (upload / count / output), one run each\n");
-  std::printf("%-12s %26s %26s\n", "volume", "gs", "hp");
+  std::printf("%-18s %26s %26s\n", "method volume", "gs", "hp");
   for (const auto& [name, sg, sh] : stages)
-    std::printf("%-12s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
+    std::printf("%-18s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
                 1e3 * sg.seconds_upload, 1e3 * sg.seconds_count, 1e3 * sg.seconds_output,
                 1e3 * sh.seconds_upload, 1e3 * sh.seconds_count, 1e3 * sh.seconds_output);
   return 0;
