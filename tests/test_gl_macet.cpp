@@ -227,8 +227,9 @@ TEST(GlMacetBackends, RegisteredInTheTable) {
   const Backend a = resolve_backend({.method = Method::Macet});
   EXPECT_EQ(a == Backend::Cpu, gl::device().software);
   for (const BackendCaps& c : capabilities())
-    if (c.backend != Backend::Cpu)
+    if (c.backend != Backend::Cpu) {
       EXPECT_NE(std::find(c.methods.begin(), c.methods.end(), Method::Macet), c.methods.end());
+    }
 }
 
 }  // namespace
