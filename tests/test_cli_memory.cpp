@@ -70,7 +70,7 @@ TEST_F(CliMemory, PeakRssStaysWithinTheBudgetAboveTheBaseline) {
       {"field:gyroid:200 --method mc --memory 8MiB", 8},
       {"field:gyroid:200 --method macet --memory 8MiB", 8},
       {"field:gyroid:200 --method dc --memory 8MiB", 8},
-      // Macet max's 51-sample halo and its state: the smallest budget that holds a brick.
+      // Macet max's halo (138 samples: the whole volume) and its state.
       {"field:gyroid:80 --method macet --quality max --memory 10MiB", 10},
       // Slabs of a gzip'd file, with the planes kept between slabs and zlib's buffers.
       {waves + " --iso 128.5 --method mc --memory 2MiB", 2},

@@ -475,13 +475,14 @@ class Extractor {
 int macet_halo(const MacetOptions& options) {
   // An emitted edge ends at most one sample past the cells. Its end point's smoothing reads the
   // crossings of the cells around its edges (end points one sample further), whose pushes read
-  // one sample more: 3. Its root search and normal stay within that. Max: a colour step at vertex
-  // v reads the displacements up to two samples around it (the intersection guard's 4x4x4
-  // cells), and through root searches between vertices moved up to one voxel, samples up to four
-  // around it. The last of a sweep's 8 steps decides the emitted end points, one past the cells;
-  // each earlier step reaches two samples further: 1 + 2 * (8 * sweeps - 1) + 4 = 3 + 16 * sweeps.
+  // one sample more: 3. Its root search and normal stay within that. Max: the emitted end points
+  // (one past the cells) depend on a chain of colour steps, each reading the displacements within
+  // kGuardReach (3) of its vertex, that reaches macet_search_reach(sweeps) samples; the chain's
+  // last step reads crossings whose end points lie 3 further, found by root searches within one
+  // voxel of them and pushed and smoothed from samples two around them: 1 + reach + 3 + 2.
   const int relax = options.relax > 0 ? 1 : 0;
-  if (options.quality == MacetQuality::Max) return 3 + 16 * std::max(options.max_sweeps, 0) + relax;
+  if (options.quality == MacetQuality::Max && options.max_sweeps > 0)
+    return 1 + detail::macet_search_reach(options.max_sweeps) + detail::kGuardReach + 2 + relax;
   return 3 + relax;
 }
 

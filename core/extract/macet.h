@@ -14,8 +14,9 @@
 //         than 0.4 of an edge, then moved once within its tangent plane by the mean mesh
 //         Laplacian of those crossings (one smoothing pass through the end points).
 //   Max:  Fast, then a local search per grid vertex on the worst triangles: Gauss-Seidel sweeps
-//         over the eight parity colours of grid vertices (vertices of one colour share no cell, so
-//         they move in parallel and the result does not depend on the thread count).
+//         over 27 colours of grid vertices (coordinates modulo 3: vertices of one colour cannot
+//         affect each other, so they move in parallel and the result does not depend on the
+//         thread count), guarded so that no move adds a self-intersecting pair.
 //
 // Output order and brick mode follow the brick contract (same as marching_cubes): vertices in
 // ascending key lin(s) * 3 + axis over the closed cell box, triangles cell by cell in z, y, x and
@@ -47,10 +48,9 @@ struct MacetOptions {
   Box3 cells{};
 };
 
-// Samples beyond the cells that brick mode reads: 3 for Fast; 3 + 16 per sweep for Max, since
-// each of a sweep's eight colour steps can carry a change two samples further (its intersection
-// guard looks two samples around a vertex); one more with relax (a relaxed sample depends on its
-// neighbours).
+// Samples beyond the cells that brick mode reads: 3 for Fast; for Max 6 plus how far its colour
+// steps can carry a change (48, 93, 138 for 1, 2, 3 sweeps; docs/macet.md); one more with relax
+// (a relaxed sample depends on its neighbours).
 int macet_halo(const MacetOptions& options);
 
 // Throws InputError for a negative max_sweeps or a relax outside [0, 0.5), and CapacityError when

@@ -2,26 +2,36 @@
 // Internal to core/.
 //
 // Moving grid vertex v changes only the crossings on its own (up to six) crossed edges, and those
-// only appear in triangles of the eight cells around v. For every grid vertex whose affected
-// triangles include one worse than kGoal, the search tries displacements around the current one
-// (26 directions at a few radii, then a finer round around the best) and keeps the one that raises
-// the minimum radius ratio of the affected triangles, subject to
+// only appear in triangles of the eight cells around v (its moving triangles). For every grid
+// vertex whose moving triangles include one worse than the goal, the search tries displacements
+// around the current one (26 directions at a few radii, then a finer round around the best) and
+// keeps the one that raises their minimum radius ratio, subject to
 //   * the vertex keeps its side of the surface (so every edge still brackets a crossing and the
 //     topology stays MC's),
 //   * it stays within max_move voxels of its grid position,
-//   * no affected triangle turns over (its normal keeps a positive dot product with the current
-//     one),
-//   * the affected triangles intersect each other and the triangles of the 4x4x4 cells around v
-//     in no more pairs than before.
-// Determinism: vertices are swept in eight colours by the parity of their GLOBAL coordinates.
-// Two vertices of one colour differ by two samples along some axis, so they share no cell and no
-// crossed edge: a colour's vertices move in parallel without seeing each other's moves (the
-// guard's outer cells, which may hold another moving vertex of the colour, are read from a
-// snapshot taken when the step began), and the result is the same for any thread count and any
-// brick cut. Each colour step lets a change travel two samples (the guard's reach), which is why
-// macet_halo grows by 16 per sweep.
+//   * no moving triangle turns over (its normal keeps a positive dot product with the current one),
+//   * every moving triangle lies strictly inside v's box, the cube of half-width 1.5 samples
+//     around v, before and after the move, and
+//   * the moving triangles intersect each other and every other triangle of the mesh in no more
+//     pairs than before (the rule of core/mesh/self_intersections.h, exactly: on the float world
+//     coordinates that are emitted, vertices identified by position as it does).
+// The guard is complete: a triangle of cell o lies within [o - 1, o + 2] samples along each axis
+// (its corners are crossings between grid vertices displaced by at most one voxel), so only the
+// cells o in [v - 3, v + 2] can reach v's box, and the guard tests all their triangles that meet
+// it. A move therefore never raises the mesh's count of intersecting pairs.
+//
+// Determinism and parallelism: vertices are swept in 27 colours by their GLOBAL coordinates modulo
+// 3. Two vertices of one colour lie at least three samples apart along some axis, so their boxes
+// are disjoint: neither's moving triangles can meet the other's, whatever either does, and neither
+// reads a crossing of its eight cells that the other changes. Each colour step first finds every
+// vertex's move from the same state (nothing is written), then applies them all: the result equals
+// visiting the colour's vertices one after another in any order, and is the same for any thread
+// count and any brick cut. Crossings are stored per crossed edge and updated when an end point
+// moves, so the guard and the fixed corners read them without a root search.
+// macet_search_reach() bounds how far the steps can carry a change (macet_halo).
 #pragma once
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -63,6 +73,52 @@ inline P3 tri_normal(const P3& a, const P3& b, const P3& c) {
   return {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
 }
 
+// Colours of the search: global coordinates modulo kColourSpacing along each axis, visited in this
+// order: residues summing to 0, 1, 2 (mod 3) in turn, so that few consecutive colours share a
+// residue along one axis. With x fastest, a chain of steps could climb three samples per step
+// along z (74 per sweep against 42 in this order; see macet_search_reach).
+inline constexpr int kColourSpacing = 3;
+inline constexpr int kSearchColours = kColourSpacing * kColourSpacing * kColourSpacing;
+inline constexpr int kColourOrder[kSearchColours][3] = {
+    {0, 0, 0}, {1, 1, 1}, {2, 2, 2}, {0, 2, 1}, {1, 0, 2}, {2, 1, 0}, {0, 1, 2},
+    {1, 2, 0}, {2, 0, 1}, {0, 0, 1}, {1, 1, 2}, {2, 2, 0}, {0, 2, 2}, {1, 0, 0},
+    {2, 1, 1}, {0, 1, 0}, {1, 2, 1}, {2, 0, 2}, {0, 0, 2}, {1, 1, 0}, {2, 2, 1},
+    {0, 2, 0}, {1, 0, 1}, {2, 1, 2}, {0, 1, 1}, {1, 2, 2}, {2, 0, 0}};
+// Half-width of a vertex's box in samples: half the colour spacing, so that the boxes of two
+// vertices of one colour are disjoint open cubes.
+inline constexpr double kBoxHalf = 0.5 * kColourSpacing;
+// Cells whose triangles can reach v's box: o in [v - kGuardReach, v + kGuardReach - 1] (a triangle
+// of cell o lies within [o - 1, o + 2]); a colour step at v reads the displacements of the grid
+// vertices within kGuardReach of v.
+inline constexpr int kGuardReach = 3;
+
+// How far (in samples, along one axis) a change can travel in `sweeps` sweeps: the longest chain
+// of grid vertices visited at strictly increasing colour steps in which each reads the one before
+// (within kGuardReach along each axis, so a hop between colours whose residues differ by d along
+// the axis covers at most the largest value in [-kGuardReach, kGuardReach] congruent to d).
+inline int macet_search_reach(int sweeps) {
+  const int steps = std::max(sweeps, 0) * kSearchColours;
+  auto hop = [](int from, int to, int axis) {
+    const int d =
+        ((kColourOrder[to][axis] - kColourOrder[from][axis]) % kColourSpacing + kColourSpacing) %
+        kColourSpacing;
+    int best = -kGuardReach - 1;
+    for (int x = -kGuardReach; x <= kGuardReach; ++x)
+      if (((x - d) % kColourSpacing + kColourSpacing) % kColourSpacing == 0) best = x;
+    return best;
+  };
+  int reach = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<int> best(static_cast<std::size_t>(steps), 0);
+    for (int t = 0; t < steps; ++t) {
+      for (int u = 0; u < t; ++u)
+        best[t] = std::max(best[t], best[u] + hop(u % kSearchColours, t % kSearchColours, axis));
+      reach = std::max(reach, best[t]);
+    }
+  }
+  return reach;
+}
+
 template <class T>
 class LocalSearch {
  public:
@@ -77,56 +133,127 @@ class LocalSearch {
           const double n = std::sqrt(double(dx * dx + dy * dy + dz * dz));
           dirs_.push_back({dx / n, dy / n, dz / n});
         }
+    const std::size_t nv = gv_.disp.size();
+    last_moved_.assign(nv, -1);
+    settled_at_.assign(nv, -1);
+    settled_reach_.assign(nv, 1);
+    // The crossing store: slot xoff_[v] + rank of the axis among v's crossed +axis edges.
+    xoff_.resize(nv + 1);
+    xoff_[0] = 0;
+    for_vertices(-1, [&](std::int64_t i, std::int64_t j, std::int64_t k, std::uint32_t idx) {
+      const std::int64_t s[3] = {i, j, k};
+      xoff_[idx + 1] = crossed(s, 0) + crossed(s, 1) + crossed(s, 2);
+    });
+    for (std::size_t n = 0; n < nv; ++n) xoff_[n + 1] += xoff_[n];
+    xpos_.resize(xoff_[nv]);
+    for_vertices(-1, [&](std::int64_t i, std::int64_t j, std::int64_t k, std::uint32_t) {
+      const std::int64_t s[3] = {i, j, k};
+      for (int a = 0; a < 3; ++a)
+        if (crossed(s, a)) xpos_[slot(s, a)] = crossing(s, a, ~0u, P3{}, 0);
+    });
   }
 
   void sweep() {
-    for (int colour = 0; colour < 8; ++colour) {
+    for (int colour = 0; colour < kSearchColours; ++colour) {
       colour_step(colour);
       ++step_;
     }
   }
 
  private:
+  struct Proposal {
+    std::uint32_t index;
+    std::int64_t v[3];
+    P3 d;
+    double f;
+  };
+
   bool inside(std::int64_t i, std::int64_t j, std::int64_t k) const {
     return (grid_.row(j, k)[i >> 6] >> (i & 63)) & 1;
   }
 
-  void colour_step(int colour) {
-    // The guard reads crossings two samples away, where other vertices of this colour may be
-    // moving: it reads them as they were when the step began.
-    const std::size_t nv = gv_.disp.size();
-    snap_disp_.resize(nv);
-    snap_value_.resize(nv);
-    last_moved_.resize(nv, -1);
-    settled_at_.resize(nv, -1);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv), [&](const auto& range) {
-      for (std::size_t n = range.begin(); n != range.end(); ++n) {
-        snap_disp_[n] = gv_.disp[n];
-        snap_value_[n] = gv_.value[n];
-      }
-    });
+  // Whether the edge from local sample s along +a is crossed.
+  bool crossed(const std::int64_t s[3], int a) const {
+    std::int64_t q[3] = {s[0], s[1], s[2]};
+    if (++q[a] >= field_.view.dims[a]) return false;
+    return inside(s[0], s[1], s[2]) != inside(q[0], q[1], q[2]);
+  }
+
+  // The store slot of crossed edge (s, +a); s is a grid vertex.
+  std::uint32_t slot(const std::int64_t s[3], int a) const {
+    std::uint32_t r = xoff_[gv_.index(s[0], s[1], s[2])];
+    for (int c = 0; c < a; ++c) r += crossed(s, c);
+    return r;
+  }
+
+  // Calls fn(i, j, k, index) for every grid vertex of colour `colour` (-1: all), rows in
+  // parallel.
+  template <class F>
+  void for_vertices(int colour, F&& fn) const {
     const Box3& b = gv_.box;
     const VolumeView& view = field_.view;
-    const int px = colour & 1, py = (colour >> 1) & 1, pz = (colour >> 2) & 1;
-    // Local x with the wanted global parity sit at every other bit.
-    const std::uint64_t even = 0x5555555555555555ull;
-    const std::uint64_t parity_mask = ((view.box.lo[0] & 1) ^ px) ? ~even : even;
+    const int cx = colour >= 0 ? kColourOrder[colour][0] : 0,
+              cy = colour >= 0 ? kColourOrder[colour][1] : 0,
+              cz = colour >= 0 ? kColourOrder[colour][2] : 0;
+    auto residue = [](std::int64_t x) { return static_cast<int>(x % kColourSpacing); };
+    // Bits b with b % 3 == r.
+    std::uint64_t every_third[kColourSpacing] = {};
+    for (int bit = 0; bit < 64; ++bit) every_third[bit % kColourSpacing] |= std::uint64_t{1} << bit;
     const std::int64_t rows = b.extent(1) * b.extent(2);
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, rows), [&](const auto& range) {
       for (std::int64_t r = range.begin(); r != range.end(); ++r) {
         const std::int64_t j = b.lo[1] + r % gv_.ny, k = b.lo[2] + r / gv_.ny;
-        if (((view.box.lo[1] + j) & 1) != py || ((view.box.lo[2] + k) & 1) != pz) continue;
+        if (colour >= 0 && (residue(view.box.lo[1] + j) != cy || residue(view.box.lo[2] + k) != cz))
+          continue;
         for (std::int64_t w = b.lo[0] >> 6; w <= (b.hi[0] - 1) >> 6; ++w) {
           const std::size_t word = static_cast<std::size_t>(r * gv_.words + w);
-          for (std::uint64_t m = gv_.bits[word] & parity_mask; m; m &= m - 1)
-            improve(w * 64 + std::countr_zero(m), j, k);
+          std::uint64_t m = gv_.bits[word];
+          if (colour >= 0) {
+            // Local x = 64 w + bit has the colour's residue when bit = cx - lo - 64 w (mod 3).
+            const std::int64_t want = cx - view.box.lo[0] - 64 * w;
+            m &= every_third[residue(want % kColourSpacing + kColourSpacing)];
+          }
+          for (; m; m &= m - 1) {
+            const int bit = std::countr_zero(m);
+            const std::uint64_t below = (std::uint64_t{1} << bit) - 1;
+            fn(w * 64 + bit, j, k,
+               gv_.prefix[word] +
+                   static_cast<std::uint32_t>(std::popcount(gv_.bits[word] & below)));
+          }
         }
       }
     });
   }
 
+  void colour_step(int colour) {
+    // Every move of the colour is found from the same state, then all are applied (see the top
+    // of this file: they cannot interact).
+    for (auto& list : proposals_) list.clear();
+    for_vertices(colour, [&](std::int64_t i, std::int64_t j, std::int64_t k, std::uint32_t idx) {
+      Proposal p;
+      if (improve(i, j, k, idx, p)) proposals_.local().push_back(p);
+    });
+    for (auto& list : proposals_) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, list.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) apply(list[n]);
+      });
+    }
+  }
+
+  // Moves a vertex and updates the crossings on its edges (their other ends have other colours).
+  void apply(const Proposal& p) {
+    gv_.disp[p.index] = p.d;
+    gv_.value[p.index] = p.f;
+    last_moved_[p.index] = step_;
+    for (int a = 0; a < 3; ++a) {
+      if (crossed(p.v, a)) xpos_[slot(p.v, a)] = crossing(p.v, a, ~0u, P3{}, 0);
+      std::int64_t s[3] = {p.v[0], p.v[1], p.v[2]};
+      if (--s[a] >= 0 && crossed(s, a)) xpos_[slot(s, a)] = crossing(s, a, ~0u, P3{}, 0);
+    }
+  }
+
   // The crossing on edge (s, axis a) with the current displacements, except that grid vertex
-  // `moved` uses (d, f) instead.
+  // `moved` uses (d, f) instead. The emission computes the same (same inputs, same arithmetic).
   P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f) const {
     std::int64_t q[3] = {s[0], s[1], s[2]};
     ++q[a];
@@ -141,19 +268,6 @@ class LocalSearch {
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
-  // The crossing on edge (s, axis a) with the displacements of the step's snapshot.
-  P3 snapshot_crossing(const std::int64_t s[3], int a) const {
-    std::int64_t q[3] = {s[0], s[1], s[2]};
-    ++q[a];
-    const std::uint32_t i0 = gv_.index(s[0], s[1], s[2]), i1 = gv_.index(q[0], q[1], q[2]);
-    const P3 p0 = field_.global(s[0], s[1], s[2], snap_disp_[i0]);
-    const P3 p1 = field_.global(q[0], q[1], q[2], snap_disp_[i1]);
-    const double f0 = snap_value_[i0], f1 = snap_value_[i1];
-    const bool straight = snap_disp_[i0] == P3{0, 0, 0} && snap_disp_[i1] == P3{0, 0, 0};
-    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
-    return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
-  }
-
   int cell_case(const std::int64_t o[3]) const {
     int cs = 0;
     for (int corner = 0; corner < 8; ++corner)
@@ -162,11 +276,11 @@ class LocalSearch {
     return cs;
   }
 
-  // Whether a grid vertex of the 3x3x3 block around v moved at or after `step`.
-  bool block_moved_since(const std::int64_t v[3], int step) const {
-    for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
+  // Whether a grid vertex within `reach` of v (along each axis) moved at or after `step`.
+  bool moved_since(const std::int64_t v[3], int reach, int step) const {
+    for (int dz = -reach; dz <= reach; ++dz)
+      for (int dy = -reach; dy <= reach; ++dy)
+        for (int dx = -reach; dx <= reach; ++dx) {
           const std::int64_t q[3] = {v[0] + dx, v[1] + dy, v[2] + dz};
           if (gv_.contains(q[0], q[1], q[2]) && last_moved_[gv_.index(q[0], q[1], q[2])] >= step)
             return true;
@@ -174,21 +288,67 @@ class LocalSearch {
     return false;
   }
 
-  void improve(std::int64_t i, std::int64_t j, std::int64_t k) {
+  // A triangle as the intersection test sees it: emitted float world coordinates.
+  struct Corners {
+    std::array<Vec3f, 3> p;
+    Vec3f lo, hi;
+    bool live;
+  };
+
+  Vec3f world(const P3& x) const {
+    const VolumeView& view = field_.view;
+    Vec3f w;
+    for (int c = 0; c < 3; ++c) w[c] = static_cast<float>(view.origin[c] + view.spacing[c] * x[c]);
+    return w;
+  }
+
+  Corners make_corners(const P3& a, const P3& b, const P3& c) const {
+    Corners t;
+    t.p = {world(a), world(b), world(c)};
+    for (int k = 0; k < 3; ++k) {
+      t.lo[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
+      t.hi[k] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
+    }
+    t.live = triangle_has_area(t.p);
+    return t;
+  }
+
+  // self_intersections' rule for one pair, vertices identified by position as it does.
+  static bool meet(const Corners& a, const Corners& b) {
+    for (int k = 0; k < 3; ++k)
+      if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
+    if (!a.live || !b.live) return false;
+    const std::array<std::uint32_t, 3> ia{0, 1, 2};
+    std::array<std::uint32_t, 3> ib{3, 4, 5};
+    for (int l = 0; l < 3; ++l)
+      for (std::uint32_t k = 0; k < 3; ++k)
+        if (b.p[l] == a.p[k]) ib[l] = k;
+    return triangles_intersect(a.p, ia, b.p, ib);
+  }
+
+  void settle(std::uint32_t self, int reach) {
+    settled_at_[self] = step_;
+    settled_reach_[self] = static_cast<std::int8_t>(reach);
+  }
+
+  // Finds the move of grid vertex (i, j, k) (dense index `self`); true with `out` filled when it
+  // moves.
+  bool improve(std::int64_t i, std::int64_t j, std::int64_t k, std::uint32_t self, Proposal& out) {
     const VolumeView& view = field_.view;
     const std::int64_t v[3] = {i, j, k};
-    const std::uint32_t self = gv_.index(i, j, k);
     // A vertex whose last visit left it in place without consulting the guard (its triangles
-    // good enough, or no candidate better) would do the same again until a vertex of its block
-    // moves (its eight cells' crossings depend on that block only): skipping it then gives
-    // exactly what a visit would. Vertices of one colour are never in each other's
-    // blocks, so the test reads nothing that moves during this step.
-    if (settled_at_[self] >= 0 && !block_moved_since(v, settled_at_[self])) return;
+    // good enough, or no candidate better) would do the same again until a vertex of its 3x3x3
+    // block moves (its eight cells' crossings depend on that block only); one that the guard or
+    // its box kept in place, until a vertex within kGuardReach moves (the guard reads no further).
+    // Skipping it until then gives exactly what a visit would. Moves are applied after the step,
+    // so nothing read here changes during it.
+    if (settled_at_[self] >= 0 && !moved_since(v, settled_reach_[self], settled_at_[self]))
+      return false;
     settled_at_[self] = -1;
     const bool in = inside(i, j, k);
 
-    // The affected triangles: those of the eight cells around v that use a crossing on one of
-    // v's edges. Crossings are slots: fixed ones computed once, moving ones per candidate.
+    // The moving triangles: those of the eight cells around v that use a crossing on one of v's
+    // edges. Crossings are slots: fixed ones read from the store, moving ones per candidate.
     struct Slot {
       std::int64_t s[3];
       int axis;
@@ -205,14 +365,6 @@ class LocalSearch {
     // The other triangles of the eight cells (all corners fixed), for the intersection guard.
     std::array<TriRef, 8 * mc::kMaxTrianglesPerCase> statics{};
     int n_statics = 0;
-    const P3 zero{0, 0, 0};
-    // Crossings by edge, for the guard's vertex identities: edges with both ends in v +- 2.
-    auto edge_code = [&](const std::int64_t s[3], int a) {
-      return static_cast<std::uint32_t>(
-          (((s[2] - v[2] + 2) * 5 + (s[1] - v[1] + 2)) * 5 + (s[0] - v[0] + 2)) * 3 + a);
-    };
-    std::array<std::uint32_t, 8 * 12> fixed_code{};
-    std::array<std::uint32_t, 6> moving_code{};
 
     for (int c = 0; c < 8; ++c) {
       std::int64_t o[3];
@@ -225,7 +377,7 @@ class LocalSearch {
       const int cs = cell_case(o);
       const int nt = table_.triangle_count[cs];
       if (nt == 0) continue;
-      std::int16_t slot[12];
+      std::int16_t slot_of[12];
       for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
         const int e = std::countr_zero(em);
         const int c0 = mc::kEdgeCorners[e][0];
@@ -240,20 +392,16 @@ class LocalSearch {
           while (m < n_moving && !(moving[m].axis == a && moving[m].s[0] == s[0] &&
                                    moving[m].s[1] == s[1] && moving[m].s[2] == s[2]))
             ++m;
-          if (m == n_moving) {
-            moving_code[n_moving] = edge_code(s, a);
-            moving[n_moving++] = {{s[0], s[1], s[2]}, a};
-          }
-          slot[e] = static_cast<std::int16_t>(-1 - m);
+          if (m == n_moving) moving[n_moving++] = {{s[0], s[1], s[2]}, a};
+          slot_of[e] = static_cast<std::int16_t>(-1 - m);
         } else {
-          slot[e] = static_cast<std::int16_t>(n_fixed);
-          fixed_code[n_fixed] = edge_code(s, a);
-          fixed[n_fixed++] = crossing(s, a, ~0u, zero, 0);
+          slot_of[e] = static_cast<std::int16_t>(n_fixed);
+          fixed[n_fixed++] = xpos_[slot(s, a)];
         }
       }
       const auto& tt = table_.triangles[cs];
       for (int t = 0; t < nt; ++t) {
-        const TriRef ref{{slot[tt[3 * t]], slot[tt[3 * t + 1]], slot[tt[3 * t + 2]]}};
+        const TriRef ref{{slot_of[tt[3 * t]], slot_of[tt[3 * t + 1]], slot_of[tt[3 * t + 2]]}};
         if (ref.v[0] < 0 || ref.v[1] < 0 || ref.v[2] < 0)
           tris[n_tris++] = ref;
         else
@@ -261,8 +409,8 @@ class LocalSearch {
       }
     }
     if (n_tris == 0) {
-      settled_at_[self] = step_;
-      return;
+      settle(self, 1);
+      return false;
     }
 
     // Moving crossings for the candidate (cand_d, cand_f), computed when first needed: most
@@ -282,6 +430,11 @@ class LocalSearch {
         mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f);
       placed = (1u << n_moving) - 1;
     };
+    auto place_current = [&]() {
+      stage(gv_.disp[self], gv_.value[self]);
+      for (int m = 0; m < n_moving; ++m) mpos[m] = xpos_[slot(moving[m].s, moving[m].axis)];
+      placed = (1u << n_moving) - 1;
+    };
     auto pos = [&](std::int16_t s) -> const P3& {
       if (s >= 0) return fixed[s];
       const int m = -1 - s;
@@ -295,7 +448,7 @@ class LocalSearch {
     std::array<double, 8 * mc::kMaxTrianglesPerCase> q0{};
     std::array<int, 8 * mc::kMaxTrianglesPerCase> order{};
     for (int t = 0; t < n_tris; ++t) order[t] = t;
-    // The minimum radius ratio of the affected triangles, -1 when one turns over, and with a
+    // The minimum radius ratio of the moving triangles, -1 when one turns over, and with a
     // `bar`, -1 as soon as one is no better than it: such a candidate can never be chosen, and
     // visiting the worst triangles first stops most candidates early.
     auto score = [&](bool record, double bar = -1.0) {
@@ -319,121 +472,110 @@ class LocalSearch {
       return worst;
     };
 
-    // Intersection guard: a move may not raise the number of intersecting pairs (rule of
-    // core/mesh/self_intersections.h, on the float coordinates) between a triangle that involves a
-    // moving crossing and any triangle of the 4x4x4 cells around v, read as they were when the
-    // colour step began. Without it the search folds neighbouring sheets of thin features
-    // through each other (bonsai: 42 intersecting pairs against MC's 28 and Fast's 0; lobster:
-    // 16 when the guard saw the eight cells around v only). Vertices are identified by edge.
-    struct Corners {
-      std::array<Vec3f, 3> p;
-      std::array<std::uint32_t, 3> id;
-      Vec3f lo, hi;
-      bool live;
+    // v's box in world floats (rounding is monotone, so a point strictly inside it in floats lies
+    // strictly inside the open cube in samples' terms, up to rounding shared by both sides).
+    Vec3f box_lo, box_hi;
+    for (int a = 0; a < 3; ++a) {
+      const double g = static_cast<double>(view.box.lo[a] + v[a]);
+      const float x0 = static_cast<float>(view.origin[a] + view.spacing[a] * (g - kBoxHalf));
+      const float x1 = static_cast<float>(view.origin[a] + view.spacing[a] * (g + kBoxHalf));
+      box_lo[a] = std::min(x0, x1);
+      box_hi[a] = std::max(x0, x1);
+    }
+    auto in_box = [&](const Corners& t) {
+      for (int a = 0; a < 3; ++a)
+        if (!(t.lo[a] > box_lo[a] && t.hi[a] < box_hi[a])) return false;
+      return true;
     };
-    auto make_corners = [](const P3* x[3], const std::uint32_t id[3]) {
-      Corners c;
-      for (int k = 0; k < 3; ++k) {
-        c.p[k] = {static_cast<float>((*x[k])[0]), static_cast<float>((*x[k])[1]),
-                  static_cast<float>((*x[k])[2])};
-        c.id[k] = id[k];
-      }
-      for (int a = 0; a < 3; ++a) {
-        c.lo[a] = std::min({c.p[0][a], c.p[1][a], c.p[2][a]});
-        c.hi[a] = std::max({c.p[0][a], c.p[1][a], c.p[2][a]});
-      }
-      c.live = triangle_has_area(c.p);
-      return c;
+    auto meets_box = [&](const Corners& t) {
+      for (int a = 0; a < 3; ++a)
+        if (t.hi[a] < box_lo[a] || t.lo[a] > box_hi[a]) return false;
+      return true;
     };
-    auto corners = [&](const TriRef& t) {
-      const P3* x[3];
-      std::uint32_t id[3];
-      for (int k = 0; k < 3; ++k) {
-        x[k] = &pos(t.v[k]);
-        id[k] = t.v[k] >= 0 ? fixed_code[t.v[k]] : moving_code[-1 - t.v[k]];
-      }
-      return make_corners(x, id);
-    };
-    auto meet = [](const Corners& a, const Corners& b) {
-      for (int k = 0; k < 3; ++k)
-        if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
-      return a.live && b.live && triangles_intersect(a.p, a.id, b.p, b.id);
-    };
-    // The other triangles: the eight cells' fixed ones, then the 56 cells around them (built on
-    // the first candidate that needs the guard: most vertices never get that far).
-    std::array<Corners, 64 * mc::kMaxTrianglesPerCase> others;
-    int n_others = 0;
-    for (int t = 0; t < n_statics; ++t) others[n_others++] = corners(statics[t]);
+
+    // The guard's other triangles: the eight cells' fixed ones and those of the cells within
+    // kGuardReach that meet v's box (built on the first candidate that needs the guard: most
+    // vertices never get that far).
+    static thread_local std::vector<Corners> others;
+    others.clear();
     bool ring_built = false;
     auto build_ring = [&]() {
       ring_built = true;
-      for (int c = 0; c < 64; ++c) {
-        const int d[3] = {c % 4 - 2, (c / 4) % 4 - 2, c / 16 - 2};
-        if (d[0] >= -1 && d[0] <= 0 && d[1] >= -1 && d[1] <= 0 && d[2] >= -1 && d[2] <= 0)
-          continue;  // one of the eight cells
-        std::int64_t o[3];
-        bool ok = true;
-        for (int a = 0; a < 3; ++a) {
-          o[a] = v[a] + d[a];
-          ok = ok && o[a] >= 0 && o[a] + 1 < view.dims[a];
-        }
-        if (!ok) continue;
-        const int cs = cell_case(o);
-        const int nt = table_.triangle_count[cs];
-        if (nt == 0) continue;
-        P3 x[12];
-        std::uint32_t id[12];
-        for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
-          const int e = std::countr_zero(em);
-          const int c0 = mc::kEdgeCorners[e][0];
-          const std::int64_t s[3] = {o[0] + (c0 & 1), o[1] + ((c0 >> 1) & 1),
-                                     o[2] + ((c0 >> 2) & 1)};
-          x[e] = snapshot_crossing(s, e / 4);
-          id[e] = edge_code(s, e / 4);
-        }
-        const auto& tt = table_.triangles[cs];
-        for (int t = 0; t < nt; ++t) {
-          const P3* px[3] = {&x[tt[3 * t]], &x[tt[3 * t + 1]], &x[tt[3 * t + 2]]};
-          const std::uint32_t pid[3] = {id[tt[3 * t]], id[tt[3 * t + 1]], id[tt[3 * t + 2]]};
-          others[n_others++] = make_corners(px, pid);
-        }
+      for (int t = 0; t < n_statics; ++t) {
+        const Corners c =
+            make_corners(pos(statics[t].v[0]), pos(statics[t].v[1]), pos(statics[t].v[2]));
+        if (meets_box(c)) others.push_back(c);
       }
+      for (std::int64_t dz = -kGuardReach; dz < kGuardReach; ++dz)
+        for (std::int64_t dy = -kGuardReach; dy < kGuardReach; ++dy)
+          for (std::int64_t dx = -kGuardReach; dx < kGuardReach; ++dx) {
+            if (dx >= -1 && dx <= 0 && dy >= -1 && dy <= 0 && dz >= -1 && dz <= 0)
+              continue;  // one of the eight cells
+            const std::int64_t d[3] = {dx, dy, dz};
+            std::int64_t o[3];
+            bool ok = true;
+            for (int a = 0; a < 3; ++a) {
+              o[a] = v[a] + d[a];
+              ok = ok && o[a] >= 0 && o[a] + 1 < view.dims[a];
+            }
+            if (!ok) continue;
+            const int cs = cell_case(o);
+            const int nt = table_.triangle_count[cs];
+            if (nt == 0) continue;
+            P3 x[12];
+            for (unsigned em = table_.edge_mask[cs]; em; em &= em - 1) {
+              const int e = std::countr_zero(em);
+              const int c0 = mc::kEdgeCorners[e][0];
+              const std::int64_t s[3] = {o[0] + (c0 & 1), o[1] + ((c0 >> 1) & 1),
+                                         o[2] + ((c0 >> 2) & 1)};
+              x[e] = xpos_[slot(s, e / 4)];
+            }
+            const auto& tt = table_.triangles[cs];
+            for (int t = 0; t < nt; ++t) {
+              const Corners c = make_corners(x[tt[3 * t]], x[tt[3 * t + 1]], x[tt[3 * t + 2]]);
+              if (meets_box(c)) others.push_back(c);
+            }
+          }
     };
     std::array<Corners, 8 * mc::kMaxTrianglesPerCase> moving_corners;
-    auto intersecting_pairs = [&]() {
-      int n = 0;
+    // The moving triangles as placed: false when one leaves v's box, else their pairs.
+    auto intersecting_pairs = [&](int& n) {
+      n = 0;
       for (int t = 0; t < n_tris; ++t) {
-        moving_corners[t] = corners(tris[t]);
+        moving_corners[t] = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
+        if (!in_box(moving_corners[t])) return false;
+      }
+      for (int t = 0; t < n_tris; ++t) {
         if (!moving_corners[t].live) continue;
-        for (int u = 0; u < n_others; ++u) n += meet(moving_corners[t], others[u]);
+        for (const Corners& u : others) n += meet(moving_corners[t], u);
         for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
       }
-      return n;
+      return true;
     };
 
     P3 best_d = gv_.disp[self];
     double best_f = gv_.value[self];
-    place(best_d, best_f);
+    place_current();
     double best = score(true);
     if (best >= params_.goal) {
-      settled_at_[self] = step_;
-      return;
+      settle(self, 1);
+      return false;
     }
     std::stable_sort(order.begin(), order.begin() + n_tris,
                      [&](int x, int y) { return q0[x] < q0[y]; });
     const double start = best;
-    const P3 start_d = best_d;
-    const double start_f = best_f;
     int allowed_pairs = -1;
+    bool start_in_box = true;
     // Called with candidate (d, f) placed; leaves it placed.
     auto guard_passes = [&](const P3& d, double f) {
       if (!ring_built) {
         build_ring();
-        place(start_d, start_f);
-        allowed_pairs = intersecting_pairs();
+        place_current();
+        start_in_box = intersecting_pairs(allowed_pairs);
         place(d, f);
       }
-      return intersecting_pairs() <= allowed_pairs;
+      int n = 0;
+      return start_in_box && intersecting_pairs(n) && n <= allowed_pairs;
     };
 
     // A round keeps the best-scoring candidate that passes the guard (the first in scan order
@@ -476,16 +618,21 @@ class LocalSearch {
     };
     const P3 centre = best_d;
     try_round(centre, {0.08, 0.16, 0.3, 0.45});
+    if (!start_in_box) {  // it cannot move until its eight cells change
+      settle(self, 1);
+      return false;
+    }
     const P3 centre2 = best_d;
     try_round(centre2, {0.02, 0.04});
     if (best > start) {
-      gv_.disp[self] = best_d;
-      gv_.value[self] = best_f;
-      last_moved_[self] = step_;
-    } else if (!any_candidate) {
-      // Nothing beat the start, which depends on the block only (the guard never ran).
-      settled_at_[self] = step_;
+      out.index = self;
+      for (int a = 0; a < 3; ++a) out.v[a] = v[a];
+      out.d = best_d;
+      out.f = best_f;
+      return true;
     }
+    settle(self, any_candidate ? kGuardReach : 1);  // without candidates, no guard ran
+    return false;
   }
 
   const Field<T>& field_;
@@ -494,17 +641,22 @@ class LocalSearch {
   const MacetCaseTable& table_;
   MacetSearchParams params_;
   std::vector<P3> dirs_;
-  std::vector<P3> snap_disp_;  // the displacements and values when the colour step began
-  std::vector<double> snap_value_;
-  // Per grid vertex: the colour step (counted over all sweeps) that last moved it, and the step
-  // at which it was last found good enough to leave (-1: never, or visited since).
+  // Crossing positions per crossed edge (global sample coordinates), slots by grid vertex.
+  std::vector<std::uint32_t> xoff_;
+  UninitVector<P3> xpos_;
+  tbb::enumerable_thread_specific<std::vector<Proposal>> proposals_;
+  // Per grid vertex: the colour step (counted over all sweeps) that last moved it, the step at
+  // which a visit last left it in place (-1: never, or visited since), and how far around it a
+  // move calls for a new visit.
   std::vector<int> last_moved_, settled_at_;
+  std::vector<std::int8_t> settled_reach_;
   int step_ = 0;
 };
 
 template <class T>
 void macet_local_search(const Field<T>& field, const BitGrid& grid, GridVertices& gv,
                         const MacetCaseTable& table, int sweeps) {
+  if (sweeps <= 0) return;
   LocalSearch<T> search(field, grid, gv, table, MacetSearchParams{});
   for (int s = 0; s < sweeps; ++s) search.sweep();
 }
