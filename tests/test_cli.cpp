@@ -155,8 +155,6 @@ TEST_F(Cli, ErrorsAreOneLineAndLeaveNoFiles) {
       {"extract short.raw --iso 1 -o out.ply", "--dims"},
       {"extract short.raw --iso 1 --dims 4,4 --type uint8 -o out.ply", "--dims"},
       {"extract short.raw --iso 1 --dims 4,4,4 --type uint9 -o out.ply", "uint9"},
-      {"extract field:sphere:16 --method dc --backend hp -o out.ply", "hp"},
-      {"extract field:sphere:16 --method macet --backend gs -o out.ply", "gs"},
       {"extract field:sphere:16 --macet-relax 0.2 -o out.ply", "--macet-relax"},
       {"quality missing.ply", "missing.ply"},
       {"info missing.nrrd", "missing.nrrd"},

@@ -92,7 +92,7 @@ TEST_F(GlCli, DualContouringWritesTheCpuFile) {
 }
 
 // Macet on the GL backends, in core and brick by brick through the tiler (Fast with normals, and
-// Max with relaxation, whose search runs on the CPU between the GL passes; Max's halo of 52
+// Max with relaxation, whose search runs on the CPU between the GL passes; Max's halo of 139
 // samples makes bricks of a small volume as slow as the whole, so Max runs in core here and in
 // slabs in test_gl_macet): the CPU's file.
 TEST_F(GlCli, MacetGlRunsWriteTheCpuFile) {

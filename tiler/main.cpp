@@ -345,11 +345,11 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     dims = source->dims;
     type = source->type;
     region_reads = !source->in_memory();
-    progress("extracting " + args.in.input + " (" + std::to_string(dims[0]) + "x" +
-             std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
-             std::string(scalar_name(type)) + ") brick by brick within " + args.memory +
-             (source->in_memory() ? " (this input cannot be read by region: read whole first)"
-                                  : ""));
+    progress(
+        "extracting " + args.in.input + " (" + std::to_string(dims[0]) + "x" +
+        std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
+        std::string(scalar_name(type)) + ") brick by brick within " + args.memory +
+        (source->in_memory() ? " (this input cannot be read by region: read whole first)" : ""));
     r = extract_tiled(*source, to, args.output);
   }
   progress(

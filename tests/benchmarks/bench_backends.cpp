@@ -1,5 +1,5 @@
-// Marching Cubes, Macet (Fast) and Dual Contouring on the three backends (CPU, GL geometry shader, GL
-// HistoPyramid), side by side in one run on the same in-memory volumes, after checking that all
+// Marching Cubes, Macet (Fast) and Dual Contouring on the three backends (CPU, GL geometry shader,
+// GL HistoPyramid), side by side in one run on the same in-memory volumes, after checking that all
 // three give the same mesh.
 //
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
