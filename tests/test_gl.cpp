@@ -16,6 +16,7 @@
 #include "core/extract/marching_cubes.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "gl_test_support.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "test_support.h"
@@ -25,51 +26,15 @@ namespace {
 
 using testing::shared_volume;
 
-// The OSMesa runs (ISOTILE_GL=osmesa, tests/CMakeLists.txt) need OSMesa, the others any context.
-bool forcing_osmesa() {
-  const char* env = std::getenv("ISOTILE_GL");
-  return env && std::string(env) == "osmesa";
-}
-#define REQUIRE_GL()                                                 \
-  do {                                                               \
-    std::string why;                                                 \
-    if (!gl::available(&why)) {                                      \
-      if (forcing_osmesa()) ISOTILE_SKIP(Osmesa, "OSMesa: " << why); \
-      ISOTILE_SKIP(Gl, why);                                         \
-    }                                                                \
-  } while (0)
-
-enum class Path { Gs, Hp };
+using Path = testing::GlPath;
 
 Mesh run(Path p, const VolumeView& v, const gl::McOptions& o, gl::McStats* stats = nullptr) {
   return p == Path::Gs ? gl::mc_geometry_shader(v, o, stats) : gl::mc_histopyramid(v, o, stats);
 }
 
-// Same triangles and vertex order as the CPU; positions within 1e-5 voxel (and counted when not
-// bit-equal), normals within 1e-5.
+// Same triangles and vertex order as the CPU; positions and normals within 1e-5.
 void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v, const char* what) {
-  ASSERT_EQ(gl.positions.size(), cpu.positions.size()) << what;
-  ASSERT_EQ(gl.normals.size(), cpu.normals.size()) << what;
-  ASSERT_EQ(gl.triangles.size(), cpu.triangles.size()) << what;
-  EXPECT_TRUE(gl.triangles == cpu.triangles) << what;
-  std::size_t differ = 0;
-  double worst = 0;
-  for (std::size_t i = 0; i < cpu.positions.size(); ++i)
-    for (int a = 0; a < 3; ++a) {
-      const double d = std::abs(double(gl.positions[i][a]) - double(cpu.positions[i][a]));
-      worst = std::max(worst, d / v.spacing[a]);
-      differ += gl.positions[i][a] != cpu.positions[i][a];
-    }
-  EXPECT_LE(worst, 1e-5) << what;
-  // llvmpipe's double arithmetic is IEEE: the positions are the CPU's bit for bit.
-  if (gl::device().software) {
-    EXPECT_EQ(differ, 0u) << what;
-  }
-  double worst_n = 0;
-  for (std::size_t i = 0; i < cpu.normals.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
-  EXPECT_LE(worst_n, 1e-5) << what;
+  testing::expect_same_gl_mesh(gl, cpu, v, what, 1e-5, 1e-5);
 }
 
 // A field sampled into a volume of another scalar type, scaled so that integers keep the shape.

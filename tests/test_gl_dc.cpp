@@ -16,6 +16,7 @@
 #include "core/extract/extract.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "gl_test_support.h"
 #include "shaders/dc_gl.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
@@ -26,15 +27,7 @@ namespace {
 
 using testing::shared_volume;
 
-#define REQUIRE_GL()            \
-  do {                          \
-    std::string why;            \
-    if (!gl::available(&why)) { \
-      ISOTILE_SKIP(Gl, why);    \
-    }                           \
-  } while (0)
-
-enum class Path { Gs, Hp };
+using Path = testing::GlPath;
 
 Mesh run(Path p, const VolumeView& v, const gl::DcGlOptions& o, gl::McStats* stats = nullptr) {
   return p == Path::Gs ? gl::dc_geometry_shader(v, o, stats) : gl::dc_histopyramid(v, o, stats);
@@ -58,33 +51,10 @@ std::string describe(const DualContouringOptions& o) {
   return s;
 }
 
-// The same faces in the same order and the same vertex count as the CPU; positions within 1e-4
-// voxel (bit-equal on llvmpipe, whose double arithmetic is IEEE), normals within 1e-5.
+// The CPU's mesh: positions within 1e-4 voxel, normals within 1e-5.
 void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
                       const std::string& what) {
-  ASSERT_EQ(gl.positions.size(), cpu.positions.size()) << what;
-  ASSERT_EQ(gl.normals.size(), cpu.normals.size()) << what;
-  ASSERT_EQ(gl.triangles.size(), cpu.triangles.size()) << what;
-  ASSERT_EQ(gl.quads.size(), cpu.quads.size()) << what;
-  EXPECT_TRUE(gl.triangles == cpu.triangles) << what;
-  EXPECT_TRUE(gl.quads == cpu.quads) << what;
-  std::size_t differ = 0;
-  double worst = 0;
-  for (std::size_t i = 0; i < cpu.positions.size(); ++i)
-    for (int a = 0; a < 3; ++a) {
-      const double d = std::abs(double(gl.positions[i][a]) - double(cpu.positions[i][a]));
-      worst = std::max(worst, d / v.spacing[a]);
-      differ += gl.positions[i][a] != cpu.positions[i][a];
-    }
-  EXPECT_LE(worst, 1e-4) << what;
-  if (gl::device().software) {
-    EXPECT_EQ(differ, 0u) << what;
-  }
-  double worst_n = 0;
-  for (std::size_t i = 0; i < cpu.normals.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
-  EXPECT_LE(worst_n, 1e-5) << what;
+  testing::expect_same_gl_mesh(gl, cpu, v, what, 1e-4, 1e-5);
 }
 
 // Every variant: both vertex variants, the three solvers, both Hermite choices; quads and normals

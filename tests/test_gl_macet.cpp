@@ -16,6 +16,7 @@
 #include "core/extract/marching_cubes.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "gl_test_support.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/macet_gl.h"
@@ -26,15 +27,7 @@ namespace {
 
 using testing::shared_volume;
 
-#define REQUIRE_GL()            \
-  do {                          \
-    std::string why;            \
-    if (!gl::available(&why)) { \
-      ISOTILE_SKIP(Gl, why);    \
-    }                           \
-  } while (0)
-
-enum class Path { Gs, Hp };
+using Path = testing::GlPath;
 
 Mesh run(Path p, const VolumeView& v, const gl::MacetGlOptions& o, gl::McStats* stats = nullptr) {
   return p == Path::Gs ? gl::macet_geometry_shader(v, o, stats)
@@ -48,31 +41,10 @@ gl::MacetGlOptions opts(const MacetOptions& m, std::int64_t slab = 0) {
   return o;
 }
 
-// Same triangles and vertex order as the CPU; positions and normals within 1e-4 (voxels for
-// positions). On llvmpipe (IEEE doubles) the positions are expected bit-equal.
+// The CPU's mesh: positions and normals within 1e-4 (voxels for positions).
 void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
                       const std::string& what) {
-  ASSERT_EQ(gl.positions.size(), cpu.positions.size()) << what;
-  ASSERT_EQ(gl.normals.size(), cpu.normals.size()) << what;
-  ASSERT_EQ(gl.triangles.size(), cpu.triangles.size()) << what;
-  EXPECT_TRUE(gl.triangles == cpu.triangles) << what;
-  std::size_t differ = 0;
-  double worst = 0;
-  for (std::size_t i = 0; i < cpu.positions.size(); ++i)
-    for (int a = 0; a < 3; ++a) {
-      const double d = std::abs(double(gl.positions[i][a]) - double(cpu.positions[i][a]));
-      worst = std::max(worst, d / v.spacing[a]);
-      differ += gl.positions[i][a] != cpu.positions[i][a];
-    }
-  EXPECT_LE(worst, 1e-4) << what;
-  if (gl::device().software) {
-    EXPECT_EQ(differ, 0u) << what;
-  }
-  double worst_n = 0;
-  for (std::size_t i = 0; i < cpu.normals.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
-  EXPECT_LE(worst_n, 1e-4) << what;
+  testing::expect_same_gl_mesh(gl, cpu, v, what, 1e-4, 1e-4);
 }
 
 class GlMacet : public ::testing::TestWithParam<Path> {};

@@ -1,0 +1,68 @@
+// What the GL extractor tests share: the skip when no context can be made, and the comparison of
+// a GL mesh with the CPU's (the GL paths promise the CPU's mesh: docs/gl.md).
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdlib>
+#include <string>
+
+#include "core/mesh/mesh.h"
+#include "core/volume/volume.h"
+#include "shaders/gl_context.h"
+#include "skip_support.h"
+
+namespace isotile::testing {
+
+// The OSMesa runs (ISOTILE_GL=osmesa, tests/CMakeLists.txt) need OSMesa, the others any context.
+inline bool forcing_osmesa() {
+  const char* env = std::getenv("ISOTILE_GL");
+  return env && std::string(env) == "osmesa";
+}
+
+#define REQUIRE_GL()                                                                     \
+  do {                                                                                   \
+    std::string why;                                                                     \
+    if (!::isotile::gl::available(&why)) {                                               \
+      if (::isotile::testing::forcing_osmesa()) ISOTILE_SKIP(Osmesa, "OSMesa: " << why); \
+      ISOTILE_SKIP(Gl, why);                                                             \
+    }                                                                                    \
+  } while (0)
+
+enum class GlPath { Gs, Hp };
+
+// The same vertex count, the same triangles and quads in the same order as the CPU; positions
+// within `position_tolerance` voxel and normals within `normal_tolerance`. On a software
+// rasteriser (llvmpipe, whose double arithmetic is IEEE) positions must be bit-equal.
+inline void expect_same_gl_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
+                                const std::string& what, double position_tolerance,
+                                double normal_tolerance) {
+  ASSERT_EQ(gl.positions.size(), cpu.positions.size()) << what;
+  ASSERT_EQ(gl.normals.size(), cpu.normals.size()) << what;
+  ASSERT_EQ(gl.triangles.size(), cpu.triangles.size()) << what;
+  ASSERT_EQ(gl.quads.size(), cpu.quads.size()) << what;
+  EXPECT_TRUE(gl.triangles == cpu.triangles) << what;
+  EXPECT_TRUE(gl.quads == cpu.quads) << what;
+  std::size_t differ = 0;
+  double worst = 0;
+  for (std::size_t i = 0; i < cpu.positions.size(); ++i)
+    for (int a = 0; a < 3; ++a) {
+      const double d = std::abs(double(gl.positions[i][a]) - double(cpu.positions[i][a]));
+      worst = std::max(worst, d / v.spacing[a]);
+      differ += gl.positions[i][a] != cpu.positions[i][a];
+    }
+  EXPECT_LE(worst, position_tolerance) << what;
+  if (gl::device().software) {
+    EXPECT_EQ(differ, 0u) << what;
+  }
+  double worst_n = 0;
+  for (std::size_t i = 0; i < cpu.normals.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
+  EXPECT_LE(worst_n, normal_tolerance) << what;
+}
+
+}  // namespace isotile::testing
