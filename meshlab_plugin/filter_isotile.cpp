@@ -121,8 +121,10 @@ QString FilterIsotile::filterName(FilterIDType filter) const {
 QString FilterIsotile::filterInfo(FilterIDType filter) const {
   switch (filter) {
     case FP_ISOSURFACE:
-      return "Extracts the isosurface of a volume file (raw, raw.gz, NRRD/NHDR, OpenVDB) as a new "
-             "layer, with isotile: Marching Cubes, Macet (Marching Cubes with edge "
+      return "Extracts the isosurface of a volume file (raw, raw.gz, NRRD/NHDR, OpenVDB, NIfTI, "
+             "MetaImage, TIFF, MRC/CCP4, a DICOM series through any of its files) as a new "
+             "layer, in the volume's world coordinates, with isotile: Marching Cubes, Macet "
+             "(Marching Cubes with edge "
              "transformations: well-shaped triangles) or table-driven Dual Contouring, on the "
              "CPU or in OpenGL shaders, in core or brick by brick within a memory budget, "
              "optionally simplified. Per-face quality is the triangle's radius ratio (1: "
