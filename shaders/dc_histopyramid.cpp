@@ -159,17 +159,10 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
     const bool last = slabs.empty();
     if (!last && n_vertices > 0) {
       prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, pyramid);
-      pyr.set_uniforms(prog);
-      set_uniform_u(
-          prog, "u_element",
-          static_cast<std::uint32_t>(vcells.extent(0) * vcells.extent(1) * (vcells.extent(2) - 1)));
-      const Buffer result(4);
-      result.bind(GL_SHADER_STORAGE_BUFFER, 3);
-      glUseProgram(prog);
-      dispatch(1);
-      std::uint32_t before = 0;
-      result.read(0, 4, &before);
-      shared = n_vertices - before;
+      shared = n_vertices -
+               vertices_before(prog, pyr,
+                               static_cast<std::uint32_t>(vcells.extent(0) * vcells.extent(1) *
+                                                          (vcells.extent(2) - 1)));
     }
     if (vertex_base + n_vertices > std::numeric_limits<std::uint32_t>::max())
       throw CapacityError(

@@ -7,6 +7,8 @@
 #include <array>
 #include <cstdint>
 
+#include "gl_program.h"
+
 namespace isotile::gl {
 
 inline constexpr int kMaxPyramidLevels = 16;
@@ -41,5 +43,20 @@ struct Pyramid {
                          count.data());
   }
 };
+
+// What hp_prefix.comp (`prog`, its other uniforms already set) counts before `element`: the
+// vertices of the elements before it, with the pyramid bound as for the output passes. Both
+// HistoPyramid extractors use it to find the vertices a slab shares with the next one.
+inline std::uint32_t vertices_before(GLuint prog, const Pyramid& pyr, std::uint32_t element) {
+  pyr.set_uniforms(prog);
+  set_uniform_u(prog, "u_element", element);
+  const Buffer result(4);
+  result.bind(GL_SHADER_STORAGE_BUFFER, 3);
+  glUseProgram(prog);
+  dispatch(1);
+  std::uint32_t before = 0;
+  result.read(0, 4, &before);
+  return before;
+}
 
 }  // namespace isotile::gl
