@@ -73,13 +73,8 @@ int dc_gs_faces(const std::string& defines, const std::function<void(GLuint)>& u
       staging.resize(written * corners * 2);
       capture.read(0, written * prim_bytes, staging.data());
       auto elem_of = [&](std::uint64_t p) { return staging[p * corners * 2 + 1]; };
-      std::uint64_t keep = written;
-      std::uint64_t resume = elements;
+      const auto [keep, resume] = cut_capture(first, elements, written, generated, elem_of);
       if (written < generated) {
-        const std::uint32_t last = elem_of(written - 1);
-        while (keep > 0 && elem_of(keep - 1) == last) --keep;
-        resume = last;
-        if (keep == 0 && resume == first) throw Error("transform feedback captured no element");
         const std::uint64_t needed = generated - keep;
         if (needed > cap) {
           cap = std::min(needed, limit);

@@ -11,6 +11,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/errors.h"
 #include "core/mesh/mesh.h"
 #include "core/volume/volume.h"
 
@@ -55,6 +56,27 @@ class Buffer {
 // Runs the current compute program (local size 256 in x) over n invocations; the shaders compute
 // their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.
 void dispatch(std::uint64_t n);
+
+// After a transform-feedback draw from element `first` captured `written` of the `generated`
+// primitives (each tagged with its element by `element_of`): the primitives to keep and the
+// element to draw from next (`end` when everything fit). On an overflow the last captured
+// element may be cut short, so its primitives are dropped and the draw resumes at it.
+struct CaptureCut {
+  std::uint64_t keep = 0, resume = 0;
+};
+template <class ElementOf>
+CaptureCut cut_capture(std::uint64_t first, std::uint64_t end, std::uint64_t written,
+                       std::uint64_t generated, ElementOf element_of) {
+  CaptureCut c{written, end};
+  if (written < generated) {
+    const std::uint64_t last = element_of(written - 1);
+    while (c.keep > 0 && element_of(c.keep - 1) == last) --c.keep;
+    c.resume = last;
+    if (c.keep == 0 && c.resume == first)
+      throw Error("transform feedback captured no element (its primitives exceed the buffer)");
+  }
+  return c;
+}
 
 // A method's case tables as the std140 uniform block `Tables` of mc_common.glsl, bound at uniform
 // binding 0, uploaded once per context from core's own tables: Marching Cubes'

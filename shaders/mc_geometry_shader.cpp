@@ -139,14 +139,12 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
         auto cell_of = [&](std::uint64_t t) { return staging[t * 3 * words + 1]; };
-        std::uint64_t keep = written;
-        std::int64_t resume = n_cells;
+        const CaptureCut cut =
+            cut_capture(static_cast<std::uint64_t>(first), static_cast<std::uint64_t>(n_cells),
+                        written, generated, cell_of);
+        const std::uint64_t keep = cut.keep;
+        const std::int64_t resume = static_cast<std::int64_t>(cut.resume);
         if (written < generated) {
-          // The last captured cell may be cut short: drop it and draw again from it.
-          const std::uint32_t last_cell = cell_of(written - 1);
-          while (keep > 0 && cell_of(keep - 1) == last_cell) --keep;
-          resume = last_cell;
-          if (keep == 0 && resume == first) throw Error("transform feedback captured no cell");
           const std::uint64_t needed = generated - keep;
           if (needed > cap) {
             cap = std::min(needed, limit);
