@@ -44,19 +44,28 @@ class Tiler : public testing::TempDirTest {
     return slurp(out);
   }
 
-  // Out of core within `memory`. Returns the file's bytes.
+  // Out of core within `memory`. Returns the file's bytes. Runs twice: one brick at a time as
+  // small budgets do, and with the next brick read and the last written while one is extracted
+  // (as budgets from TiledOptions::overlap_min_memory on do); both must write the same file.
   std::string tiled(const std::string& input, const ExtractOptions& o, MeshFormat format,
                     std::uint64_t memory, TiledResult* result = nullptr,
                     const RawOptions& raw = {}) {
-    auto source = open_volume_source(input, raw);
     const fs::path out = dir_ / (format == MeshFormat::Ply ? "tiled.ply" : "tiled.stl");
     TiledOptions to;
     to.extract = o;
     to.memory = memory;
     to.format = format;
-    const TiledResult r = extract_tiled(*source, to, out);
+    to.overlap_min_memory = ~std::uint64_t{0};
+    const TiledResult r = extract_tiled(*open_volume_source(input, raw), to, out);
     if (result) *result = r;
-    return slurp(out);
+    const std::string one_at_a_time = slurp(out);
+    to.overlap_min_memory = 0;
+    const TiledResult overlapped = extract_tiled(*open_volume_source(input, raw), to, out);
+    EXPECT_EQ(slurp(out), one_at_a_time) << input << " memory " << memory << " overlapped";
+    EXPECT_EQ(overlapped.quality.triangles, r.quality.triangles);
+    EXPECT_EQ(overlapped.quality.histogram, r.quality.histogram);
+    EXPECT_EQ(overlapped.quality.mean, r.quality.mean);
+    return one_at_a_time;
   }
   // `memory` for the bricks plus what the source itself holds (zlib's buffers for gzip), so a
   // small budget cuts a gzip'd volume into as many slabs as a plain one.

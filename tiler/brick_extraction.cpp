@@ -1,11 +1,13 @@
 #include "tiler/brick_extraction.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <chrono>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -18,10 +20,6 @@
 namespace isotile {
 
 namespace {
-
-bool contains(const Box3& b, std::int64_t x, std::int64_t y, std::int64_t z) {
-  return x >= b.lo[0] && x < b.hi[0] && y >= b.lo[1] && y < b.hi[1] && z >= b.lo[2] && z < b.hi[2];
-}
 
 template <class T>
 char* put_le(char* p, T v) {
@@ -39,19 +37,9 @@ std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& 
   return {a0, a1};
 }
 
-// Writes [begin, end) of `records` (fixed-size) whose file offsets are offset(i); consecutive
-// records that are also consecutive in the file go out in one write.
-template <class Offset>
-void write_runs(const WriteAt& write, const std::vector<char>& records, std::size_t record_bytes,
-                std::size_t count, Offset&& offset) {
-  std::size_t i = 0;
-  while (i < count) {
-    std::size_t j = i + 1;
-    const std::uint64_t first = offset(i);
-    while (j < count && offset(j) == first + (j - i) * record_bytes) ++j;
-    write(first, records.data() + i * record_bytes, (j - i) * record_bytes);
-    i = j;
-  }
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
 }  // namespace
@@ -74,7 +62,14 @@ bool BrickExtraction::empty_volume() const {
 }
 
 const BrickPlan& BrickExtraction::plan() {
-  plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
+  try {
+    plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
+  } catch (const InputError&) {
+    // Too small a budget for a second brick's samples: one brick at a time.
+    if (!overlap_) throw;
+    set_overlap(false);
+    plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
+  }
   vseg_ = std::make_unique<SegmentTable>(n_, plan_.count[0]);
   fseg_ = std::make_unique<SegmentTable>(n_, plan_.count[0]);
   brick_vertices_.assign(static_cast<std::size_t>(plan_.total()), 0);
@@ -82,9 +77,31 @@ const BrickPlan& BrickExtraction::plan() {
   return plan_;
 }
 
+TiledResult::Stages BrickExtraction::stages() const {
+  TiledResult::Stages s = stages_;
+  s.read = reader_.read_seconds();
+  return s;
+}
+
+void BrickExtraction::set_overlap(bool on) {
+  overlap_ = on;
+  reader_.set_read_ahead(on);
+}
+
 void BrickExtraction::count(std::int64_t b) {
+  std::vector<char> buffer;
+  count(b, read_for_count(b, buffer));
+}
+
+VolumeView BrickExtraction::read_for_count(std::int64_t b, std::vector<char>& buffer) {
+  return reader_.read(reader_.count_box(plan_.cells(b)), buffer);
+}
+
+void BrickExtraction::count(std::int64_t b, const VolumeView& view) {
   const Box3 cells = plan_.cells(b);
-  const BrickCounts counts = reader_.count(cells);
+  const auto t0 = Clock::now();
+  const BrickCounts counts = reader_.count(cells, view);
+  stages_.count += since(t0);
   const std::int64_t xb = plan_.owner(0, cells.lo[0]);
   brick_vertices_[static_cast<std::size_t>(b)] = scatter(counts.vertices, xb, 1, *vseg_);
   brick_faces_[static_cast<std::size_t>(b)] = scatter(counts.faces, xb, face_mult_, *fseg_);
@@ -134,123 +151,273 @@ std::string BrickExtraction::header() const {
 
 void BrickExtraction::extract(std::int64_t b, const WriteAt& write, QualityAccumulator& quality,
                               TiledResult& result) {
+  std::vector<char> buffer;
+  for (const Box3& part : parts(b, result))
+    this->write(extract_part(part, read_part(part, buffer), quality), write);
+}
+
+std::vector<Box3> BrickExtraction::parts(std::int64_t b, TiledResult& result) {
   const Box3 cells = plan_.cells(b);
   const auto i = static_cast<std::size_t>(b);
+  // Records of the part before, still being written while this one is extracted.
+  double extra_per_face = 0;
+  if (overlap_ && brick_faces_[i] > 0)
+    extra_per_face =
+        static_cast<double>(face_bytes_) + static_cast<double>(vertex_bytes_ * brick_vertices_[i]) /
+                                               static_cast<double>(brick_faces_[i]);
   // The real output is known now: cut a brick whose output would overflow the budget into
   // thinner z-slices.
   const BrickReader::Slicing cut =
-      reader_.slice(cells, brick_vertices_[i], brick_faces_[i], opt_.memory);
+      reader_.slice(cells, brick_vertices_[i], brick_faces_[i], opt_.memory, extra_per_face);
   const std::int64_t slices = cut.count;
+  std::vector<Box3> out;
   for (std::int64_t s = 0; s < slices; ++s) {
     Box3 part = cells;
     part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
     part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
-    extract_part(part, write, quality);
-    ++result.bricks_extracted;
+    out.push_back(part);
   }
+  result.bricks_extracted += slices;
   result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
+  return out;
 }
 
-void BrickExtraction::extract_part(const Box3& cells, const WriteAt& write,
-                                   QualityAccumulator& quality) {
-  const SegmentTable& vseg = *vseg_;
-  const VolumeView view = reader_.read(grow(cells, halo_, n_));
-  ExtractOptions o = ex_;
-  o.cells = cells;
-  const Mesh mesh = isotile::extract(view, o);
-  const std::vector<std::uint64_t> keys = brick_vertex_keys(view, ex_.iso, layout_, cells);
-  if (keys.size() != mesh.positions.size())
-    throw Error("brick contract broken: the extractor listed " +
-                std::to_string(mesh.positions.size()) + " vertices where " +
-                std::to_string(keys.size()) + " were expected");
+VolumeView BrickExtraction::read_part(const Box3& part, std::vector<char>& buffer) {
+  return reader_.read(grow(part, halo_, n_), buffer);
+}
 
+void BrickExtraction::write(const BrickRecords& records, const WriteAt& write) {
+  const auto t0 = Clock::now();
+  records.write(write);
+  stages_.write += since(t0);
+}
+
+void BrickRecords::write(const WriteAt& write) const {
+  for (const Run& r : runs) write(r.offset, data.get() + r.begin, r.bytes);
+}
+
+// Edge vertices need no keys: a brick lists, per point row of its closed box, the vertices its
+// column's segment of that row counted (whichever brick counted it), then the 0-3 on the edges
+// of the sample at x = cells.hi.x, which open the next column's segment.
+void BrickExtraction::edge_vertex_index(const VolumeView& view, const Box3& cells,
+                                        std::vector<std::uint64_t>& index,
+                                        std::vector<char>& is_owned) {
+  const SegmentTable& vseg = *vseg_;
+  const std::vector<std::uint8_t> upper = upper_x_edge_vertices(view, ex_.iso, cells);
+  const std::int64_t column = plan_.owner(0, cells.lo[0]);
+  const Box3 owned = owned_samples(cells, n_);
+  const std::int64_t ny = cells.extent(1) + 1;
+  const std::size_t rows = upper.size();
+  const auto segment = [&](std::size_t r, std::int64_t col) {
+    const auto ri = static_cast<std::int64_t>(r);
+    return vseg.index(cells.lo[1] + ri % ny, cells.lo[2] + ri / ny, col);
+  };
+  std::vector<std::uint64_t> start(rows + 1);
+  for (std::size_t r = 0; r < rows; ++r)
+    start[r + 1] = start[r] + vseg.count(segment(r, column)) + upper[r];
+  if (start[rows] != index.size())
+    throw Error("brick contract broken: the extractor listed " + std::to_string(index.size()) +
+                " vertices where " + std::to_string(start[rows]) + " were counted");
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rows), [&](const auto& range) {
+    for (std::size_t r = range.begin(); r != range.end(); ++r) {
+      const auto ri = static_cast<std::int64_t>(r);
+      const std::int64_t y = cells.lo[1] + ri % ny, z = cells.lo[2] + ri / ny;
+      const char own = y < owned.hi[1] && z < owned.hi[2];
+      const std::size_t seg = segment(r, column);
+      const std::uint64_t n = vseg.count(seg);
+      for (std::uint64_t i = 0; i < n; ++i) {
+        index[start[r] + i] = vseg.offset(seg) + i;
+        is_owned[start[r] + i] = own;
+      }
+      if (upper[r] == 0) continue;
+      const std::uint64_t next = vseg.offset(segment(r, column + 1));
+      for (std::uint64_t i = 0; i < upper[r]; ++i) {
+        index[start[r] + n + i] = next + i;
+        is_owned[start[r] + n + i] = 0;
+      }
+    }
+  });
+}
+
+// Cell vertices (Dual Contouring) by their keys.
+void BrickExtraction::keyed_vertex_index(const VolumeView& view, const Box3& cells,
+                                         std::vector<std::uint64_t>& index,
+                                         std::vector<char>& is_owned) {
+  const std::vector<std::uint64_t> keys = brick_vertex_keys(view, ex_.iso, layout_, cells);
+  if (keys.size() != index.size())
+    throw Error("brick contract broken: the extractor listed " + std::to_string(index.size()) +
+                " vertices where " + std::to_string(keys.size()) + " were expected");
   // Final index of every listed vertex. Keys are sorted, so a segment's listed vertices are
   // consecutive: a prefix of it when the segment is this brick's column or the next one
   // (Marching Cubes' vertices on the upper x face), a suffix when it is the previous column
-  // (Dual Contouring's cells just below the brick).
+  // (Dual Contouring's cells just below the brick). Rows are independent; within a row, column
+  // and ownership are key ranges, so no key is divided.
+  const SegmentTable& vseg = *vseg_;
   const std::int64_t column = plan_.owner(0, cells.lo[0]);
   const Box3 owned = layout_ == SiteLayout::EdgeVertices ? owned_samples(cells, n_) : cells;
-  std::vector<std::uint64_t> index(keys.size());
-  std::vector<char> is_owned(keys.size());
   const auto nx = static_cast<std::uint64_t>(n_[0]), ny = static_cast<std::uint64_t>(n_[1]);
   const std::uint64_t per_site = keys_per_site(layout_);
-  for (std::size_t g0 = 0; g0 < keys.size();) {
-    const std::uint64_t lin = keys[g0] / per_site;
-    const auto y = static_cast<std::int64_t>(lin / nx % ny);
-    const auto z = static_cast<std::int64_t>(lin / nx / ny);
-    const std::int64_t col = plan_.owner(0, static_cast<std::int64_t>(lin % nx));
-    const std::size_t seg = vseg.index(y, z, col);
-    std::size_t g1 = g0 + 1;
-    for (; g1 < keys.size(); ++g1) {
-      const std::uint64_t l = keys[g1] / per_site;
-      if (l / nx != lin / nx || plan_.owner(0, static_cast<std::int64_t>(l % nx)) != col) break;
-    }
-    const std::uint64_t first = vseg.offset(seg) + (col < column ? vseg.count(seg) - (g1 - g0) : 0);
-    for (std::size_t i = g0; i < g1; ++i) {
-      index[i] = first + (i - g0);
-      const std::uint64_t l = keys[i] / per_site;
-      is_owned[i] = contains(owned, static_cast<std::int64_t>(l % nx), y, z);
-    }
-    g0 = g1;
+  const std::uint64_t row_keys = nx * per_site;
+  const auto key_at = [&](std::uint64_t row, std::int64_t x) {
+    return row * row_keys + static_cast<std::uint64_t>(x) * per_site;
+  };
+  if (!keys.empty()) {
+    const std::uint64_t row0 = keys.front() / row_keys, row1 = keys.back() / row_keys;
+    tbb::parallel_for(tbb::blocked_range<std::uint64_t>(row0, row1 + 1), [&](const auto& range) {
+      for (std::uint64_t row = range.begin(); row != range.end(); ++row) {
+        const auto lo = std::lower_bound(keys.begin(), keys.end(), key_at(row, 0));
+        const auto hi = std::lower_bound(lo, keys.end(), key_at(row + 1, 0));
+        if (lo == hi) continue;
+        const auto y = static_cast<std::int64_t>(row % ny), z = static_cast<std::int64_t>(row / ny);
+        const bool row_owned =
+            y >= owned.lo[1] && y < owned.hi[1] && z >= owned.lo[2] && z < owned.hi[2];
+        const std::uint64_t own_lo = key_at(row, owned.lo[0]), own_hi = key_at(row, owned.hi[0]);
+        for (auto g0 = lo; g0 != hi;) {
+          const auto x = static_cast<std::int64_t>((*g0 - key_at(row, 0)) / per_site);
+          const std::int64_t col = plan_.owner(0, x);
+          const std::int64_t col_end =
+              col + 1 < plan_.count[0] ? (col + 1) * plan_.brick[0] : n_[0];
+          const auto g1 = std::lower_bound(g0, hi, key_at(row, col_end));
+          const std::size_t seg = vseg.index(y, z, col);
+          const auto n = static_cast<std::uint64_t>(g1 - g0);
+          const std::uint64_t first = vseg.offset(seg) + (col < column ? vseg.count(seg) - n : 0);
+          for (auto g = g0; g != g1; ++g) {
+            const auto i = static_cast<std::size_t>(g - keys.begin());
+            index[i] = first + static_cast<std::uint64_t>(g - g0);
+            is_owned[i] = row_owned && *g >= own_lo && *g < own_hi;
+          }
+          g0 = g1;
+        }
+      }
+    });
   }
-  if (opt_.format == MeshFormat::Ply) write_vertices(mesh, index, is_owned, write);
-  write_faces(cells, mesh, index, write, quality);
 }
 
-void BrickExtraction::write_vertices(const Mesh& mesh, const std::vector<std::uint64_t>& index,
-                                     const std::vector<char>& is_owned, const WriteAt& write) {
-  std::vector<std::size_t> owned;
-  owned.reserve(index.size());
-  for (std::size_t i = 0; i < index.size(); ++i)
-    if (is_owned[i]) owned.push_back(i);
-  std::vector<char> records(owned.size() * vertex_bytes_);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, owned.size()), [&](const auto& r) {
-    for (std::size_t o = r.begin(); o != r.end(); ++o) {
-      char* p = records.data() + o * vertex_bytes_;
-      for (float c : frame_position(opt_.frame, mesh.positions[owned[o]])) p = put_le(p, c);
-      if (ex_.normals)
-        for (float c : frame_normal(opt_.frame, mesh.normals[owned[o]])) p = put_le(p, c);
+BrickRecords BrickExtraction::extract_part(const Box3& cells, const VolumeView& view,
+                                           QualityAccumulator& quality) {
+  ExtractOptions o = ex_;
+  o.cells = cells;
+  auto t0 = Clock::now();
+  const Mesh mesh = isotile::extract(view, o);
+  stages_.extract += since(t0);
+  t0 = Clock::now();
+  std::vector<std::uint64_t> index(mesh.positions.size());
+  std::vector<char> is_owned(mesh.positions.size());
+  if (layout_ == SiteLayout::EdgeVertices)
+    edge_vertex_index(view, cells, index, is_owned);
+  else
+    keyed_vertex_index(view, cells, index, is_owned);
+  stages_.index += since(t0);
+
+  t0 = Clock::now();
+  BrickRecords out;
+  std::vector<std::size_t> first_vertex;
+  std::size_t vertex_bytes = 0;
+  if (opt_.format == MeshFormat::Ply) {
+    vertex_bytes = vertex_runs(index, is_owned, out.runs, first_vertex);
+  }
+  const std::size_t vertex_runs_end = out.runs.size();
+  const std::size_t faces = quads_ ? mesh.quads.size() : mesh.triangles.size();
+  face_runs(cells, faces, out.runs, vertex_bytes);
+  out.size = vertex_bytes + faces * face_bytes_;
+  // Not value-initialised: every byte is written below.
+  out.data.reset(new char[out.size]);
+  fill_vertex_records(mesh, out.runs, vertex_runs_end, first_vertex, out.data.get());
+  fill_face_records(mesh, index, out.data.get() + vertex_bytes, quality);
+  written_faces_ += faces;
+  stages_.records += since(t0);
+  return out;
+}
+
+// Runs of owned vertices consecutive both in the mesh and in the file; returns their bytes.
+std::size_t BrickExtraction::vertex_runs(const std::vector<std::uint64_t>& index,
+                                         const std::vector<char>& is_owned,
+                                         std::vector<BrickRecords::Run>& runs,
+                                         std::vector<std::size_t>& first_vertex) const {
+  std::size_t bytes = 0;
+  for (std::size_t i = 0; i < index.size();) {
+    if (!is_owned[i]) {
+      ++i;
+      continue;
     }
-  });
-  write_runs(write, records, vertex_bytes_, owned.size(),
-             [&](std::size_t o) { return vertex_base_ + index[owned[o]] * vertex_bytes_; });
+    std::size_t j = i + 1;
+    while (j < index.size() && is_owned[j] && index[j] == index[i] + (j - i)) ++j;
+    const std::size_t n = (j - i) * vertex_bytes_;
+    runs.push_back({vertex_base_ + index[i] * vertex_bytes_, bytes, n});
+    first_vertex.push_back(i);
+    bytes += n;
+    i = j;
+  }
+  return bytes;
 }
 
-void BrickExtraction::write_faces(const Box3& cells, const Mesh& mesh,
-                                  const std::vector<std::uint64_t>& index, const WriteAt& write,
-                                  QualityAccumulator& quality) {
+// Faces come cell row by cell row, each row's at its segment's offset: one run per row, rows
+// merged where their segments follow each other in the file.
+void BrickExtraction::face_runs(const Box3& cells, std::size_t total,
+                                std::vector<BrickRecords::Run>& runs, std::size_t begin) const {
   const SegmentTable& fseg = *fseg_;
   const std::int64_t column = plan_.owner(0, cells.lo[0]);
-  const std::size_t total = quads_ ? mesh.quads.size() : mesh.triangles.size();
-  // Faces come row by row; each row's faces start at its segment's offset.
-  std::vector<std::uint64_t> first;  // file index of each face
-  first.reserve(total);
+  const std::size_t first_run = runs.size();
+  std::size_t at = 0;  // faces placed
   for (std::int64_t z = cells.lo[2]; z < cells.hi[2]; ++z)
     for (std::int64_t y = cells.lo[1]; y < cells.hi[1]; ++y) {
       const std::size_t seg = fseg.index(y, z, column);
       const std::uint64_t n = fseg.count(seg);
-      if (first.size() + n > total)
+      if (n == 0) continue;
+      if (at + n > total)
         throw Error("brick contract broken: the extractor made fewer faces than counted");
-      for (std::uint64_t f = 0; f < n; ++f) first.push_back(fseg.offset(seg) + f);
+      const std::uint64_t offset = face_base_ + fseg.offset(seg) * face_bytes_;
+      BrickRecords::Run* last = runs.size() > first_run ? &runs.back() : nullptr;
+      if (last && last->offset + last->bytes == offset)
+        last->bytes += n * face_bytes_;
+      else
+        runs.push_back({offset, begin + at * face_bytes_, n * face_bytes_});
+      at += n;
     }
-  if (first.size() != total)
+  if (at != total)
     throw Error("brick contract broken: the extractor made " + std::to_string(total) +
-                " faces where " + std::to_string(first.size()) + " were counted");
+                " faces where " + std::to_string(at) + " were counted");
+}
+
+void BrickExtraction::fill_vertex_records(const Mesh& mesh,
+                                          const std::vector<BrickRecords::Run>& runs,
+                                          std::size_t end,
+                                          const std::vector<std::size_t>& first_vertex,
+                                          char* out) const {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, end), [&](const auto& range) {
+    for (std::size_t r = range.begin(); r != range.end(); ++r) {
+      char* p = out + runs[r].begin;
+      const std::size_t n = runs[r].bytes / vertex_bytes_;
+      for (std::size_t v = first_vertex[r]; v < first_vertex[r] + n; ++v) {
+        for (float c : frame_position(opt_.frame, mesh.positions[v])) p = put_le(p, c);
+        if (ex_.normals)
+          for (float c : frame_normal(opt_.frame, mesh.normals[v])) p = put_le(p, c);
+      }
+    }
+  });
+}
+
+void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std::uint64_t>& index,
+                                        char* out, QualityAccumulator& quality) const {
+  const std::size_t total = quads_ ? mesh.quads.size() : mesh.triangles.size();
   const auto& P = mesh.positions;
   const MeshFrame& fr = opt_.frame;
   // The written corners: in the world frame, and mirrored faces reversed (as apply_frame does).
   const auto W = [&](std::uint32_t v) { return frame_position(fr, P[v]); };
-  std::vector<char> records(total * face_bytes_);
-  std::vector<double> q(opt_.quality ? total * (quads_ ? 2 : 1) : 0);
+  // One accumulator per thread, merged after: their sums are integers, so the statistics do not
+  // depend on which thread took which faces.
+  tbb::enumerable_thread_specific<QualityAccumulator> local;
+  const bool measure = opt_.quality;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, total), [&](const auto& r) {
+    QualityAccumulator* acc = measure ? &local.local() : nullptr;
     for (std::size_t f = r.begin(); f != r.end(); ++f) {
-      char* p = records.data() + f * face_bytes_;
+      char* p = out + f * face_bytes_;
       if (quads_) {
         Quad v = mesh.quads[f];
-        if (!q.empty()) {
+        if (acc) {
           const auto pair = quad_quality(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
-          q[2 * f] = pair[0];
-          q[2 * f + 1] = pair[1];
+          acc->add(pair[0]);
+          acc->add(pair[1]);
         }
         if (fr.flip) std::swap(v[1], v[3]);
         if (opt_.format == MeshFormat::Ply)
@@ -260,7 +427,7 @@ void BrickExtraction::write_faces(const Box3& cells, const Mesh& mesh,
                            W(v[3]));
       } else {
         Tri t = mesh.triangles[f];
-        if (!q.empty()) q[f] = radius_ratio(P[t[0]], P[t[1]], P[t[2]]);
+        if (acc) acc->add(radius_ratio(P[t[0]], P[t[1]], P[t[2]]));
         if (fr.flip) std::swap(t[1], t[2]);
         if (opt_.format == MeshFormat::Ply)
           put_face(p, t.data(), 3, index);
@@ -269,10 +436,7 @@ void BrickExtraction::write_faces(const Box3& cells, const Mesh& mesh,
       }
     }
   });
-  for (double x : q) quality.add(x);
-  write_runs(write, records, face_bytes_, total,
-             [&](std::size_t f) { return face_base_ + first[f] * face_bytes_; });
-  written_faces_ += total;
+  for (const QualityAccumulator& a : local) quality.merge(a);
 }
 
 char* BrickExtraction::put_face(char* p, const std::uint32_t* v, int n,

@@ -50,6 +50,21 @@ class SegmentTable {
 // Receives `n` bytes of records for file offset `offset`.
 using WriteAt = std::function<void(std::uint64_t offset, const char* data, std::size_t n)>;
 
+// The records of one brick (or z-slice of one), formatted and placed: runs of bytes that are
+// consecutive in the file. They own their bytes, so they can be written while the next brick is
+// extracted.
+struct BrickRecords {
+  struct Run {
+    std::uint64_t offset;      // in the file
+    std::size_t begin, bytes;  // in data
+  };
+  std::unique_ptr<char[]> data;
+  std::size_t size = 0;
+  std::vector<Run> runs;
+
+  void write(const WriteAt& write) const;
+};
+
 class BrickExtraction {
  public:
   // InputError for an output format without fixed-size records.
@@ -62,8 +77,19 @@ class BrickExtraction {
   const BrickPlan& current_plan() const { return plan_; }
   const ExtractOptions& extract_options() const { return ex_; }
 
+  // Read the next brick while this one is counted or extracted (every brick's working set then
+  // counts a second sample buffer; and records of the brick before while this one is
+  // extracted). Set before plan().
+  // plan() turns it off where the budget does not hold two bricks' samples.
+  void set_overlap(bool on);
+  bool overlap() const { return overlap_; }
+
   // Pass 1 for brick b: its owned vertices and faces into the tables and the per-brick sums.
   void count(std::int64_t b);
+  // The same in two steps, so that reading one brick can overlap counting another: the samples
+  // counting brick b needs, read into `buffer`, then the count from them.
+  VolumeView read_for_count(std::int64_t b, std::vector<char>& buffer);
+  void count(std::int64_t b, const VolumeView& view);
   SegmentTable& vertex_table() { return *vseg_; }
   SegmentTable& face_table() { return *fseg_; }
   std::vector<std::uint64_t>& brick_vertices() { return brick_vertices_; }
@@ -79,16 +105,35 @@ class BrickExtraction {
   // bricks_extracted and largest_brick_bytes.
   void extract(std::int64_t b, const WriteAt& write, QualityAccumulator& quality,
                TiledResult& result);
+  // The same in steps: the parts (z-slices) brick b runs as (counted in `result`), each read
+  // into `buffer`, extracted into its records, then written (BrickRecords::write).
+  std::vector<Box3> parts(std::int64_t b, TiledResult& result);
+  VolumeView read_part(const Box3& part, std::vector<char>& buffer);
+  BrickRecords extract_part(const Box3& part, const VolumeView& view, QualityAccumulator& quality);
+  void write(const BrickRecords& records, const WriteAt& write);
   std::uint64_t written_faces() const { return written_faces_; }
+  // Busy seconds per stage so far (read from the reader's clock).
+  TiledResult::Stages stages() const;
 
  private:
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
                         SegmentTable& table);
-  void extract_part(const Box3& cells, const WriteAt& write, QualityAccumulator& quality);
-  void write_vertices(const Mesh& mesh, const std::vector<std::uint64_t>& index,
-                      const std::vector<char>& is_owned, const WriteAt& write);
-  void write_faces(const Box3& cells, const Mesh& mesh, const std::vector<std::uint64_t>& index,
-                   const WriteAt& write, QualityAccumulator& quality);
+  // The final index of every vertex a brick lists, and whether the brick owns (writes) it.
+  void edge_vertex_index(const VolumeView& view, const Box3& cells,
+                         std::vector<std::uint64_t>& index, std::vector<char>& is_owned);
+  void keyed_vertex_index(const VolumeView& view, const Box3& cells,
+                          std::vector<std::uint64_t>& index, std::vector<char>& is_owned);
+  // Runs of the owned vertices' records (bytes from 0), and of the faces' (from `begin`).
+  std::size_t vertex_runs(const std::vector<std::uint64_t>& index,
+                          const std::vector<char>& is_owned, std::vector<BrickRecords::Run>& runs,
+                          std::vector<std::size_t>& first_vertex) const;
+  void face_runs(const Box3& cells, std::size_t total, std::vector<BrickRecords::Run>& runs,
+                 std::size_t begin) const;
+  void fill_vertex_records(const Mesh& mesh, const std::vector<BrickRecords::Run>& runs,
+                           std::size_t end, const std::vector<std::size_t>& first_vertex,
+                           char* out) const;
+  void fill_face_records(const Mesh& mesh, const std::vector<std::uint64_t>& index, char* out,
+                         QualityAccumulator& quality) const;
   char* put_face(char* p, const std::uint32_t* v, int n,
                  const std::vector<std::uint64_t>& index) const;
 
@@ -107,6 +152,8 @@ class BrickExtraction {
   bool index64_ = false;
   std::uint64_t vertex_base_ = 0, vertex_bytes_ = 12, face_base_ = 0, face_bytes_ = 13;
   std::uint64_t written_faces_ = 0;
+  bool overlap_ = false;
+  TiledResult::Stages stages_;
 };
 
 }  // namespace isotile

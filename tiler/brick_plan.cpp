@@ -31,9 +31,9 @@ std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& o) {
     samples *= static_cast<double>(extent);
     n_cells *= static_cast<double>(cells[a]);
   }
-  const double bytes =
-      samples * (static_cast<double>(o.sample_bytes) + 1.0 / 8 + o.state_bytes_per_sample) +
-      n_cells * o.output_bytes_per_cell + static_cast<double>(o.fixed_bytes);
+  const double bytes = samples * (static_cast<double>(o.sample_bytes) * o.sample_buffers + 1.0 / 8 +
+                                  o.state_bytes_per_sample) +
+                       n_cells * o.output_bytes_per_cell + static_cast<double>(o.fixed_bytes);
   return bytes >= 1.8e19 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(bytes);
 }
 

@@ -19,6 +19,8 @@ struct BrickPlanOptions {
   std::uint64_t memory = 0;  // bytes for one brick's working set
   int halo = 2;              // samples read beyond a brick's cells on each side
   std::size_t sample_bytes = 1;
+  // Sample buffers held at once: 2 when the next brick is read while this one is extracted.
+  int sample_buffers = 1;
   // Output expected per cell when planning (vertices, faces, keys and their global indices). The
   // tiler checks every brick's real output (known after its counting pass) against the budget
   // and cuts a brick into thinner z-slices when it would not fit.

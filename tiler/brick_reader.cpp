@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cmath>
 
 #include "core/volume/volume_io.h"
@@ -40,6 +41,7 @@ BrickPlanOptions BrickReader::plan_options(std::uint64_t memory) {
   po.memory = memory;
   po.halo = halo_;
   po.sample_bytes = sample_bytes();
+  po.sample_buffers = read_ahead_ ? 2 : 1;
   po.slabs = src_.sequential();
   po.fixed_bytes = kept_bytes();
   po.state_bytes_per_sample = state_bytes_per_sample();
@@ -49,21 +51,35 @@ BrickPlanOptions BrickReader::plan_options(std::uint64_t memory) {
 }
 
 VolumeView BrickReader::read(const Box3& box) {
-  const std::size_t bytes =
-      checked_volume_bytes(src_.type, {box.extent(0), box.extent(1), box.extent(2)});
-  if (buffer_.size() < bytes) buffer_.resize(bytes);
-  src_.read(box, buffer_.data());
-  return brick_view(src_, box, buffer_.data());
+  return read(box, buffer_);
 }
 
-BrickCounts BrickReader::count(const Box3& cells) {
+VolumeView BrickReader::read(const Box3& box, std::vector<char>& buffer) {
+  const std::size_t bytes =
+      checked_volume_bytes(src_.type, {box.extent(0), box.extent(1), box.extent(2)});
+  const auto t0 = std::chrono::steady_clock::now();
+  if (buffer.size() < bytes) buffer.resize(bytes);
+  src_.read(box, buffer.data());
+  read_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return brick_view(src_, box, buffer.data());
+}
+
+Box3 BrickReader::count_box(const Box3& cells) const {
   const Box3 owned = owned_samples(cells, n_);
-  const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
   // Patch vertices look at the cells across their faces: one sample more on every side.
   const int more = layout_ == SiteLayout::PatchVertices ? 1 : 0;
   Box3 read_box = grow(cells, more, n_);
   for (int a = 0; a < 3; ++a) read_box.hi[a] = std::min(owned.hi[a] + 1 + more, n_[a]);
-  const VolumeView view = read(read_box);
+  return read_box;
+}
+
+BrickCounts BrickReader::count(const Box3& cells) {
+  return count(cells, read(count_box(cells)));
+}
+
+BrickCounts BrickReader::count(const Box3& cells, const VolumeView& view) const {
+  const Box3 owned = owned_samples(cells, n_);
+  const Box3 vbox = layout_ == SiteLayout::EdgeVertices ? owned : cells;
   check_finite(view, src_.name);
   return count_brick_sites(view, ex_.iso, layout_, vbox, cells);
 }
@@ -97,8 +113,10 @@ std::uint64_t BrickReader::estimate(const Box3& cells, std::uint64_t vertices, s
                          static_cast<double>(r.extent(2));
   const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
   const double per_face = 16.0 + 4 * 8 + extra_per_face;
+  const double sample_buffers = read_ahead_ ? 2 : 1;
   return static_cast<std::uint64_t>(
-      samples * (static_cast<double>(sample_bytes()) + 0.125 + state_bytes_per_sample()) +
+      samples * (static_cast<double>(sample_bytes()) * sample_buffers + 0.125 +
+                 state_bytes_per_sample()) +
       static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face +
       static_cast<double>(kept_bytes()));
 }
@@ -134,11 +152,21 @@ void QualityAccumulator::add(double q) {
   if (q < 1e-6) ++degenerate_;
   min_ = std::min(min_, q);
   max_ = std::max(max_, q);
-  const auto fixed = static_cast<std::uint64_t>(std::ldexp(std::clamp(q, 0.0, 8.0), 60));
+  const auto fixed = static_cast<std::uint64_t>(std::clamp(q, 0.0, 8.0) * 0x1p60);
   sum_lo_ += fixed;
   if (sum_lo_ < fixed) ++sum_hi_;
   const int n = static_cast<int>(bins_.size());
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
+}
+
+void QualityAccumulator::merge(const QualityAccumulator& o) {
+  triangles_ += o.triangles_;
+  degenerate_ += o.degenerate_;
+  min_ = std::min(min_, o.min_);
+  max_ = std::max(max_, o.max_);
+  sum_lo_ += o.sum_lo_;
+  sum_hi_ += o.sum_hi_ + (sum_lo_ < o.sum_lo_ ? 1 : 0);
+  for (std::size_t i = 0; i < bins_.size(); ++i) bins_[i] += o.bins_[i];
 }
 
 // Lower-tail quantile p, at the upper edge of the bin that reaches it.

@@ -32,14 +32,24 @@ class BrickReader {
   const Index3& dims() const { return n_; }
   VolumeSource& source() { return src_; }
 
+  // Whether the next brick's samples are read while this one is worked on: every brick's working
+  // set then counts a second sample buffer. Set before plan_options().
+  void set_read_ahead(bool on) { read_ahead_ = on; }
   // The planner's options for `memory` bytes a brick; tells the source how much consecutive
   // bricks overlap.
   BrickPlanOptions plan_options(std::uint64_t memory);
   // A view of global box `box`, read into the shared buffer (valid until the next read).
   VolumeView read(const Box3& box);
+  // The same into `buffer` (grown as needed, never shrunk; valid until its next use).
+  VolumeView read(const Box3& box, std::vector<char>& buffer);
+  // Seconds spent in read() so far.
+  double read_seconds() const { return read_seconds_; }
   // Reads what counting a brick needs (its owned samples and one more) and counts the vertices
   // and faces it owns; InputError for NaN or infinite samples.
   BrickCounts count(const Box3& cells);
+  // The same in two steps: the samples counting needs, then the count from a view of them.
+  Box3 count_box(const Box3& cells) const;
+  BrickCounts count(const Box3& cells, const VolumeView& view) const;
   // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
   // the records being written, and `extra_per_face` bytes for each face (a later stage's).
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
@@ -65,6 +75,8 @@ class BrickReader {
   SiteLayout layout_ = SiteLayout::EdgeVertices;
   int halo_ = 2;
   std::vector<char> buffer_;
+  double read_seconds_ = 0;
+  bool read_ahead_ = false;
 };
 
 // Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
@@ -74,6 +86,9 @@ class BrickReader {
 class QualityAccumulator {
  public:
   void add(double q);
+  // Adds another accumulator's triangles (the statistics do not depend on how triangles were
+  // split between accumulators).
+  void merge(const QualityAccumulator& other);
   QualityStats stats() const;
 
   // For adding accumulators of several processes: the counters (triangles, degenerate, the sum

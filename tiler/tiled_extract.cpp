@@ -1,7 +1,11 @@
 #include "tiler/tiled_extract.h"
 
+#include <tbb/parallel_pipeline.h>
+
 #include <chrono>
+#include <memory>
 #include <string>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
@@ -25,16 +29,38 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
     write_mesh(Mesh{}, output, {.format = options.format, .ascii = false, .write_normals = false});
     return result;
   }
+  bricks.set_overlap(options.memory >= options.overlap_min_memory);
   result.plan = bricks.plan();
   result.backend = bricks.extract_options().backend;
   const std::int64_t total = result.plan.total();
+  const std::size_t in_flight = bricks.overlap() ? 2 : 1;
 
-  // Pass 1: count.
+  // Pass 1: count. Two bricks in flight: the next one is read while this one is counted.
   auto t0 = Clock::now();
   source.rewind();
-  for (std::int64_t b = 0; b < total; ++b) {
-    bricks.count(b);
-    if (options.progress) options.progress("count", b + 1, total);
+  {
+    std::vector<char> buffers[2];
+    std::int64_t next = 0;
+    struct Read {
+      std::int64_t brick;
+      VolumeView view;
+    };
+    tbb::parallel_pipeline(
+        in_flight,
+        tbb::make_filter<
+            void, Read>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> Read {
+          if (next == total) {
+            fc.stop();
+            return {};
+          }
+          const std::int64_t b = next++;
+          // A buffer is free again once the brick two before is
+          // done: at most two are in flight.
+          return {b, bricks.read_for_count(b, buffers[static_cast<std::size_t>(b) % in_flight])};
+        }) & tbb::make_filter<Read, void>(tbb::filter_mode::serial_in_order, [&](const Read& r) {
+          bricks.count(r.brick, r.view);
+          if (options.progress) options.progress("count", r.brick + 1, total);
+        }));
   }
   bricks.scan(result);
   result.seconds_count = since(t0);
@@ -43,18 +69,62 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   const std::string header = bricks.header();
   file.write(header.data(), header.size());
 
-  // Pass 2: extract and write.
+  // Pass 2: read, extract and write, a part (a brick, or a z-slice of one) at a time, with the
+  // next part read and the previous one written meanwhile (at most two in flight).
   t0 = Clock::now();
   source.rewind();
   QualityAccumulator quality;
   const WriteAt write = [&](std::uint64_t offset, const char* data, std::size_t n) {
     file.write_at(offset, data, n);
   };
-  for (std::int64_t b = 0; b < total; ++b) {
-    bricks.extract(b, write, quality, result);
-    if (options.progress) options.progress("extract", b + 1, total);
+  {
+    struct Part {
+      std::int64_t brick;
+      bool last;  // of its brick
+      Box3 cells;
+    };
+    std::vector<Part> parts;
+    for (std::int64_t b = 0; b < total; ++b) {
+      const std::vector<Box3> cut = bricks.parts(b, result);
+      for (std::size_t i = 0; i < cut.size(); ++i)
+        parts.push_back({b, i + 1 == cut.size(), cut[i]});
+    }
+    std::vector<char> buffers[2];
+    std::size_t next = 0;
+    struct Read {
+      const Part* part;
+      VolumeView view;
+    };
+    struct Done {
+      const Part* part;
+      std::shared_ptr<BrickRecords> records;
+    };
+    tbb::parallel_pipeline(
+        in_flight,
+        tbb::make_filter<void, Read>(
+            tbb::filter_mode::serial_in_order,
+            [&](tbb::flow_control& fc) -> Read {
+              if (next == parts.size()) {
+                fc.stop();
+                return {};
+              }
+              const std::size_t i = next++;
+              return {&parts[i], bricks.read_part(parts[i].cells, buffers[i % in_flight])};
+            }) &
+            tbb::make_filter<Read, Done>(
+                tbb::filter_mode::serial_in_order,
+                [&](const Read& r) -> Done {
+                  return {r.part, std::make_shared<BrickRecords>(
+                                      bricks.extract_part(r.part->cells, r.view, quality))};
+                }) &
+            tbb::make_filter<Done, void>(tbb::filter_mode::serial_in_order, [&](const Done& d) {
+              bricks.write(*d.records, write);
+              if (d.part->last && options.progress)
+                options.progress("extract", d.part->brick + 1, total);
+            }));
   }
   result.seconds_extract = since(t0);
+  result.stages = bricks.stages();
   if (bricks.written_faces() != result.faces)
     throw Error("tiled extraction wrote " + std::to_string(bricks.written_faces()) + " faces of " +
                 std::to_string(result.faces) + " counted");

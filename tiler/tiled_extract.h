@@ -29,8 +29,12 @@
 namespace isotile {
 
 struct TiledOptions {
-  ExtractOptions extract;               // method, iso, normals, ... (cells is set per brick)
-  std::uint64_t memory = 0;             // budget for one brick's working set, bytes
+  ExtractOptions extract;    // method, iso, normals, ... (cells is set per brick)
+  std::uint64_t memory = 0;  // budget for one brick's working set, bytes
+  // From this budget on, the next brick is read and the last one written while a brick is
+  // extracted (two in flight, each planned to fit the budget together). Below it, where a few
+  // MiB of allocator slack between two bricks matter, one brick at a time.
+  std::uint64_t overlap_min_memory = std::uint64_t{256} << 20;
   MeshFormat format = MeshFormat::Ply;  // binary PLY or binary STL (fixed-size records)
   bool quality = true;                  // accumulate radius-ratio statistics of the faces
   // Below 1: simplify to this fraction of the faces, brick by brick (tiler/tiled_simplify.h).
@@ -50,6 +54,12 @@ struct TiledResult {
   std::uint64_t vertices = 0, faces = 0, triangles = 0;
   std::uint64_t largest_brick_bytes = 0;  // estimated working set of the largest brick run
   double seconds_count = 0, seconds_extract = 0;
+  // Where the passes' time goes: busy seconds of each stage summed over the bricks (reading the
+  // samples, counting a brick, extracting it, turning its keys into final indices, formatting its
+  // records, writing them). Stages that overlap in time add up to more than the wall time.
+  struct Stages {
+    double read = 0, count = 0, extract = 0, index = 0, records = 0, write = 0;
+  } stages;
   // With simplification: faces as extracted (triangles), the simplifier's counts, the seam
   // cells (a grid shifted by half a brick) and the time of the seam pass.
   std::uint64_t triangles_extracted = 0;

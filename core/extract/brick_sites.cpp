@@ -184,6 +184,36 @@ BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout lay
   return out;
 }
 
+std::vector<std::uint8_t> upper_x_edge_vertices(const VolumeView& view, double iso,
+                                                const Box3& cells) {
+  const int64_t ny = cells.extent(1) + 1, nz = cells.extent(2) + 1;
+  std::vector<std::uint8_t> out(static_cast<size_t>(ny * nz), 0);
+  const Index3& n = view.global_dims;
+  const int64_t x = cells.hi[0];
+  if (x + 1 >= n[0]) return out;
+  Box3 points = cells;
+  points.lo[0] = x;
+  require(view, points, 1);
+  visit_scalar(view.type, [&](auto tag) {
+    using T = decltype(tag);
+    const InsideTest<T> inside(iso);
+    const T* data = view.typed<T>();
+    const auto in = [&](int64_t i, int64_t j, int64_t k) {
+      return inside(data[view.offset(i - view.box.lo[0], j - view.box.lo[1], k - view.box.lo[2])]);
+    };
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, ny * nz), [&](const auto& range) {
+      for (int64_t r = range.begin(); r != range.end(); ++r) {
+        const int64_t y = cells.lo[1] + r % ny, z = cells.lo[2] + r / ny;
+        const bool s = in(x, y, z);
+        const int count = (s != in(x + 1, y, z)) + (y + 1 < n[1] && s != in(x, y + 1, z)) +
+                          (z + 1 < n[2] && s != in(x, y, z + 1));
+        out[static_cast<size_t>(r)] = static_cast<std::uint8_t>(count);
+      }
+    });
+  });
+  return out;
+}
+
 std::vector<uint64_t> brick_vertex_keys(const VolumeView& view, double iso, SiteLayout layout,
                                         const Box3& cells) {
   if (layout == SiteLayout::EdgeVertices) {

@@ -48,6 +48,14 @@ struct BrickCounts {
 BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout layout,
                               const Box3& vertex_box, const Box3& face_box);
 
+// EdgeVertices: per point row (y, z) of the closed box [cells.lo, cells.hi] (z-major, as
+// RowCounts), the crossed edges owned by the sample at x = cells.hi.x, 0 to 3; all 0 when that is
+// the volume's last sample plane (the brick owns it). A brick lists, per point row, the vertices
+// its own column owns and then these, which open the next column's row. The view must hold the
+// samples one beyond the box.
+std::vector<std::uint8_t> upper_x_edge_vertices(const VolumeView& view, double iso,
+                                                const Box3& cells);
+
 // Keys of the vertices a brick-mode extraction of `cells` lists, in its order. The view must hold
 // the samples the extractor's halo asks for.
 std::vector<std::uint64_t> brick_vertex_keys(const VolumeView& view, double iso, SiteLayout layout,
