@@ -1,7 +1,6 @@
 #include "tiler/brick_extraction.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -404,20 +403,18 @@ void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std:
   const MeshFrame& fr = opt_.frame;
   // The written corners: in the world frame, and mirrored faces reversed (as apply_frame does).
   const auto W = [&](std::uint32_t v) { return frame_position(fr, P[v]); };
-  // One accumulator per thread, merged after: their sums are integers, so the statistics do not
-  // depend on which thread took which faces.
-  tbb::enumerable_thread_specific<QualityAccumulator> local;
-  const bool measure = opt_.quality;
+  // The ratios in parallel, added in face order after (the sums are integers anyway): one
+  // accumulator's 2^16 bins per thread would cost more memory than small bricks have.
+  std::vector<double> q(opt_.quality ? total * (quads_ ? 2 : 1) : 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, total), [&](const auto& r) {
-    QualityAccumulator* acc = measure ? &local.local() : nullptr;
     for (std::size_t f = r.begin(); f != r.end(); ++f) {
       char* p = out + f * face_bytes_;
       if (quads_) {
         Quad v = mesh.quads[f];
-        if (acc) {
+        if (!q.empty()) {
           const auto pair = quad_quality(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
-          acc->add(pair[0]);
-          acc->add(pair[1]);
+          q[2 * f] = pair[0];
+          q[2 * f + 1] = pair[1];
         }
         if (fr.flip) std::swap(v[1], v[3]);
         if (opt_.format == MeshFormat::Ply)
@@ -427,7 +424,7 @@ void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std:
                            W(v[3]));
       } else {
         Tri t = mesh.triangles[f];
-        if (acc) acc->add(radius_ratio(P[t[0]], P[t[1]], P[t[2]]));
+        if (!q.empty()) q[f] = radius_ratio(P[t[0]], P[t[1]], P[t[2]]);
         if (fr.flip) std::swap(t[1], t[2]);
         if (opt_.format == MeshFormat::Ply)
           put_face(p, t.data(), 3, index);
@@ -436,7 +433,7 @@ void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std:
       }
     }
   });
-  for (const QualityAccumulator& a : local) quality.merge(a);
+  for (double x : q) quality.add(x);
 }
 
 char* BrickExtraction::put_face(char* p, const std::uint32_t* v, int n,

@@ -159,16 +159,6 @@ void QualityAccumulator::add(double q) {
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
 }
 
-void QualityAccumulator::merge(const QualityAccumulator& o) {
-  triangles_ += o.triangles_;
-  degenerate_ += o.degenerate_;
-  min_ = std::min(min_, o.min_);
-  max_ = std::max(max_, o.max_);
-  sum_lo_ += o.sum_lo_;
-  sum_hi_ += o.sum_hi_ + (sum_lo_ < o.sum_lo_ ? 1 : 0);
-  for (std::size_t i = 0; i < bins_.size(); ++i) bins_[i] += o.bins_[i];
-}
-
 // Lower-tail quantile p, at the upper edge of the bin that reaches it.
 double QualityAccumulator::quantile(double p) const {
   const auto need = static_cast<std::uint64_t>(std::ceil(p * static_cast<double>(triangles_)));

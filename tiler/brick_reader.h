@@ -86,9 +86,6 @@ class BrickReader {
 class QualityAccumulator {
  public:
   void add(double q);
-  // Adds another accumulator's triangles (the statistics do not depend on how triangles were
-  // split between accumulators).
-  void merge(const QualityAccumulator& other);
   QualityStats stats() const;
 
   // For adding accumulators of several processes: the counters (triangles, degenerate, the sum
