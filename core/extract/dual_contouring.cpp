@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <bit>
@@ -20,6 +21,7 @@
 #include "core/extract/inside_bits.h"
 #include "core/extract/isovalue_ties.h"
 #include "core/extract/marching_cubes_tables.h"
+#include "core/extract/scratch_vector.h"
 
 namespace isotile {
 
@@ -302,8 +304,9 @@ class Extractor {
     classify<T>(view_, options_.iso, grid_);
 
     // Count: mixed cells per cell row (kept: they index the vertices), quads per sample row.
+    reserve_huge(mixed_, static_cast<size_t>(rows * words));
     mixed_.resize(static_cast<size_t>(rows * words));
-    std::vector<uint32_t> vertex_count(rows), quad_count(rows);
+    ScratchVector<uint32_t> vertex_count(rows), quad_count(rows);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = r % grid_.ny, k = r / grid_.ny;
@@ -319,8 +322,9 @@ class Extractor {
     });
 
     // Scan.
-    vertex_offset_.assign(rows + 1, 0);
-    std::vector<uint64_t> quad_offset(rows + 1);
+    vertex_offset_.resize(rows + 1);
+    ScratchVector<uint64_t> quad_offset(rows + 1);
+    vertex_offset_[0] = quad_offset[0] = 0;
     for (int64_t r = 0; r < rows; ++r) {
       vertex_offset_[r + 1] = vertex_offset_[r] + vertex_count[r];
       quad_offset[r + 1] = quad_offset[r] + quad_count[r];
@@ -329,21 +333,36 @@ class Extractor {
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
+    reserve_huge(mesh.positions, n_vertices);
     mesh.positions.resize(n_vertices);
-    if (options_.normals) mesh.normals.resize(n_vertices);
+    if (options_.normals) {
+      reserve_huge(mesh.normals, n_vertices);
+      mesh.normals.resize(n_vertices);
+    }
 
-    // Fill vertices, then faces: splitting a quad looks at its vertices' final positions.
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      std::vector<dc::CellQef> qef;
-      std::vector<std::array<double, 3>> x;
-      std::vector<int64_t> cell_x;
-      for (int64_t r = range.begin(); r != range.end(); ++r)
-        if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, cell_x, mesh);
-    });
+    // Fill vertices, then faces: splitting a quad looks at its vertices' final positions. The
+    // face array is allocated (std::vector zeroes it, a serial pass taking each page's first-touch
+    // fault) while the vertices are placed.
     if (options_.keep_quads)
-      mesh.quads.resize(n_quads);
+      reserve_huge(mesh.quads, n_quads);
     else
-      mesh.triangles.resize(2 * n_quads);
+      reserve_huge(mesh.triangles, 2 * n_quads);
+    tbb::parallel_invoke(
+        [&] {
+          if (options_.keep_quads)
+            mesh.quads.resize(n_quads);
+          else
+            mesh.triangles.resize(2 * n_quads);
+        },
+        [&] {
+          tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+            std::vector<dc::CellQef> qef;
+            std::vector<std::array<double, 3>> x;
+            std::vector<int64_t> cell_x;
+            for (int64_t r = range.begin(); r != range.end(); ++r)
+              if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, cell_x, mesh);
+          });
+        });
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r)
         if (quad_count[r]) fill_faces(r % grid_.ny, r / grid_.ny, quad_offset[r], mesh);
@@ -734,10 +753,12 @@ class Extractor {
     const int64_t r = k * grid_.ny + j;
     const uint64_t first = vertex_offset_[r];
     const size_t n = static_cast<size_t>(vertex_offset_[r + 1] - first);
-    qef.resize(n);
+    // The mass point needs no QEF: its vertex is written straight into x, as
+    // accumulate_planes() computes it, without zeroing and copying 15 doubles per cell.
+    const bool with_normals = options_.solver != DcSolver::MassPoint;
+    if (with_normals) qef.resize(n);
     x.resize(n);
     cell_x.resize(n);
-    const bool with_normals = options_.solver != DcSolver::MassPoint;
     const uint64_t* rows[4];
     cell_rows(j, k, rows);
     const MixedWord* mixed = mixed_.data() + r * grid_.words;
@@ -760,7 +781,15 @@ class Extractor {
           dc::HermitePlane planes[12];
           const int count = hermite(w * 64 + b, j, k, edges, with_normals, planes);
           cell_x[v] = w * 64 + b;
-          qef[v++] = dc::accumulate_planes(planes, count, with_normals);
+          if (with_normals) {
+            qef[v++] = dc::accumulate_planes(planes, count, true);
+            continue;
+          }
+          std::array<double, 3>& mass = x[v++];
+          mass = {0, 0, 0};
+          for (int i = 0; i < count; ++i)
+            for (int c = 0; c < 3; ++c) mass[c] += planes[i].p[c];
+          for (double& m : mass) m /= count;
         }
       }
     }
@@ -768,8 +797,7 @@ class Extractor {
 
     switch (options_.solver) {
       case DcSolver::MassPoint:
-        for (size_t c = 0; c < n; ++c) x[c] = qef[c].mass;
-        break;
+        break;  // x holds the mass points already
       case DcSolver::Qef:
         for (size_t c = 0; c < n; ++c) x[c] = dc::solve_qef(qef[c], options_);
         break;
@@ -871,10 +899,10 @@ class Extractor {
   Box3 cells_;   // the cells whose faces are wanted, in the view's indices
   Box3 vcells_;  // the cells that get vertices: cells_ and the layer below it, within the view
   BitGrid grid_;
-  std::vector<MixedWord> mixed_;
-  int64_t corner_offset_[8];  // of a cell's corner c from its corner 0, in samples
-  bool patches_ = false;      // DcVertices::Patch
-  std::vector<uint64_t> vertex_offset_;
+  ScratchVector<MixedWord> mixed_;  // mark_mixed() writes every word
+  int64_t corner_offset_[8];        // of a cell's corner c from its corner 0, in samples
+  bool patches_ = false;            // DcVertices::Patch
+  ScratchVector<uint64_t> vertex_offset_;
 };
 
 }  // namespace

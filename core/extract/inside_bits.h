@@ -13,6 +13,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "core/extract/scratch_vector.h"
 #include "core/volume/volume.h"
 
 #if defined(__SSE4_1__)
@@ -30,8 +31,8 @@ using std::uint64_t;
 // in these masks: no per-edge index array is ever stored.
 struct BitGrid {
   int64_t nx = 0, ny = 0, nz = 0;
-  int64_t words = 0;  // per row
-  std::vector<uint64_t> bits;
+  int64_t words = 0;             // per row
+  ScratchVector<uint64_t> bits;  // classify() writes every word
 
   const uint64_t* row(int64_t j, int64_t k) const { return bits.data() + (k * ny + j) * words; }
 };

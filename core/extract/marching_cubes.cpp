@@ -1,6 +1,7 @@
 #include "core/extract/marching_cubes.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <bit>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include "core/errors.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/marching_cubes_tables.h"
+#include "core/extract/scratch_vector.h"
 
 namespace isotile {
 
@@ -98,7 +100,7 @@ class Extractor {
     const int64_t x0 = cells_.lo[0], x1 = cells_.hi[0];
 
     // Count.
-    std::vector<uint32_t> vertex_count(rows), triangle_count(rows);
+    ScratchVector<uint32_t> vertex_count(rows), triangle_count(rows);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
@@ -108,7 +110,8 @@ class Extractor {
     });
 
     // Scan.
-    std::vector<uint64_t> vertex_offset(rows + 1), triangle_offset(rows + 1);
+    ScratchVector<uint64_t> vertex_offset(rows + 1), triangle_offset(rows + 1);
+    vertex_offset[0] = triangle_offset[0] = 0;
     for (int64_t r = 0; r < rows; ++r) {
       vertex_offset[r + 1] = vertex_offset[r] + vertex_count[r];
       triangle_offset[r + 1] = triangle_offset[r] + triangle_count[r];
@@ -129,9 +132,17 @@ class Extractor {
       });
       return mesh;
     }
-    mesh.positions.resize(n_vertices);
-    if (options_.normals) mesh.normals.resize(n_vertices);
-    mesh.triangles.resize(n_triangles);
+    // std::vector zeroes what it allocates, taking each page's first-touch fault as it goes: the
+    // arrays are zeroed side by side rather than one after the other, in huge pages.
+    reserve_huge(mesh.positions, n_vertices);
+    if (options_.normals) reserve_huge(mesh.normals, n_vertices);
+    reserve_huge(mesh.triangles, n_triangles);
+    tbb::parallel_invoke(
+        [&] {
+          mesh.positions.resize(n_vertices);
+          if (options_.normals) mesh.normals.resize(n_vertices);
+        },
+        [&] { mesh.triangles.resize(n_triangles); });
 
     // Fill. Consecutive cell rows share two point rows, so the masks of rows (j+1, k) and
     // (j+1, k+1) computed for one cell row are reused as (j, k) and (j, k+1) for the next.
