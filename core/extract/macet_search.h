@@ -288,11 +288,13 @@ class LocalSearch {
     return false;
   }
 
-  // A triangle as the intersection test sees it: emitted float world coordinates.
+  // A triangle as the intersection test sees it: emitted float world coordinates, with its plane
+  // for the filter in meet().
   struct Corners {
     std::array<Vec3f, 3> p;
     Vec3f lo, hi;
     bool live;
+    P3 n, n_abs;  // (p1 - p0) x (p2 - p0) in doubles; n_abs: the same with |products| added
   };
 
   Vec3f world(const P3& x) const {
@@ -309,20 +311,72 @@ class LocalSearch {
       t.lo[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
       t.hi[k] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
     }
-    t.live = triangle_has_area(t.p);
+    double u[3], w[3];
+    for (int k = 0; k < 3; ++k) {
+      u[k] = double(t.p[1][k]) - double(t.p[0][k]);
+      w[k] = double(t.p[2][k]) - double(t.p[0][k]);
+    }
+    bool certain_area = false;
+    for (int k = 0; k < 3; ++k) {
+      const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+      const double x = u[k1] * w[k2], y = u[k2] * w[k1];
+      t.n[k] = x - y;
+      t.n_abs[k] = std::abs(x) + std::abs(y);
+      // Shewchuk's orient2d bound ((3 + 16 eps) eps, eps = 2^-53, with margin): the projection
+      // onto the other two axes has area for certain, so the triangle has.
+      certain_area = certain_area || std::abs(t.n[k]) > 4e-16 * t.n_abs[k];
+    }
+    t.live = certain_area || triangle_has_area(t.p);
     return t;
   }
 
-  // self_intersections' rule for one pair, vertices identified by position as it does.
+  // The side of point x of triangle t's plane: +1 or -1 when certain, 0 when the double
+  // arithmetic cannot tell (Shewchuk's orient3d bound (7 + 56 eps) eps, with margin, on the same
+  // products: the differences to t's first corner, then the cofactors).
+  static int side(const Corners& t, const Vec3f& x) {
+    double det = 0, perm = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double d = double(x[k]) - double(t.p[0][k]);
+      det += d * t.n[k];
+      perm += std::abs(d) * t.n_abs[k];
+    }
+    if (perm < 1e-250) return 0;  // near underflow the relative bound does not hold
+    const double bound = 1e-15 * perm;
+    return det > bound ? 1 : det < -bound ? -1 : 0;
+  }
+
+  // Whether the corners of b that are not a's all lie strictly on one side of a's plane, for
+  // certain: then b meets a's plane only in the corners they share, and the pair does not
+  // intersect under the rule below (with no corner shared there is no common point, with one
+  // none but it, with two the triangles are not coplanar).
+  static bool apart(const Corners& a, const Corners& b, const int shared_with_a[3]) {
+    int first = 0;
+    for (int l = 0; l < 3; ++l) {
+      if (shared_with_a[l] >= 0) continue;
+      const int sd = side(a, b.p[l]);
+      if (sd == 0 || (first != 0 && sd != first)) return false;
+      first = sd;
+    }
+    return first != 0;
+  }
+
+  // self_intersections' rule for one pair, vertices identified by position as it does. The
+  // plane filter settles most pairs in doubles; the rest go to the exact predicates.
   static bool meet(const Corners& a, const Corners& b) {
     for (int k = 0; k < 3; ++k)
       if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
     if (!a.live || !b.live) return false;
     const std::array<std::uint32_t, 3> ia{0, 1, 2};
     std::array<std::uint32_t, 3> ib{3, 4, 5};
+    int b_in_a[3] = {-1, -1, -1}, a_in_b[3] = {-1, -1, -1};
     for (int l = 0; l < 3; ++l)
       for (std::uint32_t k = 0; k < 3; ++k)
-        if (b.p[l] == a.p[k]) ib[l] = k;
+        if (b.p[l] == a.p[k]) {
+          ib[l] = k;
+          b_in_a[l] = static_cast<int>(k);
+          a_in_b[k] = l;
+        }
+    if (apart(a, b, b_in_a) || apart(b, a, a_in_b)) return false;
     return triangles_intersect(a.p, ia, b.p, ib);
   }
 
