@@ -592,16 +592,30 @@ class LocalSearch {
           }
     };
     std::array<Corners, 8 * mc::kMaxTrianglesPerCase> moving_corners;
-    // The moving triangles as placed: false when one leaves v's box, else their pairs.
+    static thread_local std::vector<const Corners*> near;
+    // The moving triangles as placed: false when one leaves v's box, else their pairs. Only the
+    // other triangles that meet the moving ones' common bounding box can take part in a pair.
     auto intersecting_pairs = [&](int& n) {
       n = 0;
+      Vec3f lo, hi;
       for (int t = 0; t < n_tris; ++t) {
-        moving_corners[t] = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
-        if (!in_box(moving_corners[t])) return false;
+        Corners& m = moving_corners[t];
+        m = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
+        if (!in_box(m)) return false;
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = t == 0 ? m.lo[a] : std::min(lo[a], m.lo[a]);
+          hi[a] = t == 0 ? m.hi[a] : std::max(hi[a], m.hi[a]);
+        }
+      }
+      near.clear();
+      for (const Corners& u : others) {
+        bool apart_boxes = false;
+        for (int a = 0; a < 3; ++a) apart_boxes = apart_boxes || u.hi[a] < lo[a] || hi[a] < u.lo[a];
+        if (!apart_boxes) near.push_back(&u);
       }
       for (int t = 0; t < n_tris; ++t) {
         if (!moving_corners[t].live) continue;
-        for (const Corners& u : others) n += meet(moving_corners[t], u);
+        for (const Corners* u : near) n += meet(moving_corners[t], *u);
         for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
       }
       return true;
@@ -663,7 +677,10 @@ class LocalSearch {
                        [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
       for (int c = 0; c < n; ++c) {
         place(candidates[c].d, candidates[c].f);
-        if (!guard_passes(candidates[c].d, candidates[c].f)) continue;
+        if (!guard_passes(candidates[c].d, candidates[c].f)) {
+          if (!start_in_box) break;  // no candidate can pass
+          continue;
+        }
         best = candidates[c].score;
         best_d = candidates[c].d;
         best_f = candidates[c].f;
