@@ -254,7 +254,9 @@ class LocalSearch {
 
   // The crossing on edge (s, axis a) with the current displacements, except that grid vertex
   // `moved` uses (d, f) instead. The emission computes the same (same inputs, same arithmetic).
-  P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f) const {
+  // `cache`: find_root's cell samples, kept per edge across a vertex's candidates.
+  P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f,
+              typename Field<T>::Corners* cache = nullptr) const {
     std::int64_t q[3] = {s[0], s[1], s[2]};
     ++q[a];
     const std::uint32_t i0 = gv_.index(s[0], s[1], s[2]), i1 = gv_.index(q[0], q[1], q[2]);
@@ -264,7 +266,7 @@ class LocalSearch {
     const P3 p0 = field_.global(s[0], s[1], s[2], d0);
     const P3 p1 = field_.global(q[0], q[1], q[2], d1);
     const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
-    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight, cache);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
@@ -470,6 +472,7 @@ class LocalSearch {
     // Moving crossings for the candidate (cand_d, cand_f), computed when first needed: most
     // candidates are rejected after a crossing or two (see score).
     std::array<P3, 6> mpos{};
+    std::array<typename Field<T>::Corners, 6> samples;  // per moving edge, for find_root
     P3 cand_d{};
     double cand_f = 0;
     unsigned placed = 0;  // bit m: mpos[m] holds the candidate's crossing
@@ -481,7 +484,7 @@ class LocalSearch {
     auto place = [&](const P3& d, double f) {
       stage(d, f);
       for (int m = 0; m < n_moving; ++m)
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f);
+        mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f, &samples[m]);
       placed = (1u << n_moving) - 1;
     };
     auto place_current = [&]() {
@@ -493,7 +496,7 @@ class LocalSearch {
       if (s >= 0) return fixed[s];
       const int m = -1 - s;
       if (!((placed >> m) & 1)) {
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, cand_d, cand_f);
+        mpos[m] = crossing(moving[m].s, moving[m].axis, self, cand_d, cand_f, &samples[m]);
         placed |= 1u << m;
       }
       return mpos[m];
