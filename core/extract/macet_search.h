@@ -473,6 +473,37 @@ class LocalSearch {
     // candidates are rejected after a crossing or two (see score).
     std::array<P3, 6> mpos{};
     std::array<typename Field<T>::Corners, 6> samples;  // per moving edge, for find_root
+    // What a candidate does not change on a moving edge: its other end (crossing() for the
+    // candidate is then these with v's end replaced; same inputs, same arithmetic).
+    struct OtherEnd {
+      std::int64_t q[3];  // the edge's other end point
+      bool v_first;       // v is the edge's lower end
+      P3 p, d;            // its displaced position and displacement
+      double f;
+    };
+    std::array<OtherEnd, 6> other_end;
+    for (int m = 0; m < n_moving; ++m) {
+      OtherEnd& e = other_end[m];
+      e.v_first = moving[m].s[0] == v[0] && moving[m].s[1] == v[1] && moving[m].s[2] == v[2];
+      for (int a = 0; a < 3; ++a) e.q[a] = moving[m].s[a];
+      if (e.v_first) ++e.q[moving[m].axis];
+      const std::uint32_t iq = gv_.index(e.q[0], e.q[1], e.q[2]);
+      e.d = gv_.disp[iq];
+      e.f = gv_.value[iq];
+      e.p = field_.global(e.q[0], e.q[1], e.q[2], e.d);
+    }
+    auto moving_crossing = [&](int m, const P3& d, double f) {
+      const OtherEnd& e = other_end[m];
+      const P3 pv = field_.global(v[0], v[1], v[2], d);
+      const bool straight = d == P3{0, 0, 0} && e.d == P3{0, 0, 0};
+      const P3& p0 = e.v_first ? pv : e.p;
+      const P3& p1 = e.v_first ? e.p : pv;
+      const double t =
+          e.v_first ? edge_crossing(field_, grid_, v, e.q, p0, p1, f, e.f, straight, &samples[m])
+                    : edge_crossing(field_, grid_, e.q, v, p0, p1, e.f, f, straight, &samples[m]);
+      return P3{p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]),
+                p0[2] + t * (p1[2] - p0[2])};
+    };
     P3 cand_d{};
     double cand_f = 0;
     unsigned placed = 0;  // bit m: mpos[m] holds the candidate's crossing
@@ -483,8 +514,7 @@ class LocalSearch {
     };
     auto place = [&](const P3& d, double f) {
       stage(d, f);
-      for (int m = 0; m < n_moving; ++m)
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f, &samples[m]);
+      for (int m = 0; m < n_moving; ++m) mpos[m] = moving_crossing(m, d, f);
       placed = (1u << n_moving) - 1;
     };
     auto place_current = [&]() {
@@ -496,7 +526,7 @@ class LocalSearch {
       if (s >= 0) return fixed[s];
       const int m = -1 - s;
       if (!((placed >> m) & 1)) {
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, cand_d, cand_f, &samples[m]);
+        mpos[m] = moving_crossing(m, cand_d, cand_f);
         placed |= 1u << m;
       }
       return mpos[m];
