@@ -689,6 +689,7 @@ class LocalSearch {
     };
     std::array<Candidate, 26 * 4> candidates;
     bool any_candidate = false;
+    typename Field<T>::Corners candidate_cell;  // neighbouring candidates share cells
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
       int n = 0;
       for (double r : radii)
@@ -699,7 +700,7 @@ class LocalSearch {
           const P3 p = field_.displaced(v, d);
           const P3 g = field_.global(v[0], v[1], v[2]);
           for (int a = 0; a < 3; ++a) d[a] = p[a] - g[a];
-          const double f = field_.value(p);
+          const double f = field_.value(p, candidate_cell);
           if ((f >= 0) != in) continue;
           stage(d, f);
           const double sc = score(false, best);
