@@ -119,6 +119,63 @@ inline int macet_search_reach(int sweeps) {
   return reach;
 }
 
+// The guard's filter before the exact predicates: a triangle's plane in doubles, and whether a
+// pair certainly does not intersect under the rule of core/mesh/self_intersections.h.
+struct GuardPlane {
+  P3 n, n_abs;  // (p1 - p0) x (p2 - p0) in doubles; n_abs: the same with |products| added
+};
+
+// `certain_area`: the projection onto some axis plane certainly has area (Shewchuk's orient2d
+// bound (3 + 16 eps) eps, eps = 2^-53, with margin), so the triangle has.
+inline GuardPlane guard_plane(const std::array<Vec3f, 3>& p, bool& certain_area) {
+  GuardPlane g;
+  double u[3], w[3];
+  for (int k = 0; k < 3; ++k) {
+    u[k] = double(p[1][k]) - double(p[0][k]);
+    w[k] = double(p[2][k]) - double(p[0][k]);
+  }
+  certain_area = false;
+  for (int k = 0; k < 3; ++k) {
+    const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+    const double x = u[k1] * w[k2], y = u[k2] * w[k1];
+    g.n[k] = x - y;
+    g.n_abs[k] = std::abs(x) + std::abs(y);
+    certain_area = certain_area || std::abs(g.n[k]) > 4e-16 * g.n_abs[k];
+  }
+  return g;
+}
+
+// The side of point x of the plane of triangle p: +1 or -1 when certain, 0 when the double
+// arithmetic cannot tell (Shewchuk's orient3d bound (7 + 56 eps) eps, with margin, on the same
+// products: the differences to p's first corner, then the cofactors).
+inline int guard_side(const std::array<Vec3f, 3>& p, const GuardPlane& g, const Vec3f& x) {
+  double det = 0, perm = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double d = double(x[k]) - double(p[0][k]);
+    det += d * g.n[k];
+    perm += std::abs(d) * g.n_abs[k];
+  }
+  if (perm < 1e-250) return 0;  // near underflow the relative bound does not hold
+  const double bound = 1e-15 * perm;
+  return det > bound ? 1 : det < -bound ? -1 : 0;
+}
+
+// True when the corners of b that a does not share (shared_with_a[l] >= 0: b's corner l is one
+// of a's) all lie certainly strictly on one side of a's plane: then b meets a's plane only in the
+// shared corners, and the pair does not intersect (with no corner shared there is no common
+// point, with one none but it, with two the triangles are not coplanar). False says nothing.
+inline bool guard_apart(const std::array<Vec3f, 3>& a, const GuardPlane& ga,
+                        const std::array<Vec3f, 3>& b, const int shared_with_a[3]) {
+  int first = 0;
+  for (int l = 0; l < 3; ++l) {
+    if (shared_with_a[l] >= 0) continue;
+    const int sd = guard_side(a, ga, b[l]);
+    if (sd == 0 || (first != 0 && sd != first)) return false;
+    first = sd;
+  }
+  return first != 0;
+}
+
 template <class T>
 class LocalSearch {
  public:
@@ -296,7 +353,7 @@ class LocalSearch {
     std::array<Vec3f, 3> p;
     Vec3f lo, hi;
     bool live;
-    P3 n, n_abs;  // (p1 - p0) x (p2 - p0) in doubles; n_abs: the same with |products| added
+    GuardPlane plane;
   };
 
   Vec3f world(const P3& x) const {
@@ -313,53 +370,10 @@ class LocalSearch {
       t.lo[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
       t.hi[k] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
     }
-    double u[3], w[3];
-    for (int k = 0; k < 3; ++k) {
-      u[k] = double(t.p[1][k]) - double(t.p[0][k]);
-      w[k] = double(t.p[2][k]) - double(t.p[0][k]);
-    }
     bool certain_area = false;
-    for (int k = 0; k < 3; ++k) {
-      const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-      const double x = u[k1] * w[k2], y = u[k2] * w[k1];
-      t.n[k] = x - y;
-      t.n_abs[k] = std::abs(x) + std::abs(y);
-      // Shewchuk's orient2d bound ((3 + 16 eps) eps, eps = 2^-53, with margin): the projection
-      // onto the other two axes has area for certain, so the triangle has.
-      certain_area = certain_area || std::abs(t.n[k]) > 4e-16 * t.n_abs[k];
-    }
+    t.plane = guard_plane(t.p, certain_area);
     t.live = certain_area || triangle_has_area(t.p);
     return t;
-  }
-
-  // The side of point x of triangle t's plane: +1 or -1 when certain, 0 when the double
-  // arithmetic cannot tell (Shewchuk's orient3d bound (7 + 56 eps) eps, with margin, on the same
-  // products: the differences to t's first corner, then the cofactors).
-  static int side(const Corners& t, const Vec3f& x) {
-    double det = 0, perm = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double d = double(x[k]) - double(t.p[0][k]);
-      det += d * t.n[k];
-      perm += std::abs(d) * t.n_abs[k];
-    }
-    if (perm < 1e-250) return 0;  // near underflow the relative bound does not hold
-    const double bound = 1e-15 * perm;
-    return det > bound ? 1 : det < -bound ? -1 : 0;
-  }
-
-  // Whether the corners of b that are not a's all lie strictly on one side of a's plane, for
-  // certain: then b meets a's plane only in the corners they share, and the pair does not
-  // intersect under the rule below (with no corner shared there is no common point, with one
-  // none but it, with two the triangles are not coplanar).
-  static bool apart(const Corners& a, const Corners& b, const int shared_with_a[3]) {
-    int first = 0;
-    for (int l = 0; l < 3; ++l) {
-      if (shared_with_a[l] >= 0) continue;
-      const int sd = side(a, b.p[l]);
-      if (sd == 0 || (first != 0 && sd != first)) return false;
-      first = sd;
-    }
-    return first != 0;
   }
 
   // self_intersections' rule for one pair, vertices identified by position as it does. The
@@ -378,7 +392,8 @@ class LocalSearch {
           b_in_a[l] = static_cast<int>(k);
           a_in_b[k] = l;
         }
-    if (apart(a, b, b_in_a) || apart(b, a, a_in_b)) return false;
+    if (guard_apart(a.p, a.plane, b.p, b_in_a) || guard_apart(b.p, b.plane, a.p, a_in_b))
+      return false;
     return triangles_intersect(a.p, ia, b.p, ib);
   }
 
@@ -630,7 +645,7 @@ class LocalSearch {
     // other triangles that meet the moving ones' common bounding box can take part in a pair.
     auto intersecting_pairs = [&](int& n) {
       n = 0;
-      Vec3f lo, hi;
+      Vec3f lo{}, hi{};
       for (int t = 0; t < n_tris; ++t) {
         Corners& m = moving_corners[t];
         m = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
