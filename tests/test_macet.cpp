@@ -14,6 +14,7 @@
 #include "core/extract/dual_contouring_table.h"
 #include "core/extract/macet.h"
 #include "core/extract/macet_relax.h"
+#include "core/extract/macet_search.h"
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes.h"
 #include "core/extract/marching_cubes_tables.h"
@@ -479,6 +480,61 @@ void check_fast(const RealCase& rc) {
   EXPECT_TRUE(t.watertight);
   EXPECT_EQ(t.nonmanifold_edges, 0u);
   EXPECT_EQ(t.inconsistently_oriented_edges, 0u);
+}
+
+// The search's guard settles pairs in doubles before the exact predicates; it may only ever say
+// "no intersection" where the exact rule says so too. Corners on a quarter-voxel lattice, some
+// nudged by one float step, with 0-3 shared corners, give many exactly coplanar, touching and
+// nearly touching pairs.
+TEST(MacetMax, GuardFilterNeverHidesAnIntersection) {
+  std::mt19937 rng(16);
+  std::uniform_int_distribution<int> lattice(0, 6), coin(0, 3), pick(0, 2);
+  auto corner = [&]() {
+    Vec3f p;
+    for (float& c : p) {
+      c = 100.0f + 0.25f * static_cast<float>(lattice(rng));
+      if (coin(rng) == 0) c = std::nextafter(c, coin(rng) < 2 ? 0.0f : 1000.0f);
+    }
+    return p;
+  };
+  int settled = 0, intersecting = 0, tested = 0;
+  for (int n = 0; n < 40000; ++n) {
+    std::array<Vec3f, 3> a{corner(), corner(), corner()}, b{corner(), corner(), corner()};
+    const int share = coin(rng);  // 0-3 corners of b taken from a
+    for (int l = 0; l < share; ++l) b[l] = a[(l + pick(rng)) % 3];
+    bool area_a = false, area_b = false;
+    const detail::GuardPlane ga = detail::guard_plane(a, area_a),
+                             gb = detail::guard_plane(b, area_b);
+    if (area_a) {
+      ASSERT_TRUE(triangle_has_area(a));
+    }
+    if (area_b) {
+      ASSERT_TRUE(triangle_has_area(b));
+    }
+    if (!triangle_has_area(a) || !triangle_has_area(b)) continue;
+    // Identity by position, as the guard does.
+    std::array<std::uint32_t, 3> ia{0, 1, 2}, ib{3, 4, 5};
+    int b_in_a[3] = {-1, -1, -1}, a_in_b[3] = {-1, -1, -1};
+    for (int l = 0; l < 3; ++l)
+      for (std::uint32_t k = 0; k < 3; ++k)
+        if (b[l] == a[k]) {
+          ib[l] = k;
+          b_in_a[l] = static_cast<int>(k);
+          a_in_b[k] = l;
+        }
+    if (ib[0] == ib[1] || ib[1] == ib[2] || ib[0] == ib[2]) continue;  // b not a triangle of a mesh
+    ++tested;
+    const bool exact = triangles_intersect(a, ia, b, ib);
+    intersecting += exact;
+    if (detail::guard_apart(a, ga, b, b_in_a) || detail::guard_apart(b, gb, a, a_in_b)) {
+      ++settled;
+      ASSERT_FALSE(exact) << "pair " << n << " settled as apart but intersects";
+    }
+  }
+  // Both outcomes occur often, so the check above is exercised on both sides.
+  EXPECT_GT(tested, 20000);
+  EXPECT_GT(intersecting, 2000);
+  EXPECT_GT(settled, 5000);
 }
 
 TEST(MacetRealData, BonsaiFast) {

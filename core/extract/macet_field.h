@@ -192,14 +192,18 @@ struct Field {
 // The crossing of f = iso on the segment p0 -> p1 whose ends have f - iso = f0 >= 0 > f1 or
 // f0 < 0 <= f1: Illinois-modified regula falsi on the trilinear interpolant, which converges
 // superlinearly and never leaves the bracket. Returns the parameter t in [0, 1].
+// `cache`: the cell samples last read, kept across calls that search near one another (the same
+// samples give the same arithmetic, so the result does not depend on it).
 template <class T>
-double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, double f1) {
+double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, double f1,
+                 typename Field<T>::Corners* cache = nullptr) {
   if (p0 == p1) return 0.5;
   double lo = 0, hi = 1, flo = f0, fhi = f1;
   const double tol = 1e-5 * std::abs(f0 - f1);
   int side = 0;
   double t = 0.5;
-  typename Field<T>::Corners corners;
+  typename Field<T>::Corners own;
+  typename Field<T>::Corners& corners = cache ? *cache : own;
   for (int it = 0; it < 24; ++it) {
     const double denom = flo - fhi;
     t = denom != 0 ? lo + (hi - lo) * flo / denom : 0.5 * (lo + hi);
@@ -249,10 +253,10 @@ inline bool spreading_tie(const BitGrid& grid, const std::int64_t s[3]) {
 template <class T>
 double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int64_t s0[3],
                      const std::int64_t s1[3], const P3& p0, const P3& p1, double f0, double f1,
-                     bool straight) {
+                     bool straight, typename Field<T>::Corners* cache = nullptr) {
   if (f0 == 0 && spreading_tie(grid, s0)) return kTieOffset;
   if (f1 == 0 && spreading_tie(grid, s1)) return 1 - kTieOffset;
-  return straight ? f0 / (f0 - f1) : find_root(field, p0, p1, f0, f1);
+  return straight ? f0 / (f0 - f1) : find_root(field, p0, p1, f0, f1, cache);
 }
 
 // std::allocator that leaves elements default-initialised (trivial types: uninitialised) on

@@ -119,6 +119,63 @@ inline int macet_search_reach(int sweeps) {
   return reach;
 }
 
+// The guard's filter before the exact predicates: a triangle's plane in doubles, and whether a
+// pair certainly does not intersect under the rule of core/mesh/self_intersections.h.
+struct GuardPlane {
+  P3 n, n_abs;  // (p1 - p0) x (p2 - p0) in doubles; n_abs: the same with |products| added
+};
+
+// `certain_area`: the projection onto some axis plane certainly has area (Shewchuk's orient2d
+// bound (3 + 16 eps) eps, eps = 2^-53, with margin), so the triangle has.
+inline GuardPlane guard_plane(const std::array<Vec3f, 3>& p, bool& certain_area) {
+  GuardPlane g;
+  double u[3], w[3];
+  for (int k = 0; k < 3; ++k) {
+    u[k] = double(p[1][k]) - double(p[0][k]);
+    w[k] = double(p[2][k]) - double(p[0][k]);
+  }
+  certain_area = false;
+  for (int k = 0; k < 3; ++k) {
+    const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+    const double x = u[k1] * w[k2], y = u[k2] * w[k1];
+    g.n[k] = x - y;
+    g.n_abs[k] = std::abs(x) + std::abs(y);
+    certain_area = certain_area || std::abs(g.n[k]) > 4e-16 * g.n_abs[k];
+  }
+  return g;
+}
+
+// The side of point x of the plane of triangle p: +1 or -1 when certain, 0 when the double
+// arithmetic cannot tell (Shewchuk's orient3d bound (7 + 56 eps) eps, with margin, on the same
+// products: the differences to p's first corner, then the cofactors).
+inline int guard_side(const std::array<Vec3f, 3>& p, const GuardPlane& g, const Vec3f& x) {
+  double det = 0, perm = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double d = double(x[k]) - double(p[0][k]);
+    det += d * g.n[k];
+    perm += std::abs(d) * g.n_abs[k];
+  }
+  if (perm < 1e-250) return 0;  // near underflow the relative bound does not hold
+  const double bound = 1e-15 * perm;
+  return det > bound ? 1 : det < -bound ? -1 : 0;
+}
+
+// True when the corners of b that a does not share (shared_with_a[l] >= 0: b's corner l is one
+// of a's) all lie certainly strictly on one side of a's plane: then b meets a's plane only in the
+// shared corners, and the pair does not intersect (with no corner shared there is no common
+// point, with one none but it, with two the triangles are not coplanar). False says nothing.
+inline bool guard_apart(const std::array<Vec3f, 3>& a, const GuardPlane& ga,
+                        const std::array<Vec3f, 3>& b, const int shared_with_a[3]) {
+  int first = 0;
+  for (int l = 0; l < 3; ++l) {
+    if (shared_with_a[l] >= 0) continue;
+    const int sd = guard_side(a, ga, b[l]);
+    if (sd == 0 || (first != 0 && sd != first)) return false;
+    first = sd;
+  }
+  return first != 0;
+}
+
 template <class T>
 class LocalSearch {
  public:
@@ -254,7 +311,9 @@ class LocalSearch {
 
   // The crossing on edge (s, axis a) with the current displacements, except that grid vertex
   // `moved` uses (d, f) instead. The emission computes the same (same inputs, same arithmetic).
-  P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f) const {
+  // `cache`: find_root's cell samples, kept per edge across a vertex's candidates.
+  P3 crossing(const std::int64_t s[3], int a, std::uint32_t moved, const P3& d, double f,
+              typename Field<T>::Corners* cache = nullptr) const {
     std::int64_t q[3] = {s[0], s[1], s[2]};
     ++q[a];
     const std::uint32_t i0 = gv_.index(s[0], s[1], s[2]), i1 = gv_.index(q[0], q[1], q[2]);
@@ -264,7 +323,7 @@ class LocalSearch {
     const P3 p0 = field_.global(s[0], s[1], s[2], d0);
     const P3 p1 = field_.global(q[0], q[1], q[2], d1);
     const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
-    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight, cache);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
@@ -288,11 +347,13 @@ class LocalSearch {
     return false;
   }
 
-  // A triangle as the intersection test sees it: emitted float world coordinates.
+  // A triangle as the intersection test sees it: emitted float world coordinates, with its plane
+  // for the filter in meet().
   struct Corners {
     std::array<Vec3f, 3> p;
     Vec3f lo, hi;
     bool live;
+    GuardPlane plane;
   };
 
   Vec3f world(const P3& x) const {
@@ -309,20 +370,30 @@ class LocalSearch {
       t.lo[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
       t.hi[k] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
     }
-    t.live = triangle_has_area(t.p);
+    bool certain_area = false;
+    t.plane = guard_plane(t.p, certain_area);
+    t.live = certain_area || triangle_has_area(t.p);
     return t;
   }
 
-  // self_intersections' rule for one pair, vertices identified by position as it does.
+  // self_intersections' rule for one pair, vertices identified by position as it does. The
+  // plane filter settles most pairs in doubles; the rest go to the exact predicates.
   static bool meet(const Corners& a, const Corners& b) {
     for (int k = 0; k < 3; ++k)
       if (a.hi[k] < b.lo[k] || b.hi[k] < a.lo[k]) return false;
     if (!a.live || !b.live) return false;
     const std::array<std::uint32_t, 3> ia{0, 1, 2};
     std::array<std::uint32_t, 3> ib{3, 4, 5};
+    int b_in_a[3] = {-1, -1, -1}, a_in_b[3] = {-1, -1, -1};
     for (int l = 0; l < 3; ++l)
       for (std::uint32_t k = 0; k < 3; ++k)
-        if (b.p[l] == a.p[k]) ib[l] = k;
+        if (b.p[l] == a.p[k]) {
+          ib[l] = k;
+          b_in_a[l] = static_cast<int>(k);
+          a_in_b[k] = l;
+        }
+    if (guard_apart(a.p, a.plane, b.p, b_in_a) || guard_apart(b.p, b.plane, a.p, a_in_b))
+      return false;
     return triangles_intersect(a.p, ia, b.p, ib);
   }
 
@@ -416,6 +487,38 @@ class LocalSearch {
     // Moving crossings for the candidate (cand_d, cand_f), computed when first needed: most
     // candidates are rejected after a crossing or two (see score).
     std::array<P3, 6> mpos{};
+    std::array<typename Field<T>::Corners, 6> samples;  // per moving edge, for find_root
+    // What a candidate does not change on a moving edge: its other end (crossing() for the
+    // candidate is then these with v's end replaced; same inputs, same arithmetic).
+    struct OtherEnd {
+      std::int64_t q[3];  // the edge's other end point
+      bool v_first;       // v is the edge's lower end
+      P3 p, d;            // its displaced position and displacement
+      double f;
+    };
+    std::array<OtherEnd, 6> other_end;
+    for (int m = 0; m < n_moving; ++m) {
+      OtherEnd& e = other_end[m];
+      e.v_first = moving[m].s[0] == v[0] && moving[m].s[1] == v[1] && moving[m].s[2] == v[2];
+      for (int a = 0; a < 3; ++a) e.q[a] = moving[m].s[a];
+      if (e.v_first) ++e.q[moving[m].axis];
+      const std::uint32_t iq = gv_.index(e.q[0], e.q[1], e.q[2]);
+      e.d = gv_.disp[iq];
+      e.f = gv_.value[iq];
+      e.p = field_.global(e.q[0], e.q[1], e.q[2], e.d);
+    }
+    auto moving_crossing = [&](int m, const P3& d, double f) {
+      const OtherEnd& e = other_end[m];
+      const P3 pv = field_.global(v[0], v[1], v[2], d);
+      const bool straight = d == P3{0, 0, 0} && e.d == P3{0, 0, 0};
+      const P3& p0 = e.v_first ? pv : e.p;
+      const P3& p1 = e.v_first ? e.p : pv;
+      const double t =
+          e.v_first ? edge_crossing(field_, grid_, v, e.q, p0, p1, f, e.f, straight, &samples[m])
+                    : edge_crossing(field_, grid_, e.q, v, p0, p1, e.f, f, straight, &samples[m]);
+      return P3{p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]),
+                p0[2] + t * (p1[2] - p0[2])};
+    };
     P3 cand_d{};
     double cand_f = 0;
     unsigned placed = 0;  // bit m: mpos[m] holds the candidate's crossing
@@ -426,8 +529,7 @@ class LocalSearch {
     };
     auto place = [&](const P3& d, double f) {
       stage(d, f);
-      for (int m = 0; m < n_moving; ++m)
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, d, f);
+      for (int m = 0; m < n_moving; ++m) mpos[m] = moving_crossing(m, d, f);
       placed = (1u << n_moving) - 1;
     };
     auto place_current = [&]() {
@@ -439,7 +541,7 @@ class LocalSearch {
       if (s >= 0) return fixed[s];
       const int m = -1 - s;
       if (!((placed >> m) & 1)) {
-        mpos[m] = crossing(moving[m].s, moving[m].axis, self, cand_d, cand_f);
+        mpos[m] = moving_crossing(m, cand_d, cand_f);
         placed |= 1u << m;
       }
       return mpos[m];
@@ -538,16 +640,30 @@ class LocalSearch {
           }
     };
     std::array<Corners, 8 * mc::kMaxTrianglesPerCase> moving_corners;
-    // The moving triangles as placed: false when one leaves v's box, else their pairs.
+    static thread_local std::vector<const Corners*> near;
+    // The moving triangles as placed: false when one leaves v's box, else their pairs. Only the
+    // other triangles that meet the moving ones' common bounding box can take part in a pair.
     auto intersecting_pairs = [&](int& n) {
       n = 0;
+      Vec3f lo{}, hi{};
       for (int t = 0; t < n_tris; ++t) {
-        moving_corners[t] = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
-        if (!in_box(moving_corners[t])) return false;
+        Corners& m = moving_corners[t];
+        m = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
+        if (!in_box(m)) return false;
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = t == 0 ? m.lo[a] : std::min(lo[a], m.lo[a]);
+          hi[a] = t == 0 ? m.hi[a] : std::max(hi[a], m.hi[a]);
+        }
+      }
+      near.clear();
+      for (const Corners& u : others) {
+        bool apart_boxes = false;
+        for (int a = 0; a < 3; ++a) apart_boxes = apart_boxes || u.hi[a] < lo[a] || hi[a] < u.lo[a];
+        if (!apart_boxes) near.push_back(&u);
       }
       for (int t = 0; t < n_tris; ++t) {
         if (!moving_corners[t].live) continue;
-        for (const Corners& u : others) n += meet(moving_corners[t], u);
+        for (const Corners* u : near) n += meet(moving_corners[t], *u);
         for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
       }
       return true;
@@ -588,6 +704,7 @@ class LocalSearch {
     };
     std::array<Candidate, 26 * 4> candidates;
     bool any_candidate = false;
+    typename Field<T>::Corners candidate_cell;  // neighbouring candidates share cells
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
       int n = 0;
       for (double r : radii)
@@ -598,7 +715,7 @@ class LocalSearch {
           const P3 p = field_.displaced(v, d);
           const P3 g = field_.global(v[0], v[1], v[2]);
           for (int a = 0; a < 3; ++a) d[a] = p[a] - g[a];
-          const double f = field_.value(p);
+          const double f = field_.value(p, candidate_cell);
           if ((f >= 0) != in) continue;
           stage(d, f);
           const double sc = score(false, best);
@@ -609,7 +726,10 @@ class LocalSearch {
                        [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
       for (int c = 0; c < n; ++c) {
         place(candidates[c].d, candidates[c].f);
-        if (!guard_passes(candidates[c].d, candidates[c].f)) continue;
+        if (!guard_passes(candidates[c].d, candidates[c].f)) {
+          if (!start_in_box) break;  // no candidate can pass
+          continue;
+        }
         best = candidates[c].score;
         best_d = candidates[c].d;
         best_f = candidates[c].f;
