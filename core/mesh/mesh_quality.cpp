@@ -12,12 +12,21 @@
 
 namespace isotile {
 
-double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c) {
+namespace {
+
+// Inlined into the measure's loops (a call per triangle costs as much as the arithmetic).
+inline double radius_ratio_inline(const Vec3f& a, const Vec3f& b, const Vec3f& c) {
   auto length = [](const Vec3f& p, const Vec3f& q) {
     const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
     return std::sqrt(dx * dx + dy * dy + dz * dz);
   };
   return radius_ratio_of_lengths(length(b, c), length(c, a), length(a, b));
+}
+
+}  // namespace
+
+double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c) {
+  return radius_ratio_inline(a, b, c);
 }
 
 namespace {
@@ -36,10 +45,10 @@ struct ChunkStats {
 // (0-2 on a tie).
 std::array<double, 2> quad_quality(const Mesh& mesh, const Quad& q) {
   const auto& p = mesh.positions;
-  const double a0 = radius_ratio(p[q[0]], p[q[1]], p[q[2]]);
-  const double a1 = radius_ratio(p[q[0]], p[q[2]], p[q[3]]);
-  const double b0 = radius_ratio(p[q[0]], p[q[1]], p[q[3]]);
-  const double b1 = radius_ratio(p[q[1]], p[q[2]], p[q[3]]);
+  const double a0 = radius_ratio_inline(p[q[0]], p[q[1]], p[q[2]]);
+  const double a1 = radius_ratio_inline(p[q[0]], p[q[2]], p[q[3]]);
+  const double b0 = radius_ratio_inline(p[q[0]], p[q[1]], p[q[3]]);
+  const double b1 = radius_ratio_inline(p[q[1]], p[q[2]], p[q[3]]);
   if (std::min(b0, b1) > std::min(a0, a1)) return {b0, b1};
   return {a0, a1};
 }
@@ -51,7 +60,7 @@ void for_each_quality(const Mesh& mesh, std::size_t begin, std::size_t end, F&& 
   for (std::size_t i = begin; i < end; ++i) {
     if (i < ntri) {
       const Tri& t = mesh.triangles[i];
-      f(radius_ratio(mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]));
+      f(radius_ratio_inline(mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]));
       continue;
     }
     // A chunk border may split a quad's pair; each side then recomputes the quad.
