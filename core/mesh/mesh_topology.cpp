@@ -88,10 +88,8 @@ class Corners {
 
   C count() const { return tri_corners_ + C{4} * static_cast<C>(mesh_.quads.size()); }
 
-  // Vertex at the corner, and at the next and previous corner of its face.
+  // Vertex at the corner.
   std::uint32_t vertex(C c) const { return at(c, 0); }
-  std::uint32_t next(C c) const { return at(c, 1); }
-  std::uint32_t prev(C c) const { return at(c, -1); }
   // Corners of one face have equal face numbers.
   C face(C c) const { return c < tri_corners_ ? c / 3 : tri_corners_ + (c - tri_corners_) / 4; }
   // The vertices at the next, the previous and (quads only; else the corner's own vertex) the
