@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -145,6 +146,38 @@ Mesh random_mesh(std::size_t triangles, std::size_t quads) {
   for (std::size_t i = 0; i < triangles; ++i) m.triangles.push_back({v(), v(), v()});
   for (std::size_t i = 0; i < quads; ++i) m.quads.push_back({v(), v(), v(), v()});
   return m;
+}
+
+// The quantiles are exact where many values share the histogram bin that holds a rank: values
+// below 2^-32 (one bin, exact zeros among them), runs of equal values across a rank, and ranks
+// that share a bin.
+TEST(TriangleQuality, QuantilesExactWithinCrowdedBins) {
+  std::mt19937 rng(11);
+  for (const std::size_t n : {std::size_t{5001}, std::size_t{20011}}) {
+    Mesh m;
+    m.positions = {{0, 0, 0}, {1, 0, 0}};
+    std::uniform_real_distribution<float> log_height(-12, -0.1f);
+    for (std::size_t i = 0; i < n; ++i) {
+      float h = std::pow(10.0f, log_height(rng));
+      if (i % 7 == 0) h = 0;                // degenerate: quality exactly 0
+      if (i % 5 == 0) h = 1e-9f * (i % 3);  // qualities far below 2^-32
+      if (i % 11 == 0) h = 0.5f;            // one value many times over
+      if (i > n / 3 && i < n / 3 + 40) h = 0.3f;
+      m.positions.push_back({0.5f, h, 0});
+      m.triangles.push_back({0, 1, static_cast<std::uint32_t>(m.positions.size() - 1)});
+    }
+    std::vector<double> q;
+    for (const Tri& t : m.triangles) {
+      q.push_back(radius_ratio(m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]));
+    }
+    std::sort(q.begin(), q.end());
+    ASSERT_LT(q[(n - 1) / 100], std::ldexp(1.0, -32));  // both low ranks in the lowest bin
+    const QualityStats s = triangle_quality(m);
+    EXPECT_EQ(s.q001, q[(n - 1) / 1000]);
+    EXPECT_EQ(s.q01, q[(n - 1) / 100]);
+    EXPECT_EQ(s.median, q[(n - 1) / 2]);
+    EXPECT_LT(s.q01, s.median);
+  }
 }
 
 // Bitwise-equal results whatever the number of threads (many chunks, a quad pair split by a

@@ -306,6 +306,32 @@ TEST_F(VolumeIo, RawTooShortAndTooLong) {
   EXPECT_EQ(read_raw(file, {}).data<std::uint16_t>()[63], 0x6161);
 }
 
+// A file of several read slices (16 MiB each) and a partial last one, read by all threads: every
+// byte lands where it belongs, in both byte orders.
+TEST_F(VolumeIo, RawLargerThanOneSlice) {
+  const Index3 dims{1024, 1024, 9};  // 9 Mi uint16 samples, 18 MiB
+  std::string bytes(static_cast<std::size_t>(dims[0] * dims[1] * dims[2]) * 2, '\0');
+  for (std::size_t i = 0; i < bytes.size() / 2; ++i) {
+    const auto v = static_cast<std::uint16_t>(i * 2654435761u >> 7);
+    bytes[2 * i] = static_cast<char>(v & 0xff);
+    bytes[2 * i + 1] = static_cast<char>(v >> 8);
+  }
+  const std::string file = path("big_1024x1024x9_uint16.raw");
+  write_file(file, bytes);
+  const Volume little = read_raw(file, {});
+  RawOptions big_endian;
+  big_endian.endian = Endian::Big;
+  const Volume big = read_raw(file, big_endian);
+  ASSERT_EQ(little.byte_size(), bytes.size());
+  EXPECT_EQ(std::memcmp(little.bytes(), bytes.data(), bytes.size()), 0);
+  std::size_t wrong = 0;
+  for (std::size_t i = 0; i < bytes.size() / 2; ++i) {
+    const auto v = static_cast<std::uint16_t>(i * 2654435761u >> 7);
+    wrong += big.data<std::uint16_t>()[i] != __builtin_bswap16(v);
+  }
+  EXPECT_EQ(wrong, 0u);
+}
+
 TEST_F(VolumeIo, RawZeroAndNegativeDims) {
   const std::string file = path("v_0x4x4_uint8.raw");
   write_file(file, std::string());

@@ -1,7 +1,8 @@
 // Everything is computed per vertex from a vertex -> incident corners table: each edge is
 // examined at its lower endpoint, each fan at its centre. That keeps memory at one index per
 // corner (no global edge sort) and lets all vertices be processed in parallel; every result is
-// an integer count, so the outcome does not depend on the thread count.
+// an integer count that does not depend on the order of a vertex's corners, so neither the
+// table's order (which depends on scheduling) nor the thread count changes the outcome.
 #include "core/mesh/mesh_topology.h"
 
 #include <tbb/blocked_range.h>
@@ -11,6 +12,7 @@
 #include <algorithm>
 #include <atomic>
 #include <limits>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -86,12 +88,29 @@ class Corners {
 
   C count() const { return tri_corners_ + C{4} * static_cast<C>(mesh_.quads.size()); }
 
-  // Vertex at the corner, and at the next and previous corner of its face.
+  // Vertex at the corner.
   std::uint32_t vertex(C c) const { return at(c, 0); }
-  std::uint32_t next(C c) const { return at(c, 1); }
-  std::uint32_t prev(C c) const { return at(c, -1); }
-  // Corners of one face have equal face numbers and no other face's corner lies between them.
+  // Corners of one face have equal face numbers.
   C face(C c) const { return c < tri_corners_ ? c / 3 : tri_corners_ + (c - tri_corners_) / 4; }
+  // The vertices at the next, the previous and (quads only; else the corner's own vertex) the
+  // opposite corner of c's face, from one read of the face.
+  std::array<std::uint32_t, 3> around(C c) const {
+    if (c < tri_corners_) {
+      const C t = c / 3;
+      const int i = static_cast<int>(c - 3 * t);
+      const Tri& f = mesh_.triangles[t];
+      return {f[(i + 1) % 3], f[(i + 2) % 3], f[i]};
+    }
+    const C q = (c - tri_corners_) / 4;
+    const int i = static_cast<int>(c - tri_corners_ - 4 * q);
+    const Quad& f = mesh_.quads[q];
+    return {f[(i + 1) % 4], f[(i + 3) % 4], f[(i + 2) % 4]};
+  }
+  // Where face c lies, to fetch it ahead of its use.
+  const void* address(C c) const {
+    if (c < tri_corners_) return &mesh_.triangles[c / 3];
+    return &mesh_.quads[(c - tri_corners_) / 4];
+  }
 
  private:
   std::uint32_t at(C c, int step) const {
@@ -120,6 +139,8 @@ bool on_border(const Vec3f& a, const Vec3f& b, const std::array<Vec3f, 2>& box,
   return false;
 }
 
+constexpr std::size_t kPrefetchVertices = 8;
+
 // Smallest local union-find, for the faces around one vertex.
 std::size_t local_find(std::vector<std::size_t>& parent, std::size_t x) {
   while (parent[x] != x) x = parent[x] = parent[parent[x]];
@@ -132,102 +153,127 @@ TopologyStats compute(const Mesh& mesh, const TopologyOptions& options) {
   const C ncorners = corners.count();
   const std::size_t nv = mesh.positions.size();
 
-  // vertex -> incident corners, as offsets into one array (a counting sort).
-  std::vector<C> offsets(nv + 1, 0);
-  std::vector<C> incident(ncorners);
-  {
-    std::vector<std::atomic<C>> fill(nv);
-    tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
-      for (C c = r.begin(); c < r.end(); ++c) {
-        fill[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed);
-      }
-    });
-    for (std::size_t v = 0; v < nv; ++v) {
-      offsets[v + 1] = offsets[v] + fill[v].load(std::memory_order_relaxed);
-      fill[v].store(offsets[v], std::memory_order_relaxed);
+  // vertex -> incident corners, as one array (a counting sort). `bound` counts, is scanned into
+  // each vertex's first slot and is advanced by the fill, after which bound[v] is the end of v's
+  // corners and bound[v - 1] their beginning.
+  std::vector<std::atomic<C>> bound(nv);
+  auto incident = std::make_unique_for_overwrite<C[]>(ncorners);
+  tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
+    for (C c = r.begin(); c < r.end(); ++c) {
+      bound[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed);
     }
-    // The order within a vertex depends on scheduling; each vertex sorts its list below.
-    tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
-      for (C c = r.begin(); c < r.end(); ++c) {
-        incident[fill[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed)] = c;
-      }
-    });
+  });
+  {
+    C sum = 0;
+    for (std::size_t v = 0; v < nv; ++v) {
+      const C count = bound[v].load(std::memory_order_relaxed);
+      bound[v].store(sum, std::memory_order_relaxed);
+      sum += count;
+    }
   }
+  tbb::parallel_for(tbb::blocked_range<C>(0, ncorners, 1 << 14), [&](const auto& r) {
+    for (C c = r.begin(); c < r.end(); ++c) {
+      incident[bound[corners.vertex(c)].fetch_add(1, std::memory_order_relaxed)] = c;
+    }
+  });
+  auto first_of = [&](std::size_t v) -> C {
+    return v == 0 ? C{0} : bound[v - 1].load(std::memory_order_relaxed);
+  };
+  auto last_of = [&](std::size_t v) -> C { return bound[v].load(std::memory_order_relaxed); };
 
   const auto& pos = mesh.positions;
   const Counts counts = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, nv, 1 << 12), Counts{},
       [&](const tbb::blocked_range<std::size_t>& r, Counts sum) {
-        // (other endpoint, 1 when the face runs v -> other) for each edge v owns.
-        std::vector<std::pair<std::uint32_t, int>> edges;
-        // (neighbour across an edge, local corner) for the fans.
-        std::vector<std::pair<std::uint32_t, std::size_t>> links;
+        // One entry per (corner at v, neighbour across an edge of its face at v):
+        // neighbour << 32 | local corner << 1 | 1 when the face runs v -> neighbour. Sorted, the
+        // entries of one neighbour are adjacent: the edge's faces and the fan's links at once.
+        std::vector<std::uint64_t> entries;
         std::vector<std::size_t> parent;
         for (std::size_t vi = r.begin(); vi < r.end(); ++vi) {
           const auto v = static_cast<std::uint32_t>(vi);
-          C* first = incident.data() + offsets[vi];
-          C* last = incident.data() + offsets[vi + 1];
+          const C* first = incident.get() + first_of(vi);
+          const C* last = incident.get() + last_of(vi);
           if (first == last) {
             ++sum.unreferenced;
             continue;
           }
           ++sum.vertices;
-          std::sort(first, last);
           const std::size_t degree = static_cast<std::size_t>(last - first);
+          if (degree >= (std::size_t{1} << 31))
+            throw CapacityError("vertex " + std::to_string(v) + " has " + std::to_string(degree) +
+                                " face corners, more than the topology measure can count");
 
-          // An edge belongs to its lower endpoint; a face's edge v-w is seen from v's corner
-          // either leaving v (w = next) or entering it (w = prev). The self-edge of a face that
-          // repeats v is taken once, as leaving.
-          edges.clear();
-          for (const C* c = first; c != last; ++c) {
-            const std::uint32_t n = corners.next(*c), p = corners.prev(*c);
-            if (n >= v) edges.emplace_back(n, 1);
-            if (p > v) edges.emplace_back(p, 0);
+          // A face's edge v-w is seen from v's corner either leaving v (w = next) or entering it
+          // (w = prev). The self-edge of a face that repeats v is taken once, as leaving.
+          // The faces around a vertex lie far apart in memory; the next vertices' faces are
+          // fetched while this one's are examined.
+          if (vi + kPrefetchVertices < r.end()) {
+            const C* ahead = incident.get() + first_of(vi + kPrefetchVertices);
+            const C* ahead_end = incident.get() + last_of(vi + kPrefetchVertices);
+            for (; ahead != ahead_end; ++ahead) __builtin_prefetch(corners.address(*ahead));
           }
-          std::sort(edges.begin(), edges.end());
-          for (std::size_t i = 0; i < edges.size();) {
-            std::size_t j = i + 1;
-            while (j < edges.size() && edges[j].first == edges[i].first) ++j;
-            ++sum.edges;
-            if (j - i == 1) {
-              ++sum.boundary;
-              if (options.border_box &&
-                  on_border(pos[v], pos[edges[i].first], *options.border_box,
-                            options.border_inner.value_or(*options.border_box))) {
-                ++sum.border;
+          entries.clear();
+          bool repeats = false;
+          for (std::size_t i = 0; i < degree; ++i) {
+            const auto [n, p, o] = corners.around(first[i]);
+            entries.push_back(std::uint64_t{n} << 32 | std::uint64_t{i} << 1 | 1);
+            if (p != v) entries.push_back(std::uint64_t{p} << 32 | std::uint64_t{i} << 1);
+            repeats = repeats || n == v || p == v || o == v;
+          }
+          std::sort(entries.begin(), entries.end());
+
+          const bool fans = degree > 1;
+          if (fans) {
+            parent.resize(degree);
+            for (std::size_t i = 0; i < degree; ++i) parent[i] = i;
+          }
+          // A face that visits v twice is still one face.
+          if (fans && repeats) {
+            for (std::size_t i = 0; i < degree; ++i) {
+              const auto [n, p, o] = corners.around(first[i]);
+              if (n != v && p != v && o != v) continue;
+              for (std::size_t j = 0; j < i; ++j) {
+                if (corners.face(first[j]) == corners.face(first[i])) {
+                  parent[local_find(parent, i)] = local_find(parent, j);
+                }
               }
-            } else if (j - i > 2) {
-              ++sum.nonmanifold_edges;
-            } else if (edges[i].second == edges[i + 1].second) {
-              ++sum.inconsistent;
+            }
+          }
+          // An edge belongs to its lower endpoint (the self-edge to its only one); faces around
+          // v are one fan when linked through edges at v to other vertices.
+          for (std::size_t i = 0; i < entries.size();) {
+            const auto w = static_cast<std::uint32_t>(entries[i] >> 32);
+            std::size_t j = i + 1;
+            while (j < entries.size() && static_cast<std::uint32_t>(entries[j] >> 32) == w) ++j;
+            if (w >= v) {
+              ++sum.edges;
+              if (j - i == 1) {
+                ++sum.boundary;
+                if (options.border_box &&
+                    on_border(pos[v], pos[w], *options.border_box,
+                              options.border_inner.value_or(*options.border_box))) {
+                  ++sum.border;
+                }
+              } else if (j - i > 2) {
+                ++sum.nonmanifold_edges;
+              } else if ((entries[i] & 1) == (entries[i + 1] & 1)) {
+                ++sum.inconsistent;
+              }
+            }
+            if (fans && w != v) {
+              for (std::size_t k = i + 1; k < j; ++k) {
+                const std::size_t a = local_find(parent, (entries[k] >> 1) & 0x7fffffff);
+                const std::size_t b = local_find(parent, (entries[k - 1] >> 1) & 0x7fffffff);
+                if (a != b) parent[a] = b;
+              }
             }
             i = j;
           }
-
-          // Faces around v are one fan when linked through shared edges at v.
-          if (degree == 1) continue;
-          parent.resize(degree);
-          for (std::size_t i = 0; i < degree; ++i) parent[i] = i;
-          links.clear();
-          for (std::size_t i = 0; i < degree; ++i) {
-            const std::uint32_t n = corners.next(first[i]), p = corners.prev(first[i]);
-            if (n != v) links.emplace_back(n, i);
-            if (p != v) links.emplace_back(p, i);
-            // A face that visits v twice is still one face.
-            if (i > 0 && corners.face(first[i]) == corners.face(first[i - 1])) {
-              parent[local_find(parent, i)] = local_find(parent, i - 1);
-            }
-          }
-          std::sort(links.begin(), links.end());
-          for (std::size_t i = 1; i < links.size(); ++i) {
-            if (links[i].first != links[i - 1].first) continue;
-            const std::size_t a = local_find(parent, links[i].second);
-            const std::size_t b = local_find(parent, links[i - 1].second);
-            if (a != b) parent[a] = b;
-          }
-          std::size_t fans = 0;
-          for (std::size_t i = 0; i < degree && fans < 2; ++i) fans += parent[i] == i;
-          if (fans > 1) ++sum.nonmanifold_vertices;
+          if (!fans) continue;
+          std::size_t roots = 0;
+          for (std::size_t i = 0; i < degree && roots < 2; ++i) roots += parent[i] == i;
+          if (roots > 1) ++sum.nonmanifold_vertices;
         }
         return sum;
       },
@@ -252,7 +298,7 @@ TopologyStats compute(const Mesh& mesh, const TopologyOptions& options) {
       tbb::blocked_range<std::size_t>(0, nv, 1 << 14), std::uint64_t{0},
       [&](const tbb::blocked_range<std::size_t>& r, std::uint64_t n) {
         for (std::size_t v = r.begin(); v < r.end(); ++v) {
-          if (offsets[v + 1] != offsets[v] && components.is_root(static_cast<std::uint32_t>(v))) {
+          if (last_of(v) != first_of(v) && components.is_root(static_cast<std::uint32_t>(v))) {
             ++n;
           }
         }
