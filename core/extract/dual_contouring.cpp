@@ -304,7 +304,7 @@ class Extractor {
     classify<T>(view_, options_.iso, grid_);
 
     // Count: mixed cells per cell row (kept: they index the vertices), quads per sample row.
-    reserve_huge(mixed_, static_cast<size_t>(rows * words));
+    reserve_on_caller(mixed_, static_cast<size_t>(rows * words));
     mixed_.resize(static_cast<size_t>(rows * words));
     ScratchVector<uint32_t> vertex_count(rows), quad_count(rows);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
@@ -333,10 +333,10 @@ class Extractor {
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
-    reserve_huge(mesh.positions, n_vertices);
+    reserve_on_caller(mesh.positions, n_vertices);
     mesh.positions.resize(n_vertices);
     if (options_.normals) {
-      reserve_huge(mesh.normals, n_vertices);
+      reserve_on_caller(mesh.normals, n_vertices);
       mesh.normals.resize(n_vertices);
     }
 
@@ -344,9 +344,9 @@ class Extractor {
     // face array is allocated (std::vector zeroes it, a serial pass taking each page's first-touch
     // fault) while the vertices are placed.
     if (options_.keep_quads)
-      reserve_huge(mesh.quads, n_quads);
+      reserve_on_caller(mesh.quads, n_quads);
     else
-      reserve_huge(mesh.triangles, 2 * n_quads);
+      reserve_on_caller(mesh.triangles, 2 * n_quads);
     tbb::parallel_invoke(
         [&] {
           if (options_.keep_quads)

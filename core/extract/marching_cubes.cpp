@@ -134,9 +134,9 @@ class Extractor {
     }
     // std::vector zeroes what it allocates, taking each page's first-touch fault as it goes: the
     // arrays are zeroed side by side rather than one after the other, in huge pages.
-    reserve_huge(mesh.positions, n_vertices);
-    if (options_.normals) reserve_huge(mesh.normals, n_vertices);
-    reserve_huge(mesh.triangles, n_triangles);
+    reserve_on_caller(mesh.positions, n_vertices);
+    if (options_.normals) reserve_on_caller(mesh.normals, n_vertices);
+    reserve_on_caller(mesh.triangles, n_triangles);
     tbb::parallel_invoke(
         [&] {
           mesh.positions.resize(n_vertices);

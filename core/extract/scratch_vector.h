@@ -9,13 +9,15 @@
 // pass writes the same bytes again; left uninitialised, the pages are first touched by the
 // threads that fill them.
 //
-// reserve_huge: reserves a vector that is about to be resized and filled (the mesh's arrays, which
-// stay plain std::vectors) and asks the kernel for transparent huge pages over the new block, so
-// that zeroing it takes one fault per 2 MiB instead of per 4 KiB (8 MB of triangles: 3.5 ms ->
-// 1.6 ms here). A hint only: where huge pages are off, or the system is not Linux, it is a plain
-// reserve. Reserving on the calling thread also keeps the block in the calling thread's malloc
-// arena when a worker thread then resizes it (an allocation made on a TBB worker lands in that
-// thread's arena, which kept 0.6 MB more resident in bricked Dual Contouring).
+// reserve_on_caller: reserves a vector that is about to be resized and filled (the mesh's arrays,
+// which stay plain std::vectors) on the calling thread, which keeps the block in the calling
+// thread's malloc arena when a worker thread then resizes it (an allocation made on a TBB worker
+// lands in that thread's arena, which kept 0.6 MB more resident in bricked Dual Contouring). It
+// used to ask for transparent huge pages too (8 MB of triangles zeroed in 1.6 ms instead of 3.5),
+// but on these virtual machines a fresh huge page costs more than 512 small ones (the host hands
+// free 2 MiB blocks back and faults them in again): MC in core on a 4 GiB volume (181M triangles)
+// took 7.4-7.5 s with the advice and 3.6-3.7 s without, while bonsai gained nothing measurable
+// (16-18 ms either way).
 //
 // Internal to core/; not part of the library's interface.
 #pragma once
@@ -26,10 +28,6 @@
 #include <new>
 #include <utility>
 #include <vector>
-
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 namespace isotile::detail {
 
@@ -56,18 +54,8 @@ template <class T>
 using ScratchVector = std::vector<T, ScratchAllocator<T>>;
 
 template <class V>
-void reserve_huge(V& v, std::size_t n) {
+void reserve_on_caller(V& v, std::size_t n) {
   v.reserve(n);
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t kHuge = std::uintptr_t{1} << 21;
-  if (v.empty() && n * sizeof(typename V::value_type) >= 2 * kHuge) {
-    // Only whole huge pages inside the block: the advice must not reach a neighbouring allocation.
-    const auto begin = reinterpret_cast<std::uintptr_t>(v.data());
-    const std::uintptr_t lo = (begin + kHuge - 1) & ~(kHuge - 1);
-    const std::uintptr_t hi = (begin + n * sizeof(typename V::value_type)) & ~(kHuge - 1);
-    if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-  }
-#endif
 }
 
 }  // namespace isotile::detail

@@ -56,7 +56,7 @@ if "stages" in s:
     st = s["stages"]
     line += "  | " + " ".join(f"{k} {st[k]:.2f}" for k in
                               ("read", "count", "extract", "index", "records", "write"))
-else:
+elif "read" in s:
     gb_in = d["dims"][0] * d["dims"][1] * d["dims"][2] / 1e9
     # Binary PLY: 12 bytes a vertex, 13 a triangle (plus the header).
     gb_out = (12 * d["vertices"] + 13 * tris) / 1e9
