@@ -174,7 +174,8 @@ Mesh run(const VolumeView& view, const MacetGlOptions& options, McStats* stats, 
   mc.capture_bytes = options.capture_bytes;
   if (o.relax > 0) {
     // As macet(): the relaxed samples are doubles, uploaded as such.
-    const detail::UninitVector<double> samples = detail::relax_pinned_samples(view, o.iso, o.relax);
+    const detail::ScratchVector<double> samples =
+        detail::relax_pinned_samples(view, o.iso, o.relax);
     VolumeView relaxed = view;
     relaxed.data = samples.data();
     relaxed.type = ScalarType::Float64;

@@ -211,9 +211,9 @@ class Extractor {
     for (int64_t r = 0; r < rows; ++r) ei.offset[r + 1] += ei.offset[r];
     const size_t n_edges = ei.offset[rows];
     // Written in full by the next pass (sum and count included), so left uninitialised here.
-    UninitVector<P3> x(n_edges), sum(n_edges);
-    UninitVector<double> t(n_edges);
-    UninitVector<std::uint16_t> count(n_edges);
+    ScratchVector<P3> x(n_edges), sum(n_edges);
+    ScratchVector<double> t(n_edges);
+    ScratchVector<std::uint16_t> count(n_edges);
     auto for_edges = [&](auto&& fn) {
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
         for (int64_t r = range.begin(); r != range.end(); ++r) {
@@ -295,8 +295,8 @@ class Extractor {
   }
 
   // The umbrella sums of the crossings in the mixed cells of cell row (j, k) (see smooth_all).
-  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const UninitVector<P3>& x,
-                 UninitVector<P3>& sum, UninitVector<std::uint16_t>& count) const {
+  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const ScratchVector<P3>& x,
+                 ScratchVector<P3>& sum, ScratchVector<std::uint16_t>& count) const {
     const uint64_t* rows[4] = {grid_.row(j, k), grid_.row(j + 1, k), grid_.row(j, k + 1),
                                grid_.row(j + 1, k + 1)};
     const int64_t r0 = k * ei.ny + j;
@@ -496,7 +496,7 @@ Mesh macet(const VolumeView& view, const MacetOptions& options) {
   if (options.relax > 0) {
     // The relaxed samples are doubles; the Field converts every sample to double anyway, so the
     // arithmetic on unrelaxed samples is unchanged.
-    const UninitVector<double> samples = relax_pinned_samples(view, options.iso, options.relax);
+    const ScratchVector<double> samples = relax_pinned_samples(view, options.iso, options.relax);
     VolumeView relaxed = view;
     relaxed.data = samples.data();
     relaxed.type = ScalarType::Float64;

@@ -20,6 +20,7 @@
 
 #include "core/extract/inside_bits.h"
 #include "core/extract/isovalue_ties.h"
+#include "core/extract/scratch_vector.h"
 #include "core/volume/volume.h"
 
 namespace isotile::detail {
@@ -259,30 +260,6 @@ double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int6
   return straight ? f0 / (f0 - f1) : find_root(field, p0, p1, f0, f1, cache);
 }
 
-// std::allocator that leaves elements default-initialised (trivial types: uninitialised) on
-// resize. For arrays that a parallel pass writes in full before anything reads them, so that no
-// serial zeroing pass runs first and the pages are first touched by the threads that fill them.
-template <class T>
-struct UninitAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = UninitAllocator<U>;
-  };
-  UninitAllocator() = default;
-  template <class U>
-  UninitAllocator(const UninitAllocator<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
-template <class T>
-using UninitVector = std::vector<T, UninitAllocator<T>>;
-
 // Grid vertices touching a crossed edge, inside a box of samples; each gets a dense index (its
 // rank in x-fastest order), found from bit masks and popcounts. Holds one displacement and the
 // value f - iso at the displaced point per vertex.
@@ -291,8 +268,8 @@ struct GridVertices {
   std::int64_t words = 0, ny = 0;
   std::vector<std::uint64_t> bits;    // per row of the box, bit i = local x i (as in BitGrid)
   std::vector<std::uint32_t> prefix;  // vertices before each word
-  UninitVector<P3> disp;              // displacement, voxel units (written by the push)
-  UninitVector<double> value;         // f - iso at the displaced vertex
+  ScratchVector<P3> disp;             // displacement, voxel units (written by the push)
+  ScratchVector<double> value;        // f - iso at the displaced vertex
 
   std::int64_t row(std::int64_t j, std::int64_t k) const {
     return (k - box.lo[2]) * ny + (j - box.lo[1]);

@@ -13,7 +13,7 @@ namespace isotile::detail {
 namespace {
 
 template <class T>
-void relax_typed(const VolumeView& view, double iso, double relax, UninitVector<double>& out) {
+void relax_typed(const VolumeView& view, double iso, double relax, ScratchVector<double>& out) {
   const T* data = view.typed<T>();
   const std::int64_t nx = view.dims[0], ny = view.dims[1], nz = view.dims[2];
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& range) {
@@ -74,9 +74,9 @@ void relax_typed(const VolumeView& view, double iso, double relax, UninitVector<
 
 }  // namespace
 
-UninitVector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax) {
+ScratchVector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax) {
   // Every entry is written by the parallel pass, which also first-touches the pages.
-  UninitVector<double> out(static_cast<std::size_t>(view.sample_count()));
+  ScratchVector<double> out(static_cast<std::size_t>(view.sample_count()));
   visit_scalar(view.type, [&](auto tag) { relax_typed<decltype(tag)>(view, iso, relax, out); });
   return out;
 }

@@ -25,6 +25,6 @@ namespace isotile::detail {
 // The samples of `view` as doubles (x fastest, the view's dims), pinned ones relaxed. A sample
 // whose six neighbours are not all in the view (where the volume goes on) is kept as it is:
 // brick mode grows the halo by one so that such samples never reach an emitted result.
-UninitVector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax);
+ScratchVector<double> relax_pinned_samples(const VolumeView& view, double iso, double relax);
 
 }  // namespace isotile::detail

@@ -763,7 +763,7 @@ class LocalSearch {
   std::vector<P3> dirs_;
   // Crossing positions per crossed edge (global sample coordinates), slots by grid vertex.
   std::vector<std::uint32_t> xoff_;
-  UninitVector<P3> xpos_;
+  ScratchVector<P3> xpos_;
   tbb::enumerable_thread_specific<std::vector<Proposal>> proposals_;
   // Per grid vertex: the colour step (counted over all sweeps) that last moved it, the step at
   // which a visit last left it in place (-1: never, or visited since), and how far around it a
