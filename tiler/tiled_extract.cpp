@@ -35,7 +35,8 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   const std::int64_t total = result.plan.total();
   const std::size_t in_flight = bricks.overlap() ? 2 : 1;
 
-  // Pass 1: count. Two bricks in flight: the next one is read while this one is counted.
+  // Pass 1: count. With overlap, two bricks in flight: the next one is read while this one is
+  // counted.
   auto t0 = Clock::now();
   source.rewind();
   {
@@ -54,8 +55,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
             return {};
           }
           const std::int64_t b = next++;
-          // A buffer is free again once the brick two before is
-          // done: at most two are in flight.
+          // A buffer is free again once the brick two before is done.
           return {b, bricks.read_for_count(b, buffers[static_cast<std::size_t>(b) % in_flight])};
         }) & tbb::make_filter<Read, void>(tbb::filter_mode::serial_in_order, [&](const Read& r) {
           bricks.count(r.brick, r.view);
@@ -69,8 +69,8 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   const std::string header = bricks.header();
   file.write(header.data(), header.size());
 
-  // Pass 2: read, extract and write, a part (a brick, or a z-slice of one) at a time, with the
-  // next part read and the previous one written meanwhile (at most two in flight).
+  // Pass 2: read, extract and write, a part (a brick, or a z-slice of one) at a time; with
+  // overlap, the next part is read and the previous one written meanwhile.
   t0 = Clock::now();
   source.rewind();
   QualityAccumulator quality;
