@@ -96,13 +96,7 @@ Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
 
 DcGlOptions dc_gl_options(const ExtractOptions& o) {
   DcGlOptions d;
-  d.dc.iso = o.iso;
-  d.dc.solver = o.dc_solver;
-  d.dc.keep_quads = o.keep_quads;
-  d.dc.normals = o.normals;
-  d.dc.hermite = o.dc_hermite;
-  d.dc.vertices = o.dc_vertices;
-  d.dc.cells = o.cells;
+  d.dc = dual_contouring_options(o);
   return d;
 }
 
@@ -114,22 +108,18 @@ Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o) {
   return dc_histopyramid(view, dc_gl_options(o));
 }
 
-MacetGlOptions macet_options(const ExtractOptions& o) {
+MacetGlOptions macet_gl_options(const ExtractOptions& o) {
   MacetGlOptions m;
-  m.macet.iso = o.iso;
-  m.macet.normals = o.normals;
-  m.macet.quality = o.quality;
-  m.macet.relax = o.macet_relax;
-  m.macet.cells = o.cells;
+  m.macet = macet_options(o);
   return m;
 }
 
 Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet_geometry_shader(view, macet_options(o));
+  return macet_geometry_shader(view, macet_gl_options(o));
 }
 
 Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet_histopyramid(view, macet_options(o));
+  return macet_histopyramid(view, macet_gl_options(o));
 }
 
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`

@@ -160,11 +160,7 @@ EdgeMethod macet_method(const VolumeView& view, const MacetOptions& o) {
 template <class Path>
 Mesh run(const VolumeView& view, const MacetGlOptions& options, McStats* stats, Path path) {
   const MacetOptions& o = options.macet;
-  if (o.max_sweeps < 0)
-    throw InputError("macet: max_sweeps must not be negative, got " + std::to_string(o.max_sweeps));
-  if (!(o.relax >= 0 && o.relax < 0.5))
-    throw InputError("macet: relax must lie in [0, 0.5) edge lengths, got " +
-                     std::to_string(o.relax));
+  check_macet_options(o);
   McOptions mc;
   mc.iso = o.iso;
   mc.normals = o.normals;

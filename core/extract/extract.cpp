@@ -17,28 +17,12 @@ Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
   return marching_cubes(view, {.iso = o.iso, .normals = o.normals, .cells = o.cells});
 }
 
-DualContouringOptions dc_options(const ExtractOptions& o) {
-  DualContouringOptions dc;
-  dc.iso = o.iso;
-  dc.solver = o.dc_solver;
-  dc.keep_quads = o.keep_quads;
-  dc.normals = o.normals;
-  dc.hermite = o.dc_hermite;
-  dc.vertices = o.dc_vertices;
-  dc.cells = o.cells;
-  return dc;
-}
-
 Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
-  return dual_contouring(view, dc_options(o));
+  return dual_contouring(view, dual_contouring_options(o));
 }
 
 Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet(view, {.iso = o.iso,
-                      .normals = o.normals,
-                      .quality = o.quality,
-                      .relax = o.macet_relax,
-                      .cells = o.cells});
+  return macet(view, macet_options(o));
 }
 
 struct BackendEntry {
@@ -93,6 +77,28 @@ bool usable(const BackendEntry& e, std::string* why, bool* hardware, bool hardwa
 }
 
 }  // namespace
+
+DualContouringOptions dual_contouring_options(const ExtractOptions& o) {
+  DualContouringOptions dc;
+  dc.iso = o.iso;
+  dc.solver = o.dc_solver;
+  dc.keep_quads = o.keep_quads;
+  dc.normals = o.normals;
+  dc.hermite = o.dc_hermite;
+  dc.vertices = o.dc_vertices;
+  dc.cells = o.cells;
+  return dc;
+}
+
+MacetOptions macet_options(const ExtractOptions& o) {
+  MacetOptions m;
+  m.iso = o.iso;
+  m.normals = o.normals;
+  m.quality = o.quality;
+  m.relax = o.macet_relax;
+  m.cells = o.cells;
+  return m;
+}
 
 std::string_view method_name(Method m) {
   return kMethodNames[static_cast<int>(m)];
@@ -180,7 +186,7 @@ int extract_halo(const ExtractOptions& options) {
                          .quality = options.quality,
                          .relax = options.macet_relax});
     case Method::DualContouring:
-      return dual_contouring_halo(dc_options(options));
+      return dual_contouring_halo(dual_contouring_options(options));
   }
   return 2;
 }

@@ -49,6 +49,10 @@ struct ExtractOptions {
 // Samples beyond a brick's cells that `options` needs the view to hold.
 int extract_halo(const ExtractOptions& options);
 
+// The method's own options from `options` (the CPU and the GL backends run them alike).
+DualContouringOptions dual_contouring_options(const ExtractOptions& options);
+MacetOptions macet_options(const ExtractOptions& options);
+
 // The border of the whole volume of `view` for mesh_topology(), so that `watertight` means the
 // same for every method: closed except where the surface leaves the volume. The box is computed
 // as extractors compute positions (vertices on the border compare equal to it); Dual

@@ -486,13 +486,17 @@ int macet_halo(const MacetOptions& options) {
   return 3 + relax;
 }
 
-Mesh macet(const VolumeView& view, const MacetOptions& options) {
+void check_macet_options(const MacetOptions& options) {
   if (options.max_sweeps < 0)
     throw InputError("macet: max_sweeps must not be negative, got " +
                      std::to_string(options.max_sweeps));
   if (!(options.relax >= 0 && options.relax < 0.5))
     throw InputError("macet: relax must lie in [0, 0.5) edge lengths, got " +
                      std::to_string(options.relax));
+}
+
+Mesh macet(const VolumeView& view, const MacetOptions& options) {
+  check_macet_options(options);
   if (options.relax > 0) {
     // The relaxed samples are doubles; the Field converts every sample to double anyway, so the
     // arithmetic on unrelaxed samples is unchanged.

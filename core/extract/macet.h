@@ -57,4 +57,8 @@ int macet_halo(const MacetOptions& options);
 // the mesh would need more than 2^32 - 1 vertices.
 Mesh macet(const VolumeView& view, const MacetOptions& options);
 
+// InputError for options macet() refuses (negative max_sweeps, relax outside [0, 0.5)); for
+// other implementations of the method (the GL paths).
+void check_macet_options(const MacetOptions& options);
+
 }  // namespace isotile

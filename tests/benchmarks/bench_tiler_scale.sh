@@ -67,21 +67,15 @@ print(line, flush=True)
 EOF
 }
 
-for bin in "$ISOTILE" $OTHER; do
-  tag=$( [ "$bin" = "$ISOTILE" ] && echo this || echo other )
-  run "$tag mc --memory 1GiB" "$bin" "$OUT" --memory 1GiB
-done
-for bin in "$ISOTILE" $OTHER; do
-  tag=$( [ "$bin" = "$ISOTILE" ] && echo this || echo other )
-  run "$tag macet --memory 1GiB" "$bin" "$OUT" --method macet --memory 1GiB
-done
-if [ -n "$DISK" ]; then
-  for bin in "$ISOTILE" $OTHER; do
-    tag=$( [ "$bin" = "$ISOTILE" ] && echo this || echo other )
-    run "$tag mc 1GiB to disk" "$bin" "$DISK" --memory 1GiB
-  done
-fi
-for bin in "$ISOTILE" $OTHER; do
-  tag=$( [ "$bin" = "$ISOTILE" ] && echo this || echo other )
-  run "$tag mc in core" "$bin" "$OUT"
-done
+both() {  # label outdir args...: this build, then OTHER_ISOTILE, side by side
+  label=$1
+  dir=$2
+  shift 2
+  run "this $label" "$ISOTILE" "$dir" "$@"
+  if [ -n "$OTHER" ]; then run "other $label" "$OTHER" "$dir" "$@"; fi
+}
+
+both "mc --memory 1GiB" "$OUT" --memory 1GiB
+both "macet --memory 1GiB" "$OUT" --method macet --memory 1GiB
+if [ -n "$DISK" ]; then both "mc 1GiB to disk" "$DISK" --memory 1GiB; fi
+both "mc in core" "$OUT"
