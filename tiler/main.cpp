@@ -298,13 +298,14 @@ json distributed_json(const DistributedResult& d) {
 }
 #endif
 
-// Out of core: brick by brick within --memory, streamed into the output file.
-// Bricks allocate and free arrays of the same sizes, brick after brick. glibc maps every block
-// above 32 MiB afresh and unmaps it when freed, so each brick's arrays were faulted in and
-// zero-filled by the kernel again: 2.0M page faults and 4.5 s of system time on a 4 GiB volume
-// (docs/tiler.md). Kept on the heap, they reuse the pages of the brick before; peak RSS is the
-// same, since the largest brick's arrays were resident at once anyway. One arena: a worker
-// thread's arena maps large blocks whatever M_MMAP_MAX says.
+// glibc maps every large block afresh and unmaps it when freed, so each array an extraction
+// allocates after freeing another is faulted in and zero-filled by the kernel again. Out of core,
+// bricks allocate and free arrays of the same sizes, brick after brick: 2.0M page faults and 4.5 s
+// of system time on a 4 GiB volume (docs/tiler.md). In core, the extractors' passes free scratch
+// tables before the next allocates (Macet's smoothing tables, then the mesh: 11% of a one-shot
+// Macet run on bonsai). Kept on the heap, later arrays reuse the freed pages; peak RSS is the
+// same, since the freed arrays were resident at once anyway. One arena: a worker thread's arena
+// maps large blocks whatever M_MMAP_MAX says.
 void keep_freed_memory_for_reuse() {
 #ifdef __GLIBC__
   mallopt(M_ARENA_MAX, 1);
@@ -313,9 +314,9 @@ void keep_freed_memory_for_reuse() {
 #endif
 }
 
+// Out of core: brick by brick within --memory, streamed into the output file.
 int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, MeshFormat format,
                       Clock::time_point t_total) {
-  keep_freed_memory_for_reuse();
   TiledOptions to;
   to.extract = options;
   to.memory = parse_memory_size(args.memory);
@@ -439,6 +440,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
 
 int run_extract(const ExtractArgs& args) {
   const auto t_total = Clock::now();
+  keep_freed_memory_for_reuse();
   // Fail on a bad output name or an unavailable method before spending time on reading.
   const MeshFormat format = mesh_format_from_path(args.output);
   ExtractOptions options;

@@ -1,6 +1,7 @@
 #include "core/extract/macet.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <bit>
@@ -56,10 +57,6 @@ class Extractor {
   }
 
  private:
-  bool inside(int64_t i, int64_t j, int64_t k) const {
-    return (grid_.row(j, k)[i >> 6] >> (i & 63)) & 1;
-  }
-
   // Touched samples of word w of row (j, k): those with a neighbour on the other side.
   uint64_t touched_word(int64_t j, int64_t k, int64_t w) const {
     const uint64_t* a = grid_.row(j, k);
@@ -144,9 +141,11 @@ class Extractor {
         q[a] += dir;
         if (q[a] < 0 || q[a] >= view_.dims[a]) continue;
         const double g = field_.sample(q[0], q[1], q[2]) - field_.iso;
-        if ((g >= 0) == in) continue;
+        // Selected rather than branched on (the branches are unpredictable); subtracting a zero
+        // push leaves d[a] unchanged, so the sums are those of the skipped terms.
         const double t = f / (f - g);  // the crossing, in edge lengths from this vertex
-        if (t < kMacetReach) d[a] -= dir * (kMacetReach - t);
+        const bool pushes = (g >= 0) != in && t < kMacetReach;
+        d[a] -= dir * (pushes ? kMacetReach - t : 0.0);
       }
     const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     if (len > kMacetPushCap)
@@ -183,7 +182,7 @@ class Extractor {
   // The crossed edges of the whole view, ranked like the emitted ones.
   struct EdgeIndex {
     int64_t ny = 0, words = 0;
-    std::vector<EdgeWord> bits;
+    ScratchVector<EdgeWord> bits;  // written in full by row_edges_in
     std::vector<uint64_t> offset;  // per point row
     uint64_t operator()(int64_t i, int64_t j, int64_t k, int a) const {
       const int64_t r = k * ny + j;
@@ -196,7 +195,7 @@ class Extractor {
   // there are known), which is close enough to steer the smoothing and needs no root search.
   void smooth_all() {
     const int64_t ny = grid_.ny, nz = grid_.nz, words = grid_.words, rows = ny * nz;
-    EdgeIndex ei;
+    EdgeIndex& ei = edge_index_;
     ei.ny = ny;
     ei.words = words;
     ei.bits.resize(static_cast<size_t>(rows * words));
@@ -245,7 +244,6 @@ class Extractor {
       sum[idx] = {0, 0, 0};
       count[idx] = 0;
     });
-    const int64_t dims[3] = {grid_.nx, ny, nz};
     // Umbrella sums, cell by cell: each triangle adds its other two crossings to each of its
     // corners (so a neighbour counts once per shared triangle). Cell slabs k and k + 2 touch
     // disjoint point slabs, so the slabs of one global parity run in parallel, each slab in
@@ -259,23 +257,50 @@ class Extractor {
           for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j) sum_cells(j, k, ei, x, sum, count);
       });
     }
-    // Each move reads only its own displacement and the sums above: updated in place.
+    // Each move reads only its own displacement and the sums above: updated in place. A grid
+    // vertex's crossed edges are found in the edge index's masks, ranked as edge_rank does:
+    // along +x, +y, +z in row (j, k) at x = i, along -x there at i - 1, along -y in row (j - 1, k)
+    // and along -z in row (j, k - 1), both at i.
     for_grid_vertices([&](int64_t i, int64_t j, int64_t k, uint32_t idx) {
-      const bool in = inside(i, j, k);
+      const int64_t w = i >> 6, b = i & 63, r = k * ny + j;
+      const uint64_t bit = uint64_t{1} << b, below = bit - 1;
+      const EdgeWord& here = ei.bits[static_cast<size_t>(r * words + w)];
+      const uint64_t base = ei.offset[r] + here.prefix + std::popcount(here.mask[0] & below) +
+                            std::popcount(here.mask[1] & below) +
+                            std::popcount(here.mask[2] & below);
+      // The crossed edges in the order their terms are added: -x, +x, -y, +y, -z, +z (odd slots:
+      // edges leaving the vertex).
+      uint64_t e[6];
+      unsigned crossed = 0;
+      if (i > 0 && ((b > 0 ? here.mask[0] << 1
+                           : ei.bits[static_cast<size_t>(r * words + w - 1)].mask[0] >> 63) &
+                    bit)) {
+        e[0] = ei(i - 1, j, k, 0);
+        crossed |= 1;
+      }
+      const uint64_t has_x = (here.mask[0] >> b) & 1, has_y = (here.mask[1] >> b) & 1;
+      if (has_x) e[1] = base, crossed |= 2;
+      if (j > 0) {
+        if (ei.bits[static_cast<size_t>((r - 1) * words + w)].mask[1] & bit)
+          e[2] = ei(i, j - 1, k, 1), crossed |= 4;
+      }
+      if (has_y) e[3] = base + has_x, crossed |= 8;
+      if (k > 0) {
+        if (ei.bits[static_cast<size_t>((r - ny) * words + w)].mask[2] & bit)
+          e[4] = ei(i, j, k - 1, 2), crossed |= 16;
+      }
+      if ((here.mask[2] >> b) & 1) e[5] = base + has_x + has_y, crossed |= 32;
       P3 acc{0, 0, 0};
       double weight = 0;
-      for (int a = 0; a < 3; ++a)
-        for (int dir = -1; dir <= 1; dir += 2) {
-          int64_t q[3] = {i, j, k};
-          q[a] += dir;
-          if (q[a] < 0 || q[a] >= dims[a] || inside(q[0], q[1], q[2]) == in) continue;
-          const uint64_t e = dir > 0 ? ei(i, j, k, a) : ei(q[0], q[1], q[2], a);
-          // How far the crossing follows this end point.
-          const double wt = std::clamp(dir > 0 ? 1 - t[e] : t[e], 0.0, 1.0);
-          const double n = count[e];
-          for (int c = 0; c < 3; ++c) acc[c] += wt * (n > 0 ? sum[e][c] / n - x[e][c] : 0.0);
-          weight += wt;
-        }
+      for (unsigned m = crossed; m; m &= m - 1) {
+        const int slot = std::countr_zero(m);
+        const uint64_t ed = e[slot];
+        // How far the crossing follows this end point.
+        const double wt = std::clamp(slot & 1 ? 1 - t[ed] : t[ed], 0.0, 1.0);
+        const double n = count[ed];
+        for (int c = 0; c < 3; ++c) acc[c] += wt * (n > 0 ? sum[ed][c] / n - x[ed][c] : 0.0);
+        weight += wt;
+      }
       if (weight <= 0) return;
       for (double& c : acc) c /= weight;
       const P3 g = field_.gradient(i, j, k);
@@ -344,7 +369,7 @@ class Extractor {
     *total = n;
   }
 
-  P3 crossing(int64_t i, int64_t j, int64_t k, int a) const {
+  P3 crossing(int64_t i, int64_t j, int64_t k, int a, typename Field<T>::Corners& cache) const {
     int64_t q[3] = {i, j, k};
     ++q[a];
     const uint32_t i0 = gv_.index(i, j, k), i1 = gv_.index(q[0], q[1], q[2]);
@@ -355,7 +380,7 @@ class Extractor {
     const P3 p1 = field_.global(q[0], q[1], q[2], d1);
     const bool straight = d0 == P3{0, 0, 0} && d1 == P3{0, 0, 0};
     const int64_t s[3] = {i, j, k};
-    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight);
+    const double t = edge_crossing(field_, grid_, s, q, p0, p1, f0, f1, straight, &cache);
     return {p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]), p0[2] + t * (p1[2] - p0[2])};
   }
 
@@ -374,38 +399,56 @@ class Extractor {
   void emit(Mesh& mesh) {
     const int64_t ny = cells_.extent(1) + 1, rows = ny * (cells_.extent(2) + 1);
     const int64_t words = grid_.words;
-    std::vector<EdgeWord> edges(static_cast<size_t>(rows * words));
-    std::vector<uint64_t> vertex_offset(static_cast<size_t>(rows) + 1, 0),
-        triangle_offset(static_cast<size_t>(rows) + 1, 0);
+    // With every cell of the view emitted (in core), the emitted edges, in their order, are the
+    // smoothing's edge index.
+    const bool whole = cells_.lo == Index3{0, 0, 0} &&
+                       cells_.hi == Index3{grid_.nx - 1, grid_.ny - 1, grid_.nz - 1};
+    std::vector<EdgeWord> own_edges;
+    std::vector<uint64_t> own_offset;
+    if (!whole) {
+      own_edges.resize(static_cast<size_t>(rows * words));
+      own_offset.assign(static_cast<size_t>(rows) + 1, 0);
+    }
+    const EdgeWord* edges = whole ? edge_index_.bits.data() : own_edges.data();
+    const uint64_t* vertex_offset = whole ? edge_index_.offset.data() : own_offset.data();
+    std::vector<uint64_t> triangle_offset(static_cast<size_t>(rows) + 1, 0);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        uint32_t n = 0;
-        row_edges_in(j, k, cells_.lo[0], cells_.hi[0], edges.data() + r * words, &n);
-        vertex_offset[r + 1] = n;
+        if (!whole) {
+          uint32_t n = 0;
+          row_edges_in(j, k, cells_.lo[0], cells_.hi[0], own_edges.data() + r * words, &n);
+          own_offset[r + 1] = n;
+        }
         if (j < cells_.hi[1] && k < cells_.hi[2]) triangle_offset[r + 1] = count_triangles(j, k);
       }
     });
     for (int64_t r = 0; r < rows; ++r) {
-      vertex_offset[r + 1] += vertex_offset[r];
+      if (!whole) own_offset[r + 1] += own_offset[r];
       triangle_offset[r + 1] += triangle_offset[r];
     }
-    const uint64_t n_vertices = vertex_offset[rows];
+    const uint64_t n_vertices = vertex_offset[rows], n_triangles = triangle_offset[rows];
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
-    mesh.positions.resize(n_vertices);
-    if (options_.normals) mesh.normals.resize(n_vertices);
-    mesh.triangles.resize(triangle_offset[rows]);
+    // Zeroed side by side rather than one after the other (std::vector zeroes what it allocates).
+    reserve_on_caller(mesh.positions, n_vertices);
+    if (options_.normals) reserve_on_caller(mesh.normals, n_vertices);
+    reserve_on_caller(mesh.triangles, n_triangles);
+    tbb::parallel_invoke(
+        [&] {
+          mesh.positions.resize(n_vertices);
+          if (options_.normals) mesh.normals.resize(n_vertices);
+        },
+        [&] { mesh.triangles.resize(n_triangles); });
 
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        fill_vertices(j, k, edges.data() + r * words, vertex_offset[r], mesh);
+        fill_vertices(j, k, edges + r * words, vertex_offset[r], mesh);
         if (j < cells_.hi[1] && k < cells_.hi[2]) {
-          const EdgeWord* e[4] = {edges.data() + r * words, edges.data() + (r + 1) * words,
-                                  edges.data() + (r + ny) * words,
-                                  edges.data() + (r + ny + 1) * words};
+          const EdgeWord* e[4] = {edges + r * words, edges + (r + 1) * words,
+                                  edges + (r + ny) * words, edges + (r + ny + 1) * words};
           const uint64_t base[4] = {vertex_offset[r], vertex_offset[r + 1], vertex_offset[r + ny],
                                     vertex_offset[r + ny + 1]};
           fill_triangles(j, k, e, base, mesh.triangles.data() + triangle_offset[r]);
@@ -415,6 +458,8 @@ class Extractor {
   }
 
   void fill_vertices(int64_t j, int64_t k, const EdgeWord* e, uint64_t index, Mesh& mesh) const {
+    // Neighbouring crossings' root searches often start in the same cell.
+    typename Field<T>::Corners cache;
     for (int64_t w = cells_.lo[0] >> 6; w <= cells_.hi[0] >> 6; ++w) {
       const uint64_t* mask = e[w].mask;
       for (uint64_t m = mask[0] | mask[1] | mask[2]; m; m &= m - 1) {
@@ -422,7 +467,7 @@ class Extractor {
         const int64_t i = w * 64 + b;
         for (int a = 0; a < 3; ++a) {
           if (!((mask[a] >> b) & 1)) continue;
-          const P3 p = crossing(i, j, k, a);
+          const P3 p = crossing(i, j, k, a, cache);
           Vec3f& pos = mesh.positions[index];
           for (int c = 0; c < 3; ++c)
             pos[c] = static_cast<float>(view_.origin[c] + view_.spacing[c] * p[c]);
@@ -468,6 +513,7 @@ class Extractor {
   BitGrid grid_;
   Box3 cells_;
   GridVertices gv_;
+  EdgeIndex edge_index_;  // the view's crossed edges, from smooth_all
 };
 
 }  // namespace

@@ -214,18 +214,16 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
                p0[2] + t * (p1[2] - p0[2])};
     const double f = field.value(p, corners);
     if (std::abs(f) <= tol) break;
-    // Inside is f >= 0, as in the classification.
-    if ((f >= 0) == (flo >= 0)) {
-      lo = t;
-      flo = f;
-      if (side == -1) fhi *= 0.5;
-      side = -1;
-    } else {
-      hi = t;
-      fhi = f;
-      if (side == 1) flo *= 0.5;
-      side = 1;
-    }
+    // Inside is f >= 0, as in the classification. The Illinois step, selected rather than
+    // branched on (its branches are unpredictable): the end that keeps its side twice in a row
+    // has its value halved.
+    const bool same = (f >= 0) == (flo >= 0);
+    const double kept_flo = side == 1 ? flo * 0.5 : flo, kept_fhi = side == -1 ? fhi * 0.5 : fhi;
+    lo = same ? t : lo;
+    hi = same ? hi : t;
+    flo = same ? f : kept_flo;
+    fhi = same ? kept_fhi : f;
+    side = same ? -1 : 1;
   }
   return t;
 }
