@@ -331,17 +331,36 @@ inline bool examine_fast(std::uint32_t v, std::size_t degree, const Side* sides,
   const std::uint32_t* nexts = next;
   const std::uint32_t* prevs = prev;
 #endif
+  // Row i of the next == previous matrix: the corners whose face enters v from next[i]. Every
+  // edge at v has one face or two opposite ones when no row and no column has two bits, and no
+  // two next (or previous) vertices are equal. Equal next vertices have equal rows, so only
+  // those with empty rows (boundary edges) can still be equal past the first test; likewise
+  // previous vertices with empty columns.
   std::uint8_t after[kFastDegree];
   std::uint32_t entered = 0;  // corners whose face follows another's around v
+  std::uint32_t open = 0;     // corners whose face no other follows
+  std::uint32_t twice = 0;
   for (std::size_t i = 0; i < degree; ++i) {
-    const std::uint32_t bit = std::uint32_t{1} << i;
     const std::uint32_t match = equal_mask(prevs, blocks, next[i]);
-    if (equal_mask(nexts, blocks, next[i]) != bit || equal_mask(prevs, blocks, prev[i]) != bit ||
-        (match & (match - 1)) != 0) {
-      return false;
-    }
+    twice |= (match & (match - 1)) | (entered & match);
     entered |= match;
+    open |= std::uint32_t{match == 0} << i;
     after[i] = match ? static_cast<std::uint8_t>(std::countr_zero(match)) : kFastDegree;
+  }
+  if (twice) return false;
+  const std::uint32_t all = (std::uint32_t{1} << degree) - 1;
+  const std::uint32_t heads = all & ~entered;
+  if (open & (open - 1)) {
+    for (std::uint32_t m = open; m; m &= m - 1) {
+      const int i = std::countr_zero(m);
+      if ((equal_mask(nexts, blocks, next[i]) & open) != (std::uint32_t{1} << i)) return false;
+    }
+  }
+  if (heads & (heads - 1)) {
+    for (std::uint32_t m = heads; m; m &= m - 1) {
+      const int i = std::countr_zero(m);
+      if ((equal_mask(prevs, blocks, prev[i]) & heads) != (std::uint32_t{1} << i)) return false;
+    }
   }
   Counts here;
   for (std::size_t i = 0; i < degree; ++i) {
@@ -350,20 +369,21 @@ inline bool examine_fast(std::uint32_t v, std::size_t degree, const Side* sides,
       if (after[i] == kFastDegree) ctx.boundary(v, next[i], here);
     }
     // An edge entering v that no face leaves v by: a boundary edge of its own.
-    if ((entered >> i & 1) == 0 && prev[i] > v) {
+    if ((heads >> i & 1) != 0 && prev[i] > v) {
       ++here.edges;
       ctx.boundary(v, prev[i], here);
     }
   }
   if (degree > 1) {
-    const std::uint32_t all = (std::uint32_t{1} << degree) - 1;
-    const std::uint32_t heads = all & ~entered;
     bool one_fan = std::popcount(heads) <= 1;
     if (one_fan) {
       // From the chain's head (or anywhere on a cycle) the fan must reach every face.
       const std::size_t start = heads ? std::countr_zero(heads) : 0;
       std::size_t reached = 1;
-      for (std::size_t i = after[start]; i != kFastDegree && i != start; i = after[i]) ++reached;
+      for (std::size_t i = after[start]; i != kFastDegree && i != start && reached <= degree;
+           i = after[i]) {
+        ++reached;
+      }
       one_fan = reached == degree;
     }
     if (!one_fan) ++here.nonmanifold_vertices;
