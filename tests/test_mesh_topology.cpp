@@ -1,10 +1,12 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <random>
 
 #include "core/errors.h"
@@ -292,8 +294,9 @@ TEST(MeshTopology, BadIndex) {
 }
 
 // Straightforward reference: an edge map over all half-edges and, per vertex, an O(d^2)
-// union-find of its corners.
-TopologyStats reference(const Mesh& m) {
+// union-find of its corners. A boundary edge is border when both ends lie on one face of `box`.
+TopologyStats reference(const Mesh& m,
+                        const std::optional<std::array<Vec3f, 2>>& box = std::nullopt) {
   std::vector<std::vector<std::uint32_t>> faces;
   for (const Tri& t : m.triangles) faces.push_back({t[0], t[1], t[2]});
   for (const Quad& q : m.quads) faces.push_back({q[0], q[1], q[2], q[3]});
@@ -310,8 +313,20 @@ TopologyStats reference(const Mesh& m) {
   TopologyStats s;
   s.faces = faces.size();
   s.edges = edges.size();
+  auto on_box_face = [&](std::uint32_t a, std::uint32_t b) {
+    for (int axis = 0; axis < 3; ++axis) {
+      for (int side = 0; side < 2; ++side) {
+        const float plane = (*box)[side][axis];
+        if (m.positions[a][axis] == plane && m.positions[b][axis] == plane) return true;
+      }
+    }
+    return false;
+  };
   for (const auto& [key, dirs] : edges) {
-    if (dirs.size() == 1) ++s.boundary_edges;
+    if (dirs.size() == 1) {
+      ++s.boundary_edges;
+      if (box && on_box_face(key.first, key.second)) ++s.border_boundary_edges;
+    }
     if (dirs.size() > 2) ++s.nonmanifold_edges;
     if (dirs.size() == 2 && dirs[0] == dirs[1]) ++s.inconsistently_oriented_edges;
   }
@@ -360,7 +375,25 @@ TopologyStats reference(const Mesh& m) {
   }
   s.euler = static_cast<std::int64_t>(s.vertices) - static_cast<std::int64_t>(s.edges) +
             static_cast<std::int64_t>(s.faces);
+  s.closed = s.boundary_edges == 0 && s.nonmanifold_edges == 0;
+  s.watertight = s.boundary_edges == s.border_boundary_edges && s.nonmanifold_edges == 0;
   return s;
+}
+
+void expect_same(const TopologyStats& got, const TopologyStats& want) {
+  EXPECT_EQ(got.vertices, want.vertices);
+  EXPECT_EQ(got.unreferenced_vertices, want.unreferenced_vertices);
+  EXPECT_EQ(got.edges, want.edges);
+  EXPECT_EQ(got.faces, want.faces);
+  EXPECT_EQ(got.boundary_edges, want.boundary_edges);
+  EXPECT_EQ(got.border_boundary_edges, want.border_boundary_edges);
+  EXPECT_EQ(got.nonmanifold_edges, want.nonmanifold_edges);
+  EXPECT_EQ(got.nonmanifold_vertices, want.nonmanifold_vertices);
+  EXPECT_EQ(got.inconsistently_oriented_edges, want.inconsistently_oriented_edges);
+  EXPECT_EQ(got.components, want.components);
+  EXPECT_EQ(got.euler, want.euler);
+  EXPECT_EQ(got.closed, want.closed);
+  EXPECT_EQ(got.watertight, want.watertight);
 }
 
 TEST(MeshTopology, MatchesReferenceOnRandomMeshes) {
@@ -416,6 +449,166 @@ TEST(MeshTopology, DeterministicAcrossThreadCounts) {
   EXPECT_EQ(one.inconsistently_oriented_edges, many.inconsistently_oriented_edges);
   EXPECT_EQ(one.components, many.components);
   EXPECT_EQ(one.euler, many.euler);
+}
+
+// A random mesh for the reference comparisons: a dense soup (much non-manifoldness, faces that
+// repeat a vertex) or a damaged torus (flipped and missing faces, unreferenced vertices), its
+// vertices on the points of a 3x3x3 grid so that some boundary edges lie on the faces of the box
+// [0, 2]^3.
+Mesh random_mesh(std::mt19937& rng, int trial) {
+  Mesh m;
+  if (trial % 2 == 0) {
+    const std::uint32_t nv = 3 + rng() % 30;
+    m.positions.resize(nv);
+    auto v = [&] { return static_cast<std::uint32_t>(rng() % nv); };
+    for (std::uint32_t i = rng() % 40; i > 0; --i) m.triangles.push_back({v(), v(), v()});
+    for (std::uint32_t i = rng() % 10; i > 0; --i) m.quads.push_back({v(), v(), v(), v()});
+  } else {
+    m = torus(3 + rng() % 6, 3 + rng() % 6, rng() % 2 == 0);
+    for (auto& t : m.triangles) {
+      if (rng() % 8 == 0) std::swap(t[0], t[1]);
+    }
+    for (auto& q : m.quads) {
+      if (rng() % 8 == 0) std::swap(q[0], q[2]);
+    }
+    if (!m.triangles.empty()) m.triangles.erase(m.triangles.begin() + rng() % m.triangles.size());
+    if (!m.quads.empty()) m.quads.erase(m.quads.begin() + rng() % m.quads.size());
+    m.positions.resize(m.positions.size() + rng() % 3);
+  }
+  for (Vec3f& p : m.positions) {
+    p = {float(rng() % 3), float(rng() % 3), float(rng() % 3)};
+  }
+  if (trial % 3 == 0) {
+    std::shuffle(m.triangles.begin(), m.triangles.end(), rng);
+    std::shuffle(m.quads.begin(), m.quads.end(), rng);
+  }
+  return m;
+}
+
+TEST(MeshTopology, MatchesReferenceInSmallChunks) {
+  // Chunks of a few faces leave most vertices with faces in several chunks: the pass over such
+  // shared vertices, the components linked across chunks, and the fast and the general
+  // examination of a vertex all run, on meshes with every kind of defect.
+  std::mt19937 rng(23);
+  const std::array<Vec3f, 2> box{Vec3f{0, 0, 0}, Vec3f{2, 2, 2}};
+  for (int trial = 0; trial < 150; ++trial) {
+    SCOPED_TRACE(trial);
+    const Mesh m = random_mesh(rng, trial);
+    const TopologyStats want = reference(m, box);
+    for (std::size_t chunk : {1, 2, 5, 0}) {
+      SCOPED_TRACE(chunk);
+      TopologyOptions options;
+      options.border_box = box;
+      options.chunk_faces = chunk;
+      expect_same(mesh_topology(m, options), want);
+    }
+  }
+}
+
+// n triangles around vertex 0, wound alike; `closed`: the last one meets the first one.
+Mesh fan(std::uint32_t n, bool closed) {
+  Mesh m;
+  const std::uint32_t rim = closed ? n : n + 1;
+  m.positions.push_back({0, 0, 1});
+  for (std::uint32_t i = 0; i < rim; ++i) {
+    const double a = 2 * M_PI * i / (rim + (closed ? 0 : 1));
+    m.positions.push_back({float(std::cos(a)), float(std::sin(a)), 0});
+  }
+  for (std::uint32_t i = 0; i < n; ++i) m.triangles.push_back({0, 1 + i, 1 + (i + 1) % rim});
+  return m;
+}
+
+// Appends `part`'s vertices and faces to m.
+void append(Mesh& m, const Mesh& part, bool share_vertex_0) {
+  const auto offset = static_cast<std::uint32_t>(m.positions.size());
+  auto map = [&](std::uint32_t v) { return share_vertex_0 && v == 0 ? 0 : v + offset; };
+  m.positions.insert(m.positions.end(), part.positions.begin(), part.positions.end());
+  for (const Tri& t : part.triangles) m.triangles.push_back({map(t[0]), map(t[1]), map(t[2])});
+}
+
+TEST(MeshTopology, FansOfEveryDegree) {
+  // Around the centre up to 16 faces take the fast path, more the general one; both must agree
+  // with the counts worked out by hand.
+  for (std::uint32_t n : {1u, 2u, 3u, 15u, 16u, 17u, 40u}) {
+    for (bool closed : {false, true}) {
+      if (closed && n < 3) continue;
+      SCOPED_TRACE(std::to_string(n) + (closed ? " closed" : " open"));
+      const Mesh m = fan(n, closed);
+      for (std::size_t chunk : {0, 1}) {
+        TopologyOptions options;
+        options.chunk_faces = chunk;
+        const TopologyStats s = mesh_topology(m, options);
+        EXPECT_EQ(s.vertices, closed ? n + 1 : n + 2);
+        EXPECT_EQ(s.edges, closed ? 2 * n : 2 * n + 1);
+        EXPECT_EQ(s.boundary_edges, closed ? n : n + 2);
+        EXPECT_EQ(s.euler, 1);
+        EXPECT_EQ(s.nonmanifold_vertices, 0u);
+        EXPECT_EQ(s.nonmanifold_edges, 0u);
+        EXPECT_EQ(s.inconsistently_oriented_edges, 0u);
+        EXPECT_EQ(s.components, 1u);
+        expect_same(s, reference(m));
+      }
+    }
+  }
+}
+
+TEST(MeshTopology, SeveralFansAtOneVertex) {
+  // Vertex 0 is the centre of each part. A closed fan and an open one (a cycle and a chain of
+  // faces), two closed ones (two cycles: equal counts of faces and of links between them, like a
+  // single closed fan), two open ones, and the same past the fast path's degree.
+  struct Case {
+    std::uint32_t a;
+    bool a_closed;
+    std::uint32_t b;
+    bool b_closed;
+  };
+  for (const Case c : {Case{6, true, 1, false}, Case{5, true, 4, true}, Case{3, false, 2, false},
+                       Case{8, true, 8, true}, Case{12, true, 9, false}}) {
+    SCOPED_TRACE(std::to_string(c.a) + " " + std::to_string(c.b));
+    Mesh m = fan(c.a, c.a_closed);
+    append(m, fan(c.b, c.b_closed), true);
+    for (std::size_t chunk : {0, 1, 4}) {
+      TopologyOptions options;
+      options.chunk_faces = chunk;
+      const TopologyStats s = mesh_topology(m, options);
+      EXPECT_EQ(s.nonmanifold_vertices, 1u);
+      EXPECT_EQ(s.nonmanifold_edges, 0u);
+      EXPECT_EQ(s.components, 1u);
+      expect_same(s, reference(m));
+    }
+  }
+}
+
+TEST(MeshTopology, SameForAnyChunkSizeAndThreadCount) {
+  // A larger damaged surface: two tori, one with flipped and missing faces, fans glued on, and
+  // three faces on one of its edges, faces interleaved in memory so that chunks mix them.
+  Mesh m = torus(60, 40, false);
+  for (std::size_t t = 0; t < m.triangles.size(); t += 37)
+    std::swap(m.triangles[t][0], m.triangles[t][1]);
+  for (std::size_t t = 0; t < m.triangles.size(); t += 101) m.triangles[t] = {0, 0, 0};
+  append(m, torus(20, 10, false), false);
+  append(m, fan(7, true), true);
+  append(m, fan(5, false), false);
+  m.triangles.push_back({m.triangles[500][1], m.triangles[500][0], 2});
+  m.positions.resize(m.positions.size() + 2);
+  std::mt19937 rng(3);
+  std::shuffle(m.triangles.begin() + m.triangles.size() / 2, m.triangles.end(), rng);
+  const TopologyStats want = reference(m);
+  EXPECT_GT(want.nonmanifold_vertices, 0u);
+  EXPECT_GT(want.nonmanifold_edges, 0u);
+  EXPECT_GT(want.inconsistently_oriented_edges, 0u);
+  EXPECT_GT(want.boundary_edges, 0u);
+  EXPECT_GE(want.unreferenced_vertices, 2u);
+  for (int threads : {1, 2, 3}) {
+    for (std::size_t chunk : {1, 3, 64, 1000, 0}) {
+      SCOPED_TRACE(std::to_string(threads) + " threads, chunks of " + std::to_string(chunk));
+      TopologyOptions options;
+      options.chunk_faces = chunk;
+      TopologyStats got;
+      tbb::task_arena(threads).execute([&] { got = mesh_topology(m, options); });
+      expect_same(got, want);
+    }
+  }
 }
 
 }  // namespace

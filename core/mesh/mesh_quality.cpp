@@ -8,6 +8,9 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
 #include <vector>
 
 namespace isotile {
@@ -80,7 +83,9 @@ void for_each_quality(const Mesh& mesh, std::size_t begin, std::size_t end, F&& 
 // Exact quantiles without keeping every value: a fine histogram finds the bin that holds each
 // rank, a second pass collects only the values of those bins, and the rank is taken among them.
 // Values lie in [0, 1], where a double's bits order like the double; a bin is one of 2^10 slices
-// of an octave, over the 32 octaves below 1, all smaller values (0 included) in bin 0.
+// of an octave, over the 32 octaves below 1, all smaller values (0 included) in bin 0. The first
+// pass keeps each triangle's bin (2 bytes a triangle), so that the second one computes again only
+// the values it keeps.
 constexpr int kOctaves = 32;
 constexpr int kSliceBits = 10;
 constexpr std::size_t kFineBins = 1 + ((kOctaves + 1) << kSliceBits);
@@ -95,6 +100,8 @@ std::size_t fine_bin(double v) {
 }
 
 using FineHistogram = std::vector<std::uint64_t>;
+using FineBin = std::uint16_t;
+static_assert(kFineBins <= std::numeric_limits<FineBin>::max() + std::size_t{1});
 
 }  // namespace
 
@@ -109,6 +116,7 @@ QualityStats triangle_quality(const Mesh& mesh) {
   // Integer counts: their sum is the same however chunks are spread over threads.
   tbb::enumerable_thread_specific<FineHistogram> fine_local(
       [] { return FineHistogram(kFineBins, 0); });
+  auto bins = std::make_unique_for_overwrite<FineBin[]>(n);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, chunks, 1),
       [&](const tbb::blocked_range<std::size_t>& r) {
@@ -116,13 +124,16 @@ QualityStats triangle_quality(const Mesh& mesh) {
         for (std::size_t c = r.begin(); c < r.end(); ++c) {
           ChunkStats& s = partial[c];
           const std::size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
+          std::size_t i = begin;
           for_each_quality(mesh, begin, end, [&](double v) {
             s.sum += v;
             s.min = std::min(s.min, v);
             s.max = std::max(s.max, v);
             if (v < 1e-6) ++s.degenerate;
             s.histogram[std::min<std::size_t>(static_cast<std::size_t>(v * 20), 19)]++;
-            ++fine[fine_bin(v)];
+            const std::size_t b = fine_bin(v);
+            ++fine[b];
+            bins[i++] = static_cast<FineBin>(b);
           });
         }
       },
@@ -163,16 +174,16 @@ QualityStats triangle_quality(const Mesh& mesh) {
         auto& picked = picked_local.local();
         for (std::size_t c = r.begin(); c < r.end(); ++c) {
           const std::size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
-          for_each_quality(mesh, begin, end, [&](double v) {
-            const std::size_t b = fine_bin(v);
+          for (std::size_t i = begin; i < end; ++i) {
+            const std::size_t b = bins[i];
             // Ranks that share a bin share its values: kept once, under the first.
             for (std::size_t k = 0; k < bin.size(); ++k) {
               if (b == bin[k]) {
-                picked[k].push_back(v);
+                for_each_quality(mesh, i, i + 1, [&](double v) { picked[k].push_back(v); });
                 break;
               }
             }
-          });
+          }
         }
       },
       tbb::simple_partitioner());

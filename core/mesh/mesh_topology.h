@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 
@@ -20,6 +21,9 @@ struct TopologyOptions {
   // counts as a border edge. Unset: the ends must lie on the face. Dual Contouring's vertices
   // where a surface leaves the volume lie in the border cells, one voxel deep (border_layer()).
   std::optional<std::array<Vec3f, 2>> border_inner = std::nullopt;
+  // Faces per chunk of the measure's local pass (0: its default). The results do not depend on
+  // it; tests make it small so that many vertices have their faces in several chunks.
+  std::size_t chunk_faces = 0;
 };
 
 struct TopologyStats {
