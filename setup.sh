@@ -89,7 +89,10 @@ if [ "$tsan" = 1 ]; then
     ensure_deb_src
     src="$PWD/$build_dir/onetbb-src"
     rm -rf "$src" && mkdir -p "$src"
-    (cd "$src" && apt-get source -qq onetbb >/dev/null 2>&1)
+    if ! (cd "$src" && apt-get source -qq onetbb >/dev/null 2>&1); then
+      echo "setup.sh: could not fetch TBB's source package (apt-get source onetbb)" >&2
+      exit 1
+    fi
     tbb_dir=$(find "$src" -mindepth 1 -maxdepth 1 -type d -name 'onetbb-*' | head -n 1)
     cmake -S "$tbb_dir" -B "$src/build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTBB_TEST=OFF \
       -DTBB_STRICT=OFF -DTBB_SANITIZE=thread -DCMAKE_INSTALL_PREFIX="$tbb_prefix" >/dev/null
