@@ -77,14 +77,16 @@ class Extractor {
     gv_.words = grid_.words;
     gv_.ny = vbox.extent(1);
     const int64_t rows = vbox.extent(1) * vbox.extent(2), words = gv_.words;
-    gv_.bits.assign(static_cast<size_t>(rows * words), 0);
-    gv_.prefix.assign(static_cast<size_t>(rows * words), 0);
-    std::vector<uint64_t> count(static_cast<size_t>(rows) + 1, 0);
+    // Every word is written below (range_bits clears those outside the box).
+    gv_.bits.resize(static_cast<size_t>(rows * words));
+    gv_.prefix.resize(static_cast<size_t>(rows * words));
+    ScratchVector<uint64_t> count(static_cast<size_t>(rows) + 1);
+    count[0] = 0;
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = vbox.lo[1] + r % gv_.ny, k = vbox.lo[2] + r / gv_.ny;
         uint64_t n = 0;
-        for (int64_t w = vbox.lo[0] >> 6; w <= (vbox.hi[0] - 1) >> 6; ++w) {
+        for (int64_t w = 0; w < words; ++w) {
           const uint64_t m = touched_word(j, k, w) & range_bits(w, vbox.lo[0], vbox.hi[0]);
           gv_.bits[static_cast<size_t>(r * words + w)] = m;
           n += static_cast<uint64_t>(std::popcount(m));
@@ -132,15 +134,15 @@ class Extractor {
 
   // Step 1 for the grid vertex at (i, j, k); see kMacetReach (macet_field.h).
   void push(int64_t i, int64_t j, int64_t k, P3& disp, double& value) const {
-    const double f = field_.sample(i, j, k) - field_.iso;
+    const T* c = field_.data + view_.offset(i, j, k);
+    const int64_t s[3] = {i, j, k};
+    const double f = static_cast<double>(*c) - field_.iso;
     const bool in = f >= 0;
     P3 d{0, 0, 0};
     for (int a = 0; a < 3; ++a)
       for (int dir = -1; dir <= 1; dir += 2) {
-        int64_t q[3] = {i, j, k};
-        q[a] += dir;
-        if (q[a] < 0 || q[a] >= view_.dims[a]) continue;
-        const double g = field_.sample(q[0], q[1], q[2]) - field_.iso;
+        if (s[a] + dir < 0 || s[a] + dir >= view_.dims[a]) continue;
+        const double g = static_cast<double>(c[dir * view_.strides[a]]) - field_.iso;
         // Selected rather than branched on (the branches are unpredictable); subtracting a zero
         // push leaves d[a] unchanged, so the sums are those of the skipped terms.
         const double t = f / (f - g);  // the crossing, in edge lengths from this vertex
@@ -182,8 +184,8 @@ class Extractor {
   // The crossed edges of the whole view, ranked like the emitted ones.
   struct EdgeIndex {
     int64_t ny = 0, words = 0;
-    ScratchVector<EdgeWord> bits;  // written in full by row_edges_in
-    std::vector<uint64_t> offset;  // per point row
+    ScratchVector<EdgeWord> bits;    // written in full by row_edges_in
+    ScratchVector<uint64_t> offset;  // per point row
     uint64_t operator()(int64_t i, int64_t j, int64_t k, int a) const {
       const int64_t r = k * ny + j;
       return offset[r] + edge_rank(bits.data() + r * words, a, i);
@@ -199,7 +201,8 @@ class Extractor {
     ei.ny = ny;
     ei.words = words;
     ei.bits.resize(static_cast<size_t>(rows * words));
-    ei.offset.assign(static_cast<size_t>(rows) + 1, 0);
+    ei.offset.resize(static_cast<size_t>(rows) + 1);
+    ei.offset[0] = 0;
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         uint32_t n = 0;
@@ -244,6 +247,8 @@ class Extractor {
       sum[idx] = {0, 0, 0};
       count[idx] = 0;
     });
+    // Cell rows at the view's last y or z hold no cells.
+    row_triangles_.assign(static_cast<size_t>(rows) + 1, 0);
     // Umbrella sums, cell by cell: each triangle adds its other two crossings to each of its
     // corners (so a neighbour counts once per shared triangle). Cell slabs k and k + 2 touch
     // disjoint point slabs, so the slabs of one global parity run in parallel, each slab in
@@ -254,7 +259,9 @@ class Extractor {
       const int64_t slabs = nz - 1 > k0 ? (nz - 1 - k0 + 1) / 2 : 0;
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, slabs), [&](const auto& range) {
         for (int64_t m = range.begin(); m != range.end(); ++m)
-          for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j) sum_cells(j, k, ei, x, sum, count);
+          for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j)
+            row_triangles_[static_cast<size_t>(k * ny + j) + 1] =
+                sum_cells(j, k, ei, x, sum, count);
       });
     }
     // Each move reads only its own displacement and the sums above: updated in place. A grid
@@ -320,8 +327,10 @@ class Extractor {
   }
 
   // The umbrella sums of the crossings in the mixed cells of cell row (j, k) (see smooth_all).
-  void sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const ScratchVector<P3>& x,
-                 ScratchVector<P3>& sum, ScratchVector<std::uint16_t>& count) const {
+  // Returns the cell row's triangle count.
+  uint64_t sum_cells(int64_t j, int64_t k, const EdgeIndex& ei, const ScratchVector<P3>& x,
+                     ScratchVector<P3>& sum, ScratchVector<std::uint16_t>& count) const {
+    uint64_t triangles = 0;
     const uint64_t* rows[4] = {grid_.row(j, k), grid_.row(j + 1, k), grid_.row(j, k + 1),
                                grid_.row(j + 1, k + 1)};
     const int64_t r0 = k * ei.ny + j;
@@ -347,8 +356,10 @@ class Extractor {
             for (int c = 0; c < 3; ++c) sum[self][c] += x[o1][c] + x[o2][c];
             count[self] += 2;
           }
+        triangles += static_cast<uint64_t>(table_.triangle_count[cs]);
       }
     }
+    return triangles;
   }
 
   // Crossed edges owned by points x in [x0, x1] of row (j, k) whose far end is in the view.
@@ -411,18 +422,19 @@ class Extractor {
     }
     const EdgeWord* edges = whole ? edge_index_.bits.data() : own_edges.data();
     const uint64_t* vertex_offset = whole ? edge_index_.offset.data() : own_offset.data();
-    std::vector<uint64_t> triangle_offset(static_cast<size_t>(rows) + 1, 0);
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        if (!whole) {
+    // The smoothing counted the triangles of every cell row too.
+    std::vector<uint64_t> triangle_offset =
+        whole ? std::move(row_triangles_) : std::vector<uint64_t>(static_cast<size_t>(rows) + 1, 0);
+    if (!whole)
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
+        for (int64_t r = range.begin(); r != range.end(); ++r) {
+          const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
           uint32_t n = 0;
           row_edges_in(j, k, cells_.lo[0], cells_.hi[0], own_edges.data() + r * words, &n);
           own_offset[r + 1] = n;
+          if (j < cells_.hi[1] && k < cells_.hi[2]) triangle_offset[r + 1] = count_triangles(j, k);
         }
-        if (j < cells_.hi[1] && k < cells_.hi[2]) triangle_offset[r + 1] = count_triangles(j, k);
-      }
-    });
+      });
     for (int64_t r = 0; r < rows; ++r) {
       if (!whole) own_offset[r + 1] += own_offset[r];
       triangle_offset[r + 1] += triangle_offset[r];
@@ -514,6 +526,8 @@ class Extractor {
   Box3 cells_;
   GridVertices gv_;
   EdgeIndex edge_index_;  // the view's crossed edges, from smooth_all
+  std::vector<uint64_t>
+      row_triangles_;  // entry r + 1: the triangles of cell row r, from smooth_all
 };
 
 }  // namespace

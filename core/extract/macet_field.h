@@ -264,10 +264,10 @@ double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int6
 struct GridVertices {
   Box3 box;  // local samples [lo, hi)
   std::int64_t words = 0, ny = 0;
-  std::vector<std::uint64_t> bits;    // per row of the box, bit i = local x i (as in BitGrid)
-  std::vector<std::uint32_t> prefix;  // vertices before each word
-  ScratchVector<P3> disp;             // displacement, voxel units (written by the push)
-  ScratchVector<double> value;        // f - iso at the displaced vertex
+  ScratchVector<std::uint64_t> bits;    // per row of the box, bit i = local x i (as in BitGrid)
+  ScratchVector<std::uint32_t> prefix;  // vertices before each word
+  ScratchVector<P3> disp;               // displacement, voxel units (written by the push)
+  ScratchVector<double> value;          // f - iso at the displaced vertex
 
   std::int64_t row(std::int64_t j, std::int64_t k) const {
     return (k - box.lo[2]) * ny + (j - box.lo[1]);
