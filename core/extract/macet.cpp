@@ -1,7 +1,6 @@
 #include "core/extract/macet.h"
 
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <bit>
@@ -18,6 +17,7 @@
 #include "core/extract/macet_search.h"
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
+#include "core/extract/mesh_arrays.h"
 
 namespace isotile {
 
@@ -443,16 +443,7 @@ class Extractor {
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
-    // Zeroed side by side rather than one after the other (std::vector zeroes what it allocates).
-    reserve_on_caller(mesh.positions, n_vertices);
-    if (options_.normals) reserve_on_caller(mesh.normals, n_vertices);
-    reserve_on_caller(mesh.triangles, n_triangles);
-    tbb::parallel_invoke(
-        [&] {
-          mesh.positions.resize(n_vertices);
-          if (options_.normals) mesh.normals.resize(n_vertices);
-        },
-        [&] { mesh.triangles.resize(n_triangles); });
+    size_mesh_arrays(mesh, n_vertices, n_triangles, options_.normals);
 
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
       for (int64_t r = range.begin(); r != range.end(); ++r) {

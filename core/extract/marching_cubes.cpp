@@ -1,7 +1,6 @@
 #include "core/extract/marching_cubes.h"
 
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_invoke.h>
 
 #include <bit>
 #include <cmath>
@@ -13,6 +12,7 @@
 #include "core/errors.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/marching_cubes_tables.h"
+#include "core/extract/mesh_arrays.h"
 #include "core/extract/scratch_vector.h"
 
 namespace isotile {
@@ -132,17 +132,7 @@ class Extractor {
       });
       return mesh;
     }
-    // std::vector zeroes what it allocates, taking each page's first-touch fault as it goes: the
-    // arrays are zeroed side by side rather than one after the other, in huge pages.
-    reserve_on_caller(mesh.positions, n_vertices);
-    if (options_.normals) reserve_on_caller(mesh.normals, n_vertices);
-    reserve_on_caller(mesh.triangles, n_triangles);
-    tbb::parallel_invoke(
-        [&] {
-          mesh.positions.resize(n_vertices);
-          if (options_.normals) mesh.normals.resize(n_vertices);
-        },
-        [&] { mesh.triangles.resize(n_triangles); });
+    size_mesh_arrays(mesh, n_vertices, n_triangles, options_.normals);
 
     // Fill. Consecutive cell rows share two point rows, so the masks of rows (j+1, k) and
     // (j+1, k+1) computed for one cell row are reused as (j, k) and (j, k+1) for the next.
