@@ -363,17 +363,22 @@ class LocalSearch {
     return w;
   }
 
-  Corners make_corners(const P3& a, const P3& b, const P3& c) const {
+  // A triangle's corners and bounding box; finish() adds what only the pair test needs, so that
+  // triangles the box tests drop never pay for it.
+  Corners bound_corners(const P3& a, const P3& b, const P3& c) const {
     Corners t;
     t.p = {world(a), world(b), world(c)};
     for (int k = 0; k < 3; ++k) {
       t.lo[k] = std::min({t.p[0][k], t.p[1][k], t.p[2][k]});
       t.hi[k] = std::max({t.p[0][k], t.p[1][k], t.p[2][k]});
     }
+    return t;
+  }
+
+  static void finish(Corners& t) {
     bool certain_area = false;
     t.plane = guard_plane(t.p, certain_area);
     t.live = certain_area || triangle_has_area(t.p);
-    return t;
   }
 
   // self_intersections' rule for one pair, vertices identified by position as it does. The
@@ -600,13 +605,12 @@ class LocalSearch {
     // vertices never get that far).
     static thread_local std::vector<Corners> others;
     others.clear();
-    bool ring_built = false;
     auto build_ring = [&]() {
-      ring_built = true;
       for (int t = 0; t < n_statics; ++t) {
-        const Corners c =
-            make_corners(pos(statics[t].v[0]), pos(statics[t].v[1]), pos(statics[t].v[2]));
-        if (meets_box(c)) others.push_back(c);
+        Corners c = bound_corners(pos(statics[t].v[0]), pos(statics[t].v[1]), pos(statics[t].v[2]));
+        if (!meets_box(c)) continue;
+        finish(c);
+        others.push_back(c);
       }
       for (std::int64_t dz = -kGuardReach; dz < kGuardReach; ++dz)
         for (std::int64_t dy = -kGuardReach; dy < kGuardReach; ++dy)
@@ -634,39 +638,48 @@ class LocalSearch {
             }
             const auto& tt = table_.triangles[cs];
             for (int t = 0; t < nt; ++t) {
-              const Corners c = make_corners(x[tt[3 * t]], x[tt[3 * t + 1]], x[tt[3 * t + 2]]);
-              if (meets_box(c)) others.push_back(c);
+              Corners c = bound_corners(x[tt[3 * t]], x[tt[3 * t + 1]], x[tt[3 * t + 2]]);
+              if (!meets_box(c)) continue;
+              finish(c);
+              others.push_back(c);
             }
           }
     };
     std::array<Corners, 8 * mc::kMaxTrianglesPerCase> moving_corners;
     static thread_local std::vector<const Corners*> near;
-    // The moving triangles as placed: false when one leaves v's box, else their pairs. Only the
-    // other triangles that meet the moving ones' common bounding box can take part in a pair.
-    auto intersecting_pairs = [&](int& n) {
-      n = 0;
-      Vec3f lo{}, hi{};
+    // The moving triangles as placed, and their common bounding box: false when one leaves v's
+    // box.
+    Vec3f moving_lo{}, moving_hi{};
+    auto place_moving_corners = [&]() {
       for (int t = 0; t < n_tris; ++t) {
         Corners& m = moving_corners[t];
-        m = make_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
+        m = bound_corners(pos(tris[t].v[0]), pos(tris[t].v[1]), pos(tris[t].v[2]));
         if (!in_box(m)) return false;
         for (int a = 0; a < 3; ++a) {
-          lo[a] = t == 0 ? m.lo[a] : std::min(lo[a], m.lo[a]);
-          hi[a] = t == 0 ? m.hi[a] : std::max(hi[a], m.hi[a]);
+          moving_lo[a] = t == 0 ? m.lo[a] : std::min(moving_lo[a], m.lo[a]);
+          moving_hi[a] = t == 0 ? m.hi[a] : std::max(moving_hi[a], m.hi[a]);
         }
       }
+      for (int t = 0; t < n_tris; ++t) finish(moving_corners[t]);
+      return true;
+    };
+    // Their intersecting pairs, once placed. Only the other triangles that meet the moving ones'
+    // common bounding box can take part in a pair.
+    auto intersecting_pairs = [&]() {
       near.clear();
       for (const Corners& u : others) {
         bool apart_boxes = false;
-        for (int a = 0; a < 3; ++a) apart_boxes = apart_boxes || u.hi[a] < lo[a] || hi[a] < u.lo[a];
+        for (int a = 0; a < 3; ++a)
+          apart_boxes = apart_boxes || u.hi[a] < moving_lo[a] || moving_hi[a] < u.lo[a];
         if (!apart_boxes) near.push_back(&u);
       }
+      int n = 0;
       for (int t = 0; t < n_tris; ++t) {
         if (!moving_corners[t].live) continue;
         for (const Corners* u : near) n += meet(moving_corners[t], *u);
         for (int u = 0; u < t; ++u) n += meet(moving_corners[t], moving_corners[u]);
       }
-      return true;
+      return n;
     };
 
     P3 best_d = gv_.disp[self];
@@ -680,29 +693,53 @@ class LocalSearch {
     std::stable_sort(order.begin(), order.begin() + n_tris,
                      [&](int x, int y) { return q0[x] < q0[y]; });
     const double start = best;
+    // The guard's state, set up on the first candidate that needs it: whether the current
+    // moving triangles lie in v's box (if not, no candidate can pass, and the ring is not built),
+    // and their pair count, needed only once a candidate has pairs.
+    bool guard_ready = false, start_in_box = true;
     int allowed_pairs = -1;
-    bool start_in_box = true;
-    // Called with candidate (d, f) placed; leaves it placed.
-    auto guard_passes = [&](const P3& d, double f) {
-      if (!ring_built) {
-        build_ring();
-        place_current();
-        start_in_box = intersecting_pairs(allowed_pairs);
-        place(d, f);
+    auto with_current = [&](auto&& fn) {  // fn() on the current position, then the candidate back
+      const std::array<P3, 6> kept = mpos;
+      const P3 kept_d = cand_d;
+      const double kept_f = cand_f;
+      const unsigned kept_placed = placed;
+      place_current();
+      fn();
+      mpos = kept;
+      cand_d = kept_d;
+      cand_f = kept_f;
+      placed = kept_placed;
+    };
+    // Called with a candidate placed; leaves it placed.
+    auto guard_passes = [&]() {
+      if (!guard_ready) {
+        guard_ready = true;
+        with_current([&] { start_in_box = place_moving_corners(); });
+        if (start_in_box) build_ring();
       }
-      int n = 0;
-      return start_in_box && intersecting_pairs(n) && n <= allowed_pairs;
+      if (!start_in_box || !place_moving_corners()) return false;
+      const int n = intersecting_pairs();
+      if (n == 0) return true;
+      if (allowed_pairs < 0)
+        with_current([&] {
+          place_moving_corners();
+          allowed_pairs = intersecting_pairs();
+        });
+      return n <= allowed_pairs;
     };
 
     // A round keeps the best-scoring candidate that passes the guard (the first in scan order
-    // among equal scores). The guard is the costly test, so it runs only on the candidates that
-    // beat the round's starting score, best first, until one passes.
+    // among equal scores). The guard is the costly test, so it runs only on the round's best
+    // candidate; a scan raises its bar to the best score so far (a candidate no better than it can
+    // no longer win, and its worst triangles usually say so at once). When the guard refuses the
+    // winner, the scan runs again without it: that finds the next candidate in the order (score
+    // descending, then scan order), as sorting all candidates would.
     struct Candidate {
-      double score;
       P3 d;
       double f;
     };
     std::array<Candidate, 26 * 4> candidates;
+    std::array<bool, 26 * 4> refused;
     bool any_candidate = false;
     typename Field<T>::Corners candidate_cell;  // neighbouring candidates share cells
     auto try_round = [&](const P3& centre, std::initializer_list<double> radii) {
@@ -717,23 +754,33 @@ class LocalSearch {
           for (int a = 0; a < 3; ++a) d[a] = p[a] - g[a];
           const double f = field_.value(p, candidate_cell);
           if ((f >= 0) != in) continue;
-          stage(d, f);
-          const double sc = score(false, best);
-          if (sc > best) candidates[n++] = {sc, d, f};
+          refused[n] = false;
+          candidates[n++] = {d, f};
         }
-      any_candidate = any_candidate || n > 0;
-      std::stable_sort(candidates.begin(), candidates.begin() + n,
-                       [](const Candidate& x, const Candidate& y) { return x.score > y.score; });
-      for (int c = 0; c < n; ++c) {
-        place(candidates[c].d, candidates[c].f);
-        if (!guard_passes(candidates[c].d, candidates[c].f)) {
-          if (!start_in_box) break;  // no candidate can pass
-          continue;
+      for (;;) {
+        double bar = best;
+        int winner = -1;
+        for (int c = 0; c < n; ++c) {
+          if (refused[c]) continue;
+          stage(candidates[c].d, candidates[c].f);
+          const double sc = score(false, bar);
+          if (sc > bar) {
+            bar = sc;
+            winner = c;
+          }
         }
-        best = candidates[c].score;
-        best_d = candidates[c].d;
-        best_f = candidates[c].f;
-        break;
+        if (winner < 0) return;
+        any_candidate = true;
+        const Candidate& w = candidates[winner];
+        place(w.d, w.f);
+        if (guard_passes()) {
+          best = bar;
+          best_d = w.d;
+          best_f = w.f;
+          return;
+        }
+        if (!start_in_box) return;  // no candidate can pass
+        refused[winner] = true;
       }
     };
     const P3 centre = best_d;
