@@ -109,9 +109,13 @@ void operator delete[](void* p, const std::nothrow_t&) noexcept {
 #pragma GCC diagnostic pop
 #endif
 
-// Under AddressSanitizer, let malloc return null for impossible sizes as glibc does, rather than
-// abort: teem allocates whatever a (fuzzed) NRRD header asks for and copes with a null result.
+// Under AddressSanitizer and ThreadSanitizer, let malloc return null for impossible sizes as glibc
+// does, rather than abort: teem allocates whatever a (fuzzed) NRRD header asks for and copes with a
+// null result.
 extern "C" __attribute__((used)) const char* __asan_default_options() {
+  return "allocator_may_return_null=1";
+}
+extern "C" __attribute__((used)) const char* __tsan_default_options() {
   return "allocator_may_return_null=1";
 }
 
