@@ -13,6 +13,7 @@
 #include "core/extract/inside_bits.h"
 #include "core/extract/marching_cubes_tables.h"
 #include "core/extract/mesh_arrays.h"
+#include "core/extract/prefetch.h"
 #include "core/extract/scratch_vector.h"
 
 namespace isotile {
@@ -144,6 +145,15 @@ class Extractor {
       int64_t upper_rows_of = -1;  // the row whose e[1], e[3] were computed last
       for (int64_t r = range.begin(); r != range.end(); ++r) {
         const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+        // A sample row of plane k + 1 is first read here, at the crossings only, as the +z ends
+        // of plane k's edges: a sparse walk the hardware prefetcher does not follow, so that row
+        // is fetched a few rows ahead (gyroid-256, float samples: this loop 22.5 -> 13.9 ms).
+        if (const int64_t ahead = r + kPrefetchRows; ahead < rows) {
+          const int64_t ka = cells_.lo[2] + ahead / ny + 1;
+          if (ka < view_.dims[2])
+            prefetch_bytes(data_ + view_.offset(x0, cells_.lo[1] + ahead % ny, ka),
+                           static_cast<size_t>(x1 - x0 + 1) * sizeof(T));
+        }
         const bool reuse = upper_rows_of == r - 1 && j > cells_.lo[1];
         if (reuse) {
           std::swap(e[0], e[1]);
