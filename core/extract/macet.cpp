@@ -414,7 +414,7 @@ class Extractor {
     // smoothing's edge index.
     const bool whole = cells_.lo == Index3{0, 0, 0} &&
                        cells_.hi == Index3{grid_.nx - 1, grid_.ny - 1, grid_.nz - 1};
-    std::vector<EdgeWord> own_edges;
+    ScratchVector<EdgeWord> own_edges;  // written in full by row_edges_in
     std::vector<uint64_t> own_offset;
     if (!whole) {
       own_edges.resize(static_cast<size_t>(rows * words));
