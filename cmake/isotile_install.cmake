@@ -129,6 +129,8 @@ install(FILES "${PROJECT_BINARY_DIR}/cmake/isotileConfig.cmake"
 
 # The command line, its man page and its bash completion, both generated from its own --help.
 install(TARGETS isotile RUNTIME DESTINATION "${CMAKE_INSTALL_BINDIR}" COMPONENT cli)
+install(TARGETS ${ISOTILE_READER_MODULES} LIBRARY DESTINATION "${CMAKE_INSTALL_LIBDIR}/isotile"
+        COMPONENT cli)
 find_program(ISOTILE_HELP2MAN help2man)
 if(ISOTILE_HELP2MAN)
   set(docs "${PROJECT_BINARY_DIR}/cli-docs")

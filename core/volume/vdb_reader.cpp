@@ -62,8 +62,6 @@ class TreeVolume final : public VdbVolume {
 
 }  // namespace
 
-VdbVolume::~VdbVolume() = default;
-
 std::unique_ptr<VdbVolume> open_vdb(const std::string& path) {
   // OpenVDB says only "could not open file" for a missing one; keep the reason.
   if (std::FILE* probe = std::fopen(path.c_str(), "rb"))
@@ -107,14 +105,6 @@ std::unique_ptr<VdbVolume> open_vdb(const std::string& path) {
   } catch (const std::exception& e) {
     throw InputError(path + ": not a readable OpenVDB file: " + e.what());
   }
-}
-
-Volume read_vdb(const std::string& path) {
-  const std::unique_ptr<VdbVolume> vdb = open_vdb(path);
-  Volume volume(vdb->type, vdb->dims, vdb->spacing, vdb->origin);
-  vdb->read_box({{0, 0, 0}, vdb->dims}, volume.bytes());
-  check_finite(volume.view(), path);
-  return volume;
 }
 
 }  // namespace isotile

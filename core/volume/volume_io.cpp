@@ -344,4 +344,14 @@ std::pair<double, double> value_range(const VolumeView& view) {
   return {r.lo, r.hi};
 }
 
+// Through open_vdb, which the isotile program resolves to a module it loads on first use
+// (tiler/reader_modules.cpp).
+Volume read_vdb(const std::string& path) {
+  const std::unique_ptr<VdbVolume> vdb = open_vdb(path);
+  Volume volume(vdb->type, vdb->dims, vdb->spacing, vdb->origin);
+  vdb->read_box({{0, 0, 0}, vdb->dims}, volume.bytes());
+  check_finite(volume.view(), path);
+  return volume;
+}
+
 }  // namespace isotile

@@ -103,7 +103,7 @@ VolumeHeader read_mrc_header(const std::string& path);
 // sample indices. read_box writes box-extent samples of `type`, x fastest.
 class VdbVolume {
  public:
-  virtual ~VdbVolume();
+  virtual ~VdbVolume() = default;
   virtual void read_box(const Box3& box, void* out) const = 0;
   ScalarType type = ScalarType::Float32;
   Index3 dims{0, 0, 0};
