@@ -44,6 +44,28 @@ counts() {
     python3 -c 'import json,sys; j=json.load(sys.stdin); print(j["triangles"], j["vertices"])'
 }
 
+# The installed program ($1) reads MetaImage and OpenVDB input through the modules it loads from
+# <libdir>/isotile: a small MetaImage volume, and a file that only the OpenVDB module itself can
+# call "not a readable OpenVDB file" (without the module the error names the missing module).
+check_reader_modules() {
+  local dir="$tmp/modules" out
+  mkdir -p "$dir"
+  python3 -c 'import sys; sys.stdout.buffer.write(bytes(i % 7 * 30 for i in range(512)))' >"$dir/v.raw"
+  printf 'ObjectType = Image\nNDims = 3\nDimSize = 8 8 8\nElementType = MET_UCHAR\nElementDataFile = v.raw\n' \
+    >"$dir/v.mhd"
+  if out=$("$1" -q info --json "$dir/v.mhd" 2>&1); then
+    python3 -c 'import json,sys; assert json.loads(sys.argv[1])["dims"] == [8, 8, 8]' "$out" ||
+      fail "the installed isotile read the MetaImage volume as $out"
+  else
+    grep -q "ISOTILE_ITK=OFF" <<<"$out" || fail "the installed isotile on MetaImage: $out"
+  fi
+  echo "not OpenVDB" >"$dir/bad.vdb"
+  out=$("$1" -q extract "$dir/bad.vdb" --iso 0 -o "$dir/bad.ply" 2>&1) &&
+    fail "the installed isotile read a file that is not OpenVDB"
+  grep -q "not a readable OpenVDB file" <<<"$out" || fail "the installed isotile on .vdb: $out"
+  echo "check_install: $1 read MetaImage and OpenVDB input through its modules"
+}
+
 if [ "$mode" = prefix ]; then
   prefix="$tmp/prefix"
   for component in cli dev; do
@@ -52,6 +74,7 @@ if [ "$mode" = prefix ]; then
   [ -x "$prefix/bin/isotile" ] || fail "no bin/isotile in the cli component"
   out=$(PATH="$prefix/bin:$PATH" isotile --version)
   [ "$out" = "isotile $version" ] || fail "isotile --version printed '$out', not 'isotile $version'"
+  check_reader_modules "$prefix/bin/isotile"
 
   # The man page holds every subcommand's own options, the completion completes them.
   man="$prefix/share/man/man1/isotile.1.gz"
@@ -191,6 +214,7 @@ python3 -c 'import json,sys; j=json.load(open(sys.argv[1])); assert j["triangles
   "$tmp/run/demo.json" || fail "isotile demo's statistics"
 read -r demo_faces _ <<<"$(counts isotile "$tmp/run/isotile-demo.ply")"
 echo "check_install: isotile demo from PATH: $demo_faces faces"
+check_reader_modules isotile
 
 for p in "${packages[@]}"; do
   # dpkg lists a package's root as "/.": every other path must be /usr or under it.
