@@ -79,9 +79,11 @@ isotile_export_library(isotile_core NAME core
     core/volume/scalar_type.h
     core/volume/volume.h
     core/volume/volume_io.h
-  FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenVDB OpenMesh
-  DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenvdb-dev libboost-iostreams-dev
-                 libopenmesh-dev libgmp-dev libmpfr-dev)
+  FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenMesh
+  DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenmesh-dev libgmp-dev libmpfr-dev)
+# The OpenVDB reader's library, linked privately by core (after TBB's config is found).
+isotile_export_library(isotile_vdb NAME vdb INTERNAL FIND_PACKAGES OpenVDB
+  DEBIAN_DEPENDS libopenvdb-dev libboost-iostreams-dev)
 # The ITK readers' library, linked privately by core: consumers of the static core need ITK's
 # libraries too. Debian's ITK config runs FindHDF5, whose checks need the C language: enabled for
 # the consumer, so that a C++-only project can use the package.
