@@ -14,6 +14,7 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
@@ -314,6 +315,17 @@ void keep_freed_memory_for_reuse() {
 #endif
 }
 
+// TBB creates its worker threads on the first parallel loop, which in a one-shot run is the
+// extraction's first pass. Started there, they made cold MC and DC extractions 10-20% slower
+// (medians of 13 fresh processes; docs/benchmarks.md, "Worker threads started before the read");
+// an empty task enqueued before the volume is read starts them while the main thread reads, and
+// nothing waits for it. With one thread allowed, an enqueued task would still get a worker of its
+// own, so none is asked for.
+void start_worker_threads() {
+  if (tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) > 1)
+    tbb::this_task_arena::enqueue([] {});
+}
+
 // Out of core: brick by brick within --memory, streamed into the output file.
 int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, MeshFormat format,
                       Clock::time_point t_total) {
@@ -441,6 +453,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
 int run_extract(const ExtractArgs& args) {
   const auto t_total = Clock::now();
   keep_freed_memory_for_reuse();
+  start_worker_threads();
   // Fail on a bad output name or an unavailable method before spending time on reading.
   const MeshFormat format = mesh_format_from_path(args.output);
   ExtractOptions options;
