@@ -907,7 +907,8 @@ class Extractor {
   static void split(const std::vector<Vec3f>& p, const Quad& q, Tri* out) {
     const Vec3f &p0 = p[q[0]], &p1 = p[q[1]], &p2 = p[q[2]], &p3 = p[q[3]];
 #ifdef __SSE2__
-    // Half the square roots and divisions, which were a third of the face pass (engine, perf).
+    // Square roots and divisions in pairs: one at a time they were a third of the face pass
+    // (engine, perf).
     const __m128d s01_12 = _mm_sqrt_pd(_mm_set_pd(length2(p1, p2), length2(p0, p1)));
     const __m128d s23_30 = _mm_sqrt_pd(_mm_set_pd(length2(p3, p0), length2(p2, p3)));
     const __m128d d02_13 = _mm_sqrt_pd(_mm_set_pd(length2(p1, p3), length2(p0, p2)));
