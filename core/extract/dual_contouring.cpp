@@ -15,10 +15,6 @@
 #include <utility>
 #include <vector>
 
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
-
 #include "core/errors.h"
 #include "core/extract/dual_contouring_patches.h"
 #include "core/extract/dual_contouring_table.h"
@@ -885,48 +881,12 @@ class Extractor {
     if (!(q > 0)) return 0;
     return std::min(q, 1.0);
   }
-#ifdef __SSE2__
-  static double length2(const Vec3f& p, const Vec3f& q) {
-    const double dx = double{p[0]} - q[0], dy = double{p[1]} - q[1], dz = double{p[2]} - q[2];
-    return dx * dx + dy * dy + dz * dz;
-  }
-  // ratio() on two triangles at once, lane by lane the same operations in the same order
-  // (SSE2's square roots, divisions and minima round like the scalar ones).
-  static __m128d ratios(__m128d la, __m128d lb, __m128d lc) {
-    const __m128d zero = _mm_setzero_pd();
-    const __m128d num = _mm_mul_pd(
-        _mm_mul_pd(_mm_sub_pd(_mm_add_pd(lb, lc), la), _mm_sub_pd(_mm_add_pd(lc, la), lb)),
-        _mm_sub_pd(_mm_add_pd(la, lb), lc));
-    const __m128d q = _mm_div_pd(num, _mm_mul_pd(_mm_mul_pd(la, lb), lc));
-    // 0 where a side is 0 or !(q > 0); min(q, 1) otherwise (q is not NaN there).
-    const __m128d degenerate = _mm_or_pd(_mm_or_pd(_mm_cmpeq_pd(la, zero), _mm_cmpeq_pd(lb, zero)),
-                                         _mm_or_pd(_mm_cmpeq_pd(lc, zero), _mm_cmpngt_pd(q, zero)));
-    return _mm_andnot_pd(degenerate, _mm_min_pd(q, _mm_set1_pd(1.0)));
-  }
-#endif
   static void split(const std::vector<Vec3f>& p, const Quad& q, Tri* out) {
     const Vec3f &p0 = p[q[0]], &p1 = p[q[1]], &p2 = p[q[2]], &p3 = p[q[3]];
-#ifdef __SSE2__
-    // Square roots and divisions in pairs: one at a time they were a third of the face pass
-    // (engine, perf).
-    const __m128d s01_12 = _mm_sqrt_pd(_mm_set_pd(length2(p1, p2), length2(p0, p1)));
-    const __m128d s23_30 = _mm_sqrt_pd(_mm_set_pd(length2(p3, p0), length2(p2, p3)));
-    const __m128d d02_13 = _mm_sqrt_pd(_mm_set_pd(length2(p1, p3), length2(p0, p2)));
-    const __m128d s01 = _mm_unpacklo_pd(s01_12, s01_12), s12 = _mm_unpackhi_pd(s01_12, s01_12);
-    const __m128d s23 = _mm_unpacklo_pd(s23_30, s23_30), s30 = _mm_unpackhi_pd(s23_30, s23_30);
-    const __m128d d02 = _mm_unpacklo_pd(d02_13, d02_13), d13 = _mm_unpackhi_pd(d02_13, d02_13);
-    // Lane 0: the 0-2 split's triangles (0,1,2) and (0,2,3); lane 1: the 1-3 split's (0,1,3) and
-    // (1,2,3), as in the scalar code below.
-    const __m128d first = ratios(_mm_unpacklo_pd(s12, d13), _mm_unpacklo_pd(d02, s30), s01);
-    const __m128d second = ratios(s23, _mm_unpacklo_pd(s30, d13), _mm_unpacklo_pd(d02, s12));
-    const __m128d worst = _mm_min_pd(first, second);
-    const double a = _mm_cvtsd_f64(worst), b = _mm_cvtsd_f64(_mm_unpackhi_pd(worst, worst));
-#else
     const double s01 = length(p0, p1), s12 = length(p1, p2), s23 = length(p2, p3);
     const double s30 = length(p3, p0), d02 = length(p0, p2), d13 = length(p1, p3);
     const double a = std::min(ratio(s12, d02, s01), ratio(s23, s30, d02));  // (0,1,2), (0,2,3)
     const double b = std::min(ratio(d13, s30, s01), ratio(s23, d13, s12));  // (0,1,3), (1,2,3)
-#endif
     // Which diagonal wins is a coin toss to the branch predictor; select without branching.
     const bool d13_wins = b > a;
     out[0] = {q[0], q[1], d13_wins ? q[3] : q[2]};
