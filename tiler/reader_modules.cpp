@@ -67,9 +67,6 @@ const ItkReaderModule& itk_module(const std::string& input) {
 }
 }  // namespace
 
-bool itk_available() {
-  return true;
-}
 ItkImageInfo read_itk_info(const ItkInput& input) {
   return itk_module(input.path).read_itk_info(input);
 }
@@ -78,13 +75,6 @@ void read_itk_data(const ItkInput& input, const ItkImageInfo& info, void* out) {
 }
 std::vector<DicomSeriesInfo> list_dicom_series(const std::string& directory) {
   return itk_module(directory).list_dicom_series(directory);
-}
-bool is_dicom_file(const std::string& path) {
-  return itk_module(path).is_dicom_file(path);
-}
-void write_itk(const std::string& path, const void* data, ScalarType type, const Index3& dims,
-               const Vec3d& spacing, const Vec3d& origin, const Mat3& direction) {
-  itk_module(path).write_itk(path, data, type, dims, spacing, origin, direction);
 }
 
 #endif

@@ -25,15 +25,14 @@ struct VdbReaderModule {
 inline constexpr char kVdbReaderModule[] = "libisotile_vdb_reader.so";
 inline constexpr char kVdbReaderEntry[] = "isotile_vdb_reader_module_v1";
 
+// The ITK functions that the program's code calls (itk_available, is_dicom_file and write_itk
+// serve only the library's other users).
 struct ItkReaderModule {
   ItkImageInfo (*read_itk_info)(const ItkInput& input);
   void (*read_itk_data)(const ItkInput& input, const ItkImageInfo& info, void* out);
   std::vector<DicomSeriesInfo> (*list_dicom_series)(const std::string& directory);
-  bool (*is_dicom_file)(const std::string& path);
-  void (*write_itk)(const std::string& path, const void* data, ScalarType type, const Index3& dims,
-                    const Vec3d& spacing, const Vec3d& origin, const Mat3& direction);
 };
 inline constexpr char kItkReaderModule[] = "libisotile_itk_reader.so";
-inline constexpr char kItkReaderEntry[] = "isotile_itk_reader_module_v1";
+inline constexpr char kItkReaderEntry[] = "isotile_itk_reader_module_v2";
 
 }  // namespace isotile
