@@ -316,8 +316,9 @@ void keep_freed_memory_for_reuse() {
 }
 
 // TBB creates its worker threads on the first parallel loop, which in a one-shot run is the
-// extraction's first pass. Started there, they made cold MC and DC extractions 10-20% slower
-// (medians of 13 fresh processes; docs/benchmarks.md, "Worker threads started before the read");
+// extraction's first pass. Started there, they made cold extractions slower and more scattered
+// (engine: DC 35.7 against 27.2 ms, MC 15.0 against 13.3 ms, medians of 13 fresh processes;
+// docs/benchmarks.md, "Worker threads started before the read");
 // an empty task enqueued before the volume is read starts them while the main thread reads, and
 // nothing waits for it. With one thread allowed, an enqueued task would still get a worker of its
 // own, so none is asked for.
