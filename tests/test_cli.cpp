@@ -14,7 +14,9 @@
 #include <string>
 
 #include "cli_support.h"
+#include "core/extract/dual_contouring.h"
 #include "core/mesh/mesh_io.h"
+#include "core/volume/volume_io.h"
 
 namespace fs = std::filesystem;
 
@@ -101,6 +103,30 @@ TEST_F(Cli, DualContouringKeepsOrSplitsQuads) {
   EXPECT_TRUE(quads.triangles.empty());
   EXPECT_EQ(2 * quads.quads.size(), split.triangles.size());
   EXPECT_EQ(j["triangles"].get<std::size_t>(), split.triangles.size());
+}
+
+// The in-core run frees the samples before writing; the repairs its stats report must still be
+// counted from them, before that.
+TEST_F(Cli, DualContouringRepairsAreCountedFromTheSamples) {
+  const int n = 24;
+  std::string bytes(static_cast<std::size_t>(n) * n * n, '\0');
+  unsigned state = 12345;
+  for (char& c : bytes) {
+    state = state * 1103515245u + 12345u;
+    c = static_cast<char>((state >> 16) & 0xff);
+  }
+  const std::string name = "noise_24x24x24_uint8.raw";
+  std::ofstream(dir_ / name, std::ios::binary) << bytes;
+  const isotile::Volume volume = isotile::read_volume((dir_ / name).string());
+  const isotile::DcPatchRepairs expected =
+      isotile::dual_contouring_patch_repairs(volume.view(), 127.5);
+  ASSERT_GT(expected.flipped_faces, 0u);
+  ASSERT_GT(expected.border_cut_cells, 0u);
+  const Result r = run("extract " + name + " --iso 127.5 --method dc -q -o n.ply --stats -");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["dc_flipped_faces"].get<std::uint64_t>(), expected.flipped_faces);
+  EXPECT_EQ(j["dc_border_cut_cells"].get<std::uint64_t>(), expected.border_cut_cells);
 }
 
 TEST_F(Cli, MacetReportsItsQualityMode) {
