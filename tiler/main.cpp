@@ -317,10 +317,10 @@ void keep_freed_memory_for_reuse() {
 
 // Frees the volume's samples and gives every freed block back to the kernel. The heap keeps
 // freed blocks (keep_freed_memory_for_reuse), so without the trim the output file's pages (tmpfs
-// or page cache) could not take the volume's place and would be found elsewhere. On a virtual
-// machine that reports free pages to its host, as the development machines do, a 4 GiB volume's
-// 3.4 GB mesh was then written at 0.35 GB/s, against 1.9 GB/s with the samples' pages given
-// back just before (docs/benchmarks.md, "In-core stages at scale").
+// or page cache) could not take the volume's place and would be fresh pages. On the development
+// machines (virtual, their host slow to supply fresh pages once they hold several GB) a 4 GiB
+// volume's 3.4 GB mesh was then written at 0.35 GB/s, against 1.9 GB/s with the samples' pages
+// given back just before (docs/benchmarks.md, "In-core stages at scale").
 void release_volume(Volume& volume) {
   volume = Volume();
 #ifdef __GLIBC__
