@@ -315,6 +315,14 @@ void keep_freed_memory_for_reuse() {
 #endif
 }
 
+// Gives the heap's free blocks back to the kernel (they are otherwise kept: see
+// keep_freed_memory_for_reuse).
+void return_freed_memory() {
+#ifdef __GLIBC__
+  malloc_trim(0);
+#endif
+}
+
 // Frees the volume's samples and gives every freed block back to the kernel. The heap keeps
 // freed blocks (keep_freed_memory_for_reuse), so without the trim the output file's pages (tmpfs
 // or page cache) could not take the volume's place and would be fresh pages. On the development
@@ -323,9 +331,7 @@ void keep_freed_memory_for_reuse() {
 // given back just before (docs/benchmarks.md, "In-core stages at scale").
 void release_volume(Volume& volume) {
   volume = Volume();
-#ifdef __GLIBC__
-  malloc_trim(0);
-#endif
+  return_freed_memory();
 }
 
 // TBB creates its worker threads on the first parallel loop, which in a one-shot run is the
@@ -529,6 +535,12 @@ int run_extract(const ExtractArgs& args) {
     repairs = dual_contouring_patch_repairs(view, options.iso);
     t_repairs = seconds_since(t0);
   }
+  // Nothing below reads the samples (see release_volume), and simplification and the write both
+  // gain from their memory; the time is counted in the stage that comes next.
+  t0 = Clock::now();
+  release_volume(volume);
+  view.data = nullptr;
+  const double t_release = seconds_since(t0);
 
   // The extracted mesh is kept past simplification only for the stats' distance measure.
   std::optional<Mesh> extracted;
@@ -538,7 +550,7 @@ int run_extract(const ExtractArgs& args) {
     progress("simplifying to " + std::to_string(args.simplify) + " of the faces");
     t0 = Clock::now();
     Mesh simplified = simplify(mesh, simplify_options(args.simplify, 0, 0, 0.3, true), &sstats);
-    t_simplify = seconds_since(t0);
+    t_simplify = seconds_since(t0) + t_release;
     progress("simplified to " + std::to_string(simplified.triangles.size()) + " triangles in " +
              fmt_seconds(t_simplify));
     if (!args.stats.empty()) extracted = std::move(mesh);
@@ -547,9 +559,9 @@ int run_extract(const ExtractArgs& args) {
 
   progress("writing " + args.output);
   t0 = Clock::now();
-  // Nothing below reads the samples (see release_volume).
-  release_volume(volume);
-  view.data = nullptr;
+  // The simplifier's freed memory would otherwise stay resident through the measures: peak RSS
+  // 13.8 GB against 9.8 GB for 22M triangles simplified to a tenth with --stats.
+  if (simplifying) return_freed_memory();
   // Positions go out in the volume's world frame; the measures below stay in the grid frame
   // (the volume border is a box there), as a streamed run's do.
   const MeshFrame frame = args.frame == "world" ? mesh_frame(view) : MeshFrame{};
@@ -560,7 +572,7 @@ int run_extract(const ExtractArgs& args) {
   } else {
     write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
   }
-  const double t_write = seconds_since(t0);
+  const double t_write = seconds_since(t0) + (simplifying ? 0.0 : t_release);
 
   if (args.stats.empty()) {
     progress("done in " + fmt_seconds(seconds_since(t_total)));
