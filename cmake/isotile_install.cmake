@@ -80,7 +80,8 @@ isotile_export_library(isotile_core NAME core
     core/volume/volume.h
     core/volume/volume_io.h
   FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenMesh
-  DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenmesh-dev libgmp-dev libmpfr-dev)
+  DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenmesh-dev libgmp-dev libmpfr-dev
+                 libdeflate-dev)
 # The OpenVDB reader's library, linked privately by core (after TBB's config is found).
 isotile_export_library(isotile_vdb NAME vdb INTERNAL FIND_PACKAGES OpenVDB
   DEBIAN_DEPENDS libopenvdb-dev libboost-iostreams-dev)

@@ -447,6 +447,27 @@ TEST_F(VolumeIo, GzipTruncated) {
   EXPECT_TRUE(contains(msg, file + ": truncated gzip data")) << msg;
 }
 
+// Whole files are decompressed with libdeflate member by member; anything it does not take
+// exactly (here: bytes after the last member, which zlib ignores) goes to zlib's stream, so both
+// give the same volume.
+TEST_F(VolumeIo, GzipMembersAndTrailingBytesReadAsZlibReadsThem) {
+  const auto values = gzip_test_values(24 * 24 * 24);
+  const std::size_t half = values.size() / 2 * 2;  // bytes
+  const std::string a = path("a.gz"), b = path("b.gz");
+  write_gzip(a, values.data(), half);
+  write_gzip(b, reinterpret_cast<const char*>(values.data()) + half, values.size() * 2 - half);
+  const std::string members = read_file(a) + read_file(b);
+  const std::string expected(reinterpret_cast<const char*>(values.data()), values.size() * 2);
+  ASSERT_EQ(inflate_gzip(read_file(a)) + inflate_gzip(read_file(b)), expected);
+  for (const std::string& tail : {std::string(), std::string("trailing bytes, not gzip")}) {
+    const std::string file = path("m_24x24x24_uint16.raw.gz");
+    write_file(file, members + tail);
+    const Volume v = read_raw(file, {});
+    ASSERT_EQ(v.byte_size(), expected.size());
+    EXPECT_EQ(std::memcmp(v.bytes(), expected.data(), expected.size()), 0) << tail;
+  }
+}
+
 TEST_F(VolumeIo, GzipNameOnPlainDataIsRejected) {
   // zlib reads non-gzip data through unchanged; a .gz name on such a file is reported as such.
   const std::vector<std::uint8_t> bytes(4 * 4 * 4, 7);

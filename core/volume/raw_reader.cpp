@@ -1,4 +1,6 @@
 // Raw volumes: plain or gzip'd samples, x fastest, dims and type from the options or the name.
+#include <fcntl.h>
+#include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -228,6 +230,47 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
   if (code != Z_OK) throw_gz_error(path, file.get());
 }
 
+// Whole-buffer gzip decompression with libdeflate, about 3.5x faster than zlib's stream (bonsai:
+// 12 against 43 ms, docs/benchmarks.md), for files small enough that holding the compressed bytes
+// beside the volume for a moment costs little. Above this, zlib streams.
+constexpr std::uint64_t kWholeGzipMaxBytes = std::uint64_t{1} << 30;
+
+// Decompresses the whole gzip file `path` (of `file_bytes`, one member or several, as pigz and
+// bgzip write) into the volume. False when it did not give exactly the volume's bytes for any
+// reason (unreadable, corrupt, too short or too long, trailing data): read_gzip then reads the
+// file again with zlib, whose diagnosis names the problem, so every error and every accepted file
+// are the same as without this path.
+bool read_gzip_whole(const std::string& path, std::uint64_t file_bytes, Volume& volume) {
+  if (file_bytes == 0 || file_bytes > kWholeGzipMaxBytes) return false;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  const auto in = std::make_unique_for_overwrite<std::byte[]>(file_bytes);
+  std::uint64_t got = 0;
+  while (got < file_bytes) {
+    const ssize_t n = ::pread(fd, in.get() + got, file_bytes - got, static_cast<off_t>(got));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    got += static_cast<std::uint64_t>(n);
+  }
+  ::close(fd);
+  if (got != file_bytes) return false;
+  std::unique_ptr<libdeflate_decompressor, void (*)(libdeflate_decompressor*)> d(
+      libdeflate_alloc_decompressor(), libdeflate_free_decompressor);
+  if (!d) return false;
+  std::byte* out = volume.bytes();
+  const std::size_t need = volume.byte_size();
+  std::size_t used = 0, done = 0;
+  while (used < file_bytes) {
+    std::size_t member_in = 0, member_out = 0;
+    if (libdeflate_gzip_decompress_ex(d.get(), in.get() + used, file_bytes - used, out + done,
+                                      need - done, &member_in, &member_out) != LIBDEFLATE_SUCCESS)
+      return false;
+    used += member_in;
+    done += member_out;
+  }
+  return done == need;
+}
+
 using Layout = RawLayout;
 
 Layout resolve_layout(const std::string& path, const RawOptions& options) {
@@ -312,8 +355,11 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
 
   Volume volume(layout.type, layout.dims, options.spacing.value_or(Vec3d{1, 1, 1}),
                 options.origin.value_or(Vec3d{0, 0, 0}));
-  if (gzip)
-    read_gzip(path, gz_file, volume);
+  if (gzip) {
+    if (!S_ISREG(st.st_mode) ||
+        !read_gzip_whole(path, static_cast<std::uint64_t>(st.st_size), volume))
+      read_gzip(path, gz_file, volume);
+  }
   else if (S_ISREG(st.st_mode))
     read_regular(path, ::fileno(plain_file.get()), volume);
   else
