@@ -359,11 +359,11 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
     if (!S_ISREG(st.st_mode) ||
         !read_gzip_whole(path, static_cast<std::uint64_t>(st.st_size), volume))
       read_gzip(path, gz_file, volume);
-  }
-  else if (S_ISREG(st.st_mode))
+  } else if (S_ISREG(st.st_mode)) {
     read_regular(path, ::fileno(plain_file.get()), volume);
-  else
+  } else {
     read_stream(path, plain_file.get(), volume);
+  }
   const bool native_big = std::endian::native == std::endian::big;
   if ((options.endian == Endian::Big) != native_big) byte_swap(volume);
   check_finite(volume.view(), path);
