@@ -560,7 +560,7 @@ int run_extract(const ExtractArgs& args) {
   progress("writing " + args.output);
   t0 = Clock::now();
   // The simplifier's freed memory would otherwise stay resident through the measures: peak RSS
-  // 13.8 GB against 9.8 GB for 22M triangles simplified to a tenth with --stats.
+  // 13.8 GB against 9.5 GB for 22M triangles simplified to a tenth with --stats.
   if (simplifying) return_freed_memory();
   // Positions go out in the volume's world frame; the measures below stay in the grid frame
   // (the volume border is a box there), as a streamed run's do.

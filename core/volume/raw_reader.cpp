@@ -1,5 +1,4 @@
 // Raw volumes: plain or gzip'd samples, x fastest, dims and type from the options or the name.
-#include <fcntl.h>
 #include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -136,6 +135,19 @@ void read_stream(const std::string& path, std::FILE* file, Volume& volume) {
 // stream copies from the page cache and faults the volume's fresh pages in on one thread only.
 constexpr std::size_t kSliceBytes = std::size_t{16} << 20;
 
+// Bytes [at, end) of the open file into out + at.
+void read_range(const std::string& path, int fd, std::byte* out, std::size_t at, std::size_t end) {
+  while (at < end) {
+    const ssize_t got = ::pread(fd, out + at, end - at, static_cast<off_t>(at));
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      throw IoError("cannot read " + path + ": " + std::strerror(errno));
+    }
+    if (got == 0) throw IoError("cannot read " + path + ": the file shrank while it was read");
+    at += static_cast<std::size_t>(got);
+  }
+}
+
 void read_regular(const std::string& path, int fd, Volume& volume) {
   std::byte* out = volume.bytes();
   const std::size_t need = volume.byte_size();
@@ -143,20 +155,8 @@ void read_regular(const std::string& path, int fd, Volume& volume) {
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, slices, 1),
       [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s) {
-          std::size_t at = s * kSliceBytes;
-          const std::size_t end = std::min(need, at + kSliceBytes);
-          while (at < end) {
-            const ssize_t got = ::pread(fd, out + at, end - at, static_cast<off_t>(at));
-            if (got < 0) {
-              if (errno == EINTR) continue;
-              throw IoError("cannot read " + path + ": " + std::strerror(errno));
-            }
-            if (got == 0)
-              throw IoError("cannot read " + path + ": the file shrank while it was read");
-            at += static_cast<std::size_t>(got);
-          }
-        }
+        for (std::size_t s = r.begin(); s != r.end(); ++s)
+          read_range(path, fd, out, s * kSliceBytes, std::min(need, (s + 1) * kSliceBytes));
       },
       tbb::simple_partitioner());
 }
@@ -235,34 +235,38 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
 // beside the volume for a moment costs little. Above this, zlib streams.
 constexpr std::uint64_t kWholeGzipMaxBytes = std::uint64_t{1} << 30;
 
-// Decompresses the whole gzip file `path` (of `file_bytes`, one member or several, as pigz and
-// bgzip write) into the volume. False when it did not give exactly the volume's bytes for any
-// reason (unreadable, corrupt, too short or too long, trailing data): read_gzip then reads the
-// file again with zlib, whose diagnosis names the problem, so every error and every accepted file
-// are the same as without this path.
-bool read_gzip_whole(const std::string& path, std::uint64_t file_bytes, Volume& volume) {
-  if (file_bytes == 0 || file_bytes > kWholeGzipMaxBytes) return false;
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return false;
-  const auto in = std::make_unique_for_overwrite<std::byte[]>(file_bytes);
-  std::uint64_t got = 0;
-  while (got < file_bytes) {
-    const ssize_t n = ::pread(fd, in.get() + got, file_bytes - got, static_cast<off_t>(got));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    got += static_cast<std::uint64_t>(n);
-  }
-  ::close(fd);
-  if (got != file_bytes) return false;
+// The gzip file `path`, opened for inflate_whole when it is a regular file of at most
+// kWholeGzipMaxBytes that starts with gzip's magic bytes; null otherwise (then zlib opens it and
+// judges it, as it did before this path existed).
+std::unique_ptr<std::FILE, FileCloser> open_whole_gzip(const std::string& path,
+                                                       const struct stat& st) {
+  if (!S_ISREG(st.st_mode) || st.st_size < 2 ||
+      static_cast<std::uint64_t>(st.st_size) > kWholeGzipMaxBytes)
+    return nullptr;
+  std::unique_ptr<std::FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
+  unsigned char magic[2];
+  if (!file || ::pread(::fileno(file.get()), magic, 2, 0) != 2 || magic[0] != 0x1f ||
+      magic[1] != 0x8b)
+    return nullptr;
+  return file;
+}
+
+// Reads the whole gzip file (of `bytes`; one member or several, as pigz and bgzip write) and
+// inflates it into the volume. False when that does not give exactly the volume's bytes, for any
+// reason (corrupt, too short or too long, trailing data): zlib then reads the file, and its
+// diagnosis names the problem, so every error and every accepted file are those of zlib's stream.
+bool inflate_whole(const std::string& path, int fd, std::size_t bytes, Volume& volume) {
+  const auto in = std::make_unique_for_overwrite<std::byte[]>(bytes);
+  read_range(path, fd, in.get(), 0, bytes);
   std::unique_ptr<libdeflate_decompressor, void (*)(libdeflate_decompressor*)> d(
       libdeflate_alloc_decompressor(), libdeflate_free_decompressor);
   if (!d) return false;
   std::byte* out = volume.bytes();
   const std::size_t need = volume.byte_size();
   std::size_t used = 0, done = 0;
-  while (used < file_bytes) {
+  while (used < bytes) {
     std::size_t member_in = 0, member_out = 0;
-    if (libdeflate_gzip_decompress_ex(d.get(), in.get() + used, file_bytes - used, out + done,
+    if (libdeflate_gzip_decompress_ex(d.get(), in.get() + used, bytes - used, out + done,
                                       need - done, &member_in, &member_out) != LIBDEFLATE_SUCCESS)
       return false;
     used += member_in;
@@ -336,10 +340,11 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
     throw IoError("cannot open " + path + ": " + std::strerror(errno));
   if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + path + ": " + std::strerror(EISDIR));
   const bool gzip = ends_with_gz(path);
-  GzFilePtr gz_file;
-  std::unique_ptr<std::FILE, FileCloser> plain_file;
+  GzFilePtr gz_file;  // zlib's stream, opened unless libdeflate takes the file whole
+  std::unique_ptr<std::FILE, FileCloser> whole_gz, plain_file;
   if (gzip) {
-    gz_file = open_gzip(path);
+    whole_gz = open_whole_gzip(path, st);
+    if (!whole_gz) gz_file = open_gzip(path);
   } else {
     plain_file.reset(std::fopen(path.c_str(), "rb"));
     if (!plain_file) throw IoError("cannot open " + path + ": " + std::strerror(errno));
@@ -356,9 +361,11 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
   Volume volume(layout.type, layout.dims, options.spacing.value_or(Vec3d{1, 1, 1}),
                 options.origin.value_or(Vec3d{0, 0, 0}));
   if (gzip) {
-    if (!S_ISREG(st.st_mode) ||
-        !read_gzip_whole(path, static_cast<std::uint64_t>(st.st_size), volume))
+    if (!whole_gz || !inflate_whole(path, ::fileno(whole_gz.get()),
+                                    static_cast<std::size_t>(st.st_size), volume)) {
+      if (!gz_file) gz_file = open_gzip(path);
       read_gzip(path, gz_file, volume);
+    }
   } else if (S_ISREG(st.st_mode)) {
     read_regular(path, ::fileno(plain_file.get()), volume);
   } else {

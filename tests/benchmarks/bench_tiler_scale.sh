@@ -7,7 +7,8 @@
 #
 # Runs, each in a fresh process, output on tmpfs (/dev/shm): MC and Macet fast with --memory 1GiB,
 # then MC in core, each after an untimed run of the same kind (see both() below); with
-# OTHER_ISOTILE (e.g. an older build) the same runs of it alternate with these, side by side. With DISK_DIR, the MC 1 GiB run again with its output there (on disk).
+# OTHER_ISOTILE (e.g. an older build) the same runs of it alternate with these, side by side.
+# With DISK_DIR, the MC 1 GiB run again with its output there (on disk).
 # Prints each run's seconds.total, triangles per second of it, peak RSS and the per-stage split
 # of --stats (read, count, extract, index, records, write: busy seconds summed over bricks, which
 # overlap in time), and for in-core runs read and write throughput; then issue 19's targets, met
@@ -74,10 +75,10 @@ with open(sys.argv[5], "a") as f:
 EOF
 }
 
-# Each pair follows an untimed run of the same kind. On these virtual machines freed memory goes
-# back to the host within seconds and costs a fault on the host when taken again, so a run right
-# after a smaller one pays for all its memory and the next does not: the first in-core run (8.5 GB)
-# after the out-of-core ones took 27 s, the one after it 15-18 s, whichever build came first.
+# Each pair follows an untimed run of the same kind. On the development machines (virtual) a run
+# right after a smaller one was slower than the next: the first in-core run (8.5 GB) after the
+# out-of-core ones took 27 s, the one after it 15-18 s, whichever build came first (the host
+# supplies fresh memory slowly at times; docs/benchmarks.md, "In-core stages at scale").
 both() {  # label outdir args...: this build, then OTHER_ISOTILE, side by side
   label=$1
   dir=$2
