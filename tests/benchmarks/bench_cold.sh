@@ -4,11 +4,12 @@
 # same volume (tests/benchmarks/vtk_cold.cpp). Marching Cubes (target <= 0.5x) and Dual Contouring
 # with `--method dc`'s defaults (target <= 1.0x) on bonsai and engine at 49.5 (../shared/data) and
 # field:gyroid:256 at 0, and Macet's default (fast, target <= 2.0x) on bonsai and engine; the
-# median of RUNS fresh processes each, all interleaved so that load on
-# the machine hits every program alike. The targets are judged on the medians; min_ratio sets
-# the fastest isotile run against the fastest Flying Edges run, because on a shared virtual machine
-# cold times are bimodal (docs/benchmarks.md) and the medians can land in either mode. Then the whole `isotile extract` process for bonsai to a
-# binary PLY: its wall time without --stats (what a user waits for) and the split --stats reports.
+# median of RUNS fresh processes each, all interleaved so that load on the machine hits every
+# program alike. The targets are judged on the medians; min_ratio sets the fastest isotile run
+# against the fastest Flying Edges run, because on a shared virtual machine cold times are bimodal
+# (docs/benchmarks.md) and the medians can land in either mode. Then the whole `isotile extract`
+# process for bonsai to a binary PLY: its wall time without --stats (what a user waits for) and the
+# split --stats reports.
 #
 # usage: tests/benchmarks/bench_cold.sh [--build DIR] [--before OLD_ISOTILE] [--threads N] [--runs N]
 #   DIR: a build with -DISOTILE_BUILD_BENCHMARKS=ON and VTK (`./setup.sh --bench`); default build
