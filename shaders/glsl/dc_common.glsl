@@ -190,7 +190,8 @@ dvec3 dc_gradient(ivec3 p) {
     if (p[a] + 1 < u_view_hi[a]) hi[a] += 1;
     int h = hi[a] - lo[a];
     precise double d = sample_at(hi) - sample_at(lo);
-    g[a] = h > 0 ? d / double(h) : 0.0LF;
+    precise double ga = h > 0 ? d / double(h) : 0.0LF;
+    g = with_component(g, a, ga);
   }
   return g;
 }
@@ -338,10 +339,9 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
       slope = side == 0 ? s0l : s1l;
     }
   }
-  h.p[axis] = t;
+  h.p = with_component(h.p, axis, t);
 #if defined(DC_PARTICLE) || defined(DC_QEF)
-  precise dvec3 n;
-  n[axis] = slope;
+  precise dvec3 n = with_component(dvec3(0.0LF), axis, slope);
   // Across the edge: that side's end (side 0 or 1) or both ends interpolated. One call site in
   // loops of unknown length: inlined once, not six times.
   for (uint am = 7u ^ (1u << axis); am != 0u; am &= am - 1u) {
@@ -355,7 +355,7 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
         g1 = g;
     }
     precise double mixed = g0 + t * (g1 - g0);
-    n[a] = side == 0 ? g0 : side == 1 ? g1 : mixed;
+    n = with_component(n, a, side == 0 ? g0 : side == 1 ? g1 : mixed);
   }
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
   double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;
@@ -363,7 +363,7 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
 #endif
 #else
   dc_tie_crossing(s0, axis, f0, f1, t);
-  h.p[axis] = t;
+  h.p = with_component(h.p, axis, t);
 #if defined(DC_PARTICLE) || defined(DC_QEF)
   dvec3 g0 = dc_gradient(s0), g1 = dc_gradient(s1);
   precise dvec3 n = g0 + t * (g1 - g0);
@@ -405,18 +405,21 @@ dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
       precise double s = t * c;
       for (int k = 0; k < 3; ++k) {  // columns p and q
         precise double mkp = m[p][k], mkq = m[q][k];
-        m[p][k] = c * mkp - s * mkq;
-        m[q][k] = s * mkp + c * mkq;
+        precise double np = c * mkp - s * mkq, nq = s * mkp + c * mkq;
+        m = with_element(m, p, k, np);
+        m = with_element(m, q, k, nq);
       }
       for (int k = 0; k < 3; ++k) {  // rows p and q
         precise double mpk = m[k][p], mqk = m[k][q];
-        m[k][p] = c * mpk - s * mqk;
-        m[k][q] = s * mpk + c * mqk;
+        precise double np = c * mpk - s * mqk, nq = s * mpk + c * mqk;
+        m = with_element(m, k, p, np);
+        m = with_element(m, k, q, nq);
       }
       for (int k = 0; k < 3; ++k) {
         precise double vkp = v[p][k], vkq = v[q][k];
-        v[p][k] = c * vkp - s * vkq;
-        v[q][k] = s * vkp + c * vkq;
+        precise double np = c * vkp - s * vkq, nq = s * vkp + c * vkq;
+        v = with_element(v, p, k, np);
+        v = with_element(v, q, k, nq);
       }
     }
     if (!rotated) break;
@@ -427,9 +430,7 @@ dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
   if (lambda[order[1]] < lambda[order[0]]) { int x = order[0]; order[0] = order[1]; order[1] = x; }
   if (lambda[order[2]] < lambda[order[1]]) { int x = order[1]; order[1] = order[2]; order[2] = x; }
   if (lambda[order[1]] < lambda[order[0]]) { int x = order[0]; order[0] = order[1]; order[1] = x; }
-  precise dvec3 residual;
-  for (int r = 0; r < 3; ++r)
-    residual[r] = b[r] - ((A[0][r] * mass[0] + A[1][r] * mass[1]) + A[2][r] * mass[2]);
+  precise dvec3 residual = b - ((A[0] * mass[0] + A[1] * mass[1]) + A[2] * mass[2]);
   precise dvec3 x = mass;
   double largest = lambda[order[2]];
   precise double floor_value = u_qef_cutoff * largest;
@@ -439,7 +440,7 @@ dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
       if (!(l > floor_value && l > 0.0LF)) continue;
       dvec3 u = v[order[i]];
       precise double d = ((u[0] * residual[0] + u[1] * residual[1]) + u[2] * residual[2]) / l;
-      for (int a = 0; a < 3; ++a) x[a] += u[a] * d;
+      x = x + u * d;
     }
   return dvec3(dc_clamp01(x[0]), dc_clamp01(x[1]), dc_clamp01(x[2]));
 }
@@ -462,10 +463,11 @@ dvec3 dc_place(ivec3 c, uint edges) {
     mass += h.p;
 #if defined(DC_PARTICLE) || defined(DC_QEF)
     precise double d = ((h.n.x * h.p.x) + h.n.y * h.p.y) + h.n.z * h.p.z;
-    for (int r = 0; r < 3; ++r) {
-      b[r] += h.n[r] * d;
-      for (int k = 0; k < 3; ++k) A[k][r] += h.n[r] * h.n[k];
-    }
+    b += h.n * d;
+    // A[k][r] += n[r] n[k]: column k gains n n[k] (constant column indices).
+    A[0] += h.n * h.n.x;
+    A[1] += h.n * h.n.y;
+    A[2] += h.n * h.n.z;
 #endif
   }
   mass /= double(count);
@@ -474,19 +476,16 @@ dvec3 dc_place(ivec3 c, uint edges) {
 #elif defined(DC_PARTICLE)
   // x <- clamp(x + c (b - A x)) as the affine map (I - c A) x + c b, stopping once a step moves
   // less than the tolerance (measured after the clamp).
-  precise dmat3 M;
-  precise dvec3 shift;
-  for (int r = 0; r < 3; ++r) {
-    shift[r] = u_rate * b[r];
-    for (int k = 0; k < 3; ++k) M[k][r] = (r == k ? 1.0LF : 0.0LF) - u_rate * A[k][r];
-  }
+  precise dvec3 shift = u_rate * b;
+  // M[k][r] = (r == k ? 1 : 0) - u_rate A[k][r], element by element.
+  precise dmat3 M = dmat3(1.0LF) - u_rate * A;
   precise dvec3 x = mass;
   for (int step = 0; step < u_steps; ++step) {
     precise dvec3 next;
     precise double moved2 = 0.0LF;
     for (int r = 0; r < 3; ++r) {
       precise double y = ((M[0][r] * x[0] + M[1][r] * x[1]) + M[2][r] * x[2]) + shift[r];
-      next[r] = dc_clamp01(y);
+      next = with_component(next, r, dc_clamp01(y));
       moved2 += (next[r] - x[r]) * (next[r] - x[r]);
     }
     x = next;
@@ -506,7 +505,7 @@ vec3 dc_vertex_normal(ivec3 c, dvec3 x) {
     dvec3 g = dc_gradient(c + ivec3(k & 1, (k >> 1) & 1, (k >> 2) & 1));
     precise double w = 1.0LF;
     for (int a = 0; a < 3; ++a) w *= ((k >> a) & 1) != 0 ? x[a] : 1.0LF - x[a];
-    for (int a = 0; a < 3; ++a) n[a] -= (w * g[a]) / u_spacing[a];
+    n -= (w * g) / u_spacing;
   }
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
   double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;

@@ -39,8 +39,8 @@ double field_value(dvec3 p) {
     int hi = max(u_region_lo[a], min(max(u_global_dims[a] - 2, 0),
                                      u_region_lo[a] + max(u_region_dims[a] - 2, 0)));
     gc[a] = clamp(int(floor(p[a])), u_region_lo[a], hi);
-    u[a] = p[a] - double(gc[a]);
   }
+  u = p - dvec3(gc);
   // Along an axis of one sample the clamped read gives the CPU's zero stride.
   double q0 = sample_at(gc), q1 = sample_at(gc + ivec3(1, 0, 0));
   double q2 = sample_at(gc + ivec3(0, 1, 0)), q3 = sample_at(gc + ivec3(1, 1, 0));
@@ -63,7 +63,7 @@ dvec3 sample_gradient(ivec3 p) {
     if (p[a] + 1 < u_global_dims[a] && p[a] + 1 < region_hi()[a]) hi[a] += 1;
     double h = double(hi[a] - lo[a]);
     precise double d = (sample_at(hi) - sample_at(lo)) / h;
-    g[a] = h > 0.0 ? d : 0.0;
+    g = with_component(g, a, h > 0.0 ? d : 0.0LF);
   }
   return g;
 }
@@ -74,9 +74,10 @@ dvec3 displaced(ivec3 v, dvec3 d) {
   for (int a = 0; a < 3; ++a) {
     double x = double(v[a]);
     precise double moved = x + d[a];
-    p[a] = (v[a] == 0 || v[a] == u_global_dims[a] - 1)
-               ? x
-               : clamp(moved, 0.0LF, double(u_global_dims[a] - 1));
+    double pa = (v[a] == 0 || v[a] == u_global_dims[a] - 1)
+                    ? x
+                    : clamp(moved, 0.0LF, double(u_global_dims[a] - 1));
+    p = with_component(p, a, pa);
   }
   return p;
 }
@@ -110,8 +111,7 @@ double find_root(dvec3 p0, dvec3 p1, double f0, double f1) {
     if (!(t > lo && t < hi)) t = mid;
     precise double width = hi - lo;
     if (width < 1e-5LF) break;
-    precise dvec3 p;
-    for (int c = 0; c < 3; ++c) p[c] = p0[c] + t * (p1[c] - p0[c]);
+    precise dvec3 p = p0 + t * (p1 - p0);
     double f = field_value(p);
     if (abs(f) <= tol) break;
     if ((f >= 0.0LF) == (flo >= 0.0LF)) {
@@ -144,12 +144,10 @@ void linear_crossing(ivec3 s, int axis, out double t, out dvec3 x) {
     t = 1.0LF - MACET_TIE_OFFSET;
   else
     t = lin;
-  for (int c = 0; c < 3; ++c) {
-    precise double a0 = double(s[c]) + a[c];
-    precise double a1 = double(s1[c]) + b[c];
-    precise double xc = a0 + t * (a1 - a0);
-    x[c] = xc;
-  }
+  precise dvec3 a0 = dvec3(s) + a.xyz;
+  precise dvec3 a1 = dvec3(s1) + b.xyz;
+  precise dvec3 xc = a0 + t * (a1 - a0);
+  x = xc;
 }
 
 // macet.cpp's crossing(): the root of the trilinear interpolant between the displaced end points
@@ -158,11 +156,8 @@ dvec3 macet_crossing(ivec3 s, int axis) {
   ivec3 s1 = s;
   s1[axis] += 1;
   dvec4 a = disp_at(s), b = disp_at(s1);
-  precise dvec3 p0, p1;
-  for (int c = 0; c < 3; ++c) {
-    p0[c] = double(s[c]) + a[c];
-    p1[c] = double(s1[c]) + b[c];
-  }
+  precise dvec3 p0 = dvec3(s) + a.xyz;
+  precise dvec3 p1 = dvec3(s1) + b.xyz;
   bool straight = all(equal(a.xyz, dvec3(0.0LF))) && all(equal(b.xyz, dvec3(0.0LF)));
   precise double t;
   if (a.w == 0.0LF && spreading_tie(s))
@@ -173,8 +168,7 @@ dvec3 macet_crossing(ivec3 s, int axis) {
     t = a.w / (a.w - b.w);
   else
     t = find_root(p0, p1, a.w, b.w);
-  precise dvec3 p;
-  for (int c = 0; c < 3; ++c) p[c] = p0[c] + t * (p1[c] - p0[c]);
+  precise dvec3 p = p0 + t * (p1 - p0);
   return p;
 }
 
@@ -187,8 +181,8 @@ dvec3 world_gradient(dvec3 p) {
     int hi = max(u_region_lo[a], min(max(u_global_dims[a] - 2, 0),
                                      u_region_lo[a] + max(u_region_dims[a] - 2, 0)));
     c[a] = clamp(int(floor(p[a])), u_region_lo[a], hi);
-    u[a] = clamp(p[a] - double(c[a]), 0.0LF, 1.0LF);
   }
+  u = clamp(p - dvec3(c), 0.0LF, 1.0LF);
   precise dvec3 g = dvec3(0.0LF);
   for (int corner = 0; corner < 8; ++corner) {
     int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
@@ -196,9 +190,9 @@ dvec3 world_gradient(dvec3 p) {
     precise double w = (dx != 0 ? u.x : 1.0LF - u.x) * (dy != 0 ? u.y : 1.0LF - u.y);
     w = w * (dz != 0 ? u.z : 1.0LF - u.z);
     dvec3 gc = sample_gradient(q);
-    for (int a = 0; a < 3; ++a) g[a] = g[a] + w * gc[a];
+    g = g + w * gc;
   }
-  for (int a = 0; a < 3; ++a) g[a] = g[a] / u_spacing[a];
+  g = g / u_spacing;
   return g;
 }
 #endif

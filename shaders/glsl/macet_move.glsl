@@ -23,20 +23,16 @@ void try_move(ivec3 g, dvec3 from, dvec3 step, double guard, inout dvec3 disp, i
   dvec3 v = dvec3(g);
   precise double need = guard * abs(f);
   for (int h = 0; h <= MACET_HALVINGS; ++h) {
-    precise dvec3 to;
-    for (int c = 0; c < 3; ++c) to[c] = from[c] + step[c];
+    precise dvec3 to = from + step;
     dvec3 q = displaced(g, to);
     double val = field_value(q);
     if ((val >= 0.0LF) == in0 && abs(val) >= need) {
-      precise dvec3 d;
-      for (int c = 0; c < 3; ++c) d[c] = q[c] - v[c];
+      precise dvec3 d = q - v;
       disp = d;
       value = val;
       return;
     }
-    for (int c = 0; c < 3; ++c) {
-      precise double halved = step[c] * 0.5LF;
-      step[c] = halved;
-    }
+    precise dvec3 halved = step * 0.5LF;
+    step = halved;
   }
 }

@@ -19,13 +19,16 @@ void main() {
       precise double o = sample_at(q) - u_iso;
       if ((o >= 0.0LF) == in0) continue;
       precise double t = f / (f - o);
-      if (t < MACET_REACH) push[a] = push[a] - double(dir) * (MACET_REACH - t);
+      if (t < MACET_REACH) {
+        precise double pa = push[a] - double(dir) * (MACET_REACH - t);
+        push = with_component(push, a, pa);
+      }
     }
   precise double len2 = push.x * push.x + push.y * push.y + push.z * push.z;
   double len = sqrt(len2);
   if (len > MACET_PUSH_CAP) {
     precise double scale = MACET_PUSH_CAP / len;
-    for (int c = 0; c < 3; ++c) push[c] = push[c] * scale;
+    push = push * scale;
   }
   dvec3 disp = dvec3(0.0LF);
   double value = f;

@@ -43,11 +43,9 @@ void umbrella(ivec3 s, int axis, out dvec3 sum, out uint count) {
         ivec4 e1 = edge_info[tri_edge(cs, 3u * t + (v + 1u) % 3u)];
         ivec4 e2 = edge_info[tri_edge(cs, 3u * t + (v + 2u) % 3u)];
         dvec3 x1 = linear_at(cell + e1.xyz, e1.w).xyz, x2 = linear_at(cell + e2.xyz, e2.w).xyz;
-        for (int k = 0; k < 3; ++k) {
-          precise double pair = x1[k] + x2[k];
-          precise double acc = sum[k] + pair;
-          sum[k] = acc;
-        }
+        precise dvec3 pair = x1 + x2;
+        precise dvec3 acc = sum + pair;
+        sum = acc;
         count += 2u;
       }
   }
@@ -77,35 +75,31 @@ void main() {
       precise double follow = dir > 0 ? 1.0LF - t : t;
       double wt = clamp(follow, 0.0LF, 1.0LF);
       double n = double(count);
-      for (int c = 0; c < 3; ++c) {
-        precise double lap = sum[c] / n - x[c];
-        precise double term = wt * (n > 0.0LF ? lap : 0.0LF);
-        acc[c] = acc[c] + term;
-      }
+      precise dvec3 lap = sum / n - x;
+      precise dvec3 term = wt * (n > 0.0LF ? lap : dvec3(0.0LF));
+      acc = acc + term;
       weight = weight + wt;
     }
   if (weight <= 0.0LF) {
     disp_out[r] = old;
     return;
   }
-  for (int c = 0; c < 3; ++c) acc[c] = acc[c] / weight;
+  acc = acc / weight;
   dvec3 gr = sample_gradient(g);
   precise double g2 = gr.x * gr.x + gr.y * gr.y + gr.z * gr.z;
   if (g2 > 0.0LF) {
     precise double along = (acc.x * gr.x + acc.y * gr.y + acc.z * gr.z) / g2;
-    for (int c = 0; c < 3; ++c) acc[c] = acc[c] - along * gr[c];
+    acc = acc - along * gr;
   }
   dvec3 from = old.xyz;
-  precise dvec3 to;
-  for (int c = 0; c < 3; ++c) to[c] = from[c] + acc[c];
+  precise dvec3 to = from + acc;
   precise double len2 = to.x * to.x + to.y * to.y + to.z * to.z;
   double len = sqrt(len2);
   if (len > MACET_SMOOTH_CAP) {
     precise double scale = MACET_SMOOTH_CAP / len;
-    for (int c = 0; c < 3; ++c) to[c] = to[c] * scale;
+    to = to * scale;
   }
-  precise dvec3 step;
-  for (int c = 0; c < 3; ++c) step[c] = to[c] - from[c];
+  precise dvec3 step = to - from;
   dvec3 disp = from;
   double value = old.w;
   try_move(g, from, step, MACET_SMOOTH_GUARD, disp, value);

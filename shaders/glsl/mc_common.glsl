@@ -26,6 +26,24 @@ uniform float u_iso_float;  // the smallest float >= u_iso (core/extract/inside_
 uniform dvec3 u_origin;
 uniform dvec3 u_spacing;
 
+// Writes into one component of a double vector through a non-constant index (`v[i] = x`, also
+// `+=`, `++`, or as an out argument) do not link on NVIDIA's GLSL compiler ("C9999: can't find
+// __setVectorIndex function in stdlib"), which handles int and float vectors; llvmpipe accepts all
+// of them. Such writes go through these selects instead: no arithmetic, so exact everywhere.
+// Reads through a non-constant index link everywhere. tests/test_glsl_variants.cpp runs glslang
+// over every program the code builds and fails on any other such write.
+dvec3 with_component(dvec3 v, int i, double x) {
+  return dvec3(i == 0 ? x : v.x, i == 1 ? x : v.y, i == 2 ? x : v.z);
+}
+dvec4 with_component(dvec4 v, int i, double x) {
+  return dvec4(i == 0 ? x : v.x, i == 1 ? x : v.y, i == 2 ? x : v.z, i == 3 ? x : v.w);
+}
+// Element (column c, row r) of a double matrix replaced by x.
+dmat3 with_element(dmat3 m, int c, int r, double x) {
+  return dmat3(c == 0 ? with_component(m[0], r, x) : m[0], c == 1 ? with_component(m[1], r, x) : m[1],
+               c == 2 ? with_component(m[2], r, x) : m[2]);
+}
+
 #ifdef STAGE_COMPUTE
 layout(local_size_x = 256) in;
 // One index per invocation over a 2D grid of groups (the x count is limited to 65535 on some
@@ -122,7 +140,8 @@ dvec3 gradient(ivec3 p) {
     if (p[a] > 0) lo[a] -= 1;
     if (p[a] + 1 < u_global_dims[a]) hi[a] += 1;
     precise double h = double(hi[a] - lo[a]) * u_spacing[a];
-    g[a] = h > 0.0 ? (sample_at(hi) - sample_at(lo)) / h : 0.0;
+    precise double d = h > 0.0 ? (sample_at(hi) - sample_at(lo)) / h : 0.0;
+    g = with_component(g, a, d);
   }
   return g;
 }
