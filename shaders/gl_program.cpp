@@ -30,6 +30,22 @@ void check(const char* where) {
 
 namespace {
 
+// Programs live until shutdown(); every key built is remembered for the variant check.
+std::map<std::string, GLuint>& program_cache() {
+  static std::map<std::string, GLuint> cache;
+  return cache;
+}
+std::vector<std::string>& built_keys() {
+  static std::vector<std::string> keys;
+  return keys;
+}
+std::unique_ptr<Buffer>& case_tables(CaseTable which) {
+  static std::unique_ptr<Buffer> mc_tables, macet_tables;
+  return which == CaseTable::Macet ? macet_tables : mc_tables;
+}
+
+}  // namespace
+
 std::string stage_source(const Stage& s, const std::string& defines) {
   std::string src = "#version 450 core\n";
   if (s.type == GL_COMPUTE_SHADER) src += "#define STAGE_COMPUTE\n";
@@ -56,6 +72,28 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   return src;
 }
 
+std::string program_key(const std::vector<Stage>& stages, const std::string& defines) {
+  std::string key = defines;
+  for (const Stage& s : stages) {
+    key += '|';  // appended piecewise: GCC 12 warns (-Wrestrict) on "|" + std::string
+    key += s.file;
+  }
+  return key;
+}
+
+std::vector<std::string> built_program_keys() {
+  return built_keys();
+}
+
+void release_programs() {
+  for (auto& [key, prog] : program_cache()) glDeleteProgram(prog);
+  program_cache().clear();
+  case_tables(CaseTable::MarchingCubes).reset();
+  case_tables(CaseTable::Macet).reset();
+}
+
+namespace {
+
 GLuint compile(const Stage& s, const std::string& defines) {
   const std::string src = stage_source(s, defines);
   const GLuint sh = glCreateShader(s.type);
@@ -77,13 +115,8 @@ GLuint compile(const Stage& s, const std::string& defines) {
 
 GLuint program(const std::vector<Stage>& stages, const std::string& defines,
                const std::vector<const char*>& varyings) {
-  // Programs live as long as the context (the process), like the context itself.
-  static std::map<std::string, GLuint> cache;
-  std::string key = defines;
-  for (const Stage& s : stages) {
-    key += '|';  // appended piecewise: GCC 12 warns (-Wrestrict) on "|" + std::string
-    key += s.file;
-  }
+  auto& cache = program_cache();
+  const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
   const GLuint prog = glCreateProgram();
   std::vector<GLuint> shaders;
@@ -106,6 +139,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   }
   check("linking a program");
   cache.emplace(key, prog);
+  built_keys().push_back(key);
   return prog;
 }
 
@@ -182,19 +216,25 @@ std::unique_ptr<Buffer> table_buffer(const Table& ct) {
 }  // namespace
 
 void bind_case_tables(CaseTable which) {
-  static std::unique_ptr<Buffer> mc_tables, macet_tables;
-  std::unique_ptr<Buffer>& tables = which == CaseTable::Macet ? macet_tables : mc_tables;
+  std::unique_ptr<Buffer>& tables = case_tables(which);
   if (!tables)
     tables = which == CaseTable::Macet ? table_buffer(detail::macet_case_table(true))
                                        : table_buffer(mc::kCaseTable);
   tables->bind(GL_UNIFORM_BUFFER, 0);
 }
 
+bool wide_samples(ScalarType type) {
+  return !(type == ScalarType::Int8 || type == ScalarType::UInt8 || type == ScalarType::Int16 ||
+           type == ScalarType::UInt16 || type == ScalarType::Float32);
+}
+
+std::string sample_defines(bool wide) {
+  return wide ? "#define SAMPLE_T double\n" : "#define SAMPLE_T float\n#define SAMPLE_IS_FLOAT\n";
+}
+
 Samples upload_samples(const VolumeView& view, const Box3& region) {
   Samples out;
-  const bool exact_in_float = view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
-                              view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
-                              view.type == ScalarType::Float32;
+  const bool exact_in_float = !wide_samples(view.type);
   const Index3 d = {region.extent(0), region.extent(1), region.extent(2)};
   const std::int64_t rows = d[1] * d[2];
   auto convert = [&](auto tag) {
@@ -214,13 +254,11 @@ Samples upload_samples(const VolumeView& view, const Box3& region) {
     });
     out.buffer = Buffer(buf.size() * sizeof(Out), buf.data());
   };
-  if (exact_in_float) {
+  if (exact_in_float)
     convert(float{});
-    out.defines = "#define SAMPLE_T float\n#define SAMPLE_IS_FLOAT\n";
-  } else {
+  else
     convert(double{});
-    out.defines = "#define SAMPLE_T double\n";
-  }
+  out.defines = sample_defines(!exact_in_float);
   return out;
 }
 

@@ -27,12 +27,26 @@ struct Stage {
   std::string_view file;  // a file of shaders/glsl/
 };
 
-// The program of `stages`, each compiled as "#version 450", the extension lines, `defines`, then
-// mc_common.glsl, then its file; with transform-feedback `varyings` (interleaved) when given.
-// Built once per (stages, defines) and kept for the context's life. Throws Error with the
-// compiler's log.
+// The source of one stage exactly as program() compiles it: "#version 450 core", the stage's
+// define, `defines`, mc_common.glsl, the included files the stage needs, then its file. Needs no
+// context (tests/test_glsl_variants.cpp checks every variant with glslang).
+std::string stage_source(const Stage& stage, const std::string& defines);
+
+// The key program() caches a program under: its defines and stage files.
+std::string program_key(const std::vector<Stage>& stages, const std::string& defines);
+
+// The program of `stages` (sources from stage_source()); with transform-feedback `varyings`
+// (interleaved) when given. Built once per (stages, defines) and kept until shutdown() (in
+// gl_context.h). Throws Error with the compiler's log.
 GLuint program(const std::vector<Stage>& stages, const std::string& defines,
                const std::vector<const char*>& varyings = {});
+
+// The keys of every program built in this process (the GL tests check each against the table of
+// program_variants(), gl_variants.h).
+std::vector<std::string> built_program_keys();
+
+// Deletes the cached programs and the case tables (shutdown() calls it, context current).
+void release_programs();
 
 // A GL buffer object owned by this handle.
 class Buffer {
@@ -93,6 +107,11 @@ struct Samples {
   std::string defines;
 };
 Samples upload_samples(const VolumeView& view, const Box3& region);
+
+// Whether samples of `type` are uploaded as double (32-bit integers, float64) rather than float.
+bool wide_samples(ScalarType type);
+// The defines of upload_samples() for float (`wide` false) or double samples.
+std::string sample_defines(bool wide);
 
 // Sets the uniforms every MC shader reads (mc_common.glsl) on `prog`.
 struct GridUniforms {

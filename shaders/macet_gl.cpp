@@ -17,8 +17,6 @@
 
 namespace isotile::gl {
 
-namespace {
-
 // Core's constants as GLSL double literals (printed exactly: 17 significant digits round-trip, with
 // an exponent so that 1 reads as a double).
 std::string macet_defines() {
@@ -37,6 +35,8 @@ std::string macet_defines() {
   s += "#define MACET_HALVINGS " + std::to_string(detail::kMacetHalvings) + "\n";
   return s;
 }
+
+namespace {
 
 // Bytes per region sample of one displacement buffer: dvec4 (displacement, f - iso).
 constexpr std::size_t kDispBytes = 32;

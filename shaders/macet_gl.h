@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "core/extract/macet.h"
 #include "core/mesh/mesh.h"
@@ -27,6 +28,9 @@ struct MacetGlOptions {
   std::int64_t max_brick_cells_z = 0;
   std::uint64_t capture_bytes = 0;
 };
+
+// The defines of every Macet program: MACET and core's constants as GLSL literals.
+std::string macet_defines();
 
 // Throw as macet() does for bad options, InputError when no OpenGL 4.5 context can be created,
 // CapacityError as mc_histopyramid()/mc_geometry_shader() do.

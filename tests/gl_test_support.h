@@ -7,12 +7,15 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "core/mesh/mesh.h"
 #include "core/volume/volume.h"
 #include "shaders/gl_context.h"
+#include "shaders/gl_variants.h"
 #include "skip_support.h"
 
 namespace isotile::testing {
@@ -64,5 +67,28 @@ inline void expect_same_gl_mesh(const Mesh& gl, const Mesh& cpu, const VolumeVie
       worst_n = std::max(worst_n, std::abs(double(gl.normals[i][a]) - double(cpu.normals[i][a])));
   EXPECT_LE(worst_n, normal_tolerance) << what;
 }
+
+// At the end of a GL test program: every program it built is one of the table's variants
+// (shaders/gl_variants.h), which tests/test_glsl_variants.cpp checks with glslang. A driver that
+// builds a program the table does not list fails here.
+class BuiltProgramsListed : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::vector<std::string> listed;
+    for (const gl::ProgramVariant& v : gl::program_variants())
+      listed.push_back(gl::program_key(v.stages, v.defines));
+    int built = 0;
+    for (const std::string& key : gl::built_program_keys()) {
+      ++built;
+      if (std::find(listed.begin(), listed.end(), key) == listed.end())
+        ADD_FAILURE() << "a GL test built a program that gl::program_variants() does not list: "
+                      << key;
+    }
+    std::printf("gl_test_support: %d programs built, each listed in gl::program_variants()\n",
+                built);
+  }
+};
+inline ::testing::Environment* const kBuiltProgramsListed =
+    ::testing::AddGlobalTestEnvironment(new BuiltProgramsListed);
 
 }  // namespace isotile::testing

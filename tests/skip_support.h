@@ -12,7 +12,7 @@
 
 namespace isotile::testing {
 
-enum class SkipKind { Gl, Osmesa, SharedData, Meshlab, Mpi, Itk };
+enum class SkipKind { Gl, Osmesa, SharedData, Meshlab, Mpi, Itk, Glslang };
 
 inline const char* skip_kind_name(SkipKind k) {
   switch (k) {
@@ -28,6 +28,8 @@ inline const char* skip_kind_name(SkipKind k) {
       return "mpi";
     case SkipKind::Itk:
       return "itk";
+    case SkipKind::Glslang:
+      return "glslang";
   }
   return "?";
 }

@@ -1,0 +1,127 @@
+#include "gl_variants.h"
+
+#include <map>
+
+#include "core/extract/dual_contouring.h"
+#include "dc_gl_shared.h"
+#include "macet_gl.h"
+
+namespace isotile::gl {
+
+namespace {
+
+using Variants = std::map<std::string, ProgramVariant>;
+
+void add(Variants& out, std::string what, std::vector<Stage> stages, const std::string& defines,
+         std::vector<std::string> varyings = {}) {
+  const std::string key = program_key(stages, defines);
+  out.try_emplace(key,
+                  ProgramVariant{std::move(what), std::move(stages), defines, std::move(varyings)});
+}
+
+std::string with_base(const std::string& defines) {
+  std::string s = defines;  // appended, not concatenated: GCC 12's -Wrestrict
+  s += "#define BASE\n";
+  return s;
+}
+
+// The count pyramid's passes (mc_histopyramid.cpp, dc_histopyramid.cpp) over `defines`.
+void add_pyramid(Variants& out, const std::string& what, const std::string& defines) {
+  add(out, what + " reduce (base)", {{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, with_base(defines));
+  add(out, what + " reduce", {{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
+  add(out, what + " down-sweep", {{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, defines);
+  add(out, what + " prefix", {{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, defines);
+}
+
+// Marching Cubes and Macet: histopyramid_mesh() and geometry_shader_mesh() (gl_program.h) with
+// the defines "samples + NORMALS + the method's", and Macet's prepare passes (macet_gl.cpp).
+void add_edge_methods(Variants& out) {
+  for (const bool macet : {false, true})
+    for (const bool wide : {false, true})
+      for (const bool normals : {false, true}) {
+        std::string defines = sample_defines(wide);
+        if (normals) defines += "#define NORMALS\n";
+        if (macet) defines += macet_defines();
+        const std::string what = std::string(macet ? "macet" : "mc") +
+                                 (wide ? ", double samples" : ", float samples") +
+                                 (normals ? ", normals:" : ":");
+        add(out, what + " hp classify", {{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
+        add_pyramid(out, what + " hp", defines);
+        add(out, what + " hp vertices", {{GL_COMPUTE_SHADER, "hp_vertices.comp"}}, defines);
+        add(out, what + " hp triangles", {{GL_COMPUTE_SHADER, "hp_triangles.comp"}}, defines);
+        std::vector<std::string> varyings = {"tf_key", "tf_cell", "tf_pos"};
+        if (normals) varyings.push_back("tf_nrm");
+        add(out, what + " gs",
+            {{GL_VERTEX_SHADER, "gs_mc.vert"}, {GL_GEOMETRY_SHADER, "gs_mc.geom"}}, defines,
+            varyings);
+        if (macet) {
+          add(out, what + " push", {{GL_COMPUTE_SHADER, "macet_push.comp"}}, defines);
+          add(out, what + " linear", {{GL_COMPUTE_SHADER, "macet_linear.comp"}}, defines);
+          add(out, what + " smooth", {{GL_COMPUTE_SHADER, "macet_smooth.comp"}}, defines);
+        }
+      }
+}
+
+// Dual Contouring (dc_histopyramid.cpp, dc_geometry_shader.cpp): every option dc_defines() reads.
+void add_dual_contouring(Variants& out) {
+  for (const bool wide : {false, true})
+    for (const DcVertices vertices : {DcVertices::Cell, DcVertices::Patch})
+      for (const DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
+        for (const DcHermite hermite : {DcHermite::Central, DcHermite::Eno})
+          for (const bool normals : {false, true})
+            for (const bool quads : {false, true}) {
+              DualContouringOptions o;
+              o.vertices = vertices;
+              o.solver = solver;
+              o.hermite = hermite;
+              o.normals = normals;
+              o.keep_quads = quads;
+              const std::string samples = sample_defines(wide);
+              const std::string what =
+                  std::string("dc") + (wide ? ", double samples" : ", float samples") + ":";
+              add_pyramid(out, what + " hp", samples + dc_defines(o, DcPass::Pyramid));
+              add(out, what + " classify", {{GL_COMPUTE_SHADER, "dc_hp_classify.comp"}},
+                  samples + dc_defines(o, DcPass::Classify));
+              add(out, what + " vertices", {{GL_COMPUTE_SHADER, "dc_hp_vertices.comp"}},
+                  samples + dc_defines(o, DcPass::Vertices));
+              const std::string faces = samples + dc_defines(o, DcPass::Faces);
+              add(out, what + " hp quads", {{GL_COMPUTE_SHADER, "dc_hp_quads.comp"}}, faces);
+              add(out, what + " gs faces",
+                  {{GL_VERTEX_SHADER, "dc_gs.vert"}, {GL_GEOMETRY_SHADER, "dc_gs.geom"}}, faces,
+                  {"tf_vertex", "tf_elem"});
+            }
+}
+
+// The count pyramid's other layouts, built by tests/benchmarks/bench_hp_layouts.cpp only.
+void add_benchmark_layouts(Variants& out) {
+  // Stage names view these literals (Stage::file is a string_view).
+  static constexpr const char* kPasses[] = {
+      "hp_bench_linear_find.comp", "hp_bench_block_classify.comp", "hp_bench_block_find.comp",
+      "hp_bench_tex_classify.comp", "hp_bench_tex_find.comp"};
+  static constexpr const char* kReduces[] = {"hp_bench_block_reduce.comp",
+                                             "hp_bench_tex_reduce.comp"};
+  for (const bool wide : {false, true}) {
+    const std::string d = sample_defines(wide);
+    const std::string what = wide ? "bench, double samples: " : "bench, float samples: ";
+    for (const char* file : kPasses) add(out, what + file, {{GL_COMPUTE_SHADER, file}}, d);
+    for (const char* file : kReduces) {
+      add(out, what + file, {{GL_COMPUTE_SHADER, file}}, d);
+      add(out, what + file + " (base)", {{GL_COMPUTE_SHADER, file}}, with_base(d));
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<ProgramVariant> program_variants() {
+  Variants v;
+  add_edge_methods(v);
+  add_dual_contouring(v);
+  add_benchmark_layouts(v);
+  std::vector<ProgramVariant> out;
+  out.reserve(v.size());
+  for (auto& [key, variant] : v) out.push_back(std::move(variant));
+  return out;
+}
+
+}  // namespace isotile::gl
