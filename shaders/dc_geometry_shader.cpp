@@ -37,8 +37,7 @@ int dc_gs_faces(const std::string& defines, const std::function<void(GLuint)>& u
   const std::uint64_t total = n_quads * per_quad;
   std::uint64_t cap = std::min(limit, total);
 
-  static GLuint vao = 0;
-  if (!vao) glCreateVertexArrays(1, &vao);
+  const GLuint vao = empty_vertex_array();
   const GLuint prog =
       program({{GL_VERTEX_SHADER, "dc_gs.vert"}, {GL_GEOMETRY_SHADER, "dc_gs.geom"}}, defines,
               {"tf_vertex", "tf_elem"});

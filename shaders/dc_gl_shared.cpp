@@ -10,13 +10,25 @@
 #include "core/extract/isovalue_ties.h"
 #include "core/extract/marching_cubes_tables.h"
 #include "dc_gl.h"
+#include "gl_context.h"
 #include "gl_program.h"
 
 namespace isotile::gl {
 
-void bind_dc_tables() {
+namespace {
+std::unique_ptr<Buffer>& dc_tables() {
   static std::unique_ptr<Buffer> tables;
+  return tables;
+}
+void release_dc_tables() {
+  dc_tables().reset();
+}
+}  // namespace
+
+void bind_dc_tables() {
+  std::unique_ptr<Buffer>& tables = dc_tables();
   if (!tables) {
+    at_shutdown(release_dc_tables);
     // std430 layout of DcTables in dc_common.glsl.
     struct {
       std::array<std::uint32_t, 256> patch_map{};

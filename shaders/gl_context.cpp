@@ -5,11 +5,13 @@
 #include <dlfcn.h>
 #include <glad/gl.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <string_view>
+#include <vector>
 
 #include "core/errors.h"
 
@@ -26,6 +28,7 @@ constexpr int kOsmesaFormat = 0x22, kOsmesaRgba = 0x1908, kOsmesaDepthBits = 0x3
 using OsmesaCreateFn = OSMesaContext (*)(const int*, OSMesaContext);
 using OsmesaMakeCurrentFn = unsigned char (*)(OSMesaContext, void*, unsigned, int, int);
 using OsmesaGetProcFn = GLADapiproc (*)(const char*);
+using OsmesaDestroyFn = void (*)(OSMesaContext);
 
 struct Context {
   DeviceInfo info;
@@ -35,12 +38,14 @@ struct Context {
   // OSMesa
   OSMesaContext osmesa = nullptr;
   OsmesaMakeCurrentFn osmesa_make_current = nullptr;
+  OsmesaDestroyFn osmesa_destroy = nullptr;
   unsigned char pixel[4] = {};
   GLuint framebuffer = 0;
 
   bool make_current() {
     if (osmesa) return osmesa_make_current(osmesa, pixel, GL_UNSIGNED_BYTE, 1, 1);
-    return eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, egl) == EGL_TRUE;
+    return eglBindAPI(EGL_OPENGL_API) &&
+           eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, egl) == EGL_TRUE;
   }
   void release() {
     if (osmesa)
@@ -48,10 +53,30 @@ struct Context {
     else
       eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
   }
+  // Releases this thread's EGL state (current context, bound API); the next make_current()
+  // binds the OpenGL API again.
+  void release_thread() {
+    release();
+    if (!osmesa) eglReleaseThread();
+  }
+  // The context and its display, after release().
+  void destroy() {
+    if (osmesa) {
+      if (osmesa_destroy) osmesa_destroy(osmesa);
+      osmesa = nullptr;
+      return;
+    }
+    if (egl != EGL_NO_CONTEXT) eglDestroyContext(display, egl);
+    egl = EGL_NO_CONTEXT;
+    if (display != EGL_NO_DISPLAY) eglTerminate(display);
+    display = EGL_NO_DISPLAY;
+    eglReleaseThread();
+  }
 };
 
 std::recursive_mutex g_mutex;
-std::unique_ptr<Context> g_context;  // set once created; lives until exit
+std::unique_ptr<Context> g_context;  // set once created; lives until shutdown()
+std::vector<void (*)()> g_releases;  // at_shutdown()
 std::string g_failure;               // set once creation failed
 thread_local int t_depth = 0;
 
@@ -187,6 +212,7 @@ bool try_osmesa(Context& c, std::string& why) {
   c.osmesa = create(attrs, nullptr);
   if (!c.osmesa) return why = "OSMesaCreateContextAttribs(OpenGL 4.5 core) failed", false;
   c.osmesa_make_current = make_current;
+  c.osmesa_destroy = reinterpret_cast<OsmesaDestroyFn>(dlsym(lib, "OSMesaDestroyContext"));
   if (!c.make_current()) return why = "OSMesaMakeCurrent failed", false;
   c.info.platform = "osmesa";
   return gladLoadGL(osmesa_proc) != 0 || (why = "loading OpenGL functions failed", false);
@@ -318,7 +344,7 @@ bool available(std::string* why) {
   std::lock_guard lock(g_mutex);
   if (!g_context && g_failure.empty()) {
     create();
-    if (g_context && t_depth == 0) g_context->release();
+    if (g_context && t_depth == 0) g_context->release_thread();
   }
   if (why) *why = g_failure;
   return g_context != nullptr;
@@ -337,7 +363,33 @@ Scope::Scope() : lock_(g_mutex) {
 }
 
 Scope::~Scope() {
-  if (--t_depth == 0 && g_context) g_context->release();
+  if (--t_depth == 0 && g_context) g_context->release_thread();
+}
+
+void at_shutdown(void (*release)()) {
+  std::lock_guard lock(g_mutex);
+  if (std::find(g_releases.begin(), g_releases.end(), release) == g_releases.end())
+    g_releases.push_back(release);
+}
+
+void shutdown() {
+  std::lock_guard lock(g_mutex);
+  if (!g_context) return;
+  Context& c = *g_context;
+  if (t_depth == 0 && c.make_current()) {
+    for (auto release : g_releases) release();
+    if (c.framebuffer) glDeleteFramebuffers(1, &c.framebuffer);
+    c.framebuffer = 0;
+    glFinish();
+  }
+  c.release();
+  c.destroy();
+  g_context.reset();
+}
+
+bool context_alive() {
+  std::lock_guard lock(g_mutex);
+  return g_context != nullptr;
 }
 
 }  // namespace isotile::gl

@@ -45,8 +45,28 @@ bool available(std::string* why = nullptr);
 // made), so that `--backend auto` on a machine without a GPU does not pay for starting llvmpipe.
 bool hardware_device_present();
 
+// Registers `release` to run, with the context current, when shutdown() ends the context: the
+// objects kept for the context's life (programs, tables, vertex arrays) register their deletion
+// here. Registering the same function again does nothing.
+void at_shutdown(void (*release)());
+
+// Ends this process's use of GL in a known order: runs the registered releases with the context
+// current, deletes the context's framebuffer, destroys the context and terminates its EGL display
+// (or destroys the OSMesa context), and releases this thread's EGL state. Afterwards no GL or EGL
+// object is left to static destructors or to the drivers' own exit handlers (NVIDIA's libEGL
+// corrupted the heap at exit while TBB's workers were still running: docs/gl.md). Call it once
+// no thread uses GL any more; the CLI calls it after joining TBB's workers, the MeshLab plugin
+// when it is unloaded, and library users before leaving main(). A later GL call creates a new
+// context. Does nothing when no context exists.
+void shutdown();
+
+// Whether a context exists now (created and not shut down).
+bool context_alive();
+
 // Holds the context current on the calling thread, and every other thread's GL work off it, for
-// its lifetime. Creates the context when needed (throws like device()).
+// its lifetime. Creates the context when needed (throws like device()). When the outermost Scope
+// of a thread ends, the context is released and, on EGL, so is the thread's EGL state, so that
+// worker threads that ran GL keep nothing of the driver's when they exit.
 class Scope {
  public:
   Scope();

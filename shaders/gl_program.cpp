@@ -15,6 +15,7 @@
 #include "core/errors.h"
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
+#include "gl_context.h"
 
 namespace isotile::gl {
 
@@ -42,6 +43,10 @@ std::vector<std::string>& built_keys() {
 std::unique_ptr<Buffer>& case_tables(CaseTable which) {
   static std::unique_ptr<Buffer> mc_tables, macet_tables;
   return which == CaseTable::Macet ? macet_tables : mc_tables;
+}
+GLuint& vertex_array() {
+  static GLuint vao = 0;
+  return vao;
 }
 
 }  // namespace
@@ -90,6 +95,16 @@ void release_programs() {
   program_cache().clear();
   case_tables(CaseTable::MarchingCubes).reset();
   case_tables(CaseTable::Macet).reset();
+  if (vertex_array()) glDeleteVertexArrays(1, &vertex_array());
+  vertex_array() = 0;
+}
+
+GLuint empty_vertex_array() {
+  if (!vertex_array()) {
+    at_shutdown(release_programs);
+    glCreateVertexArrays(1, &vertex_array());
+  }
+  return vertex_array();
 }
 
 namespace {
@@ -118,6 +133,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   auto& cache = program_cache();
   const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
+  at_shutdown(release_programs);
   const GLuint prog = glCreateProgram();
   std::vector<GLuint> shaders;
   for (const Stage& s : stages) {
@@ -217,6 +233,7 @@ std::unique_ptr<Buffer> table_buffer(const Table& ct) {
 
 void bind_case_tables(CaseTable which) {
   std::unique_ptr<Buffer>& tables = case_tables(which);
+  if (!tables) at_shutdown(release_programs);
   if (!tables)
     tables = which == CaseTable::Macet ? table_buffer(detail::macet_case_table(true))
                                        : table_buffer(mc::kCaseTable);

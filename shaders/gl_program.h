@@ -45,8 +45,12 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
 // program_variants(), gl_variants.h).
 std::vector<std::string> built_program_keys();
 
-// Deletes the cached programs and the case tables (shutdown() calls it, context current).
+// Deletes the cached programs, the case tables and the vertex array (shutdown() calls it, with
+// the context current).
 void release_programs();
+
+// The vertex array without attributes that the geometry-shader paths draw points with.
+GLuint empty_vertex_array();
 
 // A GL buffer object owned by this handle.
 class Buffer {

@@ -78,8 +78,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
 
   std::vector<const char*> varyings = {"tf_key", "tf_cell", "tf_pos"};
   if (o.normals) varyings.push_back("tf_nrm");
-  static GLuint vao = 0;
-  if (!vao) glCreateVertexArrays(1, &vao);
+  const GLuint vao = empty_vertex_array();
   GLuint queries[2];
   glCreateQueries(GL_PRIMITIVES_GENERATED, 1, &queries[0]);
   glCreateQueries(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN, 1, &queries[1]);

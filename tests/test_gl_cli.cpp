@@ -63,6 +63,33 @@ TEST_F(GlCli, BrickedGlRunsWriteTheCpuFile) {
   }
 }
 
+// A bricked GL run at many threads (TBB's workers drive the bricks) exits 0 with the CPU's file
+// and leaves no GL or EGL object for the drivers' exit handlers: tests/gl_exit_check.c, preloaded,
+// counts what is alive after everything else at exit and exits 3 when anything is. NVIDIA's libEGL
+// corrupted the heap at exit when the context was left alive with TBB's workers running.
+TEST_F(GlCli, BrickedGlRunsAtManyThreadsLeaveNothingAliveAtExit) {
+  REQUIRE_GL_CLI();
+  const std::string in = "--threads 8 extract field:gyroid:48 -q --memory 120KiB ";
+  ASSERT_EQ(run(in + "--backend cpu -o cpu.ply").code, 0);
+  const std::string preload = std::string("LD_PRELOAD='") + ISOTILE_GL_EXIT_CHECK +
+                              "' ASAN_OPTIONS=\"$ASAN_OPTIONS:verify_asan_link_order=0\"";
+  for (const char* b : {"hp", "gs"}) {
+    const Result r =
+        run(in + "--backend " + b + " -o " + b + ".ply --stats " + b + ".json", preload);
+    EXPECT_EQ(r.code, 0) << b << ": " << r.err;
+    EXPECT_NE(r.err.find("gl_exit_check: nothing alive at exit: 0 EGL contexts (of 1 made)"),
+              std::string::npos)
+        << b << ": " << r.err;
+    EXPECT_GT(nlohmann::json::parse(slurp(dir_ / (std::string(b) + ".json")))["bricks"].get<int>(),
+              4);
+    EXPECT_TRUE(slurp(dir_ / (std::string(b) + ".ply")) == slurp(dir_ / "cpu.ply")) << b;
+  }
+  // Every subcommand that may touch GL ends the same way.
+  const Result info = run("gl-info", preload);
+  EXPECT_EQ(info.code, 0) << info.err;
+  EXPECT_NE(info.err.find("gl_exit_check: nothing alive at exit"), std::string::npos) << info.err;
+}
+
 // Dual Contouring on both GL backends, in core and brick by brick through the tiler, writes the
 // in-core CPU file, with the default options and with the QEF.
 TEST_F(GlCli, DualContouringWritesTheCpuFile) {

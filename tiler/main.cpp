@@ -1142,35 +1142,48 @@ int main(int argc, char** argv) {
 
   std::optional<tbb::global_control> limit;
   if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
+  tbb::task_scheduler_handle workers{tbb::attach{}};
 
-  try {
-    if (*extract_cmd) return run_extract(ex);
-    if (*info_cmd) return run_info(info_in, info_json);
-    if (*gl_info_cmd) return run_gl_info(gl_info_json);
-    if (*quality_cmd)
-      return run_quality(quality_path, quality_json_flag, quality_intersections, quality_reference);
-    if (*simplify_cmd) return run_simplify(sa);
-    if (*demo_cmd) {
-      ExtractArgs d;
-      d.in.input = "field:gyroid:128";
-      d.output = demo_output;
-      d.stats = "-";
-      const int rc = run_extract(d);
-      if (rc == 0 && !g_quiet)
-        std::fprintf(stderr, "isotile: demo mesh written to %s\n",
-                     std::filesystem::absolute(demo_output).c_str());
-      return rc;
-    }
+  const int rc = [&]() -> int {
+    try {
+      if (*extract_cmd) return run_extract(ex);
+      if (*info_cmd) return run_info(info_in, info_json);
+      if (*gl_info_cmd) return run_gl_info(gl_info_json);
+      if (*quality_cmd)
+        return run_quality(quality_path, quality_json_flag, quality_intersections,
+                           quality_reference);
+      if (*simplify_cmd) return run_simplify(sa);
+      if (*demo_cmd) {
+        ExtractArgs d;
+        d.in.input = "field:gyroid:128";
+        d.output = demo_output;
+        d.stats = "-";
+        const int rc = run_extract(d);
+        if (rc == 0 && !g_quiet)
+          std::fprintf(stderr, "isotile: demo mesh written to %s\n",
+                       std::filesystem::absolute(demo_output).c_str());
+        return rc;
+      }
 #ifdef ISOTILE_HAVE_MPI
-  } catch (const isotile::AgreedError& e) {
-    return fail(e.what(), true);
+    } catch (const isotile::AgreedError& e) {
+      return fail(e.what(), true);
 #endif
-  } catch (const isotile::Error& e) {
-    return fail(e.what(), false);
-  } catch (const std::bad_alloc&) {
-    return fail("out of memory", false);
-  } catch (const std::exception& e) {
-    return fail(e.what(), false);
-  }
-  return 0;
+    } catch (const isotile::Error& e) {
+      return fail(e.what(), false);
+    } catch (const std::bad_alloc&) {
+      return fail("out of memory", false);
+    } catch (const std::exception& e) {
+      return fail(e.what(), false);
+    }
+    return 0;
+  }();
+
+  // A known order at the end (docs/gl.md): TBB's workers joined, then the GL context and what was
+  // made on it deleted, before exit() runs static destructors and the drivers' own exit handlers.
+  limit.reset();
+  tbb::finalize(workers, std::nothrow);
+#ifdef ISOTILE_HAVE_GL
+  isotile::gl::shutdown();
+#endif
+  return rc;
 }
