@@ -17,6 +17,7 @@
 #include "meshlab_plugin/isosurface_job.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/gl_backends.h"
+#include "shaders/gl_context.h"
 #endif
 
 namespace {
@@ -42,7 +43,16 @@ T on_own_thread(vcg::CallBackPos* cb, Work&& work) {
     percent = p;
     what = w;
   };
-  std::packaged_task<T()> task([&] { return work(progress); });
+  std::packaged_task<T()> task([&] {
+#ifdef ISOTILE_HAVE_GL
+    // The job's GL context ends with the job, on the thread that used it, in a known order
+    // (docs/gl.md): nothing GL is left for MeshLab's exit. A later GL job makes a new one.
+    struct EndGl {
+      ~EndGl() { isotile::gl::shutdown(); }
+    } end_gl;
+#endif
+    return work(progress);
+  });
   std::future<T> done = task.get_future();
   std::thread worker(std::move(task));
   while (done.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) {
@@ -221,8 +231,8 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                         "one vertex per cell (the paper's table; non-manifold edges where a cell "
                         "holds several sheets)"));
   par.addParam(RichEnum("backend", d.backend, choices(ml::kBackendNames, 4), "Backend",
-                        "Auto (the GPU where there is one, else the CPU), CPU, or OpenGL: "
-                        "geometry shader or HistoPyramid (Marching Cubes and Macet)"));
+                        "Auto (the CPU: no GPU path is measured faster yet; docs/gl.md), CPU, "
+                        "or OpenGL: geometry shader or HistoPyramid"));
   par.addParam(RichString("memory", QString::fromStdString(d.memory), "Memory budget",
                           "Extract brick by brick within this working set, e.g. 512MiB; 0: in "
                           "core. MeshLab still holds the whole result"));

@@ -425,6 +425,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     }
     if (options.method == Method::DualContouring) j["dc_vertices"] = args.dc_vertices;
     j["backend"] = backend_name(r.backend);
+    j["backend_reason"] = choose_backend(options).reason;
     j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
     j["frame"] = to.frame.active ? "world" : "grid";
     j["triangles"] = r.triangles;
@@ -490,7 +491,8 @@ int run_extract(const ExtractArgs& args) {
   options.macet_relax = args.macet_relax;
   if (options.macet_relax > 0 && options.method != Method::Macet)
     throw InputError("--macet-relax applies to --method macet only");
-  const Backend backend = resolve_backend(options);
+  BackendChoice choice = choose_backend(options);
+  const Backend backend = choice.backend;
 
   const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
   if (args.iso) {
@@ -521,7 +523,7 @@ int run_extract(const ExtractArgs& args) {
   progress("extracting (" + std::string(method_name(options.method)) + ", " +
            std::string(backend_name(backend)) + ", iso " + std::to_string(options.iso) + ")");
   t0 = Clock::now();
-  Mesh mesh = extract(view, options);
+  Mesh mesh = extract(view, options, &choice);
   const double t_extract = seconds_since(t0);
   progress("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
            std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
@@ -592,7 +594,8 @@ int run_extract(const ExtractArgs& args) {
     j["quality"] = args.quality;
     j["macet_relax"] = options.macet_relax;
   }
-  j["backend"] = backend_name(backend);
+  j["backend"] = backend_name(choice.backend);
+  j["backend_reason"] = choice.reason;
   j["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
   j["frame"] = frame.active ? "world" : "grid";
   j["triangles"] = mesh.triangles.size() + 2 * mesh.quads.size();

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "core/errors.h"
@@ -60,9 +62,18 @@ const BackendEntry& entry(Backend b) {
   throw InputError("unknown backend");
 }
 
-// Auto prefers a GPU path when one is available; the CPU comes last as the fallback.
-constexpr std::array<Backend, 3> kAutoOrder = {Backend::HistoPyramid, Backend::GeometryShader,
-                                               Backend::Cpu};
+// Auto's rules, the first whose backend implements the method and can run here wins. Measured on
+// an NVIDIA H200 (docs/gl.md), the HistoPyramid path is 4-7x slower than the CPU at 16 threads
+// and llvmpipe is slower still, so no rule sends a machine to a GL path yet; a measured rule
+// (device, memory, upload rate) belongs here, above the CPU's.
+struct AutoRule {
+  Backend backend;
+  std::string_view reason;
+};
+constexpr std::array<AutoRule, 1> kAutoRules = {{
+    {Backend::Cpu,
+     "auto: the CPU (no GL path has been measured faster than the CPU on any device yet)"},
+}};
 
 // Whether `e` can run here; `why` says why not, `hardware` whether it runs on a real GPU.
 // `hardware_only`: only a real GPU matters (Auto), which the probe may rule out cheaply.
@@ -133,22 +144,36 @@ std::vector<BackendCaps> capabilities() {
   return caps;
 }
 
-Backend resolve_backend(const ExtractOptions& options) {
+BackendChoice choose_backend(const ExtractOptions& options) {
   const int m = static_cast<int>(options.method);
-  if (options.backend == Backend::Auto) {
-    // A GPU backend only on a real GPU: on a software rasteriser the CPU path is faster.
-    for (Backend b : kAutoOrder) {
-      const auto& e = entry(b);
-      if (!e.run[m]) continue;
+  if (options.backend != Backend::Auto) return {resolve_backend(options), "requested"};
+  if (const char* env = std::getenv("ISOTILE_AUTO_BACKEND"); env && *env) {
+    const std::string want = env;
+    for (const auto& e : kBackends) {
+      if (e.name != want) continue;
       std::string why;
       bool hardware = false;
-      if (b == Backend::Cpu ? usable(e, &why, &hardware)
-                            : usable(e, &why, &hardware, true) && hardware)
-        return b;
+      if (e.run[m] && usable(e, &why, &hardware))
+        return {e.backend, "auto: ISOTILE_AUTO_BACKEND=" + want};
+      return {Backend::Cpu, "auto: the CPU (ISOTILE_AUTO_BACKEND=" + want + " cannot run " +
+                                std::string(method_name(options.method)) + " here" +
+                                (why.empty() ? "" : ": " + why) + ")"};
     }
-    throw InputError("method '" + std::string(method_name(options.method)) +
-                     "' is not implemented by any backend of this build");
+    throw InputError("ISOTILE_AUTO_BACKEND='" + want + "' names no backend (cpu, gs, hp)");
   }
+  for (const AutoRule& rule : kAutoRules) {
+    const auto& e = entry(rule.backend);
+    std::string why;
+    bool hardware = false;
+    if (e.run[m] && usable(e, &why, &hardware)) return {rule.backend, std::string(rule.reason)};
+  }
+  throw InputError("method '" + std::string(method_name(options.method)) +
+                   "' is not implemented by any backend of this build");
+}
+
+Backend resolve_backend(const ExtractOptions& options) {
+  const int m = static_cast<int>(options.method);
+  if (options.backend == Backend::Auto) return choose_backend(options).backend;
   const auto& e = entry(options.backend);
   if (!e.run[m] && !e.missing.empty())
     throw InputError("backend '" + std::string(e.name) + "': " + std::string(e.missing));
@@ -191,9 +216,26 @@ int extract_halo(const ExtractOptions& options) {
   return 2;
 }
 
-Mesh extract(const VolumeView& view, const ExtractOptions& options) {
-  const Backend b = resolve_backend(options);
-  return entry(b).run[static_cast<int>(options.method)](view, options);
+Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoice* ran) {
+  const int m = static_cast<int>(options.method);
+  BackendChoice choice = choose_backend(options);
+  const Backend b = choice.backend;
+  if (options.backend != Backend::Auto || b == Backend::Cpu) {
+    if (ran) *ran = std::move(choice);
+    return entry(b).run[m](view, options);
+  }
+  try {
+    Mesh mesh = entry(b).run[m](view, options);
+    if (ran) *ran = std::move(choice);
+    return mesh;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "isotile: the %s backend failed (%s); extracting on the CPU instead\n",
+                 std::string(entry(b).name).c_str(), e.what());
+    if (ran)
+      *ran = {Backend::Cpu, "auto: the CPU after the " + std::string(entry(b).name) +
+                                " backend failed: " + e.what()};
+    return entry(Backend::Cpu).run[m](view, options);
+  }
 }
 
 }  // namespace isotile

@@ -2,8 +2,9 @@
 //
 // Backends are described by one table (extract.cpp) indexed by Backend, checked against the
 // enum's size at compile time; capabilities() reports what this build and machine can run.
-// Backend::Auto resolves to the fastest available backend that supports the method; the CPU is the
-// reference and the fallback.
+// Backend::Auto resolves by one table of rules (extract.cpp, docs/gl.md); the CPU is the
+// reference and the fallback. Until a GL path is measured faster than the CPU on some device,
+// the table sends every machine to the CPU; the GL paths stay one option away.
 #pragma once
 
 #include <array>
@@ -74,7 +75,19 @@ std::vector<BackendCaps> capabilities();
 // requested backend or method is not available.
 Backend resolve_backend(const ExtractOptions& options);
 
-Mesh extract(const VolumeView& view, const ExtractOptions& options);
+// resolve_backend() with the reason: "requested" for an explicit backend, else the Auto rule
+// that chose it. ISOTILE_AUTO_BACKEND=cpu|gs|hp overrides the rules (diagnosis and tests); an
+// override whose backend cannot run here gives the CPU, saying why.
+struct BackendChoice {
+  Backend backend = Backend::Cpu;
+  std::string reason;
+};
+BackendChoice choose_backend(const ExtractOptions& options);
+
+// Under Backend::Auto, a GL backend that fails (any isotile::Error) is followed by the CPU, with
+// one line on stderr naming the failure: Auto never fails where the CPU would succeed. `ran`, when
+// given, gets the backend that made the mesh and why.
+Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoice* ran = nullptr);
 
 // Optional backends live in their own targets (the GL ones in shaders/, isotile_gl) so that core
 // does not depend on them; the program installs them at startup, before any extract(). `probe`
