@@ -28,9 +28,9 @@ std::string dc_defines(const DualContouringOptions& o, DcPass pass);
 void set_dc_uniforms(GLuint prog, const Box3& vertex_cells, const VolumeView& view,
                      const DualContouringOptions& o);
 
-// The slab pipeline both paths share (dc_histopyramid.cpp): classification, the count pyramid
-// and the vertex pass, then the faces from the pyramid's quad pass or, with `geometry_shader`,
-// from dc_gs_faces.
+// Dual Contouring on the HistoPyramid driver (hp_driver.h, dc_histopyramid.cpp): classification,
+// the count pyramid and the vertex pass, then the faces from the pyramid's quad pass or, with
+// `geometry_shader`, from dc_gs_faces.
 Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
                    bool geometry_shader);
 

@@ -1,0 +1,233 @@
+#include "hp_driver.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <deque>
+#include <limits>
+#include <string>
+
+#include "core/errors.h"
+#include "gl_context.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// Indices per face as read back, and the mesh's face array they land in.
+std::uint64_t face_words(HpFaces f) {
+  return f == HpFaces::Triangles ? 3 : f == HpFaces::Quads ? 4 : 6;
+}
+
+// Adds `base` to every vertex index of `faces` from element `first` on.
+template <class Faces>
+void offset_indices(Faces& faces, std::size_t first, std::uint32_t base) {
+  if (base == 0) return;
+  tbb::parallel_for(first, faces.size(), [&](std::size_t i) {
+    for (auto& v : faces[i]) v += base;
+  });
+}
+
+// Runs the current program `prog` over `n` items in chunks of at most `cap`, each chunk read back
+// from `out` (bytes_per_item each) to `dst`, and `out2` to `dst2` when given.
+void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint64_t bytes_per_item,
+                     const Buffer& out, void* dst, const Buffer* out2 = nullptr,
+                     void* dst2 = nullptr) {
+  for (std::uint64_t first = 0; first < n; first += cap) {
+    const std::uint64_t k = std::min(cap, n - first);
+    set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
+    set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(k));
+    dispatch(k);
+    out.read(0, k * bytes_per_item, static_cast<char*>(dst) + first * bytes_per_item);
+    if (out2) out2->read(0, k * bytes_per_item, static_cast<char*>(dst2) + first * bytes_per_item);
+  }
+}
+
+}  // namespace
+
+Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMethod& method,
+                         McStats* stats) {
+  Scope scope;
+  const DeviceInfo& dev = device();
+  Mesh mesh;
+  const double sample_bytes = wide_samples(view.type) ? 8 : 4;
+  const std::uint64_t budget = memory_budget(run.memory);
+  const std::vector<Box3> planned =
+      plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
+                 std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
+                 run.max_brick_cells_z);
+  std::deque<Box3> slabs(planned.begin(), planned.end());
+  const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
+  const std::uint64_t words = face_words(method.faces);
+  // Output buffers: at most one binding, and half the budget.
+  const std::uint64_t out_bytes = std::max<std::uint64_t>(1, std::min(max_binding, budget / 2));
+
+  method.bind_tables();
+  std::uint64_t vertex_base = 0;
+  int slab_count = 0, draws = 0;
+  while (!slabs.empty()) {
+    const Box3 cells = slabs.front();
+    slabs.pop_front();
+    const Box3 elems = method.elements(cells);
+    const Box3 region = slab_region(view, cells, method.halo);
+    StageTimer timer;
+    const Samples samples = upload_samples(view, region);
+    const std::string pyramid = samples.defines + method.pyramid_defines;
+    std::string base_defines = pyramid;  // appended, not concatenated: GCC 12's -Wrestrict
+    base_defines += "#define BASE\n";
+    const GridUniforms grid{region, cells, view.global_dims, run.iso, view.origin, view.spacing};
+    auto uniforms = [&](GLuint prog) {
+      set_grid_uniforms(prog, grid);
+      if (method.uniforms) method.uniforms(prog, elems);
+    };
+    const std::uint64_t elements =
+        static_cast<std::uint64_t>(elems.extent(0) * elems.extent(1) * elems.extent(2));
+    const Pyramid pyr(elements);
+
+    const Buffer codes(((elements + 1) / 2) * 4);
+    const Buffer levels(pyr.nodes * 8);
+    const Buffer maps(method.patch_maps ? elements * 4 : 4);
+    samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
+    codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
+    levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
+    if (method.patch_maps) maps.bind(GL_SHADER_STORAGE_BUFFER, 6);
+    timer.lap(stats ? &stats->seconds_upload : nullptr);
+    // The method's own passes (Macet: its displaced grid vertices); kept until the slab is done.
+    const std::vector<Buffer> kept =
+        method.prepare ? method.prepare(samples, grid, samples.defines + method.classify_defines)
+                       : std::vector<Buffer>{};
+    samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
+
+    // (1) classify
+    GLuint prog = program({{GL_COMPUTE_SHADER, method.classify_file}},
+                          samples.defines + method.classify_defines);
+    uniforms(prog);
+    glUseProgram(prog);
+    dispatch((elements + 1) / 2);
+
+    // (2) the count pyramid, level by level, then each node's vertex offset, top-down
+    const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, base_defines);
+    const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, pyramid);
+    for (int l = 1; l <= pyr.levels; ++l) {
+      prog = l == 1 ? base : upper;
+      uniforms(prog);
+      set_uniform_u(prog, "u_count", pyr.count[l]);
+      set_uniform_u(prog, "u_src_count", pyr.count[l - 1]);
+      set_uniform_u(prog, "u_src_offset", l >= 2 ? pyr.offset[l - 1] : 0);
+      set_uniform_u(prog, "u_dst_offset", pyr.offset[l]);
+      glUseProgram(prog);
+      dispatch(pyr.count[l]);
+    }
+    const Buffer offsets(pyr.nodes * 4);
+    offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+    prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, pyramid);
+    uniforms(prog);
+    pyr.set_uniforms(prog);
+    glUseProgram(prog);
+    for (int l = pyr.levels; l >= 1; --l) {
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_level"), l);
+      dispatch(pyr.count[l]);
+    }
+    check("building the HistoPyramid");
+
+    // (3) totals
+    std::uint32_t totals[2] = {};
+    levels.read(std::size_t{pyr.offset[pyr.levels]} * 8, 8, totals);
+    const std::uint64_t n_vertices = totals[0], n_faces = totals[1];
+    if (method.positions_on_device && n_vertices * 12 > max_binding) {
+      if (cells.extent(2) > 1) {
+        // Too many vertices for one buffer: the slab in two halves.
+        Box3 lower = cells, upper_half = cells;
+        lower.hi[2] = upper_half.lo[2] = cells.lo[2] + cells.extent(2) / 2;
+        slabs.push_front(upper_half);
+        slabs.push_front(lower);
+        continue;
+      }
+      throw CapacityError("one cell layer of " + std::to_string(cells.extent(0)) + " x " +
+                          std::to_string(cells.extent(1)) +
+                          " cells has more vertices than the GL device's largest buffer holds; "
+                          "use the CPU backend");
+    }
+    // The vertices of the top layer of elements are listed again, first, by the next slab.
+    std::uint64_t shared = 0;
+    if (!slabs.empty() && n_vertices > 0) {
+      prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, pyramid);
+      uniforms(prog);
+      shared = n_vertices -
+               vertices_before(prog, pyr,
+                               static_cast<std::uint32_t>(elems.extent(0) * elems.extent(1) *
+                                                          (elems.extent(2) - 1)));
+    }
+    if (vertex_base + n_vertices > std::numeric_limits<std::uint32_t>::max())
+      throw CapacityError(
+          "the mesh would have more than 2^32 - 1 vertices, more than an in-memory mesh can "
+          "index");
+    timer.lap(stats ? &stats->seconds_count : nullptr);
+
+    // (4) vertices, in chunks unless the face pass reads them all
+    const std::size_t v0 = mesh.positions.size();
+    mesh.positions.resize(v0 + n_vertices);
+    if (method.normals) mesh.normals.resize(v0 + n_vertices);
+    const std::uint64_t vcap =
+        method.positions_on_device
+            ? std::max<std::uint64_t>(n_vertices, 1)
+            : std::max<std::uint64_t>(1, std::min(out_bytes / 12, n_vertices));
+    const Buffer pos(vcap * 12), nrm(method.normals ? vcap * 12 : 4);
+    if (n_vertices > 0) {
+      prog = program({{GL_COMPUTE_SHADER, method.vertex_file}},
+                     samples.defines + method.vertex_defines);
+      uniforms(prog);
+      pyr.set_uniforms(prog);
+      glUseProgram(prog);
+      pos.bind(GL_SHADER_STORAGE_BUFFER, 3);
+      nrm.bind(GL_SHADER_STORAGE_BUFFER, 4);
+      dispatch_chunks(prog, n_vertices, vcap, 12, pos, mesh.positions.data() + v0,
+                      method.normals ? &nrm : nullptr,
+                      method.normals ? mesh.normals.data() + v0 : nullptr);
+    }
+
+    // (5) faces, in chunks that fit one binding (or from the geometry shader)
+    const bool quads = method.faces == HpFaces::Quads;
+    const std::size_t f0 = quads ? mesh.quads.size() : mesh.triangles.size();
+    if (quads)
+      mesh.quads.resize(f0 + n_faces);
+    else
+      mesh.triangles.resize(f0 + n_faces * words / 3);
+    std::uint32_t* out = n_faces == 0 ? nullptr
+                         : quads      ? mesh.quads[f0].data()
+                                      : mesh.triangles[f0].data();
+    const std::string faces = samples.defines + method.face_defines;
+    if (n_faces > 0 && method.positions_on_device) pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
+    if (n_faces > 0 && method.gs_faces) {
+      draws += method.gs_faces(faces, uniforms, pyr, elements, n_faces, out);
+    } else if (n_faces > 0) {
+      prog = program({{GL_COMPUTE_SHADER, method.face_file}}, faces);
+      uniforms(prog);
+      pyr.set_uniforms(prog);
+      glUseProgram(prog);
+      const std::uint64_t cap =
+          std::max<std::uint64_t>(1, std::min(out_bytes / (words * 4), n_faces));
+      const Buffer face_buffer(cap * words * 4);
+      face_buffer.bind(GL_SHADER_STORAGE_BUFFER, 3);
+      dispatch_chunks(prog, n_faces, cap, words * 4, face_buffer, out);
+    }
+    if (quads)
+      offset_indices(mesh.quads, f0, static_cast<std::uint32_t>(vertex_base));
+    else
+      offset_indices(mesh.triangles, f0, static_cast<std::uint32_t>(vertex_base));
+    check("writing the HistoPyramid mesh");
+    timer.lap(stats ? &stats->seconds_output : nullptr);
+    mesh.positions.resize(v0 + n_vertices - shared);
+    if (method.normals) mesh.normals.resize(v0 + n_vertices - shared);
+    vertex_base += n_vertices - shared;
+    ++slab_count;
+  }
+  glUseProgram(0);
+  if (stats) {
+    stats->bricks = slab_count;
+    stats->capture_passes = draws;
+  }
+  return mesh;
+}
+
+}  // namespace isotile::gl
