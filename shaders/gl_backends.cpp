@@ -59,8 +59,11 @@ std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double b
   const double plane = static_cast<double>(full.extent(0) * full.extent(1));
   const double planes = std::min(static_cast<double>(budget) / (plane * bytes_per_sample),
                                  binding / (plane * largest_per_sample));
-  // A slab of t cells uploads t + 2 + 2 * halo sample planes.
+  // A slab of t cells uploads t + 2 + 2 * halo sample planes, fewer where the volume's faces clip
+  // its halo: when the whole z range fits, one slab takes it, however wide the halo (Macet max's
+  // is tens of samples).
   std::int64_t t = static_cast<std::int64_t>(std::floor(planes)) - 2 - 2 * halo;
+  if (static_cast<double>(full.extent(2)) <= std::floor(planes)) t = std::max(t, cells.extent(2));
   if (t < 1)
     throw CapacityError("one x-y slab of " + std::to_string(full.extent(0)) + " x " +
                         std::to_string(full.extent(1)) +

@@ -154,6 +154,21 @@ TEST_P(GlMacet, RelaxAndMaxMatchCpu) {
   expect_same_mesh(run(GetParam(), vol.view(), opts(max, 5)), cpu_max, vol.view(), "max");
 }
 
+// Max's halo with the default sweeps is tens of samples, so a slab's planned halo alone can exceed
+// the largest binding (llvmpipe: 128 MiB) while the whole volume, whose faces clip the halo, fits:
+// it then goes in one slab (an 80^3 volume was refused as "does not fit the GL device's buffers").
+TEST_P(GlMacet, MaxWithDefaultSweepsOnAVolumeThatFitsWhole) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::MarschnerLobb, 80});
+  const MacetOptions max{.iso = field_default_iso(FieldKind::MarschnerLobb),
+                         .quality = MacetQuality::Max};
+  ASSERT_GT(macet_halo(max), 40);
+  gl::McStats stats;
+  expect_same_mesh(run(GetParam(), vol.view(), opts(max), &stats), macet(vol.view(), max),
+                   vol.view(), "max, default sweeps");
+  EXPECT_EQ(stats.bricks, 1);
+}
+
 TEST_P(GlMacet, EmptyAndTinyVolumes) {
   REQUIRE_GL();
   const Volume vol = make_field_volume({FieldKind::Sphere, 9});
