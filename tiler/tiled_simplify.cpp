@@ -17,6 +17,7 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "tiler/brick_reader.h"
+#include "tiler/source_histogram.h"
 
 namespace isotile {
 
@@ -179,6 +180,11 @@ class TiledSimplification {
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
       count(brick_vertices, brick_faces, plane_faces);
+    }
+    if (!opt_.allow_empty && std::all_of(brick_faces.begin(), brick_faces.end(),
+                                         [](std::uint64_t n) { return n == 0; })) {
+      const ValueHistogram h = source_histogram(src_, opt_.memory);
+      throw_no_surface(opt_.extract.iso, std::pair(h.min, h.max));
     }
     result.plan = plan_;
     result.backend = reader_.extract().backend;
