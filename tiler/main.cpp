@@ -479,7 +479,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["vertices"] = r.vertices;
     j.update(quality_json(r.quality));
     // Topology needs every edge's faces at once; a streamed run does not hold them.
-    for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "watertight"})
+    for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "closed", "watertight"})
       j[key] = nullptr;
     j["bricks"] = r.plan.total();
     j["brick_cells"] = r.plan.brick;
