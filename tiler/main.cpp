@@ -100,21 +100,31 @@ struct InputArgs {
 
   void add_to(CLI::App& app) {
     app.add_option("INPUT", input,
-                   "Volume file (raw, raw.gz, nrrd, nhdr, vdb, nii, nii.gz, mha, mhd, tif, mrc, "
-                   "map, DICOM file), a DICOM or TIFF directory, a numbered TIFF pattern "
+                   "Volume file by extension: NRRD (.nrrd, .nhdr), OpenVDB (.vdb), NIfTI (.nii, "
+                   ".nii.gz), MetaImage (.mha, .mhd), TIFF (.tif, .tiff), MRC/CCP4 (.mrc, .mrcs, "
+                   ".map, .ccp4), DICOM (.dcm, .ima, or any file with DICOM's DICM marker), raw "
+                   "(any other name: NAME_XxYxZ_TYPE.raw[.gz], or --dims and --type; .gz is "
+                   "gunzipped); a DICOM or TIFF directory, a numbered TIFF pattern "
                    "(slice_%03d.tif) or a procedural field field:NAME:N (sphere, torus, gyroid, "
                    "csg-box, marschner-lobb)")
         ->required();
-    app.add_option("--dims", dims, "Raw input: samples along x,y,z, e.g. 256,256,128");
+    app.add_option("--dims", dims,
+                   "Raw input: samples along x,y,z, e.g. 256,256,128 (default: from the file "
+                   "name NAME_XxYxZ_TYPE.raw)");
     app.add_option("--type", type,
-                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64");
-    app.add_option("--spacing", spacing, "Sample spacing x,y,z (overrides the file's)");
+                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64 (default: "
+                   "from the file name)");
+    app.add_option("--spacing", spacing,
+                   "Sample spacing x,y,z, finite and above 0 (overrides the file's; default: the "
+                   "file's, 1,1,1 for raw input)");
     app.add_option("--origin", origin,
-                   "World position x,y,z of the first sample (overrides the file's)");
+                   "World position x,y,z of the first sample, finite (overrides the file's; "
+                   "default: the file's, 0,0,0 for raw input)");
     app.add_option("--endian", endian, "Raw input byte order")
         ->check(CLI::IsMember({"little", "big"}));
     app.add_option("--series", series,
-                   "DICOM: the SeriesInstanceUID to read where the directory holds several");
+                   "DICOM: the SeriesInstanceUID to read where the directory holds several "
+                   "(default: the only one)");
   }
 
   RawOptions raw_options() const {
@@ -1053,8 +1063,10 @@ int main(int argc, char** argv) {
   CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids", "isotile"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "isotile " ISOTILE_VERSION);
+  // Every option's default in --help (and so in the man page), inherited by the subcommands.
+  app.option_defaults()->always_capture_default();
   int threads = 0;
-  app.add_option("--threads", threads, "Worker threads (default: all cores)")
+  app.add_option("--threads", threads, "Worker threads (0, the default: every core)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--quiet,-q", g_quiet, "No progress messages on stderr");
 
@@ -1078,7 +1090,8 @@ int main(int argc, char** argv) {
   extract_cmd->add_option("--backend", ex.backend, "Where to run it")
       ->check(CLI::IsMember({"cpu", "gs", "hp", "auto"}));
   extract_cmd->add_option("--stats", ex.stats,
-                          "Write statistics as JSON to this file ('-': stdout)");
+                          "Write statistics as JSON to this file, any name ('-': stdout; "
+                          "default: none)");
   extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
   extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
   extract_cmd
@@ -1137,7 +1150,7 @@ int main(int argc, char** argv) {
   extract_cmd->add_option("--memory", ex.memory,
                           "Out of core: extract brick by brick, each brick's working set within "
                           "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
-                          "file identical to an in-core run");
+                          "file identical to an in-core run (default: in core)");
 
   InputArgs info_in;
   bool info_json = false;
@@ -1157,15 +1170,18 @@ int main(int argc, char** argv) {
                         "Count self-intersecting triangle pairs");
   std::string quality_reference;
   quality_cmd->add_option("--reference", quality_reference,
-                          "Also measure the two-way sampled (Hausdorff) distance to this mesh, "
-                          "e.g. the input of a simplification (mesh units)");
+                          "Also measure the two-way sampled (Hausdorff) distance to this mesh "
+                          "(.ply, .obj, .stl, .off), e.g. the input of a simplification (mesh "
+                          "units; default: none)");
 
   SimplifyArgs sa;
   auto* simplify_cmd = app.add_subcommand(
       "simplify",
       "Simplify a mesh by edge collapses: fewer triangles, same topology and border, good shapes");
   simplify_cmd->add_option("IN", sa.input, "Mesh file (.ply, .obj, .stl, .off)")->required();
-  simplify_cmd->add_option("OUT", sa.output, "Simplified mesh (.ply, .obj, .stl, .off)")
+  simplify_cmd
+      ->add_option("OUT", sa.output,
+                   "Simplified mesh: .ply (binary; --ascii for text), .obj, .stl (binary) or .off")
       ->required();
   auto* ratio_opt =
       simplify_cmd->add_option("--ratio", sa.ratio, "Fraction of faces kept, in (0, 1]");
@@ -1175,6 +1191,8 @@ int main(int argc, char** argv) {
       "--max-error", sa.max_error,
       "Simplify as far as the surface stays within E (mesh units) of the input: its "
       "vertices, edge midpoints and face centroids within E of the result (docs/simplify.md)");
+  // Exactly one of the three is given: none has a default.
+  for (CLI::Option* o : {ratio_opt, faces_opt, error_opt}) o->default_str("");
   ratio_opt->excludes(faces_opt)->excludes(error_opt);
   faces_opt->excludes(error_opt);
   simplify_cmd
@@ -1185,12 +1203,14 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--no-relax", sa.no_relax, "Skip the flips and tangential relaxation");
   simplify_cmd->add_flag("--ascii", sa.ascii, "ASCII PLY instead of binary");
   simplify_cmd->add_option("--stats", sa.stats,
-                           "Write statistics as JSON to this file ('-': stdout)");
+                           "Write statistics as JSON to this file, any name ('-': stdout; "
+                           "default: none)");
 
   std::string demo_output = "isotile-demo.ply";
   auto* demo_cmd = app.add_subcommand(
       "demo", "Extract the built-in demo (a 128^3 gyroid) and print its statistics");
-  demo_cmd->add_option("-o,--output", demo_output, "Where to write the demo mesh");
+  demo_cmd->add_option("-o,--output", demo_output,
+                       "Where to write the demo mesh: .ply, .obj, .stl or .off");
 
   // Subcommand options may also come before the subcommand name.
   bool gl_info_json = false;

@@ -42,6 +42,14 @@ constexpr double kSimplifyBytesPerFace = 450;
 constexpr double kSeamBytesPerFace = 800;
 
 // A file for intermediate data, unlinked from the start: it vanishes however the process ends.
+// Scratch files go beside the output (its file system has room for the mesh), or, where the
+// output is written in place (a device, a FIFO, standard output), to the temporary folder
+// (TMPDIR): not into /dev or /proc.
+std::filesystem::path scratch_folder(const std::filesystem::path& output) {
+  const OutputTarget t = resolve_output(output);
+  return t.in_place() ? std::filesystem::temp_directory_path() : t.path.parent_path();
+}
+
 class ScratchFile {
  public:
   explicit ScratchFile(const std::filesystem::path& dir) {
@@ -141,7 +149,7 @@ class TiledSimplification {
         opt_(options),
         n_(source.dims),
         reader_(source, options.extract),
-        dir_(output.parent_path()),
+        dir_(scratch_folder(output)),
         chunks_spill_(dir_),
         vertices_(dir_),
         faces_(dir_) {
