@@ -348,9 +348,12 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   mpi.sum(bricks->brick_faces());
   mpi.phase([&] {
     bricks->scan(result);
-    // Every rank has the summed counts, so every rank throws the same error.
-    if (result.faces == 0 && !options.allow_empty)
-      throw_no_surface(options.extract.iso, std::nullopt);
+    // Every rank has the summed counts, so every rank throws the same error; each finds the
+    // samples' range for it by one streaming pass (on this error only).
+    if (result.faces == 0 && !options.allow_empty) {
+      const ValueHistogram h = source_histogram(*source, options.memory);
+      throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+    }
   });
   result.seconds_count = since(t0);
 
