@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <new>
 #include <string>
 #include <system_error>
 
@@ -163,6 +164,9 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   final_ = t.path;
   if (t.in_place()) {
     in_place_ = true;
+    // What this process already wrote to stdout or stderr through stdio goes first.
+    if (t.kind == OutputTarget::Kind::Descriptor && (t.fd == 1 || t.fd == 2))
+      std::fflush(t.fd == 1 ? stdout : stderr);
     // A duplicate of the descriptor shares its offset and flags (O_APPEND of `>> log`).
     const int fd = t.kind == OutputTarget::Kind::Descriptor
                        ? ::fcntl(t.fd, F_DUPFD_CLOEXEC, 3)
@@ -174,6 +178,9 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
       ::close(fd);
       refuse(target_, describe(err));
     }
+    // The same large buffer as a temporary's (it outlives fclose: a member).
+    buffer_.reset(new (std::nothrow) char[kBufferSize]);
+    if (buffer_) std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferSize);
     return;
   }
   // Built with append: GCC 12 gives a false -Wrestrict for "." + std::string at -O2.

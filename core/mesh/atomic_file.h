@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <string>
 
 namespace isotile {
@@ -81,6 +82,7 @@ class AtomicFile {
   std::filesystem::path target_;
   std::filesystem::path final_;  // target_ with its symbolic links followed
   bool in_place_ = false;
+  std::unique_ptr<char[]> buffer_;  // in place: stdio's buffer (a temporary's sits with its slot)
   std::filesystem::path temp_;
   std::FILE* file_ = nullptr;
   int slot_ = -1;
