@@ -364,6 +364,10 @@ TEST_F(CliOutputs, IsoAutoFindsASurfaceInEveryField) {
     EXPECT_EQ(j["iso_auto"]["rule"], "otsu");
     EXPECT_LT(j["iso_auto"]["min"].get<double>(), j["iso"].get<double>());
     EXPECT_GT(j["iso_auto"]["max"].get<double>(), j["iso"].get<double>());
+    // `info` names the same value.
+    const CliResult info = run("info " + in + " --json");
+    ASSERT_EQ(info.code, 0) << info.err;
+    EXPECT_EQ(nlohmann::json::parse(info.out)["iso_auto"], j["iso"]) << field;
     // Out of core: the same isovalue from a streamed histogram, so the same file.
     const CliResult m =
         run("extract " + in + " --iso auto -q -o m.ply --stats m.json --memory 1MiB");
@@ -371,6 +375,18 @@ TEST_F(CliOutputs, IsoAutoFindsASurfaceInEveryField) {
     EXPECT_EQ(json_of(dir_ / "m.json")["iso"], j["iso"]) << field;
     EXPECT_EQ(slurp(dir_ / "m.ply"), slurp(dir_ / "a.ply")) << field;
   }
+}
+
+TEST_F(CliOutputs, AConstantVolumeHasNoAutomaticIsovalue) {
+  { std::ofstream(dir_ / "flat_4x4x4_uint8.raw", std::ios::binary) << std::string(64, '\x07'); }
+  const CliResult r = run("extract flat_4x4x4_uint8.raw --iso auto -o out.ply");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "every sample is 7: no isovalue separates an inside from an outside"))
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+  const CliResult info = run("info flat_4x4x4_uint8.raw --json");
+  ASSERT_EQ(info.code, 0) << info.err;
+  EXPECT_TRUE(nlohmann::json::parse(info.out)["iso_auto"].is_null());
 }
 
 TEST_F(CliOutputs, IsoAutoFindsASurfaceInEverySharedVolume) {

@@ -863,6 +863,13 @@ int run_info(const InputArgs& in, bool as_json) {
   for (int b = 0; b < kBins; ++b)
     bins.push_back({{"from", lo + b * width}, {"to", lo + (b + 1) * width}, {"count", hist[b]}});
   j["histogram"] = bins;
+  // What `extract --iso auto` would choose (null for a volume of one value: no threshold).
+  std::optional<double> auto_iso;
+  try {
+    auto_iso = otsu_isovalue(value_histogram(v));
+  } catch (const InputError&) {
+  }
+  j["iso_auto"] = auto_iso ? json(*auto_iso) : json(nullptr);
   if (const auto field = parse_field_spec(in.input))
     j["default_iso"] = field_default_iso(field->kind);
   if (as_json) {
@@ -894,6 +901,8 @@ int run_info(const InputArgs& in, bool as_json) {
   for (int b = 0; b < kBins; ++b)
     std::printf("  %12g .. %-12g %llu\n", lo + b * width, lo + (b + 1) * width,
                 static_cast<unsigned long long>(hist[b]));
+  if (auto_iso)
+    std::printf("iso auto %.10g (Otsu's threshold: what extract --iso auto chooses)\n", *auto_iso);
   return 0;
 }
 
