@@ -4,7 +4,8 @@
 #   cmake -DISOTILE=<isotile> -DHELP2MAN=<help2man> -DOUT=<dir> -P isotile_cli_docs.cmake
 #
 # Writes OUT/isotile.1.gz (help2man over `isotile --help`, plus a COMMANDS section holding every
-# subcommand's --help) and OUT/isotile.bash (a bash completion: subcommands, their options, and
+# subcommand's --help, and the EXIT STATUS, ENVIRONMENT, FILES and EXAMPLES sections of
+# isotile.h2m beside this script) and OUT/isotile.bash (a bash completion: subcommands, their options, and
 # the values of options restricted to a set, as CLI11 prints them: `--method TEXT:{mc,macet,dc}`).
 
 function(run_help out)
@@ -92,7 +93,8 @@ file(WRITE "${OUT}/commands.h2m" "${include}")
 execute_process(
   COMMAND "${HELP2MAN}" --no-info --no-discard-stderr --section 1
           --name "isosurface meshes from volumes on uniform grids"
-          --include "${OUT}/commands.h2m" --output "${OUT}/isotile.1" "${ISOTILE}"
+          --include "${OUT}/commands.h2m" --include "${CMAKE_CURRENT_LIST_DIR}/isotile.h2m"
+          --output "${OUT}/isotile.1" "${ISOTILE}"
   RESULT_VARIABLE rc)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "help2man failed (${rc})")

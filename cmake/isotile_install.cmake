@@ -142,6 +142,7 @@ if(ISOTILE_HELP2MAN)
     COMMAND "${CMAKE_COMMAND}" "-DISOTILE=$<TARGET_FILE:isotile>" "-DHELP2MAN=${ISOTILE_HELP2MAN}"
             "-DOUT=${docs}" -P "${CMAKE_CURRENT_LIST_DIR}/isotile_cli_docs.cmake"
     DEPENDS isotile "${CMAKE_CURRENT_LIST_DIR}/isotile_cli_docs.cmake"
+            "${CMAKE_CURRENT_LIST_DIR}/isotile.h2m"
     COMMENT "Generating the isotile man page and bash completion from its --help"
     VERBATIM)
   add_custom_target(isotile_cli_docs ALL DEPENDS "${docs}/isotile.1.gz" "${docs}/isotile.bash")

@@ -209,6 +209,9 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                           "the series of the file chosen"));
   par.addParam(
       RichFloat("iso", static_cast<float>(d.iso), "Isovalue", "Samples at or above it are inside"));
+  par.addParam(RichBool("iso_auto", d.iso_auto, "Choose the isovalue",
+                        "Otsu's threshold of the samples' histogram, as isotile extract --iso "
+                        "auto (the isovalue above is then ignored; the log gives the value)"));
   par.addParam(RichEnum("method", d.method, choices(ml::kMethodNames, 3), "Method",
                         "Marching Cubes; Macet (better-shaped triangles); Dual Contouring"));
   par.addParam(RichEnum("macet_quality", d.macet_quality, choices(ml::kMacetQualityNames, 2),
@@ -275,6 +278,7 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   p.spacing = par.getString("spacing").trimmed().toStdString();
   p.series = par.getString("series").trimmed().toStdString();
   p.iso = par.getFloat("iso");
+  p.iso_auto = par.getBool("iso_auto");
   p.method = par.getEnum("method");
   p.macet_quality = par.getEnum("macet_quality");
   p.macet_relax = par.getFloat("macet_relax");
@@ -293,7 +297,7 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   if (r.mesh.triangles.empty())
     return fail(QString("no surface at isovalue %1 in %2 (see its value range with `isotile "
                         "info`)")
-                    .arg(p.iso)
+                    .arg(r.iso)
                     .arg(QString::fromStdString(p.file)));
 
   // The layer appears only now that its mesh is complete; a failure while filling it removes it.
@@ -313,6 +317,7 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
       static_cast<unsigned long long>(r.mesh.triangles.size()), r.mesh.positions.size(),
       r.quality.min, r.quality.mean, static_cast<long long>(r.bricks), r.backend.c_str(),
       r.seconds);
+  if (p.iso_auto) Log("isotile: isovalue %g (Otsu's threshold of the samples)", r.iso);
   if (p.simplify < 1)
     Log("isotile: simplified from %llu triangles",
         static_cast<unsigned long long>(r.triangles_extracted));

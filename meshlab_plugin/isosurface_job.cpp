@@ -2,18 +2,21 @@
 
 #include <unistd.h>
 
-#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
+#include "core/volume/otsu_isovalue.h"
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
+#include "tiler/source_histogram.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"
 
@@ -41,13 +44,25 @@ int checked_choice(int value, const char* const (&names)[N], const char* field) 
                    std::to_string(value));
 }
 
-// Removes a file when it goes out of scope (the brick-by-brick extraction's intermediate).
-struct RemoveOnExit {
+// A folder of its own under `parent` (mkdtemp: mode 0700, a name nobody else chose), removed
+// with its contents when it goes out of scope: the brick-by-brick extraction's intermediate file
+// goes there, so no file or link another user placed in the shared temporary folder at a name
+// this process would write can receive it.
+struct PrivateFolder {
   fs::path path;
-  ~RemoveOnExit() {
-    std::error_code ec;
-    fs::remove(path, ec);
+  explicit PrivateFolder(const fs::path& parent) {
+    std::string name = (parent / "isotile-meshlab-XXXXXX").string();
+    if (!::mkdtemp(name.data()))
+      throw IoError("cannot make a temporary folder in " + parent.string() + ": " +
+                    std::strerror(errno));
+    path = name;
   }
+  ~PrivateFolder() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+  PrivateFolder(const PrivateFolder&) = delete;
+  PrivateFolder& operator=(const PrivateFolder&) = delete;
 };
 
 std::string format_iso(double iso) {
@@ -82,7 +97,7 @@ ExtractOptions extract_options(const IsosurfaceParams& p) {
               : backend == 2 ? Backend::GeometryShader
               : backend == 3 ? Backend::HistoPyramid
                              : Backend::Auto;
-  if (!std::isfinite(p.iso)) throw InputError("iso must be a finite number");
+  if (!p.iso_auto && !std::isfinite(p.iso)) throw InputError("iso must be a finite number");
   o.iso = p.iso;
   o.normals = p.normals;
   return o;
@@ -122,6 +137,7 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
   if (memory == 0) {
     report(5, "reading " + p.file);
     const Volume volume = read_volume(p.file, raw);
+    if (p.iso_auto) o.iso = otsu_isovalue(value_histogram(volume.view()));
     report(30, "extracting");
     r.mesh = extract(volume.view(), o);
     r.triangles_extracted = r.mesh.triangles.size();
@@ -136,11 +152,13 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
   } else {
     // Brick by brick within the budget, through the tiler's streamed file: what the CLI's
     // --memory does. MeshLab then holds the whole result.
-    static std::atomic<int> counter{0};
-    const fs::path dir = temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir);
-    RemoveOnExit tmp{dir / ("isotile-meshlab-" + std::to_string(::getpid()) + "-" +
-                            std::to_string(counter++) + ".ply")};
+    const PrivateFolder tmp(temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir));
+    const fs::path mesh_file = tmp.path / "bricks.ply";
     auto source = open_volume_source(p.file, raw, memory);
+    if (p.iso_auto) {
+      report(5, "reading the samples' histogram for the isovalue");
+      o.iso = otsu_isovalue(source_histogram(*source, memory));
+    }
     TiledOptions to;
     to.frame = mesh_frame(source->origin, source->world);
     to.extract = o;
@@ -151,16 +169,17 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
       report(static_cast<int>(5 + 85 * done / std::max<std::int64_t>(total, 1)),
              std::string(pass) + " " + std::to_string(done) + "/" + std::to_string(total));
     };
-    const TiledResult t = extract_tiled(*source, to, tmp.path);
+    const TiledResult t = extract_tiled(*source, to, mesh_file);
     r.bricks = t.plan.total();
     r.triangles_extracted = p.simplify < 1 ? t.triangles_extracted : t.triangles;
     report(90, "loading the bricks' mesh");
-    r.mesh = read_mesh(tmp.path);
+    r.mesh = read_mesh(mesh_file);
   }
   report(95, "measuring");
   r.quality = triangle_quality(r.mesh);
   r.layer_name = fs::path(p.file).filename().string() + " " + std::string(method_name(o.method)) +
-                 " " + format_iso(p.iso);
+                 " " + format_iso(o.iso);
+  r.iso = o.iso;
   r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
 }

@@ -21,6 +21,9 @@ struct IsosurfaceParams {
   std::string dims, type, endian, spacing;  // raw files whose name does not say: text, or empty
   std::string series;                       // DICOM series UID; empty: the only one
   double iso = 0;
+  // Choose the isovalue instead: Otsu's threshold of the samples (core/volume/otsu_isovalue.h),
+  // as `isotile extract --iso auto`; `iso` is then ignored.
+  bool iso_auto = false;
   int method = 0;         // 0 Marching Cubes, 1 Macet, 2 Dual Contouring
   int macet_quality = 0;  // 0 fast, 1 max
   double macet_relax = 0;
@@ -44,6 +47,7 @@ extern const char* const kBackendNames[4];
 struct IsosurfaceResult {
   Mesh mesh;
   std::string layer_name;  // "<file name> <method> <iso>"
+  double iso = 0;          // the isovalue used (chosen, with iso_auto)
   std::string backend;     // where it ran ("cpu", "gs", "hp")
   std::int64_t bricks = 1;
   std::uint64_t triangles_extracted = 0;
@@ -57,7 +61,9 @@ using Progress = std::function<void(int percent, const std::string& what)>;
 
 // Throws isotile::Error (InputError, IoError, CapacityError) with a message for the user: a bad
 // or missing file, a malformed field, a feature not available yet, a GPU backend without GL.
-// `temp_dir` receives the brick-by-brick extraction's file (removed before returning).
+// `temp_dir` receives a private folder of its own (mkdtemp: no other user can place a file or a
+// link at the name written) holding the brick-by-brick extraction's file; both are removed
+// before returning.
 IsosurfaceResult run_isosurface(const IsosurfaceParams& params, const std::string& temp_dir,
                                 const Progress& progress);
 

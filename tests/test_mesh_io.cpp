@@ -1,5 +1,7 @@
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -8,10 +10,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/errors.h"
@@ -637,8 +641,8 @@ TEST(MeshWriterErrors, MissingDirectory) {
     write_mesh(small_mesh(false, false), target);
     ADD_FAILURE() << "no IoError";
   } catch (const IoError& e) {
-    EXPECT_EQ(std::string(e.what()),
-              "cannot write " + target.string() + ": No such file or directory");
+    EXPECT_EQ(std::string(e.what()), "cannot write " + target.string() + ": folder " +
+                                         (dir / "no-such-dir").string() + " does not exist");
   }
   EXPECT_FALSE(fs::exists(target));
   EXPECT_TRUE(dir.entries().empty());
@@ -717,14 +721,85 @@ TEST(AtomicFile, CommitReplacesTarget) {
 
 TEST(AtomicFile, FailedRenameRemovesTemporary) {
   TempDir dir;
-  // A non-empty directory cannot be replaced by a file.
+  // A non-empty directory, appearing after the file was opened, cannot be replaced by a file.
   const fs::path target = dir / "occupied";
-  fs::create_directories(target / "inside");
   AtomicFile f(target);
+  fs::create_directories(target / "inside");
   f.write("x", 1);
   EXPECT_THROW(f.commit(), IoError);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"occupied"});
   EXPECT_TRUE(fs::is_directory(target / "inside"));
+}
+
+TEST(AtomicFile, WhatEachKindOfPathIs) {
+  TempDir dir;
+  using Kind = OutputTarget::Kind;
+  EXPECT_EQ(resolve_output(dir / "new.ply").kind, Kind::NewFile);
+  { std::ofstream(dir / "file.ply") << "x"; }
+  EXPECT_EQ(resolve_output(dir / "file.ply").kind, Kind::RegularFile);
+  // Links are followed link by link, relative ones from their own folder.
+  fs::create_directories(dir / "sub");
+  fs::create_symlink("../file.ply", dir / "sub" / "up.ply");
+  fs::create_symlink("sub/up.ply", dir / "chain.ply");
+  const OutputTarget chain = resolve_output(dir / "chain.ply");
+  EXPECT_EQ(chain.kind, Kind::RegularFile);
+  EXPECT_EQ(fs::canonical(chain.path), fs::canonical(dir / "file.ply"));
+  fs::create_symlink("/proc/self/fd/2", dir / "err.txt");
+  const OutputTarget err = resolve_output(dir / "err.txt");
+  EXPECT_EQ(err.kind, Kind::Descriptor);
+  EXPECT_EQ(err.fd, 2);
+  EXPECT_TRUE(err.in_place());
+  ASSERT_EQ(::mkfifo((dir / "fifo").c_str(), 0644), 0);
+  EXPECT_EQ(resolve_output(dir / "fifo").kind, Kind::Device);
+  // Positioned writes: only a regular file or a new path.
+  EXPECT_NO_THROW(check_output(dir / "file.ply", true));
+  EXPECT_NO_THROW(check_output(dir / "new.ply", true));
+  EXPECT_THROW(check_output(dir / "fifo", true), IoError);
+  EXPECT_THROW(check_output(dir / "err.txt", true), IoError);
+  fs::create_symlink("loop2", dir / "loop1");
+  fs::create_symlink("loop1", dir / "loop2");
+  const auto message = [](const fs::path& p) {
+    try {
+      resolve_output(p);
+    } catch (const IoError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  EXPECT_EQ(message(dir / "loop1"),
+            "cannot write " + (dir / "loop1").string() + ": Too many levels of symbolic links");
+  EXPECT_EQ(message(dir / "sub"), "cannot write " + (dir / "sub").string() + ": it is a directory");
+  EXPECT_EQ(message(dir / "file.ply" / "x.ply"),
+            "cannot write " + (dir / "file.ply" / "x.ply").string() + ": Not a directory");
+  // Nothing was written or created by asking.
+  EXPECT_FALSE(fs::exists(dir / "new.ply"));
+  EXPECT_EQ(fs::file_size(dir / "file.ply"), 1u);
+}
+
+TEST(AtomicFile, AFifoIsWrittenInPlace) {
+  TempDir dir;
+  const fs::path fifo = dir / "fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  std::string got;
+  std::thread reader([&] {
+    std::ifstream in(fifo, std::ios::binary);
+    got.assign(std::istreambuf_iterator<char>(in), {});
+  });
+  try {
+    AtomicFile f(fifo);
+    EXPECT_TRUE(f.in_place());
+    f.write("hello", 5);
+    EXPECT_THROW(f.write_at(0, "x", 1), IoError);
+    f.commit();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << e.what();
+  }
+  // A writer of our own releases the reader if the FIFO was never opened.
+  if (const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK); fd >= 0) ::close(fd);
+  reader.join();
+  EXPECT_EQ(got, "hello");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"fifo"});
+  EXPECT_EQ(fs::status(fifo).type(), fs::file_type::fifo);
 }
 
 TEST(AtomicFile, SignalCleanupRemovesTemporaries) {

@@ -3,9 +3,11 @@
 #include "meshlab_plugin/isosurface_job.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "core/errors.h"
@@ -13,6 +15,7 @@
 #include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_topology.h"
 #include "core/volume/itk_reader.h"
+#include "core/volume/otsu_isovalue.h"
 #include "core/volume/volume_io.h"
 #include "skip_support.h"
 
@@ -74,6 +77,52 @@ TEST(MeshlabJob, BricksAndSimplification) {
   for (const auto& e : std::filesystem::directory_iterator(::testing::TempDir()))
     EXPECT_EQ(e.path().filename().string().rfind("isotile-meshlab-", 0), std::string::npos)
         << e.path();
+}
+
+TEST(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
+  IsosurfaceParams p = nucleon();
+  p.iso = std::nan("");  // ignored
+  p.iso_auto = true;
+  const IsosurfaceResult whole = run_isosurface(p, "", {});
+  const Volume v = read_volume(kNucleon, {});
+  EXPECT_EQ(whole.iso, otsu_isovalue(value_histogram(v.view())));
+  EXPECT_GT(whole.mesh.triangles.size(), 1000u);
+  EXPECT_NE(whole.layer_name.find(" mc "), std::string::npos) << whole.layer_name;
+  p.memory = "256KiB";
+  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
+  EXPECT_GT(bricked.bricks, 1);
+  EXPECT_EQ(bricked.iso, whole.iso);
+  EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
+}
+
+TEST(MeshlabJob, TheBrickFileLivesInAPrivateFolder) {
+  // A link another user could plant in the shared temporary folder, at the names the filter
+  // once wrote (isotile-meshlab-PID-N.ply): never written through.
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / ("isotile-job-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path victim = dir / "victim.txt";
+  { std::ofstream(victim) << "keep"; }
+  for (int n = 0; n < 4; ++n)
+    std::filesystem::create_symlink(victim, dir / ("isotile-meshlab-" + std::to_string(::getpid()) +
+                                                   "-" + std::to_string(n) + ".ply"));
+  IsosurfaceParams p = nucleon();
+  p.memory = "256KiB";
+  const IsosurfaceResult r = run_isosurface(p, dir.string(), {});
+  EXPECT_GT(r.mesh.triangles.size(), 1000u);
+  std::ifstream in(victim);
+  std::string text;
+  in >> text;
+  EXPECT_EQ(text, "keep");
+  // Nothing of the run is left: the private folder went with its file.
+  int entries = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    (void)e;
+    ++entries;
+  }
+  EXPECT_EQ(entries, 5);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {

@@ -153,6 +153,19 @@ TEST_F(MeshlabServer, TheShippedExampleRuns) {
   EXPECT_GT(isotile::triangle_quality(m).mean, 0.8);  // Macet
 }
 
+TEST_F(MeshlabServer, IsoAutoGivesTheCliMeshAndLogsTheValue) {
+  for (const char* memory : {"0", "256KiB"}) {
+    const ServerRun r = run(script({{"file", kNucleon},
+                                    {"iso", "1000"},  // ignored
+                                    {"iso_auto", "true"},
+                                    {"method", "0"},
+                                    {"memory", memory}}));
+    ASSERT_EQ(r.code, 0) << memory << "\n" << r.log;
+    EXPECT_NE(r.log.find("(Otsu's threshold of the samples)"), std::string::npos) << r.log;
+    expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"), cli(kNucleon + " --iso auto"), memory);
+  }
+}
+
 TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
   struct Case {
     std::map<std::string, std::string> values;

@@ -120,6 +120,19 @@ TEST_F(MpiCli, MarchingCubesMatchesSingleProcessOnOneToFourRanks) {
                                 {1, 2, 3, 4});
 }
 
+TEST_F(MpiCli, IsoAutoFindsTheSingleProcessValueOnEveryRank) {
+  expect_same_as_single_process("field:gyroid:48", "--iso auto --memory 256KiB", {2});
+}
+
+TEST_F(MpiCli, AnIsovalueWithNoSurfaceIsOneErrorNamingTheRange) {
+  const CliResult r = run_mpi(2, "field:sphere:32 --iso 5 --memory 256KiB -o m.ply");
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("isotile: error: no surface at iso 5: the samples range from "),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
+}
+
 TEST_F(MpiCli, MacetMatchesSingleProcess) {
   expect_same_as_single_process("field:gyroid:40", "--method macet --memory 512KiB", {2, 3});
   expect_same_as_single_process("field:torus:40", "--method macet --quality max --memory 600KiB",

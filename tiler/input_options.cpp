@@ -1,6 +1,7 @@
 #include "tiler/input_options.h"
 
 #include <array>
+#include <cmath>
 #include <sstream>
 #include <type_traits>
 
@@ -48,9 +49,21 @@ RawOptions parse_input_text(const InputText& text, const std::string& flag_prefi
                        "' (expected int8, uint8, int16, uint16, int32, uint32, float32 or "
                        "float64)");
   }
-  if (!text.spacing.empty())
+  if (!text.spacing.empty()) {
     o.spacing = parse_triple<double>(text.spacing, flag_prefix + "spacing");
-  if (!text.origin.empty()) o.origin = parse_triple<double>(text.origin, flag_prefix + "origin");
+    // Zero flattens the mesh, a negative spacing turns it inside out, NaN poisons every vertex.
+    for (double v : *o.spacing)
+      if (!(std::isfinite(v) && v > 0))
+        throw InputError(flag_prefix + "spacing must be three finite numbers above 0, got '" +
+                         text.spacing + "'");
+  }
+  if (!text.origin.empty()) {
+    o.origin = parse_triple<double>(text.origin, flag_prefix + "origin");
+    for (double v : *o.origin)
+      if (!std::isfinite(v))
+        throw InputError(flag_prefix + "origin must be three finite numbers, got '" + text.origin +
+                         "'");
+  }
   if (!text.endian.empty() && text.endian != "little" && text.endian != "big")
     throw InputError(flag_prefix + "endian must be 'little' or 'big', got '" + text.endian + "'");
   o.endian = text.endian == "big" ? Endian::Big : Endian::Little;

@@ -17,10 +17,12 @@
 #include <tbb/task_arena.h>
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <limits>
@@ -40,6 +42,7 @@
 #include "core/mesh/surface_distance.h"
 #include "core/simplify/simplify.h"
 #include "core/volume/itk_reader.h"
+#include "core/volume/otsu_isovalue.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
 #ifdef ISOTILE_HAVE_GL
@@ -48,6 +51,7 @@
 #endif
 #include "tiler/input_options.h"
 #include "tiler/mpi_launch.h"
+#include "tiler/source_histogram.h"
 #include "tiler/tiled_extract.h"
 #ifdef ISOTILE_HAVE_MPI
 #include "tiler/mpi_extract.h"
@@ -96,21 +100,31 @@ struct InputArgs {
 
   void add_to(CLI::App& app) {
     app.add_option("INPUT", input,
-                   "Volume file (raw, raw.gz, nrrd, nhdr, vdb, nii, nii.gz, mha, mhd, tif, mrc, "
-                   "map, DICOM file), a DICOM or TIFF directory, a numbered TIFF pattern "
+                   "Volume file by extension: NRRD (.nrrd, .nhdr), OpenVDB (.vdb), NIfTI (.nii, "
+                   ".nii.gz), MetaImage (.mha, .mhd), TIFF (.tif, .tiff), MRC/CCP4 (.mrc, .mrcs, "
+                   ".map, .ccp4), DICOM (.dcm, .ima, or any file with DICOM's DICM marker), raw "
+                   "(any other name: NAME_XxYxZ_TYPE.raw[.gz], or --dims and --type; .gz is "
+                   "gunzipped); a DICOM or TIFF directory, a numbered TIFF pattern "
                    "(slice_%03d.tif) or a procedural field field:NAME:N (sphere, torus, gyroid, "
                    "csg-box, marschner-lobb)")
         ->required();
-    app.add_option("--dims", dims, "Raw input: samples along x,y,z, e.g. 256,256,128");
+    app.add_option("--dims", dims,
+                   "Raw input: samples along x,y,z, e.g. 256,256,128 (default: from the file "
+                   "name NAME_XxYxZ_TYPE.raw)");
     app.add_option("--type", type,
-                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64");
-    app.add_option("--spacing", spacing, "Sample spacing x,y,z (overrides the file's)");
+                   "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64 (default: "
+                   "from the file name)");
+    app.add_option("--spacing", spacing,
+                   "Sample spacing x,y,z, finite and above 0 (overrides the file's; default: the "
+                   "file's, 1,1,1 for raw input)");
     app.add_option("--origin", origin,
-                   "World position x,y,z of the first sample (overrides the file's)");
+                   "World position x,y,z of the first sample, finite (overrides the file's; "
+                   "default: the file's, 0,0,0 for raw input)");
     app.add_option("--endian", endian, "Raw input byte order")
         ->check(CLI::IsMember({"little", "big"}));
     app.add_option("--series", series,
-                   "DICOM: the SeriesInstanceUID to read where the directory holds several");
+                   "DICOM: the SeriesInstanceUID to read where the directory holds several "
+                   "(default: the only one)");
   }
 
   RawOptions raw_options() const {
@@ -121,13 +135,15 @@ struct InputArgs {
   }
 };
 
+// A measure without a value (the radius ratios of no triangle) is null, never a made-up 0.
 json quality_json(const QualityStats& q) {
   json j;
-  j["radius_ratio_min"] = q.min;
-  j["radius_ratio_mean"] = q.mean;
-  j["radius_ratio_q001"] = q.q001;
-  j["radius_ratio_q01"] = q.q01;
-  j["radius_ratio_median"] = q.median;
+  const auto measured = [&](double v) { return q.triangles > 0 ? json(v) : json(nullptr); };
+  j["radius_ratio_min"] = measured(q.min);
+  j["radius_ratio_mean"] = measured(q.mean);
+  j["radius_ratio_q001"] = measured(q.q001);
+  j["radius_ratio_q01"] = measured(q.q01);
+  j["radius_ratio_median"] = measured(q.median);
   j["radius_ratio_histogram"] = q.histogram;
   j["degenerate_triangles"] = q.degenerate;
   return j;
@@ -135,6 +151,7 @@ json quality_json(const QualityStats& q) {
 
 // `border_known`: the mesh's volume box is known (an extraction); a mesh read from a file has
 // none, so whether its boundary lies on a volume border cannot be told: watertight is null.
+// A mesh without faces is neither closed nor open: both are null.
 json topology_json(const TopologyStats& t, bool border_known) {
   json j;
   j["boundary_edges"] = t.boundary_edges;
@@ -144,8 +161,8 @@ json topology_json(const TopologyStats& t, bool border_known) {
   j["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;
   j["euler"] = t.euler;
   j["components"] = t.components;
-  j["closed"] = t.closed;
-  j["watertight"] = border_known ? json(t.watertight) : json(nullptr);
+  j["closed"] = t.faces > 0 ? json(t.closed) : json(nullptr);
+  j["watertight"] = border_known && t.faces > 0 ? json(t.watertight) : json(nullptr);
   return j;
 }
 
@@ -179,10 +196,24 @@ std::pair<double, double> field_distances(const FieldSpec& spec, const Mesh& mes
   return {s / static_cast<double>(n), m};
 }
 
+// Standard output's buffered writes that failed (a full disk, a closed pipe's EPIPE, /dev/full):
+// an IoError, so that the run exits 1 instead of 0 with the output lost.
+void flush_stdout() {
+  // std::cout writes through stdout's buffer (synced with stdio), so its flush is stdout's: the
+  // first failing flush sets errno, the second only confirms.
+  errno = 0;
+  std::cout.flush();
+  const bool flushed = std::fflush(stdout) == 0;
+  const int err = errno;
+  if (flushed && !std::ferror(stdout) && std::cout.good()) return;
+  throw IoError(std::string("cannot write standard output") +
+                (err != 0 ? std::string(": ") + std::strerror(err) : std::string()));
+}
+
 void write_text(const std::string& path, const std::string& text) {
   if (path == "-") {
     std::fwrite(text.data(), 1, text.size(), stdout);
-    std::fflush(stdout);
+    flush_stdout();
     return;
   }
   AtomicFile f(path);
@@ -195,7 +226,8 @@ void write_text(const std::string& path, const std::string& text) {
 struct ExtractArgs {
   InputArgs in;
   std::string output;
-  std::optional<double> iso;
+  std::string iso;  // a number, "auto" or empty (a field's own)
+  bool allow_empty = false;
   std::string method = "mc";
   std::string backend = "auto";
   std::string stats;
@@ -346,12 +378,25 @@ void start_worker_threads() {
     tbb::this_task_arena::enqueue([] {});
 }
 
+// --iso auto: Otsu's threshold of the samples' histogram (core/volume/otsu_isovalue.h), said on
+// stderr with the samples' range; returns the stats' "iso_auto" object.
+json choose_isovalue(const ValueHistogram& histogram, double& iso) {
+  iso = otsu_isovalue(histogram);
+  std::ostringstream s;
+  s.precision(10);
+  s << "--iso auto: " << iso << " (Otsu's threshold; the samples range from " << histogram.min
+    << " to " << histogram.max << ")";
+  progress(s.str());
+  return {{"rule", "otsu"}, {"min", histogram.min}, {"max", histogram.max}};
+}
+
 // Out of core: brick by brick within --memory, streamed into the output file.
 int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, MeshFormat format,
                       Clock::time_point t_total) {
   TiledOptions to;
   to.extract = options;
   to.memory = parse_memory_size(args.memory);
+  to.allow_empty = args.allow_empty;
   to.format = format;
   to.simplify = args.simplify;
   // The radius-ratio statistics cost a fifth of a streamed run; only --stats reports them.
@@ -374,8 +419,15 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
   json distributed;
   const bool world = args.frame == "world";
   bool region_reads = true;
+  json auto_iso;
 #ifdef ISOTILE_HAVE_MPI
   if (g_mpi) {
+    // Every rank reads the whole input once for the histogram and finds the same value.
+    if (args.iso == "auto")
+      auto_iso = choose_isovalue(
+          source_histogram(*open_volume_source(args.in.input, args.in.raw_options(), to.memory),
+                           to.memory),
+          to.extract.iso);
     progress("extracting " + args.in.input + " brick by brick within " + args.memory + " on " +
              std::to_string(g_mpi->size) + " MPI ranks");
     g_distributed = true;
@@ -393,10 +445,15 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
 #endif
   {
     auto source = open_volume_source(args.in.input, args.in.raw_options(), to.memory);
+    check_grid_geometry(source->spacing, source->origin, source->world, args.in.input);
     if (world) to.frame = mesh_frame(source->origin, source->world);
     dims = source->dims;
     type = source->type;
     region_reads = !source->in_memory();
+    if (args.iso == "auto") {
+      progress("reading " + args.in.input + " once for --iso auto's histogram");
+      auto_iso = choose_isovalue(source_histogram(*source, to.memory), to.extract.iso);
+    }
     progress(
         "extracting " + args.in.input + " (" + std::to_string(dims[0]) + "x" +
         std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
@@ -417,7 +474,8 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["output"] = args.output;
     j["dims"] = dims;
     j["type"] = scalar_name(type);
-    j["iso"] = options.iso;
+    j["iso"] = to.extract.iso;
+    if (!auto_iso.is_null()) j["iso_auto"] = auto_iso;
     j["method"] = method_name(options.method);
     if (options.method == Method::Macet) {
       j["quality"] = args.quality;
@@ -432,7 +490,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     j["vertices"] = r.vertices;
     j.update(quality_json(r.quality));
     // Topology needs every edge's faces at once; a streamed run does not hold them.
-    for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "watertight"})
+    for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "closed", "watertight"})
       j[key] = nullptr;
     j["bricks"] = r.plan.total();
     j["brick_cells"] = r.plan.brick;
@@ -475,8 +533,13 @@ int run_extract(const ExtractArgs& args) {
   const auto t_total = Clock::now();
   keep_freed_memory_for_reuse();
   start_worker_threads();
-  // Fail on a bad output name or an unavailable method before spending time on reading.
+  // Fail on a bad output name or an unavailable method before spending time on reading: the
+  // outputs' folders, their kinds (a device or FIFO cannot take the streamed writer's
+  // positioned writes) and the extension.
+  check_output(args.output, !args.memory.empty() && args.simplify >= 1);
   const MeshFormat format = mesh_format_from_path(args.output);
+  if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
+  args.in.raw_options();  // --dims, --spacing, ... checked before anything is read
   ExtractOptions options;
   options.method = parse_method(args.method);
   options.backend = parse_backend(args.backend);
@@ -495,15 +558,20 @@ int run_extract(const ExtractArgs& args) {
   const Backend backend = choice.backend;
 
   const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
-  if (args.iso) {
-    options.iso = *args.iso;
-  } else if (field) {
+  const bool iso_auto = args.iso == "auto";
+  if (!args.iso.empty() && !iso_auto) {
+    char* end = nullptr;
+    options.iso = std::strtod(args.iso.c_str(), &end);
+    if (end == args.iso.c_str() || *end != '\0' || !std::isfinite(options.iso))
+      throw InputError("--iso must be a finite number or 'auto', got '" + args.iso + "'");
+  } else if (field && !iso_auto) {
     options.iso = field_default_iso(field->kind);
-  } else {
-    throw InputError("--iso is required for a volume file (`isotile info " + args.in.input +
-                     "` shows its value range)");
+  } else if (!iso_auto) {
+    throw InputError(
+        "--iso is required for a volume file: a number, or 'auto' for Otsu's "
+        "threshold of the samples (`isotile info " +
+        args.in.input + "` shows their range and histogram)");
   }
-  if (!std::isfinite(options.iso)) throw InputError("--iso must be a finite number");
   const bool simplifying = args.simplify < 1;
   if (simplifying && options.keep_quads)
     throw InputError("--simplify gives triangles; drop --quads");
@@ -516,15 +584,23 @@ int run_extract(const ExtractArgs& args) {
   // Only extract() and the repairs below read the samples; the rest of this run uses the view's
   // dims and frame, so its data pointer is cleared when the samples are released.
   VolumeView view = volume.view();
+  check_grid_geometry(view.spacing, view.origin, view.world, args.in.input);
   progress("read " + std::to_string(view.dims[0]) + "x" + std::to_string(view.dims[1]) + "x" +
            std::to_string(view.dims[2]) + " " + std::string(scalar_name(view.type)) + " in " +
            fmt_seconds(t_read));
 
+  json auto_iso;
+  if (iso_auto) auto_iso = choose_isovalue(value_histogram(view), options.iso);
   progress("extracting (" + std::string(method_name(options.method)) + ", " +
            std::string(backend_name(backend)) + ", iso " + std::to_string(options.iso) + ")");
   t0 = Clock::now();
   Mesh mesh = extract(view, options, &choice);
   const double t_extract = seconds_since(t0);
+  // No face: found from the mesh, at no cost to a run that has one. The range is a cheap pass.
+  if (mesh.triangles.empty() && mesh.quads.empty() && !args.allow_empty) {
+    const auto [lo, hi] = value_range(view);
+    if (!(lo < options.iso && options.iso <= hi)) throw_no_surface(options.iso, std::pair(lo, hi));
+  }
   progress("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
            std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
 
@@ -589,6 +665,7 @@ int run_extract(const ExtractArgs& args) {
   j["dims"] = view.dims;
   j["type"] = scalar_name(view.type);
   j["iso"] = options.iso;
+  if (!auto_iso.is_null()) j["iso_auto"] = auto_iso;
   j["method"] = method_name(options.method);
   if (options.method == Method::Macet) {
     j["quality"] = args.quality;
@@ -618,8 +695,9 @@ int run_extract(const ExtractArgs& args) {
   }
   if (field) {
     const auto [mean, max] = field_distances(*field, mesh, view);
-    j["distance_mean"] = mean;
-    j["distance_max"] = max;
+    const bool none = mesh.positions.empty();  // no vertex: no distance
+    j["distance_mean"] = none ? json(nullptr) : json(mean);
+    j["distance_max"] = none ? json(nullptr) : json(max);
   }
   const double t_measure = seconds_since(t0) + t_repairs;
   j["seconds"] = {{"read", t_read},
@@ -645,7 +723,9 @@ struct SimplifyArgs {
 
 int run_simplify(const SimplifyArgs& args) {
   const auto t_total = Clock::now();
+  check_output(args.output);
   const MeshFormat format = mesh_format_from_path(args.output);
+  if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   if ((args.ratio > 0) + (args.faces > 0) + (args.max_error > 0) != 1)
     throw InputError("give exactly one of --ratio, --faces and --max-error");
   progress("reading " + args.input);
@@ -786,6 +866,13 @@ int run_info(const InputArgs& in, bool as_json) {
   for (int b = 0; b < kBins; ++b)
     bins.push_back({{"from", lo + b * width}, {"to", lo + (b + 1) * width}, {"count", hist[b]}});
   j["histogram"] = bins;
+  // What `extract --iso auto` would choose (null for a volume of one value: no threshold).
+  std::optional<double> auto_iso;
+  try {
+    auto_iso = otsu_isovalue(value_histogram(v));
+  } catch (const InputError&) {
+  }
+  j["iso_auto"] = auto_iso ? json(*auto_iso) : json(nullptr);
   if (const auto field = parse_field_spec(in.input))
     j["default_iso"] = field_default_iso(field->kind);
   if (as_json) {
@@ -817,6 +904,8 @@ int run_info(const InputArgs& in, bool as_json) {
   for (int b = 0; b < kBins; ++b)
     std::printf("  %12g .. %-12g %llu\n", lo + b * width, lo + (b + 1) * width,
                 static_cast<unsigned long long>(hist[b]));
+  if (auto_iso)
+    std::printf("iso auto %.10g (Otsu's threshold: what extract --iso auto chooses)\n", *auto_iso);
   return 0;
 }
 
@@ -868,7 +957,9 @@ int run_quality(const std::string& path, bool as_json, bool check_intersections,
               static_cast<unsigned long long>(t.inconsistently_oriented_edges));
   std::printf("euler / components    %lld / %llu\n", static_cast<long long>(t.euler),
               static_cast<unsigned long long>(t.components));
-  std::printf("closed                %s\n", t.closed ? "yes" : "no");
+  std::printf("closed                %s\n", t.faces == 0 ? "n/a (no faces)"
+                                            : t.closed   ? "yes"
+                                                         : "no");
   std::printf(
       "watertight            cannot tell: a mesh file carries no volume box (isotile "
       "extract --stats can)\n");
@@ -984,24 +1075,35 @@ int main(int argc, char** argv) {
   CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids", "isotile"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "isotile " ISOTILE_VERSION);
+  // Every option's default in --help (and so in the man page), inherited by the subcommands.
+  app.option_defaults()->always_capture_default();
   int threads = 0;
-  app.add_option("--threads", threads, "Worker threads (default: all cores)")
+  app.add_option("--threads", threads, "Worker threads (0, the default: every core)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--quiet,-q", g_quiet, "No progress messages on stderr");
 
   ExtractArgs ex;
   auto* extract_cmd = app.add_subcommand("extract", "Extract an isosurface mesh from a volume");
   ex.in.add_to(*extract_cmd);
-  extract_cmd->add_option("-o,--output", ex.output, "Output mesh: .ply, .obj, .stl or .off")
+  extract_cmd
+      ->add_option("-o,--output", ex.output,
+                   "Output mesh: .ply (binary; --ascii for text), .obj, .stl (binary) or .off")
       ->required();
-  extract_cmd->add_option("--iso", ex.iso,
-                          "Isovalue; samples >= iso are inside (default for fields: their own)");
+  extract_cmd->add_option(
+      "--iso", ex.iso,
+      "Isovalue; samples >= iso are inside. A finite number, or auto: Otsu's threshold of the "
+      "samples' histogram, printed with their range. Required for files; fields default to "
+      "their own (0; 0.5 for marschner-lobb)");
+  extract_cmd->add_flag("--allow-empty", ex.allow_empty,
+                        "Write the empty mesh (exit 0) when no pair of samples straddles the "
+                        "isovalue, instead of failing with the samples' range");
   extract_cmd->add_option("--method", ex.method, "Extraction method")
       ->check(CLI::IsMember({"mc", "macet", "dc"}));
   extract_cmd->add_option("--backend", ex.backend, "Where to run it")
       ->check(CLI::IsMember({"cpu", "gs", "hp", "auto"}));
   extract_cmd->add_option("--stats", ex.stats,
-                          "Write statistics as JSON to this file ('-': stdout)");
+                          "Write statistics as JSON to this file, any name ('-': stdout; "
+                          "default: none)");
   extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
   extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
   extract_cmd
@@ -1060,7 +1162,7 @@ int main(int argc, char** argv) {
   extract_cmd->add_option("--memory", ex.memory,
                           "Out of core: extract brick by brick, each brick's working set within "
                           "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
-                          "file identical to an in-core run");
+                          "file identical to an in-core run (default: in core)");
 
   InputArgs info_in;
   bool info_json = false;
@@ -1080,15 +1182,18 @@ int main(int argc, char** argv) {
                         "Count self-intersecting triangle pairs");
   std::string quality_reference;
   quality_cmd->add_option("--reference", quality_reference,
-                          "Also measure the two-way sampled (Hausdorff) distance to this mesh, "
-                          "e.g. the input of a simplification (mesh units)");
+                          "Also measure the two-way sampled (Hausdorff) distance to this mesh "
+                          "(.ply, .obj, .stl, .off), e.g. the input of a simplification (mesh "
+                          "units; default: none)");
 
   SimplifyArgs sa;
   auto* simplify_cmd = app.add_subcommand(
       "simplify",
       "Simplify a mesh by edge collapses: fewer triangles, same topology and border, good shapes");
   simplify_cmd->add_option("IN", sa.input, "Mesh file (.ply, .obj, .stl, .off)")->required();
-  simplify_cmd->add_option("OUT", sa.output, "Simplified mesh (.ply, .obj, .stl, .off)")
+  simplify_cmd
+      ->add_option("OUT", sa.output,
+                   "Simplified mesh: .ply (binary; --ascii for text), .obj, .stl (binary) or .off")
       ->required();
   auto* ratio_opt =
       simplify_cmd->add_option("--ratio", sa.ratio, "Fraction of faces kept, in (0, 1]");
@@ -1098,6 +1203,8 @@ int main(int argc, char** argv) {
       "--max-error", sa.max_error,
       "Simplify as far as the surface stays within E (mesh units) of the input: its "
       "vertices, edge midpoints and face centroids within E of the result (docs/simplify.md)");
+  // Exactly one of the three is given: none has a default.
+  for (CLI::Option* o : {ratio_opt, faces_opt, error_opt}) o->default_str("");
   ratio_opt->excludes(faces_opt)->excludes(error_opt);
   faces_opt->excludes(error_opt);
   simplify_cmd
@@ -1108,12 +1215,14 @@ int main(int argc, char** argv) {
   simplify_cmd->add_flag("--no-relax", sa.no_relax, "Skip the flips and tangential relaxation");
   simplify_cmd->add_flag("--ascii", sa.ascii, "ASCII PLY instead of binary");
   simplify_cmd->add_option("--stats", sa.stats,
-                           "Write statistics as JSON to this file ('-': stdout)");
+                           "Write statistics as JSON to this file, any name ('-': stdout; "
+                           "default: none)");
 
   std::string demo_output = "isotile-demo.ply";
   auto* demo_cmd = app.add_subcommand(
       "demo", "Extract the built-in demo (a 128^3 gyroid) and print its statistics");
-  demo_cmd->add_option("-o,--output", demo_output, "Where to write the demo mesh");
+  demo_cmd->add_option("-o,--output", demo_output,
+                       "Where to write the demo mesh: .ply, .obj, .stl or .off");
 
   // Subcommand options may also come before the subcommand name.
   bool gl_info_json = false;
@@ -1130,7 +1239,13 @@ int main(int argc, char** argv) {
     if (g_mpi && g_mpi->rank != 0) return e.get_exit_code() == 0 ? 0 : 2;
 #endif
     // --help and --version exit 0; every usage error exits 2, whatever CLI11's own code is.
-    return app.exit(e) == 0 ? 0 : 2;
+    if (app.exit(e) != 0) return 2;
+    try {
+      flush_stdout();
+    } catch (const isotile::Error& io) {
+      return fail(io.what(), false);
+    }
+    return 0;
   }
 
 #ifdef ISOTILE_HAVE_MPI
@@ -1147,21 +1262,26 @@ int main(int argc, char** argv) {
   if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
   tbb::task_scheduler_handle workers{tbb::attach{}};
 
+  // Whatever went to standard output must have reached it: a failed write is exit 1.
+  const auto finished = [](int rc) {
+    if (rc == 0) flush_stdout();
+    return rc;
+  };
   const int rc = [&]() -> int {
     try {
-      if (*extract_cmd) return run_extract(ex);
-      if (*info_cmd) return run_info(info_in, info_json);
-      if (*gl_info_cmd) return run_gl_info(gl_info_json);
+      if (*extract_cmd) return finished(run_extract(ex));
+      if (*info_cmd) return finished(run_info(info_in, info_json));
+      if (*gl_info_cmd) return finished(run_gl_info(gl_info_json));
       if (*quality_cmd)
-        return run_quality(quality_path, quality_json_flag, quality_intersections,
-                           quality_reference);
-      if (*simplify_cmd) return run_simplify(sa);
+        return finished(
+            run_quality(quality_path, quality_json_flag, quality_intersections, quality_reference));
+      if (*simplify_cmd) return finished(run_simplify(sa));
       if (*demo_cmd) {
         ExtractArgs d;
         d.in.input = "field:gyroid:128";
         d.output = demo_output;
         d.stats = "-";
-        const int rc = run_extract(d);
+        const int rc = finished(run_extract(d));
         if (rc == 0 && !g_quiet)
           std::fprintf(stderr, "isotile: demo mesh written to %s\n",
                        std::filesystem::absolute(demo_output).c_str());

@@ -21,6 +21,7 @@
 #include "core/mesh/mesh_io.h"
 #include "tiler/brick_extraction.h"
 #include "tiler/mpi_launch.h"
+#include "tiler/source_histogram.h"
 #include "tiler/volume_source.h"
 
 namespace isotile {
@@ -288,7 +289,10 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
       throw InputError(
           "--simplify is not distributed: its result depends on the brick plan and its seam "
           "pass needs neighbouring bricks; run it without mpirun");
+    // Ranks write their bricks at their offsets (MPI-IO): a device or FIFO cannot take that.
+    check_output(output, true);
     source = open_volume_source(input, raw, options.memory);
+    check_grid_geometry(source->spacing, source->origin, source->world, input);
     if (world_frame) options.frame = mesh_frame(source->origin, source->world);
     if (source->sequential())
       throw InputError(source->name +
@@ -342,7 +346,15 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   mpi.sum(bricks->face_table().values());
   mpi.sum(bricks->brick_vertices());
   mpi.sum(bricks->brick_faces());
-  mpi.phase([&] { bricks->scan(result); });
+  mpi.phase([&] {
+    bricks->scan(result);
+    // Every rank has the summed counts, so every rank throws the same error; each finds the
+    // samples' range for it by one streaming pass (on this error only).
+    if (result.faces == 0 && !options.allow_empty) {
+      const ValueHistogram h = source_histogram(*source, options.memory);
+      throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+    }
+  });
   result.seconds_count = since(t0);
 
   // Who extracts what: balanced by the counted output.

@@ -10,6 +10,7 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "tiler/brick_extraction.h"
+#include "tiler/source_histogram.h"
 #include "tiler/tiled_simplify.h"
 
 namespace isotile {
@@ -64,6 +65,10 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   }
   bricks.scan(result);
   result.seconds_count = since(t0);
+  if (result.faces == 0 && !options.allow_empty) {
+    const ValueHistogram h = source_histogram(source, options.memory);
+    throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+  }
 
   AtomicFile file(output);
   const std::string header = bricks.header();
@@ -137,6 +142,9 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
 
 TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
                           const std::filesystem::path& output) {
+  // Before the first pass: the streamed writer places each brick's records at their offsets
+  // (positioned writes); the simplifying one writes its file front to back at the end.
+  check_output(output, options.simplify >= 1);
   if (options.simplify < 1) return extract_tiled_simplified(source, options, output);
   return run(source, options, output);
 }

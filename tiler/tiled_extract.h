@@ -43,6 +43,10 @@ struct TiledOptions {
   // Maps the written positions, normals and windings into the volume's world frame (inactive:
   // the grid frame), exactly as the in-core writes do; statistics stay in the grid frame.
   MeshFrame frame;
+  // When the count pass finds no face (no pair of samples straddles the isovalue): false throws
+  // InputError naming the samples' range (found by one more pass, on that error only) before
+  // the output is touched; true writes the empty mesh.
+  bool allow_empty = true;
   // Called after each brick of each pass ("count", "extract").
   std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
 };

@@ -17,6 +17,7 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "tiler/brick_reader.h"
+#include "tiler/source_histogram.h"
 
 namespace isotile {
 
@@ -41,6 +42,14 @@ constexpr double kSimplifyBytesPerFace = 450;
 constexpr double kSeamBytesPerFace = 800;
 
 // A file for intermediate data, unlinked from the start: it vanishes however the process ends.
+// Scratch files go beside the output (its file system has room for the mesh), or, where the
+// output is written in place (a device, a FIFO, standard output), to the temporary folder
+// (TMPDIR): not into /dev or /proc.
+std::filesystem::path scratch_folder(const std::filesystem::path& output) {
+  const OutputTarget t = resolve_output(output);
+  return t.in_place() ? std::filesystem::temp_directory_path() : t.path.parent_path();
+}
+
 class ScratchFile {
  public:
   explicit ScratchFile(const std::filesystem::path& dir) {
@@ -140,7 +149,7 @@ class TiledSimplification {
         opt_(options),
         n_(source.dims),
         reader_(source, options.extract),
-        dir_(output.parent_path()),
+        dir_(scratch_folder(output)),
         chunks_spill_(dir_),
         vertices_(dir_),
         faces_(dir_) {
@@ -179,6 +188,11 @@ class TiledSimplification {
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
       count(brick_vertices, brick_faces, plane_faces);
+    }
+    if (!opt_.allow_empty && std::all_of(brick_faces.begin(), brick_faces.end(),
+                                         [](std::uint64_t n) { return n == 0; })) {
+      const ValueHistogram h = source_histogram(src_, opt_.memory);
+      throw_no_surface(opt_.extract.iso, std::pair(h.min, h.max));
     }
     result.plan = plan_;
     result.backend = reader_.extract().backend;

@@ -1,11 +1,14 @@
 #include "core/mesh/atomic_file.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <new>
 #include <string>
 #include <system_error>
 
@@ -59,12 +62,130 @@ std::string describe(int err) {
   return std::strerror(err);
 }
 
+[[noreturn]] void refuse(const std::filesystem::path& path, const std::string& why) {
+  throw IoError("cannot write " + path.string() + ": " + why);
+}
+
+// The descriptor number when `path` names one of this process's descriptors (/proc/self/fd/N,
+// /proc/thread-self/fd/N, /proc/<own pid>/fd/N, /dev/fd/N), whose link the kernel resolves to
+// whatever the descriptor holds (a pipe, a terminal, a file opened for appending).
+int descriptor_of(const std::filesystem::path& path) {
+  const std::string s = path.lexically_normal().string();
+  for (const std::string& dir :
+       {std::string("/proc/self/fd/"), std::string("/dev/fd/"),
+        std::string("/proc/thread-self/fd/"),
+        "/proc/" + std::to_string(static_cast<long>(::getpid())) + "/fd/"}) {
+    if (s.size() <= dir.size() || s.compare(0, dir.size(), dir) != 0) continue;
+    const std::string n = s.substr(dir.size());
+    if (n.size() > 9 || n.find_first_not_of("0123456789") != std::string::npos) return -1;
+    return std::stoi(n);
+  }
+  return -1;
+}
+
+void check_folder(const std::filesystem::path& given, const std::filesystem::path& file) {
+  const std::filesystem::path dir = file.parent_path().empty() ? "." : file.parent_path();
+  struct stat st {};
+  if (::stat(dir.c_str(), &st) != 0) {
+    const int err = errno;
+    refuse(given, err == ENOENT ? "folder " + dir.string() + " does not exist"
+                                : "folder " + dir.string() + ": " + describe(err));
+  }
+  if (!S_ISDIR(st.st_mode)) refuse(given, dir.string() + " is not a folder");
+  // The temporary is created beside the target and renamed over it.
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    refuse(given, "folder " + dir.string() + " is not writable (" + describe(errno) + ")");
+}
+
 }  // namespace
 
+OutputTarget resolve_output(const std::filesystem::path& path) {
+  if (path.empty()) refuse(path, "empty path");
+  OutputTarget t;
+  std::filesystem::path p = path;
+  // Link by link, as the kernel would, so that a link into /proc/self/fd is seen before the
+  // kernel turns it into what the descriptor holds.
+  for (int hop = 0;; ++hop) {
+    if (hop == 40) refuse(path, describe(ELOOP));
+    if (const int fd = descriptor_of(p); fd >= 0) {
+      if (::fcntl(fd, F_GETFL) < 0) refuse(path, "descriptor " + std::to_string(fd) + " is closed");
+      if ((::fcntl(fd, F_GETFL) & O_ACCMODE) == O_RDONLY)
+        refuse(path, "descriptor " + std::to_string(fd) + " is open for reading only");
+      t.kind = OutputTarget::Kind::Descriptor;
+      t.fd = fd;
+      t.path = p;
+      return t;
+    }
+    struct stat st {};
+    if (::lstat(p.c_str(), &st) != 0) {
+      const int err = errno;
+      if (err != ENOENT) refuse(path, describe(err));
+      check_folder(path, p);
+      t.kind = OutputTarget::Kind::NewFile;
+      t.path = p;
+      return t;
+    }
+    if (S_ISLNK(st.st_mode)) {
+      std::error_code ec;
+      const std::filesystem::path to = std::filesystem::read_symlink(p, ec);
+      if (ec) refuse(path, ec.message());
+      p = to.is_absolute() ? to : p.parent_path() / to;
+      continue;
+    }
+    t.path = p;
+    if (S_ISREG(st.st_mode)) {
+      check_folder(path, p);
+      t.kind = OutputTarget::Kind::RegularFile;
+      return t;
+    }
+    if (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode)) {
+      if (::access(p.c_str(), W_OK) != 0) refuse(path, describe(errno));
+      t.kind = OutputTarget::Kind::Device;
+      return t;
+    }
+    if (S_ISDIR(st.st_mode)) refuse(path, "it is a directory");
+    if (S_ISSOCK(st.st_mode)) refuse(path, "it is a socket");
+    if (S_ISBLK(st.st_mode)) refuse(path, "it is a block device");
+    refuse(path, "not a regular file, character device or FIFO");
+  }
+}
+
+OutputTarget check_output(const std::filesystem::path& path, bool positioned_writes) {
+  const OutputTarget t = resolve_output(path);
+  if (positioned_writes && t.in_place())
+    refuse(path,
+           "this writer places records out of order and needs a regular file (or a new path); "
+           "a device, FIFO or standard output cannot take it");
+  return t;
+}
+
 AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
+  const OutputTarget t = resolve_output(target);
+  final_ = t.path;
+  if (t.in_place()) {
+    in_place_ = true;
+    // What this process already wrote to stdout or stderr through stdio goes first.
+    if (t.kind == OutputTarget::Kind::Descriptor && (t.fd == 1 || t.fd == 2))
+      std::fflush(t.fd == 1 ? stdout : stderr);
+    // A duplicate of the descriptor shares its offset and flags (O_APPEND of `>> log`).
+    const int fd = t.kind == OutputTarget::Kind::Descriptor
+                       ? ::fcntl(t.fd, F_DUPFD_CLOEXEC, 3)
+                       : ::open(final_.c_str(), O_WRONLY | O_NOCTTY | O_CLOEXEC);
+    if (fd < 0) refuse(target_, describe(errno));
+    file_ = ::fdopen(fd, "wb");
+    if (!file_) {
+      const int err = errno;
+      ::close(fd);
+      refuse(target_, describe(err));
+    }
+    // The same large buffer as a temporary's (it outlives fclose: a member).
+    buffer_.reset(new (std::nothrow) char[kBufferSize]);
+    if (buffer_) std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferSize);
+    return;
+  }
   // Built with append: GCC 12 gives a false -Wrestrict for "." + std::string at -O2.
   std::string prefix(1, '.');
-  prefix.append(target.filename().string());
+  prefix.append(final_.filename().string());
   prefix.append(".tmp-");
   prefix.append(std::to_string(static_cast<long>(::getpid())));
   prefix.append("-");
@@ -72,7 +193,7 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   // shared, so try the next number instead.
   for (int attempt = 0; attempt < 100; ++attempt) {
     const unsigned long n = g_counter.fetch_add(1, std::memory_order_relaxed);
-    temp_ = target.parent_path() / (prefix + std::to_string(n));
+    temp_ = final_.parent_path() / (prefix + std::to_string(n));
     file_ = std::fopen(temp_.c_str(), "wbx");
     if (file_ || errno != EEXIST) break;
   }
@@ -102,6 +223,8 @@ void AtomicFile::write(const void* data, std::size_t n) {
 
 void AtomicFile::write_at(std::uint64_t offset, const void* data, std::size_t n) {
   if (!file_) throw IoError("cannot write " + target_.string() + ": file already closed");
+  if (in_place_)
+    refuse(target_, "positioned writes need a regular file, not a device, FIFO or descriptor");
   // Buffered writes must reach the descriptor before a positioned one can land beside them.
   if (std::fflush(file_) != 0) {
     const int err = errno;
@@ -129,12 +252,15 @@ void AtomicFile::commit() {
     throw IoError("cannot write " + target_.string() + ": " + describe(err));
   };
   if (std::fflush(file_) != 0) fail(errno);
-  if (::fsync(::fileno(file_)) != 0) fail(errno);
+  // A device or pipe has nothing to sync (fsync fails with EINVAL there).
+  if (!in_place_ && ::fsync(::fileno(file_)) != 0) fail(errno);
   std::FILE* f = file_;
   file_ = nullptr;
   if (std::fclose(f) != 0) fail(errno);
+  if (in_place_) return;
   std::error_code ec;
-  std::filesystem::rename(temp_, target_, ec);
+  // Over the link's target, not the link: a symbolic link to a regular file stays a link.
+  std::filesystem::rename(temp_, final_, ec);
   if (ec) {
     discard();
     throw IoError("cannot write " + target_.string() + ": " + ec.message());

@@ -4,17 +4,59 @@
 // target. Destroying an uncommitted AtomicFile removes the temporary file. The names of all open
 // temporaries are also kept in a process-wide list so that remove_pending_temporaries() (called
 // from the CLI's SIGINT/SIGTERM handler; async-signal-safe) can delete them on Ctrl-C.
+//
+// Only a regular file is ever renamed over (resolve_output below says what a path is):
+// - a path that does not exist yet, or a regular file: the temporary-then-rename write;
+// - a symbolic link is followed (link by link), and what it leads to is written as above: a
+//   regular file's target is replaced atomically and the link itself stays a link;
+// - a link into /proc/self/fd (/dev/stdout, /dev/stderr, /dev/fd/N) is written in place through
+//   the process's own descriptor, so that `--stats /dev/stdout >> log` appends to the log;
+// - an existing character device (/dev/null) or FIFO is opened and written in place: there is no
+//   temporary, and a failed run may leave part of the data there;
+// - a directory, a socket, a block device: refused (IoError).
 #pragma once
 
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
+#include <string>
 
 namespace isotile {
 
+// How a path is written.
+struct OutputTarget {
+  enum class Kind {
+    NewFile,      // nothing there yet: created by a rename
+    RegularFile,  // replaced by a rename
+    Device,       // an existing character device or FIFO, opened and written in place
+    Descriptor,   // a link into /proc/self/fd: written in place through descriptor `fd`
+  };
+  Kind kind = Kind::NewFile;
+  // Where the data ends up: the path with every symbolic link followed (Device, NewFile,
+  // RegularFile).
+  std::filesystem::path path;
+  int fd = -1;  // Descriptor only
+  // In place: whether positioned writes (write_at) work there. They do not on a FIFO, a
+  // character device or a descriptor (which may be a pipe, or a file opened for appending).
+  bool in_place() const { return kind == Kind::Device || kind == Kind::Descriptor; }
+};
+
+// Says how `path` would be written, without writing anything (a FIFO is not opened). Throws
+// IoError naming the path when it cannot be written: a directory, a socket, a block device, a
+// folder that does not exist or is not writable, a file or device without write permission, a
+// closed descriptor, a link loop.
+OutputTarget resolve_output(const std::filesystem::path& path);
+
+// resolve_output(), and for writers that place records at offsets out of order (write_at: the
+// out-of-core and MPI writers) an IoError when the target would be written in place. Call it
+// before any work, so that a bad output fails at once.
+OutputTarget check_output(const std::filesystem::path& path, bool positioned_writes = false);
+
 class AtomicFile {
  public:
-  // Throws IoError when the temporary cannot be created (e.g. the directory does not exist).
+  // Throws IoError when the path cannot be written (resolve_output) or the temporary cannot be
+  // created.
   explicit AtomicFile(const std::filesystem::path& target);
   ~AtomicFile();
   AtomicFile(const AtomicFile&) = delete;
@@ -26,15 +68,21 @@ class AtomicFile {
   // Writes n bytes; throws IoError on a short write (e.g. disk full).
   void write(const void* data, std::size_t n);
   // Writes n bytes at byte `offset`, wherever the stream is (a file written out of order, e.g.
-  // brick by brick with every record's place known in advance); throws IoError on failure.
+  // brick by brick with every record's place known in advance); throws IoError on failure, and
+  // on a target written in place (check_output(path, true) refuses those before any work).
   void write_at(std::uint64_t offset, const void* data, std::size_t n);
   // Flush, fsync, close and rename over the target; throws IoError on any failure (and then the
-  // temporary is removed).
+  // temporary is removed). In place: flush and close.
   void commit();
+  // Whether the data goes straight to the target (a device, a FIFO, a descriptor).
+  bool in_place() const { return in_place_; }
 
  private:
   void discard() noexcept;
   std::filesystem::path target_;
+  std::filesystem::path final_;  // target_ with its symbolic links followed
+  bool in_place_ = false;
+  std::unique_ptr<char[]> buffer_;  // in place: stdio's buffer (a temporary's sits with its slot)
   std::filesystem::path temp_;
   std::FILE* file_ = nullptr;
   int slot_ = -1;

@@ -1,6 +1,7 @@
 #include "core/volume/volume.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <string>
 
@@ -65,6 +66,30 @@ Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo) 
     local.hi[a] = hi - view.box.lo[a];
   }
   return local;
+}
+
+void check_grid_geometry(const Vec3d& spacing, const Vec3d& origin,
+                         const std::optional<WorldFrame>& world, const std::string& what) {
+  const auto text = [](const Vec3d& v) {
+    return std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]);
+  };
+  for (double s : spacing)
+    if (!(std::isfinite(s) && s > 0))
+      throw InputError(what + ": the spacing must be finite and positive, got " + text(spacing));
+  for (double o : origin)
+    if (!std::isfinite(o)) throw InputError(what + ": the origin is not finite: " + text(origin));
+  if (!world) return;
+  for (double o : world->origin)
+    if (!std::isfinite(o))
+      throw InputError(what + ": the world origin is not finite: " + text(world->origin));
+  const Mat3& d = world->direction;
+  for (double x : d)
+    if (!std::isfinite(x)) throw InputError(what + ": the direction cosines are not finite");
+  const double det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) +
+                     d[2] * (d[3] * d[7] - d[4] * d[6]);
+  if (!(std::abs(det) > 1e-6))
+    throw InputError(what + ": the direction matrix is singular (determinant " +
+                     std::to_string(det) + "): its axes do not span space");
 }
 
 std::size_t checked_volume_bytes(ScalarType type, const Index3& dims) {

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 
 #include "core/volume/scalar_type.h"
 
@@ -118,6 +119,13 @@ class Volume {
   Vec3d origin_{0, 0, 0};
   std::optional<WorldFrame> world_;
 };
+
+// Throws InputError naming `what` unless the grid's geometry makes a mesh: every spacing finite
+// and positive (zero flattens the mesh, a negative one turns it inside out), the origin finite,
+// and the world frame's origin and direction finite with a direction that is not singular
+// (|det| > 1e-6: its columns are unit vectors, so that is far from any real orientation).
+void check_grid_geometry(const Vec3d& spacing, const Vec3d& origin,
+                         const std::optional<WorldFrame>& world, const std::string& what);
 
 // Number of bytes of dims[0]*dims[1]*dims[2] samples of `type`. Throws InputError when a dim is
 // not positive and CapacityError when the product overflows 63 bits.

@@ -86,6 +86,10 @@ if [ "$mode" = prefix ]; then
     grep -q "^\.SS \"isotile $sub\"" <<<"$roff" || fail "man page lacks a section for '$sub'"
   done
   grep -q 'dc\\-solver' <<<"$roff" || fail "man page lacks extract's --dc-solver"
+  for section in "EXIT STATUS" ENVIRONMENT FILES EXAMPLES; do
+    grep -q "^\.SH \"\?$section\"\?\$" <<<"$roff" || fail "man page lacks its $section section"
+  done
+  grep -q 'ISOTILE_GL' <<<"$roff" || fail "man page's ENVIRONMENT lacks ISOTILE_GL"
   completion="$prefix/share/bash-completion/completions/isotile"
   [ -f "$completion" ] || fail "no bash completion in the cli component"
   complete_words() {

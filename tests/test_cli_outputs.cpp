@@ -1,0 +1,420 @@
+// Outputs and arguments of the isotile command line: what -o and --stats do with special files
+// (devices, FIFOs, sockets, links) made for each test in its own folder, paths and values that
+// fail before any input is read, standard output's write errors, the empty mesh, --iso auto.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+#include "cli_support.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/itk_reader.h"
+#include "test_support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using isotile::testing::CliResult;
+using isotile::testing::slurp;
+
+class CliOutputs : public isotile::testing::CliTest {
+ protected:
+  // A character device node in the work folder (1,3: a private /dev/null; 1,7: /dev/full).
+  // Needs CAP_MKNOD and a folder on a file system that allows devices: skipped otherwise.
+  bool make_device(const std::string& name, unsigned minor) {
+    const fs::path p = dir_ / name;
+    if (::mknod(p.c_str(), S_IFCHR | 0666, makedev(1, minor)) != 0) return false;
+    const int fd = ::open(p.c_str(), O_WRONLY);
+    if (fd < 0) {  // a file system mounted nodev
+      fs::remove(p);
+      return false;
+    }
+    ::close(fd);
+    return true;
+  }
+#define REQUIRE_DEVICE(name, minor)                                                 \
+  do {                                                                              \
+    if (!make_device(name, minor))                                                  \
+      GTEST_SKIP() << "cannot make a character device here (needs root and a file " \
+                      "system without nodev): "                                     \
+                   << std::strerror(errno);                                         \
+  } while (0)
+
+  bool is_char_device(const std::string& name) {
+    struct stat st {};
+    return ::lstat((dir_ / name).c_str(), &st) == 0 && S_ISCHR(st.st_mode);
+  }
+
+  // `sh -c` in the work folder, with ISOTILE for the program; stderr captured, stdout as the
+  // command redirects it.
+  CliResult shell(const std::string& command) {
+    const std::string cmd =
+        "cd '" + dir_.string() + "' && ISOTILE='" + ISOTILE_CLI + "'; " + command + " 2>stderr.txt";
+    const int status = std::system(cmd.c_str());
+    CliResult r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.err = slurp(dir_ / "stderr.txt");
+    fs::remove(dir_ / "stderr.txt");
+    return r;
+  }
+};
+
+nlohmann::json json_of(const fs::path& p) {
+  return nlohmann::json::parse(slurp(p));
+}
+
+bool says(const CliResult& r, const std::string& what) {
+  return r.err.find("isotile: error: ") != std::string::npos &&
+         r.err.find(what) != std::string::npos;
+}
+
+TEST_F(CliOutputs, AStatsDeviceIsWrittenInPlaceAndStaysADevice) {
+  REQUIRE_DEVICE("null", 3);
+  const CliResult r = run("extract field:sphere:16 -o s.ply -q --stats null");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(is_char_device("null"));
+  EXPECT_EQ(stray_files({"null", "s.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(CliOutputs, AMeshDeviceIsWrittenInPlaceInCoreAndRefusedOutOfCore) {
+  REQUIRE_DEVICE("null.ply", 3);
+  CliResult r = run("extract field:sphere:16 -o null.ply -q");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(is_char_device("null.ply"));
+  // The streamed writer places records at offsets: refused before any brick is read.
+  r = run("extract field:sphere:16 -o null.ply -q --memory 1MiB");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "null.ply: this writer places records out of order")) << r.err;
+  EXPECT_TRUE(is_char_device("null.ply"));
+  // The simplifying streamed writer writes front to back: a device takes it.
+  r = run("extract field:sphere:24 -o null.ply -q --memory 1MiB --simplify 0.5");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(is_char_device("null.ply"));
+  EXPECT_EQ(stray_files({"null.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(CliOutputs, AFullDeviceIsAnErrorAndStaysADevice) {
+  REQUIRE_DEVICE("full", 7);
+  REQUIRE_DEVICE("full.ply", 7);
+  CliResult r = run("extract field:sphere:16 -o s.ply -q --stats full");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "cannot write full: No space left on device")) << r.err;
+  EXPECT_TRUE(is_char_device("full"));
+  r = run("extract field:sphere:16 -o full.ply -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "cannot write full.ply: No space left on device")) << r.err;
+  EXPECT_TRUE(is_char_device("full.ply"));
+  r = run("simplify s.ply full.ply --ratio 0.5 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "cannot write full.ply")) << r.err;
+  EXPECT_TRUE(is_char_device("full.ply"));
+}
+
+TEST_F(CliOutputs, StandardOutputWriteErrorsExitOne) {
+  REQUIRE_DEVICE("full", 7);
+  ASSERT_EQ(run("extract field:sphere:16 -o s.ply -q").code, 0);
+  for (const std::string args :
+       {"extract field:sphere:16 -o t.ply -q --stats -", "info field:sphere:16",
+        "info field:sphere:16 --json", "quality s.ply", "quality s.ply --json",
+        "simplify s.ply u.ply --ratio 0.5 -q --stats -", "demo -o d.ply -q", "--help"}) {
+    const CliResult r = shell("\"$ISOTILE\" " + args + " >full");
+    EXPECT_EQ(r.code, 1) << args;
+    EXPECT_TRUE(says(r, "cannot write standard output: No space left on device"))
+        << args << ": " << r.err;
+  }
+  EXPECT_TRUE(is_char_device("full"));
+}
+
+TEST_F(CliOutputs, AFifoIsWrittenInPlaceAndRefusedOutOfCoreWithoutBlocking) {
+  ASSERT_EQ(::mkfifo((dir_ / "fifo").c_str(), 0644), 0) << std::strerror(errno);
+  std::string got;
+  std::thread reader([&] { got = slurp(dir_ / "fifo"); });
+  const CliResult r = run("extract field:sphere:16 -o s.ply -q --stats fifo");
+  // Had the program never opened the FIFO, the reader would wait for ever: a writer of our own
+  // releases it (where the program wrote and closed it, no reader is left to open it for).
+  if (const int fd = ::open((dir_ / "fifo").c_str(), O_WRONLY | O_NONBLOCK); fd >= 0) ::close(fd);
+  reader.join();
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(got)["triangles"].get<int>() > 0, true);
+  struct stat st {};
+  ASSERT_EQ(::lstat((dir_ / "fifo").c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
+  // Refused before the FIFO is opened (opening it would wait for a reader).
+  fs::rename(dir_ / "fifo", dir_ / "fifo.ply");
+  const CliResult o = shell(
+      "timeout 20 \"$ISOTILE\" extract field:sphere:16 -o fifo.ply -q "
+      "--memory 1MiB");
+  EXPECT_EQ(o.code, 1) << o.err;
+  EXPECT_TRUE(says(o, "fifo.ply: this writer places records out of order")) << o.err;
+}
+
+TEST_F(CliOutputs, ASocketIsRefusedBeforeAnyWork) {
+  const int s = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  ASSERT_GE(s, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  const std::string path = (dir_ / "sock.json").string();
+  ASSERT_LT(path.size(), sizeof addr.sun_path);
+  std::strcpy(addr.sun_path, path.c_str());
+  ASSERT_EQ(::bind(s, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0) << std::strerror(errno);
+  // A missing input: the output is checked first, so the error names the socket.
+  const CliResult r = run("extract missing_8x8x8_uint8.raw --iso 1 -o s.ply --stats sock.json");
+  ::close(s);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "cannot write sock.json: it is a socket")) << r.err;
+  EXPECT_EQ(stray_files({"sock.json"}), std::vector<std::string>{});
+}
+
+TEST_F(CliOutputs, ALinkToARegularFileKeepsTheLinkAndReplacesTheTarget) {
+  fs::create_directory(dir_ / "real");
+  { std::ofstream(dir_ / "real" / "s.json") << "old"; }
+  { std::ofstream(dir_ / "real" / "m.ply") << "old"; }
+  fs::create_symlink("real/s.json", dir_ / "s.json");
+  fs::create_symlink(dir_ / "real" / "m.ply", dir_ / "m.ply");  // absolute
+  fs::create_symlink("real/new.ply", dir_ / "dangling.ply");
+  CliResult r = run("extract field:sphere:16 -o m.ply -q --stats s.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir_ / "s.json"));
+  EXPECT_TRUE(fs::is_symlink(dir_ / "m.ply"));
+  EXPECT_GT(json_of(dir_ / "real" / "s.json")["triangles"].get<int>(), 0);
+  EXPECT_GT(isotile::read_mesh(dir_ / "real" / "m.ply").triangles.size(), 0u);
+  // A dangling link: the file is made where it points.
+  r = run("extract field:sphere:16 -o dangling.ply -q --memory 1MiB");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir_ / "dangling.ply"));
+  EXPECT_EQ(slurp(dir_ / "real" / "new.ply"), slurp(dir_ / "real" / "m.ply"));
+  EXPECT_EQ(stray_files({"real", "s.json", "m.ply", "dangling.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(CliOutputs, ADescriptorLinkAppendsToTheRedirectedLog) {
+  // Links of our own into /proc/self/fd, as /dev/stdout is.
+  fs::create_symlink("/proc/self/fd/1", dir_ / "out.json");
+  fs::create_symlink("out.json", dir_ / "chained.json");
+  { std::ofstream(dir_ / "log") << "first line\n"; }
+  CliResult r = shell("\"$ISOTILE\" extract field:sphere:16 -o s.ply -q --stats out.json >>log");
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = shell("\"$ISOTILE\" extract field:sphere:16 -o s.ply -q --stats chained.json >>log");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(dir_ / "out.json"));
+  const std::string log = slurp(dir_ / "log");
+  EXPECT_EQ(log.rfind("first line\n{", 0), 0u) << log;
+  const std::string one = log.substr(std::string("first line\n").size());
+  // Two JSON objects, one after the other.
+  const std::size_t split = one.find("}\n{");
+  ASSERT_NE(split, std::string::npos) << log;
+  const std::string a = one.substr(0, split + 2), b = one.substr(split + 2);
+  EXPECT_GT(nlohmann::json::parse(a)["triangles"].get<int>(), 0);
+  EXPECT_EQ(nlohmann::json::parse(a)["triangles"], nlohmann::json::parse(b)["triangles"]);
+  // The descriptor is whatever it holds: a pipe too.
+  r = shell("\"$ISOTILE\" extract field:sphere:16 -o s.ply -q --stats out.json | cat >piped");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(json_of(dir_ / "piped")["triangles"].get<int>(), 0);
+  // The simplifying streamed writer goes front to back, so it takes standard output too; its
+  // scratch files go to TMPDIR, not into /proc/self/fd.
+  fs::create_directory(dir_ / "tmp");
+  fs::create_symlink("/proc/self/fd/1", dir_ / "mesh.ply");
+  r = shell(
+      "TMPDIR=\"$PWD/tmp\" \"$ISOTILE\" extract field:sphere:24 -o mesh.ply -q "
+      "--memory 1MiB --simplify 0.5 >streamed.ply");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(isotile::read_mesh(dir_ / "streamed.ply").triangles.size(), 100u);
+  EXPECT_TRUE(fs::is_empty(dir_ / "tmp"));
+  // A descriptor that is not open: refused before any work.
+  fs::create_symlink("/proc/self/fd/9", dir_ / "nine.json");
+  r = shell(
+      "\"$ISOTILE\" extract missing_8x8x8_uint8.raw --iso 1 -o s.ply -q "
+      "--stats nine.json 9>&-");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "cannot write nine.json: descriptor 9 is closed")) << r.err;
+}
+
+TEST_F(CliOutputs, BadOutputPathsFailBeforeTheInputIsRead) {
+  fs::create_directory(dir_ / "adir.ply");
+  struct Bad {
+    std::string args, says;
+  } const cases[] = {
+      {"-o nope/out.ply", "cannot write nope/out.ply: folder nope does not exist"},
+      {"-o adir.ply", "cannot write adir.ply: it is a directory"},
+      {"-o out.xyz", "unknown mesh format '.xyz'"},
+      {"-o out", "no extension"},
+      {"-o out.ply --stats nope/s.json", "cannot write nope/s.json: folder nope does not exist"},
+      {"-o out.ply --stats adir.ply", "cannot write adir.ply: it is a directory"},
+      {"-o out.ply --spacing 1,0,1", "--spacing"},
+  };
+  for (const Bad& b : cases) {
+    // The input does not exist: had it been read first, the error would name it.
+    const CliResult r = run("extract missing_8x8x8_uint8.raw --iso 1 " + b.args);
+    EXPECT_EQ(r.code, 1) << b.args;
+    EXPECT_TRUE(says(r, b.says)) << b.args << ": " << r.err;
+    EXPECT_EQ(r.err.find("missing_8x8x8"), std::string::npos) << b.args << ": " << r.err;
+  }
+  const CliResult s = run("simplify missing.ply nope/out.ply --ratio 0.5");
+  EXPECT_EQ(s.code, 1);
+  EXPECT_TRUE(says(s, "folder nope does not exist")) << s.err;
+  const CliResult t = run("simplify missing.ply out.ply --ratio 0.5 --stats adir.ply");
+  EXPECT_EQ(t.code, 1);
+  EXPECT_TRUE(says(t, "it is a directory")) << t.err;
+  EXPECT_EQ(stray_files({"adir.ply"}), std::vector<std::string>{});
+}
+
+TEST_F(CliOutputs, BadNumbersAreOneLineErrors) {
+  struct Bad {
+    std::string args, says;
+  } const cases[] = {
+      {"--spacing 0,1,1", "--spacing must be three finite numbers above 0, got '0,1,1'"},
+      {"--spacing -1,1,1", "--spacing must be three finite numbers above 0"},
+      {"--spacing nan,1,1", "--spacing must be three finite numbers above 0"},
+      {"--spacing 1,inf,1", "--spacing must be three finite numbers above 0"},
+      {"--origin 0,nan,0", "--origin must be three finite numbers"},
+      {"--origin 0,0,-inf", "--origin must be three finite numbers"},
+      {"--iso nan", "--iso must be a finite number or 'auto', got 'nan'"},
+      {"--iso inf", "--iso must be a finite number or 'auto'"},
+      {"--iso 1x", "--iso must be a finite number or 'auto', got '1x'"},
+  };
+  for (const Bad& b : cases) {
+    const CliResult r = run("extract field:sphere:16 -o out.ply " + b.args);
+    EXPECT_EQ(r.code, 1) << b.args;
+    EXPECT_TRUE(says(r, b.says)) << b.args << ": " << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << b.args;
+  }
+}
+
+TEST_F(CliOutputs, BadGeometryInAFileIsAnError) {
+  const std::string data(64, '\x10');
+  {
+    std::ofstream f(dir_ / "singular.nrrd", std::ios::binary);
+    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspace: left-posterior-superior\n"
+         "space directions: (1,0,0) (1,0,0) (0,0,1)\nspace origin: (0,0,0)\nencoding: raw\n\n"
+      << data;
+  }
+  {
+    std::ofstream f(dir_ / "flipped.nrrd", std::ios::binary);
+    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspacings: -1 1 1\nencoding: raw\n\n"
+      << data;
+  }
+  for (const std::string memory : {"", " --memory 1MiB"}) {
+    CliResult r = run("extract singular.nrrd --iso 1 -o out.ply" + memory);
+    EXPECT_EQ(r.code, 1);
+    EXPECT_TRUE(says(r, "singular.nrrd: the direction matrix is singular")) << r.err;
+    r = run("extract flipped.nrrd --iso 1 -o out.ply" + memory);
+    EXPECT_EQ(r.code, 1);
+    EXPECT_TRUE(says(r, "flipped.nrrd: the spacing must be finite and positive")) << r.err;
+    // --spacing overrides the file's.
+    r = run("extract flipped.nrrd --iso 1 -o out.ply --spacing 1,1,1 --allow-empty -q" + memory);
+    EXPECT_EQ(r.code, 0) << r.err;
+  }
+}
+
+TEST_F(CliOutputs, AnIsovalueOutsideTheSamplesIsAnErrorNamingTheRange) {
+  for (const std::string memory : {"", " --memory 1MiB", " --memory 1MiB --simplify 0.5"}) {
+    CliResult r = run("extract field:sphere:16 --iso 5 -o out.ply" + memory);
+    EXPECT_EQ(r.code, 1) << memory;
+    EXPECT_TRUE(says(r, "no surface at iso 5: the samples range from ")) << memory << r.err;
+    EXPECT_NE(r.err.find(", all below it"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("--allow-empty"), std::string::npos) << r.err;
+    EXPECT_EQ(stray_files(), std::vector<std::string>{}) << memory;
+    r = run("extract field:sphere:16 --iso -5 -o out.ply" + memory);
+    EXPECT_EQ(r.code, 1) << memory;
+    EXPECT_NE(r.err.find(", all at or above it"), std::string::npos) << r.err;
+
+    r = run("extract field:sphere:16 --iso 5 --allow-empty -q -o out.ply --stats s.json" + memory);
+    ASSERT_EQ(r.code, 0) << memory << r.err;
+    EXPECT_EQ(isotile::read_mesh(dir_ / "out.ply").triangles.size(), 0u);
+    const auto j = json_of(dir_ / "s.json");
+    EXPECT_EQ(j["triangles"], 0);
+    for (const char* key : {"closed", "watertight", "radius_ratio_min", "radius_ratio_mean",
+                            "radius_ratio_median", "radius_ratio_q001", "radius_ratio_q01"})
+      EXPECT_TRUE(j.contains(key) && j[key].is_null()) << key << memory << ": " << j.dump();
+    fs::remove(dir_ / "out.ply");
+    fs::remove(dir_ / "s.json");
+  }
+}
+
+TEST_F(CliOutputs, AnEmptyMeshFileMeasuresAsNull) {
+  ASSERT_EQ(run("extract field:sphere:16 --iso 5 --allow-empty -q -o e.ply").code, 0);
+  const CliResult r = run("quality e.ply --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  for (const char* key : {"closed", "watertight", "radius_ratio_min", "radius_ratio_q01"})
+    EXPECT_TRUE(j[key].is_null()) << key;
+  EXPECT_NE(run("quality e.ply").out.find("closed                n/a"), std::string::npos);
+}
+
+TEST_F(CliOutputs, IsoAutoFindsASurfaceInEveryField) {
+  for (const char* field : {"sphere", "torus", "gyroid", "csg-box", "marschner-lobb"}) {
+    const std::string in = std::string("field:") + field + ":24";
+    const CliResult r = run("extract " + in + " --iso auto -o a.ply --stats a.json");
+    ASSERT_EQ(r.code, 0) << field << r.err;
+    EXPECT_NE(r.err.find("--iso auto: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("(Otsu's threshold; the samples range from "), std::string::npos);
+    const auto j = json_of(dir_ / "a.json");
+    EXPECT_GT(j["triangles"].get<int>(), 100) << field;
+    EXPECT_EQ(j["iso_auto"]["rule"], "otsu");
+    EXPECT_LT(j["iso_auto"]["min"].get<double>(), j["iso"].get<double>());
+    EXPECT_GT(j["iso_auto"]["max"].get<double>(), j["iso"].get<double>());
+    // `info` names the same value.
+    const CliResult info = run("info " + in + " --json");
+    ASSERT_EQ(info.code, 0) << info.err;
+    EXPECT_EQ(nlohmann::json::parse(info.out)["iso_auto"], j["iso"]) << field;
+    // Out of core: the same isovalue from a streamed histogram, so the same file.
+    const CliResult m =
+        run("extract " + in + " --iso auto -q -o m.ply --stats m.json --memory 1MiB");
+    ASSERT_EQ(m.code, 0) << field << m.err;
+    EXPECT_EQ(json_of(dir_ / "m.json")["iso"], j["iso"]) << field;
+    EXPECT_EQ(slurp(dir_ / "m.ply"), slurp(dir_ / "a.ply")) << field;
+  }
+}
+
+TEST_F(CliOutputs, AConstantVolumeHasNoAutomaticIsovalue) {
+  { std::ofstream(dir_ / "flat_4x4x4_uint8.raw", std::ios::binary) << std::string(64, '\x07'); }
+  const CliResult r = run("extract flat_4x4x4_uint8.raw --iso auto -o out.ply");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "every sample is 7: no isovalue separates an inside from an outside"))
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+  const CliResult info = run("info flat_4x4x4_uint8.raw --json");
+  ASSERT_EQ(info.code, 0) << info.err;
+  EXPECT_TRUE(nlohmann::json::parse(info.out)["iso_auto"].is_null());
+}
+
+TEST_F(CliOutputs, IsoAutoFindsASurfaceInEverySharedVolume) {
+  const fs::path data = isotile::testing::shared_volume("");
+  ISOTILE_REQUIRE_SHARED(data);
+  int volumes = 0;
+  for (const auto& e : fs::directory_iterator(data)) {
+    const std::string name = e.path().filename().string();
+    if (name.find(".raw") == std::string::npos) continue;
+    ++volumes;
+    const CliResult r =
+        run("extract '" + e.path().string() + "' --iso auto -q -o a.ply --stats a.json");
+    ASSERT_EQ(r.code, 0) << name << r.err;
+    EXPECT_GT(json_of(dir_ / "a.json")["triangles"].get<int>(), 1000) << name;
+  }
+  EXPECT_GT(volumes, 0);
+}
+
+TEST_F(CliOutputs, IsoAutoFindsASurfaceInTheDicomSeries) {
+  const fs::path series = isotile::testing::shared_volume("dicom_uih_t1_head_slab");
+  ISOTILE_REQUIRE_SHARED(series);
+  if (!isotile::itk_available()) ISOTILE_SKIP(Itk, "built without ITK");
+  for (const std::string memory : {"", " --memory 64MiB"}) {
+    const CliResult r =
+        run("extract '" + series.string() + "' --iso auto -q -o a.ply --stats a.json" + memory);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_GT(json_of(dir_ / "a.json")["triangles"].get<int>(), 1000);
+  }
+}
+
+}  // namespace

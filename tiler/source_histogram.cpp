@@ -1,0 +1,64 @@
+#include "tiler/source_histogram.h"
+
+#include <algorithm>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget) {
+  const std::uint64_t sample = scalar_size(source.type);
+  const std::uint64_t row = static_cast<std::uint64_t>(source.dims[0]) * sample;
+  const std::uint64_t plane = row * static_cast<std::uint64_t>(source.dims[1]);
+  // A quarter of the budget for the slab; otherwise 64 MiB, which keeps every thread busy.
+  const std::uint64_t slab_bytes = memory_budget > 0 ? memory_budget / 4 : std::uint64_t{64} << 20;
+  // Sequential (gzip'd) sources give whole x-y slabs only.
+  const bool rows = plane > slab_bytes && !source.sequential();
+  const std::int64_t step =
+      rows ? std::max<std::int64_t>(
+                 1, static_cast<std::int64_t>(slab_bytes / std::max<std::uint64_t>(row, 1)))
+           : std::max<std::int64_t>(
+                 1, static_cast<std::int64_t>(slab_bytes / std::max<std::uint64_t>(plane, 1)));
+  source.rewind();
+  ValueHistogram h;
+  std::vector<char> buffer;
+  for (std::int64_t z = 0; z < source.dims[2];) {
+    Box3 box;
+    if (rows) {
+      for (std::int64_t y = 0; y < source.dims[1]; y += step) {
+        box = {{0, y, z}, {source.dims[0], std::min(source.dims[1], y + step), z + 1}};
+        buffer.resize(static_cast<std::size_t>(box.extent(0) * box.extent(1)) * sample);
+        source.read(box, buffer.data());
+        merge(h, value_histogram(brick_view(source, box, buffer.data())));
+      }
+      ++z;
+      continue;
+    }
+    box = {{0, 0, z}, {source.dims[0], source.dims[1], std::min(source.dims[2], z + step)}};
+    buffer.resize(static_cast<std::size_t>(plane * static_cast<std::uint64_t>(box.extent(2))));
+    source.read(box, buffer.data());
+    merge(h, value_histogram(brick_view(source, box, buffer.data())));
+    z = box.hi[2];
+  }
+  source.rewind();
+  return h;
+}
+
+void throw_no_surface(double iso, const std::optional<std::pair<double, double>>& range) {
+  std::ostringstream s;
+  s.precision(10);
+  s << "no surface at iso " << iso;
+  if (range)
+    s << ": the samples range from " << range->first << " to " << range->second
+      << (iso > range->second ? ", all below it" : ", all at or above it");
+  else
+    s << ": every sample lies on one side of it (`isotile info` shows the range)";
+  s << "; choose an isovalue inside the range, or --iso auto (or --allow-empty to write the empty "
+       "mesh)";
+  throw InputError(s.str());
+}
+
+}  // namespace isotile

@@ -1,0 +1,26 @@
+// The samples' histogram of a volume read box by box (`--iso auto` with --memory), and the error
+// for an isovalue that gives no surface, shared by the in-core and out-of-core runs.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <utility>
+
+#include "core/volume/otsu_isovalue.h"
+#include "tiler/volume_source.h"
+
+namespace isotile {
+
+// One streaming pass over `source` in slabs of whole z-planes (rows of one plane where a plane
+// alone exceeds a quarter of `memory_budget`; 0: no budget), each slab's histogram merged into
+// the volume's (core/volume/otsu_isovalue.h). Reads the input once more than the extraction
+// does; the source is rewound before and after. Holds one slab and the histograms (1.5 MiB per
+// thread) at a time.
+ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget);
+
+// InputError: no pair of samples straddles `iso` (every sample on one side), so there is no
+// surface; names the samples' range where known and the ways out (--iso auto, --allow-empty).
+[[noreturn]] void throw_no_surface(double iso,
+                                   const std::optional<std::pair<double, double>>& range);
+
+}  // namespace isotile
