@@ -1,0 +1,65 @@
+#include "core/extract/cell_ranges.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+namespace isotile {
+namespace {
+
+template <class T>
+std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
+  const T* data = view.typed<T>();
+  const std::size_t n = mesh.positions.size();
+  std::vector<float> out(n);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+          // The cells along each axis whose closed extent holds the vertex: two where it lies on a
+          // grid plane (within float rounding of the position), else one.
+          std::int64_t lo[3], hi[3];
+          for (int a = 0; a < 3; ++a) {
+            const double g =
+                (static_cast<double>(mesh.positions[v][a]) - view.origin[a]) / view.spacing[a] -
+                static_cast<double>(view.box.lo[a]);
+            const double k = std::round(g);
+            const std::int64_t last = view.dims[a] - 2;
+            if (std::abs(g - k) < 1e-4) {
+              lo[a] = static_cast<std::int64_t>(k) - 1;
+              hi[a] = static_cast<std::int64_t>(k);
+            } else {
+              lo[a] = hi[a] = static_cast<std::int64_t>(std::floor(g));
+            }
+            lo[a] = std::clamp<std::int64_t>(lo[a], 0, last);
+            hi[a] = std::clamp<std::int64_t>(hi[a], 0, last);
+          }
+          double best = 0;
+          for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
+            for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+              for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+                double mn = INFINITY, mx = -INFINITY;
+                for (int c = 0; c < 8; ++c) {
+                  const double s = static_cast<double>(
+                      data[view.offset(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2))]);
+                  mn = std::min(mn, s);
+                  mx = std::max(mx, s);
+                }
+                best = std::max(best, mx - mn);
+              }
+          out[v] = static_cast<float>(best);
+        }
+      });
+  return out;
+}
+
+}  // namespace
+
+std::vector<float> vertex_cell_ranges(const VolumeView& view, const Mesh& mesh) {
+  if (view.dims[0] < 2 || view.dims[1] < 2 || view.dims[2] < 2)
+    return std::vector<float>(mesh.positions.size(), 0.0f);
+  return visit_scalar(view.type, [&](auto tag) { return typed_ranges<decltype(tag)>(view, mesh); });
+}
+
+}  // namespace isotile
