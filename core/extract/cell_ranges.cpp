@@ -35,16 +35,24 @@ std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
             lo[a] = std::clamp<std::int64_t>(lo[a], 0, last);
             hi[a] = std::clamp<std::int64_t>(hi[a], 0, last);
           }
+          // The samples of those cells, read once (at most 3 x 3 x 3), then each cell's range.
+          const std::int64_t n[3] = {hi[0] - lo[0] + 2, hi[1] - lo[1] + 2, hi[2] - lo[2] + 2};
+          double s[3][3][3];
+          for (std::int64_t k = 0; k < n[2]; ++k)
+            for (std::int64_t j = 0; j < n[1]; ++j) {
+              const T* row = data + view.offset(lo[0], lo[1] + j, lo[2] + k);
+              for (std::int64_t i = 0; i < n[0]; ++i)
+                s[k][j][i] = static_cast<double>(row[i * view.strides[0]]);
+            }
           double best = 0;
-          for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
-            for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
-              for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
-                double mn = INFINITY, mx = -INFINITY;
-                for (int c = 0; c < 8; ++c) {
-                  const double s = static_cast<double>(
-                      data[view.offset(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2))]);
-                  mn = std::min(mn, s);
-                  mx = std::max(mx, s);
+          for (std::int64_t k = 0; k + 1 < n[2]; ++k)
+            for (std::int64_t j = 0; j + 1 < n[1]; ++j)
+              for (std::int64_t i = 0; i + 1 < n[0]; ++i) {
+                double mn = s[k][j][i], mx = mn;
+                for (int c = 1; c < 8; ++c) {
+                  const double x = s[k + (c >> 2)][j + ((c >> 1) & 1)][i + (c & 1)];
+                  mn = std::min(mn, x);
+                  mx = std::max(mx, x);
                 }
                 best = std::max(best, mx - mn);
               }

@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 #include <tbb/task_arena.h>
 
+#include <chrono>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -278,6 +279,41 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
                         face_array(result->mesh.triangles, result->mesh.positions.size(), owner));
 }
 
+// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (value range,
+// extract, values) timed inside C++ on the same view, without the Python layer or the arrays'
+// wrapping, so that the binding's overhead can be measured in the same process. Seconds per run:
+// (all the calls, extract() alone).
+std::vector<std::pair<double, double>> time_library_calls(const py::array& volume, double level,
+                                                          const std::string& method, bool normals,
+                                                          int threads, int repeats) {
+  const VolumeView view = view_of(volume, {1, 1, 1}, "volume");
+  ExtractOptions options;
+  options.method = parse_method(method);
+  options.backend = Backend::Cpu;
+  options.iso = level;
+  options.normals = normals;
+  std::vector<std::pair<double, double>> out;
+  run_released(threads, [&] {
+    using Clock = std::chrono::steady_clock;
+    for (int r = 0; r < repeats; ++r) {
+      const auto t0 = Clock::now();
+      check_finite(view, "volume");
+      const auto range = value_range(view);
+      const auto t1 = Clock::now();
+      Mesh mesh = extract(view, options);
+      const auto t2 = Clock::now();
+      const std::vector<float> values = vertex_cell_ranges(view, mesh);
+      const auto t3 = Clock::now();
+      if (mesh.triangles.empty() || values.size() != mesh.positions.size() || range.first > level)
+        throw InputError("no surface");
+      out.emplace_back(std::chrono::duration<double>(t3 - t0).count(),
+                       std::chrono::duration<double>(t2 - t1).count());
+    }
+    return 0;
+  });
+  return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_isotile, m) {
@@ -310,6 +346,8 @@ PYBIND11_MODULE(_isotile, m) {
   m.def("simplify", &simplify_arrays, py::arg("vertices"), py::arg("faces"), py::arg("ratio"),
         py::arg("faces_target"), py::arg("max_error"), py::arg("min_quality"), py::arg("relax"),
         py::arg("threads"));
+  m.def("_time_library_calls", &time_library_calls, py::arg("volume"), py::arg("level"),
+        py::arg("method"), py::arg("normals"), py::arg("threads"), py::arg("repeats"));
   m.def(
       "backends",
       [] {
