@@ -67,7 +67,8 @@ set(CPACK_DEBIAN_PYTHON_DESCRIPTION "isosurface meshes from volumes on uniform g
 isotile for NumPy arrays: marching_cubes as a drop-in for scikit-image's, with Macet and Dual
 Contouring, mesh quality measures and simplification, on isotile's multithreaded C++ library.")
 # The extension is built against this Python's ABI and imports NumPy; shlibdeps sees neither.
+math(EXPR isotile_python_next "${Python_VERSION_MINOR} + 1")
 set(CPACK_DEBIAN_PYTHON_PACKAGE_DEPENDS
-    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}.9999), python3-numpy")
+    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${isotile_python_next}), python3-numpy")
 
 include(CPack)
