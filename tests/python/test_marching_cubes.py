@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import isotile
-from conftest import (bonsai, read_ply, require, run_cli, signed_volume, sphere,
+from conftest import (bonsai, read_ply, require, run_cli, signed_volume, skip, sphere,
                       two_way_distance)
 
 RAW_TYPES = {"int8": np.int8, "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
@@ -339,3 +339,21 @@ def test_gil_is_released_during_the_work():
     # have waited for the whole call).
     assert elapsed > 0.02
     assert n > 10000, (n, elapsed)
+
+
+@pytest.mark.parametrize("method", ["mc", "macet", "dc"])
+def test_gl_backends_give_the_cpu_mesh(method):
+    vol = sphere((30, 34, 38), radius=12.0)
+    cpu = isotile.marching_cubes(vol, 0.0, method=method)
+    for backend, why in isotile.backends().items():
+        if backend == "cpu":
+            continue
+        if why:
+            # The library's reason, as the exception's message.
+            with pytest.raises(ValueError) as e:
+                isotile.marching_cubes(vol, 0.0, method=method, backend=backend)
+            assert str(e.value)
+            skip("gl", f"backend {backend} unavailable: {why}")
+        got = isotile.marching_cubes(vol, 0.0, method=method, backend=backend)
+        for a, b in zip(got, cpu):
+            assert np.array_equal(a, b), (backend, method)
