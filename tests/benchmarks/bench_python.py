@@ -10,6 +10,8 @@ untimed run first). Outputs are alike on every side: vertices, faces, normals (s
 always computes them; VTK's vtkFlyingEdges3D with ComputeNormals on, ComputeScalars off), the
 arrays handed to NumPy (VTK's through vtk.util.numpy_support), and isotile's `values` besides.
 
+A second table times one thread in CPU time, which the load of a shared machine changes little.
+
 The binding's overhead: the module's marching_cubes() against the same library calls (value
 range, extract, values) timed inside C++ on the same array in this process
 (isotile._isotile._time_library_calls, no Python layer, no array wrapping).
@@ -28,13 +30,13 @@ import isotile
 from isotile import _isotile
 
 
-def median_time(fn, repeats):
+def median_time(fn, repeats, clock=time.perf_counter):
     fn()
     times = []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = clock()
         fn()
-        times.append(time.perf_counter() - t0)
+        times.append(clock() - t0)
     return statistics.median(times)
 
 
@@ -98,13 +100,15 @@ def main():
     print(f"threads {t}; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f} at the "
           f"start; median of {args.repeats} (scikit-image: 3); "
           f"VTK SMP backend: {vtk_run[1] if vtk_run else 'python3-vtk9 not installed'}")
-    print("| volume | triangles | scikit-image | isotile MC | speed-up | C++ calls | overhead | "
-          "C++ extract() | VTK Flying Edges | isotile Macet | isotile DC |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| volume | triangles | scikit-image | isotile MC | speed-up | MC, normals=False | speed-up "
+          "| C++ calls | overhead | C++ extract() | VTK Flying Edges | isotile Macet | isotile DC |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for name, vol, level in volumes:
         faces = len(isotile.marching_cubes(vol, level, threads=t)[1])
         sk = median_time(lambda: sk_mc(vol, level), 3)
         mc = median_time(lambda: isotile.marching_cubes(vol, level, threads=t), args.repeats)
+        bare = median_time(lambda: isotile.marching_cubes(vol, level, threads=t, normals=False),
+                           args.repeats)
         calls = _isotile._time_library_calls(vol, level, "mc", True, t, args.repeats + 1)[1:]
         cpp_all = statistics.median(c[0] for c in calls)
         cpp_extract = statistics.median(c[1] for c in calls)
@@ -114,11 +118,25 @@ def main():
         dc = median_time(lambda: isotile.marching_cubes(vol, level, method="dc", threads=t),
                          args.repeats)
         ms = lambda s: f"{s * 1e3:.1f} ms"
-        print(f"| {name} | {faces:,} | {ms(sk)} | {ms(mc)} | {sk / mc:.1f}x | {ms(cpp_all)} | "
+        print(f"| {name} | {faces:,} | {ms(sk)} | {ms(mc)} | {sk / mc:.1f}x | {ms(bare)} | "
+              f"{sk / bare:.1f}x | {ms(cpp_all)} | "
               f"{(mc / cpp_all - 1) * 100:+.1f}% | {ms(cpp_extract)} | "
               f"{ms(fe) if fe else 'n/a'} | {ms(macet)} | {ms(dc)} |")
 
 
+    # The same work on one thread, in CPU time (time.process_time): what each side costs, whatever
+    # else the machine is running (wall-clock times above grow with the load average).
+    print()
+    print("| volume | scikit-image, CPU s | isotile MC threads=1, CPU s | ratio | normals=False, CPU s "
+          "| ratio |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    cpu = time.process_time
+    for name, vol, level in volumes:
+        sk = median_time(lambda: sk_mc(vol, level), 3, cpu)
+        mc = median_time(lambda: isotile.marching_cubes(vol, level, threads=1), args.repeats, cpu)
+        bare = median_time(lambda: isotile.marching_cubes(vol, level, threads=1, normals=False),
+                           args.repeats, cpu)
+        print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x |")
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
