@@ -32,6 +32,7 @@
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/atomic_file.h"
+#include "core/mesh/field_distance.h"
 #include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
@@ -147,36 +148,6 @@ json topology_json(const TopologyStats& t, bool border_known) {
   j["closed"] = t.closed;
   j["watertight"] = border_known ? json(t.watertight) : json(nullptr);
   return j;
-}
-
-// Mean and max distance of the vertices to the exact surface of a procedural field. Sums are
-// taken per fixed chunk and added in chunk order, so the result does not depend on threads.
-std::pair<double, double> field_distances(const FieldSpec& spec, const Mesh& mesh,
-                                          const VolumeView& view) {
-  const std::size_t n = mesh.positions.size();
-  if (n == 0) return {0.0, 0.0};
-  constexpr std::size_t kChunk = 4096;
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  std::vector<double> sum(chunks), max(chunks);
-  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-    double s = 0, m = 0;
-    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      Vec3d p;
-      for (int a = 0; a < 3; ++a)
-        p[a] = (static_cast<double>(mesh.positions[i][a]) - view.origin[a]) / view.spacing[a];
-      const double d = distance_voxels(spec, p);
-      s += d;
-      m = std::max(m, d);
-    }
-    sum[c] = s;
-    max[c] = m;
-  });
-  double s = 0, m = 0;
-  for (std::size_t c = 0; c < chunks; ++c) {
-    s += sum[c];
-    m = std::max(m, max[c]);
-  }
-  return {s / static_cast<double>(n), m};
 }
 
 void write_text(const std::string& path, const std::string& text) {
@@ -614,9 +585,9 @@ int run_extract(const ExtractArgs& args) {
                            {1 / view.spacing[0], 1 / view.spacing[1], 1 / view.spacing[2]}));
   }
   if (field) {
-    const auto [mean, max] = field_distances(*field, mesh, view);
-    j["distance_mean"] = mean;
-    j["distance_max"] = max;
+    const FieldDistance d = field_distance(*field, mesh, view.origin, view.spacing);
+    j["distance_mean"] = d.mean;
+    j["distance_max"] = d.max;
   }
   const double t_measure = seconds_since(t0) + t_repairs;
   j["seconds"] = {{"read", t_read},
