@@ -122,13 +122,14 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         if mask.dtype != _np.bool_:
             mask = mask.astype(_np.bool_)
     vol = _readable(volume, "volume")
+    # The whole volume's range, as scikit-image takes it whatever the step.
+    lo, hi = _isotile.value_range(vol, True, threads)
     if step_size > 1:
         vol = vol[::step_size, ::step_size, ::step_size]
         if mask is not None:
             mask = mask[::step_size, ::step_size, ::step_size]
     if mask is not None:
         mask = _readable(mask, "mask")
-    lo, hi = _isotile.value_range(vol, True, threads)
     if level is None:
         level = 0.5 * (lo + hi)
     else:

@@ -231,7 +231,11 @@ def test_errors_match_skimage():
     require("skimage.measure")
     from skimage.measure import marching_cubes as sk_mc
     vol = sphere((10, 10, 10), radius=3.0)
+    # The range is the whole volume's, whatever the step: 7 is in it, but not in vol[::2, ::2, ::2].
+    odd = np.zeros((9, 9, 9), np.float32)
+    odd[1, 1, 1] = 10
     cases = [
+        (lambda f: f(odd, 7.0, step_size=2), RuntimeError),
         (lambda f: f(vol[0], 0.0), ValueError),              # 2-D
         (lambda f: f(vol[None], 0.0), ValueError),           # 4-D
         (lambda f: f(np.zeros((0, 4, 4), np.float32), 0.0), ValueError),   # empty
