@@ -128,15 +128,18 @@ def main():
     # else the machine is running (wall-clock times above grow with the load average).
     print()
     print("| volume | scikit-image, CPU s | isotile MC threads=1, CPU s | ratio | normals=False, CPU s "
-          "| ratio |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+          "| ratio | C++ calls, CPU s | overhead |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     cpu = time.process_time
     for name, vol, level in volumes:
         sk = median_time(lambda: sk_mc(vol, level), 3, cpu)
         mc = median_time(lambda: isotile.marching_cubes(vol, level, threads=1), args.repeats, cpu)
         bare = median_time(lambda: isotile.marching_cubes(vol, level, threads=1, normals=False),
                            args.repeats, cpu)
-        print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x |")
+        calls = median_time(lambda: _isotile._time_library_calls(vol, level, "mc", True, 1, 1),
+                            args.repeats, cpu)
+        print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x | "
+              f"{calls:.3f} | {(mc / calls - 1) * 100:+.1f}% |")
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
