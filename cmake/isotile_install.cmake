@@ -72,7 +72,6 @@ isotile_export_library(isotile_core NAME core
     core/extract/dual_contouring.h
     core/extract/extract.h
     core/extract/macet.h
-    core/mesh/field_distance.h
     core/mesh/mesh.h
     core/mesh/mesh_frame.h
     core/mesh/mesh_io.h
