@@ -121,27 +121,20 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
             raise ValueError("volume and mask must have the same shape.")
         if mask.dtype != _np.bool_:
             mask = mask.astype(_np.bool_)
-    vol = _readable(volume, "volume")
-    # The whole volume's range, as scikit-image takes it whatever the step.
-    lo, hi = _isotile.value_range(vol, True, threads)
+    whole = _readable(volume, "volume")
+    vol = whole
     if step_size > 1:
-        vol = vol[::step_size, ::step_size, ::step_size]
+        vol = whole[::step_size, ::step_size, ::step_size]
         if mask is not None:
             mask = mask[::step_size, ::step_size, ::step_size]
     if mask is not None:
         mask = _readable(mask, "mask")
-    if level is None:
-        level = 0.5 * (lo + hi)
-    else:
-        level = float(level)
-        if level != level:
-            raise ValueError("Surface level must be a number, not NaN.")
-        if level < lo or level > hi:
-            raise ValueError("Surface level must be within volume data range.")
     spacing_xyz = tuple(float(s) * step_size for s in reversed(tuple(spacing)))
+    # The library checks the level against the whole volume's range (None: its middle), as
+    # scikit-image does whatever the step, then extracts from the strided view.
     verts, faces, norms, values = _isotile.extract(
-        vol, level, spacing_xyz, _METHODS[method], quality, backend, bool(normals), True, mask,
-        threads)
+        vol, whole, None if level is None else float(level), spacing_xyz, _METHODS[method],
+        quality, backend, bool(normals), True, mask, threads)
     if len(faces) == 0:
         raise RuntimeError("No surface found at the given iso value.")
     # Views, no copies: columns reversed into the array's axis order (a mirror, which turns the

@@ -8,6 +8,7 @@
 #include <tbb/task_arena.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -142,11 +143,16 @@ Backend parse_backend(const std::string& s) {
   throw py::value_error("backend must be cpu, gs, hp or auto, not '" + s + "'");
 }
 
-py::tuple extract_arrays(const py::array& volume, double level, const Vec3d& spacing_xyz,
+// `whole`: the array the level is checked against (scikit-image takes the whole volume's range
+// whatever the step; `volume` may be a strided view of it). The check and the extraction run in
+// one call without the GIL, so that a call enters TBB's arena once.
+py::tuple extract_arrays(const py::array& volume, const py::array& whole,
+                         std::optional<double> level, const Vec3d& spacing_xyz,
                          const std::string& method, const std::string& quality,
                          const std::string& backend, bool normals, bool values,
                          const std::optional<py::array>& mask, std::optional<int> threads) {
   const VolumeView view = view_of(volume, spacing_xyz, "volume");
+  const VolumeView whole_view = view_of(whole, {1, 1, 1}, "volume");
   std::optional<VolumeView> mask_view;
   if (mask) {
     mask_view = view_of(*mask, spacing_xyz, "mask");
@@ -156,19 +162,35 @@ py::tuple extract_arrays(const py::array& volume, double level, const Vec3d& spa
   ExtractOptions options;
   options.method = parse_method(method);
   options.backend = parse_backend(backend);
-  options.iso = level;
   options.normals = normals;
   if (quality != "fast" && quality != "max")
     throw py::value_error("quality must be fast or max, not '" + quality + "'");
   options.quality = quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
   auto* result = new Result;
   py::capsule owner = owner_of(result);  // frees the result on any exception below
+  enum class Level { Ok, NaN, OutOfRange } level_check = Level::Ok;
   run_released(threads, [&] {
+    check_finite(whole_view, "volume");
+    const auto [lo, hi] = value_range(whole_view);
+    // None: the middle of the data's range, as scikit-image takes it.
+    options.iso = level ? *level : 0.5 * (lo + hi);
+    if (std::isnan(options.iso)) {
+      level_check = Level::NaN;
+      return 0;
+    }
+    if (options.iso < lo || options.iso > hi) {
+      level_check = Level::OutOfRange;
+      return 0;
+    }
     result->mesh = extract(view, options);
     if (mask_view) result->mesh = keep_masked_cells(result->mesh, view, *mask_view);
     if (values) result->values = vertex_cell_ranges(view, result->mesh);
     return 0;
   });
+  // scikit-image's messages.
+  if (level_check == Level::NaN) throw py::value_error("Surface level must be a number, not NaN.");
+  if (level_check == Level::OutOfRange)
+    throw py::value_error("Surface level must be within volume data range.");
   const Mesh& m = result->mesh;
   py::object out_normals = py::none(), out_values = py::none();
   if (normals) out_normals = vec3_array(m.normals, owner);
@@ -180,15 +202,6 @@ py::tuple extract_arrays(const py::array& volume, double level, const Vec3d& spa
   return py::make_tuple(vec3_array(m.positions, owner),
                         face_array(m.triangles, m.positions.size(), owner), out_normals,
                         out_values);
-}
-
-py::tuple value_range_of(const py::array& volume, bool check_nan, std::optional<int> threads) {
-  const VolumeView view = view_of(volume, {1, 1, 1}, "volume");
-  const auto r = run_released(threads, [&] {
-    if (check_nan) check_finite(view, "volume");
-    return value_range(view);
-  });
-  return py::make_tuple(r.first, r.second);
 }
 
 // A mesh from (V, 3) vertices and (F, 3) faces: copied, since Mesh owns its arrays.
@@ -290,7 +303,6 @@ std::vector<std::pair<double, double>> time_library_calls(const py::array& volum
   ExtractOptions options;
   options.method = parse_method(method);
   options.backend = Backend::Cpu;
-  options.iso = level;
   options.normals = normals;
   std::vector<std::pair<double, double>> out;
   run_released(threads, [&] {
@@ -334,13 +346,11 @@ PYBIND11_MODULE(_isotile, m) {
       PyErr_SetString(PyExc_RuntimeError, e.what());
     }
   });
-  m.def("extract", &extract_arrays, py::arg("volume"), py::arg("level"), py::arg("spacing_xyz"),
-        py::arg("method"), py::arg("quality"), py::arg("backend"), py::arg("normals"),
-        py::arg("values"), py::arg("mask"), py::arg("threads"),
+  m.def("extract", &extract_arrays, py::arg("volume"), py::arg("whole"), py::arg("level"),
+        py::arg("spacing_xyz"), py::arg("method"), py::arg("quality"), py::arg("backend"),
+        py::arg("normals"), py::arg("values"), py::arg("mask"), py::arg("threads"),
         "extract(view [z,y,x], level, spacing (x,y,z), ...) -> positions (x,y,z), faces (wound "
         "out of the samples >= level), normals, values; arrays own the library's buffers");
-  m.def("value_range", &value_range_of, py::arg("volume"), py::arg("check_nan"), py::arg("threads"),
-        "(min, max) of the samples; NaN/Inf samples raise when check_nan");
   m.def("quality", &quality_of, py::arg("vertices"), py::arg("faces"),
         py::arg("check_intersections"), py::arg("threads"));
   m.def("simplify", &simplify_arrays, py::arg("vertices"), py::arg("faces"), py::arg("ratio"),
