@@ -292,8 +292,8 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
                         face_array(result->mesh.triangles, result->mesh.positions.size(), owner));
 }
 
-// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (value range,
-// extract, values) timed inside C++ on the same view, without the Python layer or the arrays'
+// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (check_finite,
+// value range, extract, values) timed inside C++ on the same view, without the Python layer or the arrays'
 // wrapping, so that the binding's overhead can be measured in the same process. Seconds per run:
 // (all the calls, extract() alone).
 std::vector<std::pair<double, double>> time_library_calls(const py::array& volume, double level,
@@ -303,6 +303,7 @@ std::vector<std::pair<double, double>> time_library_calls(const py::array& volum
   ExtractOptions options;
   options.method = parse_method(method);
   options.backend = Backend::Cpu;
+  options.iso = level;
   options.normals = normals;
   std::vector<std::pair<double, double>> out;
   run_released(threads, [&] {
