@@ -293,9 +293,9 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
 }
 
 // For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (check_finite,
-// value range, extract, values) timed inside C++ on the same view, without the Python layer or the arrays'
-// wrapping, so that the binding's overhead can be measured in the same process. Seconds per run:
-// (all the calls, extract() alone).
+// value range, extract, values) timed inside C++ on the same view, without the Python layer or the
+// arrays' wrapping, so that the binding's overhead can be measured in the same process. Seconds per
+// run: (all the calls, extract() alone).
 std::vector<std::pair<double, double>> time_library_calls(const py::array& volume, double level,
                                                           const std::string& method, bool normals,
                                                           int threads, int repeats) {
