@@ -37,9 +37,11 @@ packages=(
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgl1-mesa-dev libosmesa6-dev python3-glad glslang-tools
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
   help2man
+  python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-skimage
+  python3-meshio
 )
 if [ "$bench" = 1 ]; then
-  packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev)
+  packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev python3-vtk9)
   extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
 fi
 

@@ -3,6 +3,7 @@
 #   dev      the static libraries, their public headers under include/isotile/, and the CMake
 #            package (find_package(isotile CONFIG): isotile::core, isotile::tiler, isotile::gl)
 #   meshlab  the MeshLab plugin, in MeshLab's own plugin folder (meshlab_plugin/CMakeLists.txt)
+#   python   the isotile Python package in lib/python3/dist-packages (python/CMakeLists.txt)
 # Included by the top-level CMakeLists.txt after every part has defined its targets.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
@@ -66,6 +67,8 @@ isotile_export_library(isotile_teem NAME teem INTERNAL DEBIAN_DEPENDS libteem-de
 isotile_export_library(isotile_core NAME core
   HEADERS
     core/errors.h
+    core/extract/cell_mask.h
+    core/extract/cell_ranges.h
     core/extract/dual_contouring.h
     core/extract/extract.h
     core/extract/macet.h

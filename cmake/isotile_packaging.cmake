@@ -3,6 +3,7 @@
 #   isotile                 cli      /usr/bin/isotile, man page, bash completion
 #   libisotile-dev          dev      static libraries, headers, CMake package
 #   meshlab-plugin-isotile  meshlab  the plugin in Debian MeshLab's plugin folder
+#   python3-isotile         python   the isotile module in Debian's dist-packages
 # Depends: what dpkg-shlibdeps finds in the binaries, plus what it cannot see (below).
 set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME isotile)
@@ -21,6 +22,9 @@ set(CPACK_DEB_COMPONENT_INSTALL ON)
 set(CPACK_COMPONENTS_ALL cli dev)
 if(TARGET filter_isotile)
   list(APPEND CPACK_COMPONENTS_ALL meshlab)
+endif()
+if(TARGET isotile_python)
+  list(APPEND CPACK_COMPONENTS_ALL python)
 endif()
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)  # name_version_arch.deb
 set(CPACK_DEBIAN_PACKAGE_RELEASE 1)
@@ -56,5 +60,15 @@ shape-preserving simplification.")
 # folder, which shlibdeps is told about but where it finds no shlibs entry.
 set(CPACK_DEBIAN_MESHLAB_PACKAGE_DEPENDS "meshlab (>= 2020.09), meshlab (<< 2020.10)")
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS "/usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/meshlab")
+
+set(CPACK_DEBIAN_PYTHON_PACKAGE_NAME python3-isotile)
+set(CPACK_DEBIAN_PYTHON_PACKAGE_SECTION python)
+set(CPACK_DEBIAN_PYTHON_DESCRIPTION "isosurface meshes from volumes on uniform grids (Python 3)
+isotile for NumPy arrays: marching_cubes as a drop-in for scikit-image's, with Macet and Dual
+Contouring, mesh quality measures and simplification, on isotile's multithreaded C++ library.")
+# The extension is built against this Python's ABI and imports NumPy; shlibdeps sees neither.
+math(EXPR isotile_python_next "${Python_VERSION_MINOR} + 1")
+set(CPACK_DEBIAN_PYTHON_PACKAGE_DEPENDS
+    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${isotile_python_next}), python3-numpy")
 
 include(CPack)

@@ -34,6 +34,7 @@
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/atomic_file.h"
+#include "core/mesh/field_distance.h"
 #include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
@@ -164,36 +165,6 @@ json topology_json(const TopologyStats& t, bool border_known) {
   j["closed"] = t.faces > 0 ? json(t.closed) : json(nullptr);
   j["watertight"] = border_known && t.faces > 0 ? json(t.watertight) : json(nullptr);
   return j;
-}
-
-// Mean and max distance of the vertices to the exact surface of a procedural field. Sums are
-// taken per fixed chunk and added in chunk order, so the result does not depend on threads.
-std::pair<double, double> field_distances(const FieldSpec& spec, const Mesh& mesh,
-                                          const VolumeView& view) {
-  const std::size_t n = mesh.positions.size();
-  if (n == 0) return {0.0, 0.0};
-  constexpr std::size_t kChunk = 4096;
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  std::vector<double> sum(chunks), max(chunks);
-  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-    double s = 0, m = 0;
-    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
-      Vec3d p;
-      for (int a = 0; a < 3; ++a)
-        p[a] = (static_cast<double>(mesh.positions[i][a]) - view.origin[a]) / view.spacing[a];
-      const double d = distance_voxels(spec, p);
-      s += d;
-      m = std::max(m, d);
-    }
-    sum[c] = s;
-    max[c] = m;
-  });
-  double s = 0, m = 0;
-  for (std::size_t c = 0; c < chunks; ++c) {
-    s += sum[c];
-    m = std::max(m, max[c]);
-  }
-  return {s / static_cast<double>(n), m};
 }
 
 // Standard output's buffered writes that failed (a full disk, a closed pipe's EPIPE, /dev/full):
@@ -694,10 +665,10 @@ int run_extract(const ExtractArgs& args) {
                            {1 / view.spacing[0], 1 / view.spacing[1], 1 / view.spacing[2]}));
   }
   if (field) {
-    const auto [mean, max] = field_distances(*field, mesh, view);
+    const FieldDistance d = field_distance(*field, mesh, view.origin, view.spacing);
     const bool none = mesh.positions.empty();  // no vertex: no distance
-    j["distance_mean"] = none ? json(nullptr) : json(mean);
-    j["distance_max"] = none ? json(nullptr) : json(max);
+    j["distance_mean"] = none ? json(nullptr) : json(d.mean);
+    j["distance_max"] = none ? json(nullptr) : json(d.max);
   }
   const double t_measure = seconds_since(t0) + t_repairs;
   j["seconds"] = {{"read", t_read},

@@ -13,7 +13,7 @@
 # Exit 77 (ctest: skipped) with the reason where a run cannot do it by its nature; where
 # ISOTILE_STRICT_SKIPS names "packaging" (or "all") a missing precondition fails instead.
 set -euo pipefail
-mode=$1 src=$2 build=$3 version=$4 sanitized=$5 meshlab=$6
+mode=$1 src=$2 build=$3 version=$4 sanitized=$5 meshlab=$6 python=${7:-0}
 
 fail() { echo "check_install: FAILED: $*" >&2; exit 1; }
 skip() {
@@ -66,6 +66,23 @@ check_reader_modules() {
   echo "check_install: $1 read MetaImage and OpenVDB input through its modules"
 }
 
+# The installed Python module (under $1 on sys.path, or Debian's own dist-packages when empty),
+# in Debian's python3: its mesh of a small volume has the installed program's face count.
+check_python_module() {
+  local dir=$1 want got
+  (cd "$tmp" && "$2" -q extract "$nucleon" --iso 49.5 -o py-cli.ply)
+  read -r want _ <<<"$(counts "$2" "$tmp/py-cli.ply")"
+  got=$(cd "$tmp" && PYTHONPATH="$dir" /usr/bin/python3 -c '
+import gzip, sys, numpy as np, isotile
+where = sys.argv[2] or "/usr/lib/python3/dist-packages/"
+assert isotile.__file__.startswith(where), isotile.__file__
+vol = np.frombuffer(gzip.open(sys.argv[1]).read(), np.uint8).reshape(41, 41, 41)
+print(len(isotile.marching_cubes(vol, 49.5)[1]))' "$nucleon" "$dir") ||
+    fail "import isotile from ${dir:-dist-packages}"
+  [ "$got" = "$want" ] || fail "the installed module's mesh has $got faces, the program's $want"
+  echo "check_install: the Python module from ${dir:-dist-packages}: $got faces, as the program's"
+}
+
 if [ "$mode" = prefix ]; then
   prefix="$tmp/prefix"
   for component in cli dev; do
@@ -110,6 +127,11 @@ if [ "$mode" = prefix ]; then
       "$tmp"/stage/usr/lib/*/meshlab/plugins/libfilter_isotile.so) ;;
       *) fail "meshlab component installed '$plugin', not into /usr/lib/<arch>/meshlab/plugins" ;;
     esac
+  fi
+
+  if [ "$python" = 1 ]; then
+    cmake --install "$build" --prefix "$prefix" --component python >/dev/null
+    check_python_module "$prefix/lib/python3/dist-packages" "$prefix/bin/isotile"
   fi
 
   # README.md's C++ example, as it stands there, in main(), reading a small real volume.
@@ -165,12 +187,14 @@ if [ "$(id -u)" -ne 0 ]; then
 fi
 packages=(isotile libisotile-dev)
 [ "$meshlab" = 1 ] && packages+=(meshlab-plugin-isotile)
+[ "$python" = 1 ] && packages+=(python3-isotile)
 installed() { dpkg-query -W -f='${db:Status-Status} ${Package}\n' 2>/dev/null | awk '$1 == "installed" {print $2}' | sort; }
 present=$(installed)
 for p in "${packages[@]}"; do
   grep -qx "$p" <<<"$present" && skip "package $p is installed already; this test would replace and purge it"
 done
-for p in /usr/bin/isotile /usr/lib/*/meshlab/plugins/libfilter_isotile.so; do
+for p in /usr/bin/isotile /usr/lib/*/meshlab/plugins/libfilter_isotile.so \
+  /usr/lib/python3/dist-packages/isotile; do
   [ -e "$p" ] && skip "$p exists (installed by hand?); this test would replace and remove it"
 done
 
@@ -233,6 +257,8 @@ cmake -S "$src/tests/install_consumer" -B "$tmp/consumer" -G Ninja -DREADME_EXAM
   >"$tmp/configure.log" 2>&1 || { cat "$tmp/configure.log"; fail "find_package(isotile) from /usr"; }
 found=$(sed -n 's/^isotile_DIR:PATH=//p' "$tmp/consumer/CMakeCache.txt")
 case "$found" in /usr/lib/*cmake/isotile) ;; *) fail "find_package found isotile in '$found'" ;; esac
+
+[ "$python" = 1 ] && check_python_module "" /usr/bin/isotile
 
 if [ "$meshlab" = 1 ]; then
   # Debian's own meshlabserver, with every system plugin, finds the filter from the package.

@@ -1,0 +1,185 @@
+"""isotile: isosurface meshes from NumPy volumes, on isotile's C++ libraries.
+
+``isotile.marching_cubes`` is a drop-in for ``skimage.measure.marching_cubes`` (scikit-image
+0.19): same arguments (and more), same return tuple, same conventions, many times faster, with
+Macet and Dual Contouring besides Marching Cubes. ``isotile.quality`` measures a mesh and
+``isotile.simplify`` simplifies one. See docs/python.md.
+
+Volumes are read in place, without a copy, for int8, uint8, int16, uint16, int32, uint32,
+float32, float64 and bool arrays in any memory layout whose strides are non-negative multiples
+of the item size (C or Fortran order, slices such as ``vol[::2, :, 10:]``). Anything else is
+copied first: float16 to float32, int64 and uint64 to float64 (exact up to 2**53), reversed
+axes (negative strides), unaligned or byte-swapped data to a C-ordered array. The arrays returned
+own the library's buffers (no copy).
+"""
+
+import numpy as _np
+
+from . import _isotile
+
+__all__ = ["marching_cubes", "quality", "simplify", "backends"]
+
+_IN_PLACE = {_np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "int32", "uint32",
+                                   "float32", "float64", "bool")}
+_METHODS = {"lewiner": "mc", "lorensen": "mc", "mc": "mc", "macet": "macet", "dc": "dc"}
+
+
+def _readable(array, what):
+    """`array` as the library reads it: itself when it can, else the documented copy."""
+    a = _np.asarray(array)
+    if a.dtype.kind not in "biuf":
+        raise TypeError(f"{what}: dtype {a.dtype} is not a number type")
+    dtype = a.dtype.newbyteorder("=")
+    if dtype not in _IN_PLACE:
+        dtype = _np.dtype(_np.float32 if a.dtype.kind == "f" and a.dtype.itemsize < 4
+                          else _np.float64)
+    in_place = (dtype == a.dtype and a.flags.aligned
+                and all(s >= 0 and s % a.itemsize == 0 for s in a.strides))
+    return a if in_place else _np.ascontiguousarray(a, dtype=dtype)
+
+
+def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_direction="descent",
+                   step_size=1, allow_degenerate=True, method="lewiner", mask=None,
+                   quality="fast", backend="cpu", threads=None, normals=True):
+    """Isosurface of a 3-D array; scikit-image's ``measure.marching_cubes``, on isotile.
+
+    Parameters
+    ----------
+    volume : (M, N, P) array
+        Samples indexed [axis 0, axis 1, axis 2] (e.g. [z, y, x]). Read in place for 8-, 16- and
+        32-bit integers, float32, float64 and bool in any layout with non-negative strides;
+        float16, int64 and uint64 are copied to float32 / float64 first.
+    level : float, optional
+        Isovalue. None: the middle of the data's range, (min + max) / 2. A level outside the
+        range, or NaN, raises ValueError.
+    spacing : 3 floats
+        Distance between samples along axis 0, 1, 2.
+    gradient_direction : "descent" or "ascent"
+        "descent" (the default): the object is brighter than its surroundings, and faces are
+        wound as scikit-image winds them for it; "ascent" reverses the winding.
+    step_size : int
+        Use every step_size-th sample along each axis (a strided view, no copy).
+    allow_degenerate : bool
+        Accepted for compatibility and ignored: degenerate triangles are kept (isotile's
+        Macet and Dual Contouring, and an isovalue between sample values, avoid them).
+    method : "lewiner", "lorensen", "mc", "macet" or "dc"
+        "lewiner" and "lorensen" run isotile's Marching Cubes (VTK's case table, so triangle
+        counts may differ slightly from scikit-image's), "macet" Macet, "dc" Dual Contouring.
+    mask : (M, N, P) bool array, optional
+        Faces are kept only in cells whose eight corner samples are all True (the cell holding
+        the face's centroid); scikit-image looks at one corner of each cell instead.
+    quality : "fast" or "max"
+        Macet's quality mode.
+    backend : "cpu", "gs", "hp" or "auto"
+        Where to extract: the CPU, or OpenGL (geometry shaders, HistoPyramids).
+    threads : int, optional
+        At most this many threads for this call (None: all cores). The result does not depend
+        on it.
+    normals : bool
+        Compute per-vertex normals (True, as scikit-image does); False returns None for them.
+
+    Returns
+    -------
+    verts : (V, 3) float32 array
+        Vertex positions in the array's axis order, scaled by spacing.
+    faces : (F, 3) int32 array
+        Triangles, indices into verts.
+    normals : (V, 3) float32 array or None
+        Unit normals from the data's gradient, pointing down it (out of the bright object), in
+        the array's axis order.
+    values : (V,) float32 array
+        As scikit-image defines them: for each vertex, the largest (max - min) of the samples of
+        the cells it lies in.
+
+    Raises
+    ------
+    ValueError
+        Not a 3-D array, smaller than 2x2x2, level outside the data's range or not finite, NaN
+        samples, a bad argument; or the library's message for invalid input.
+    TypeError
+        A dtype that is not a number.
+    RuntimeError
+        No surface at the given level.
+    """
+    if not isinstance(volume, _np.ndarray) or volume.ndim != 3:
+        raise ValueError("Input volume should be a 3D numpy array.")
+    if volume.shape[0] < 2 or volume.shape[1] < 2 or volume.shape[2] < 2:
+        raise ValueError("Input array must be at least 2x2x2.")
+    if method not in _METHODS:
+        raise ValueError("method should be one of 'lewiner', 'lorensen', 'mc', 'macet' or 'dc'.")
+    if gradient_direction not in ("descent", "ascent"):
+        raise ValueError(f"Incorrect input {gradient_direction} in `gradient_direction`, see "
+                         "docstring.")
+    if len(spacing) != 3:
+        raise ValueError("`spacing` must consist of three floats.")
+    step_size = int(step_size)
+    if step_size < 1:
+        raise ValueError("step_size must be at least one.")
+    if mask is not None:
+        mask = _np.asarray(mask)
+        if mask.shape != volume.shape:
+            raise ValueError("volume and mask must have the same shape.")
+        if mask.dtype != _np.bool_:
+            mask = mask.astype(_np.bool_)
+    whole = _readable(volume, "volume")
+    vol = whole
+    if step_size > 1:
+        vol = whole[::step_size, ::step_size, ::step_size]
+        if mask is not None:
+            mask = mask[::step_size, ::step_size, ::step_size]
+    if mask is not None:
+        mask = _readable(mask, "mask")
+    spacing_xyz = tuple(float(s) * step_size for s in reversed(tuple(spacing)))
+    # The library checks the level against the whole volume's range (None: its middle), as
+    # scikit-image does whatever the step, then extracts from the strided view.
+    verts, faces, norms, values = _isotile.extract(
+        vol, whole, None if level is None else float(level), spacing_xyz, _METHODS[method],
+        quality, backend, bool(normals), True, mask, threads)
+    if len(faces) == 0:
+        raise RuntimeError("No surface found at the given iso value.")
+    # Views, no copies: columns reversed into the array's axis order (a mirror, which turns the
+    # library's winding into scikit-image's for "descent"); "ascent" reverses the winding.
+    verts = verts[:, ::-1]
+    if norms is not None:
+        norms = norms[:, ::-1]
+    if gradient_direction == "ascent":
+        faces = faces[:, ::-1]
+    return verts, faces, norms, values
+
+
+def quality(vertices, faces, *, check_intersections=False, threads=None):
+    """The measures ``isotile quality --json`` reports for a triangle mesh, as a dict.
+
+    Radius ratio (2 r_in / R_circ: 1 equilateral, 0 degenerate) min, mean, median, 0.1% and 1%
+    quantiles and histogram; degenerate triangles; boundary, non-manifold and inconsistently
+    oriented edges; non-manifold vertices; Euler characteristic; components; closed; and with
+    check_intersections, the number of self-intersecting triangle pairs. ``watertight`` is None:
+    arrays carry no volume box to tell border edges from holes. The arrays are copied into the
+    library's mesh.
+    """
+    return _isotile.quality(_np.asarray(vertices), _np.asarray(faces), bool(check_intersections),
+                            threads)
+
+
+def simplify(vertices, triangles, /, *, ratio=None, faces=None, max_error=None, min_quality=0.3,
+             relax=True, threads=None):
+    """Simplify a triangle mesh by edge collapses that keep its shape, topology and border.
+
+    ``simplify(verts, faces, ratio=0.1)``, ``faces=N`` or ``max_error=E``, as ``isotile simplify``
+    takes ``--ratio``, ``--faces`` and ``--max-error``. Stops at the first target reached: ``faces``
+    faces (or ``ratio`` of the input's faces)
+    and, with ``max_error``, the error bound in mesh units. At least one must be given. Returns
+    (vertices, faces) as new arrays; the result does not depend on ``threads``.
+    """
+    if ratio is None and faces is None and max_error is None:
+        raise ValueError("simplify needs ratio, faces or max_error")
+    return _isotile.simplify(_np.asarray(vertices), _np.asarray(triangles),
+                             0.0 if ratio is None else float(ratio),
+                             0 if faces is None else int(faces),
+                             0.0 if max_error is None else float(max_error), float(min_quality),
+                             bool(relax), threads)
+
+
+def backends():
+    """{backend name: "" when this machine can run it, else why it cannot}."""
+    return _isotile.backends()

@@ -1,0 +1,372 @@
+// The `isotile._isotile` extension: NumPy arrays onto the library's views and meshes, and the
+// library's calls with the GIL released. What users call, and the scikit-image conventions
+// (axis order, level, winding), live in the pure-Python layer (python/isotile/__init__.py); this
+// file only maps arrays and calls core.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <tbb/task_arena.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "core/errors.h"
+#include "core/extract/cell_mask.h"
+#include "core/extract/cell_ranges.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/mesh/self_intersections.h"
+#include "core/simplify/simplify.h"
+#include "core/volume/volume_io.h"
+#ifdef ISOTILE_PYTHON_GL
+#include "shaders/gl_backends.h"
+#endif
+
+namespace py = pybind11;
+using namespace isotile;
+
+namespace {
+
+// The library's sample type for a NumPy dtype read in place; bool is read as uint8 (NumPy stores
+// it as one byte, 0 or 1).
+std::optional<ScalarType> scalar_type_of_dtype(const py::dtype& dt) {
+  const char kind = dt.kind();
+  const auto size = dt.itemsize();
+  if (kind == 'b' && size == 1) return ScalarType::UInt8;
+  if (kind == 'i') {
+    if (size == 1) return ScalarType::Int8;
+    if (size == 2) return ScalarType::Int16;
+    if (size == 4) return ScalarType::Int32;
+  }
+  if (kind == 'u') {
+    if (size == 1) return ScalarType::UInt8;
+    if (size == 2) return ScalarType::UInt16;
+    if (size == 4) return ScalarType::UInt32;
+  }
+  if (kind == 'f') {
+    if (size == 4) return ScalarType::Float32;
+    if (size == 8) return ScalarType::Float64;
+  }
+  return std::nullopt;
+}
+
+// A view of a 3-D array indexed [z, y, x] (axis 0 slowest in a C-ordered array), in place: the
+// library's x is NumPy's axis 2. Strides must be non-negative multiples of the item size and the
+// data aligned and in native byte order (the Python layer copies anything else first).
+VolumeView view_of(const py::array& a, const Vec3d& spacing_xyz, const char* what) {
+  if (a.ndim() != 3) throw py::value_error(std::string(what) + " must be a 3-D array");
+  const std::optional<ScalarType> type = scalar_type_of_dtype(a.dtype());
+  if (!type)
+    throw py::type_error(std::string(what) + ": dtype " + py::str(a.dtype()).cast<std::string>() +
+                         " cannot be read in place");
+  if (a.dtype().byteorder() == '>')
+    throw py::type_error(std::string(what) + " must be in native byte order");
+  const auto item = static_cast<std::int64_t>(a.itemsize());
+  if (reinterpret_cast<std::uintptr_t>(a.data()) % static_cast<std::uintptr_t>(item) != 0)
+    throw py::value_error(std::string(what) + " is not aligned");
+  VolumeView v;
+  v.data = a.data();
+  v.type = *type;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int np_axis = 2 - axis;
+    const auto stride = static_cast<std::int64_t>(a.strides(np_axis));
+    if (stride < 0 || stride % item != 0)
+      throw py::value_error(std::string(what) +
+                            ": strides must be non-negative multiples of the item size");
+    v.dims[axis] = static_cast<std::int64_t>(a.shape(np_axis));
+    v.strides[axis] = stride / item;
+  }
+  v.spacing = spacing_xyz;
+  v.box = {{0, 0, 0}, v.dims};
+  v.global_dims = v.dims;
+  return v;
+}
+
+// Runs `f` with at most `threads` worker threads (none: TBB's default) and without the GIL.
+template <class F>
+auto run_released(std::optional<int> threads, F&& f) {
+  if (threads && *threads < 1) throw py::value_error("threads must be at least 1");
+  py::gil_scoped_release release;
+  if (threads) {
+    tbb::task_arena arena(*threads);
+    return arena.execute(std::forward<F>(f));
+  }
+  return f();
+}
+
+// What one extraction hands to Python: the arrays point into it, a capsule owns it.
+struct Result {
+  Mesh mesh;
+  std::vector<float> values;
+};
+
+py::capsule owner_of(Result* r) {
+  return py::capsule(r, [](void* p) { delete static_cast<Result*>(p); });
+}
+
+// (n, 3) float32 rows of `rows` (Vec3f), owned by `owner`.
+py::array vec3_array(const std::vector<Vec3f>& rows, const py::capsule& owner) {
+  const auto n = static_cast<py::ssize_t>(rows.size());
+  return py::array(py::dtype::of<float>(), {n, py::ssize_t{3}},
+                   {py::ssize_t{3 * sizeof(float)}, py::ssize_t{sizeof(float)}},
+                   rows.empty() ? nullptr : rows.data()->data(), owner);
+}
+
+// (n, 3) faces; int32 as scikit-image gives them while the vertex count allows, else uint32.
+py::array face_array(const std::vector<Tri>& tris, std::size_t vertices, const py::capsule& owner) {
+  const auto n = static_cast<py::ssize_t>(tris.size());
+  const py::dtype dt =
+      vertices <= static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())
+          ? py::dtype::of<std::int32_t>()
+          : py::dtype::of<std::uint32_t>();
+  return py::array(dt, {n, py::ssize_t{3}},
+                   {py::ssize_t{3 * sizeof(std::uint32_t)}, py::ssize_t{sizeof(std::uint32_t)}},
+                   tris.empty() ? nullptr : tris.data()->data(), owner);
+}
+
+Method parse_method(const std::string& s) {
+  if (s == "mc") return Method::MarchingCubes;
+  if (s == "macet") return Method::Macet;
+  if (s == "dc") return Method::DualContouring;
+  throw py::value_error("method must be mc, macet or dc, not '" + s + "'");
+}
+
+Backend parse_backend(const std::string& s) {
+  for (int b = 0; b < kBackendCount; ++b)
+    if (backend_name(static_cast<Backend>(b)) == s) return static_cast<Backend>(b);
+  throw py::value_error("backend must be cpu, gs, hp or auto, not '" + s + "'");
+}
+
+// `whole`: the array the level is checked against (scikit-image takes the whole volume's range
+// whatever the step; `volume` may be a strided view of it). The check and the extraction run in
+// one call without the GIL, so that a call enters TBB's arena once.
+py::tuple extract_arrays(const py::array& volume, const py::array& whole,
+                         std::optional<double> level, const Vec3d& spacing_xyz,
+                         const std::string& method, const std::string& quality,
+                         const std::string& backend, bool normals, bool values,
+                         const std::optional<py::array>& mask, std::optional<int> threads) {
+  const VolumeView view = view_of(volume, spacing_xyz, "volume");
+  const VolumeView whole_view = view_of(whole, {1, 1, 1}, "volume");
+  std::optional<VolumeView> mask_view;
+  if (mask) {
+    mask_view = view_of(*mask, spacing_xyz, "mask");
+    if (mask_view->type != ScalarType::UInt8)
+      throw py::type_error("mask must be a bool (or uint8) array");
+  }
+  ExtractOptions options;
+  options.method = parse_method(method);
+  options.backend = parse_backend(backend);
+  options.normals = normals;
+  if (quality != "fast" && quality != "max")
+    throw py::value_error("quality must be fast or max, not '" + quality + "'");
+  options.quality = quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
+  auto* result = new Result;
+  py::capsule owner = owner_of(result);  // frees the result on any exception below
+  enum class Level { Ok, NaN, OutOfRange } level_check = Level::Ok;
+  run_released(threads, [&] {
+    check_finite(whole_view, "volume");
+    const auto [lo, hi] = value_range(whole_view);
+    // None: the middle of the data's range, as scikit-image takes it.
+    options.iso = level ? *level : 0.5 * (lo + hi);
+    if (std::isnan(options.iso)) {
+      level_check = Level::NaN;
+      return 0;
+    }
+    if (options.iso < lo || options.iso > hi) {
+      level_check = Level::OutOfRange;
+      return 0;
+    }
+    result->mesh = extract(view, options);
+    if (mask_view) result->mesh = keep_masked_cells(result->mesh, view, *mask_view);
+    if (values) result->values = vertex_cell_ranges(view, result->mesh);
+    return 0;
+  });
+  // scikit-image's messages.
+  if (level_check == Level::NaN) throw py::value_error("Surface level must be a number, not NaN.");
+  if (level_check == Level::OutOfRange)
+    throw py::value_error("Surface level must be within volume data range.");
+  const Mesh& m = result->mesh;
+  py::object out_normals = py::none(), out_values = py::none();
+  if (normals) out_normals = vec3_array(m.normals, owner);
+  if (values)
+    out_values =
+        py::array(py::dtype::of<float>(), {static_cast<py::ssize_t>(result->values.size())},
+                  {py::ssize_t{sizeof(float)}},
+                  result->values.empty() ? nullptr : result->values.data(), owner);
+  return py::make_tuple(vec3_array(m.positions, owner),
+                        face_array(m.triangles, m.positions.size(), owner), out_normals,
+                        out_values);
+}
+
+// A mesh from (V, 3) vertices and (F, 3) faces: copied, since Mesh owns its arrays.
+Mesh mesh_of(const py::array& vertices, const py::array& faces) {
+  if (vertices.ndim() != 2 || vertices.shape(1) != 3)
+    throw py::value_error("vertices must be a (V, 3) array");
+  if (faces.ndim() != 2 || faces.shape(1) != 3)
+    throw py::value_error("faces must be an (F, 3) array");
+  const auto v = py::array_t<float, py::array::forcecast>::ensure(vertices);
+  if (!v) throw py::type_error("vertices must be numeric");
+  if (faces.dtype().kind() != 'i' && faces.dtype().kind() != 'u')
+    throw py::type_error("faces must be an integer array");
+  const auto f = py::array_t<std::int64_t, py::array::forcecast>::ensure(faces);
+  Mesh mesh;
+  const auto vr = v.unchecked<2>();
+  mesh.positions.resize(static_cast<std::size_t>(vr.shape(0)));
+  for (py::ssize_t i = 0; i < vr.shape(0); ++i) mesh.positions[i] = {vr(i, 0), vr(i, 1), vr(i, 2)};
+  const auto fr = f.unchecked<2>();
+  mesh.triangles.resize(static_cast<std::size_t>(fr.shape(0)));
+  for (py::ssize_t i = 0; i < fr.shape(0); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const std::int64_t idx = fr(i, c);
+      if (idx < 0 || idx >= vr.shape(0))
+        throw py::value_error("face " + std::to_string(i) + " refers to vertex " +
+                              std::to_string(idx) + ", past the " + std::to_string(vr.shape(0)) +
+                              " vertices");
+      mesh.triangles[i][c] = static_cast<std::uint32_t>(idx);
+    }
+  return mesh;
+}
+
+py::dict quality_of(const py::array& vertices, const py::array& faces, bool check_intersections,
+                    std::optional<int> threads) {
+  const Mesh mesh = mesh_of(vertices, faces);
+  QualityStats q;
+  TopologyStats t;
+  std::optional<std::uint64_t> crossing;
+  run_released(threads, [&] {
+    q = triangle_quality(mesh);
+    t = mesh_topology(mesh);
+    if (check_intersections) crossing = self_intersections(mesh).pairs;
+    return 0;
+  });
+  // The keys of `isotile quality --json` (tiler/main.cpp).
+  py::dict d;
+  d["triangles"] = q.triangles;
+  d["vertices"] = mesh.positions.size();
+  d["radius_ratio_min"] = q.min;
+  d["radius_ratio_mean"] = q.mean;
+  d["radius_ratio_q001"] = q.q001;
+  d["radius_ratio_q01"] = q.q01;
+  d["radius_ratio_median"] = q.median;
+  d["radius_ratio_histogram"] =
+      py::cast(std::vector<std::uint64_t>(q.histogram.begin(), q.histogram.end()));
+  d["degenerate_triangles"] = q.degenerate;
+  d["boundary_edges"] = t.boundary_edges;
+  d["border_boundary_edges"] = t.border_boundary_edges;
+  d["nonmanifold_edges"] = t.nonmanifold_edges;
+  d["nonmanifold_vertices"] = t.nonmanifold_vertices;
+  d["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;
+  d["euler"] = t.euler;
+  d["components"] = t.components;
+  d["closed"] = t.closed;
+  d["watertight"] = py::none();  // arrays carry no volume box (as for `isotile quality`)
+  d["edges"] = t.edges;
+  d["unreferenced_vertices"] = t.unreferenced_vertices;
+  if (crossing) d["self_intersections"] = *crossing;
+  return d;
+}
+
+py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, double ratio,
+                          std::uint64_t target_faces, double max_error, double min_quality,
+                          bool relax, std::optional<int> threads) {
+  const Mesh mesh = mesh_of(vertices, faces);
+  SimplifyOptions o;
+  o.ratio = ratio;
+  o.faces = target_faces;
+  o.max_error = max_error;
+  o.min_quality = min_quality;
+  o.relax = relax;
+  auto* result = new Result;
+  py::capsule owner = owner_of(result);
+  run_released(threads, [&] {
+    result->mesh = simplify(mesh, o);
+    return 0;
+  });
+  return py::make_tuple(vec3_array(result->mesh.positions, owner),
+                        face_array(result->mesh.triangles, result->mesh.positions.size(), owner));
+}
+
+// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (check_finite,
+// value range, extract, values) timed inside C++ on the same view, without the Python layer or the
+// arrays' wrapping, so that the binding's overhead can be measured in the same process. Seconds per
+// run: (all the calls, extract() alone).
+std::vector<std::pair<double, double>> time_library_calls(const py::array& volume, double level,
+                                                          const std::string& method, bool normals,
+                                                          int threads, int repeats) {
+  const VolumeView view = view_of(volume, {1, 1, 1}, "volume");
+  ExtractOptions options;
+  options.method = parse_method(method);
+  options.backend = Backend::Cpu;
+  options.iso = level;
+  options.normals = normals;
+  std::vector<std::pair<double, double>> out;
+  run_released(threads, [&] {
+    using Clock = std::chrono::steady_clock;
+    for (int r = 0; r < repeats; ++r) {
+      const auto t0 = Clock::now();
+      check_finite(view, "volume");
+      const auto range = value_range(view);
+      const auto t1 = Clock::now();
+      Mesh mesh = extract(view, options);
+      const auto t2 = Clock::now();
+      const std::vector<float> values = vertex_cell_ranges(view, mesh);
+      const auto t3 = Clock::now();
+      if (mesh.triangles.empty() || values.size() != mesh.positions.size() || range.first > level)
+        throw InputError("no surface");
+      out.emplace_back(std::chrono::duration<double>(t3 - t0).count(),
+                       std::chrono::duration<double>(t2 - t1).count());
+    }
+    return 0;
+  });
+  return out;
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_isotile, m) {
+  m.doc() = "isotile's C++ libraries for NumPy arrays (use the isotile package, not this module)";
+#ifdef ISOTILE_PYTHON_GL
+  isotile::gl::register_gl_backends();
+#endif
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const InputError& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const IoError& e) {
+      PyErr_SetString(PyExc_OSError, e.what());
+    } catch (const CapacityError& e) {
+      PyErr_SetString(PyExc_MemoryError, e.what());
+    } catch (const Error& e) {
+      PyErr_SetString(PyExc_RuntimeError, e.what());
+    }
+  });
+  m.def("extract", &extract_arrays, py::arg("volume"), py::arg("whole"), py::arg("level"),
+        py::arg("spacing_xyz"), py::arg("method"), py::arg("quality"), py::arg("backend"),
+        py::arg("normals"), py::arg("values"), py::arg("mask"), py::arg("threads"),
+        "extract(view [z,y,x], level, spacing (x,y,z), ...) -> positions (x,y,z), faces (wound "
+        "out of the samples >= level), normals, values; arrays own the library's buffers");
+  m.def("quality", &quality_of, py::arg("vertices"), py::arg("faces"),
+        py::arg("check_intersections"), py::arg("threads"));
+  m.def("simplify", &simplify_arrays, py::arg("vertices"), py::arg("faces"), py::arg("ratio"),
+        py::arg("faces_target"), py::arg("max_error"), py::arg("min_quality"), py::arg("relax"),
+        py::arg("threads"));
+  m.def("_time_library_calls", &time_library_calls, py::arg("volume"), py::arg("level"),
+        py::arg("method"), py::arg("normals"), py::arg("threads"), py::arg("repeats"));
+  m.def(
+      "backends",
+      [] {
+        py::dict d;
+        for (const BackendCaps& c : capabilities())
+          d[py::str(std::string(backend_name(c.backend)))] =
+              c.available ? py::object(py::str("")) : py::object(py::str(c.why_unavailable));
+        return d;
+      },
+      "{backend: '' when available, else why not}");
+}

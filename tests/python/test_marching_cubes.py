@@ -1,0 +1,363 @@
+# isotile.marching_cubes: the same mesh as the C++ library (through the isotile program) bit for
+# bit, scikit-image's conventions, every dtype and layout read in place, errors, lifetime.
+import gc
+import os
+import threading
+import time
+import tracemalloc
+
+import numpy as np
+import pytest
+
+import isotile
+from conftest import (bonsai, read_ply, require, run_cli, signed_volume, skip, sphere,
+                      two_way_distance)
+
+RAW_TYPES = {"int8": np.int8, "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16,
+             "int32": np.int32, "uint32": np.uint32, "float32": np.float32,
+             "float64": np.float64}
+
+
+def cli_mesh(tmp_path, vol, level, *args):
+    """The isotile program's mesh of `vol` (C-ordered [z, y, x], written as a raw file)."""
+    name = np.dtype(vol.dtype).name
+    z, y, x = vol.shape
+    raw = tmp_path / f"v_{x}x{y}x{z}_{name}.raw"
+    np.ascontiguousarray(vol).tofile(raw)
+    out = tmp_path / "out.ply"
+    run_cli("extract", raw, "--iso", repr(float(level)), "-o", out, "--normals", *args)
+    return read_ply(out)
+
+
+def test_same_mesh_as_the_program_bit_for_bit(tmp_path):
+    base = sphere((30, 34, 38), radius=11.3, dtype=np.float64)
+    for name, t in RAW_TYPES.items():
+        scale = 1.0 if np.dtype(t).kind == "f" else 9.0
+        vol = (base * scale + (100 if name.startswith("u") else 0)).astype(t)
+        level = 100.5 if name.startswith("u") else 0.5
+        verts, faces, normals, _ = isotile.marching_cubes(vol, level)
+        p, n, f = cli_mesh(tmp_path, vol, level)
+        assert len(f) > 1000, name
+        # The module's vertices are the program's with the columns in the array's axis order.
+        assert np.array_equal(verts[:, ::-1], p), name
+        assert np.array_equal(normals[:, ::-1], n), name
+        assert np.array_equal(faces, f), name
+
+
+@pytest.mark.parametrize("method,args", [("macet", ["--method", "macet"]),
+                                         ("dc", ["--method", "dc"])])
+def test_other_methods_and_spacing_match_the_program(tmp_path, method, args):
+    vol = sphere((24, 28, 32), radius=9.2)
+    spacing = (0.7, 1.3, 2.1)  # axis 0, 1, 2 = z, y, x
+    verts, faces, normals, _ = isotile.marching_cubes(vol, 0.25, spacing=spacing, method=method)
+    p, n, f = cli_mesh(tmp_path, vol, 0.25, *args, "--spacing", "2.1,1.3,0.7")
+    assert len(f) > 500
+    assert np.array_equal(verts[:, ::-1], p)
+    assert np.array_equal(normals[:, ::-1], n)
+    assert np.array_equal(faces, f)
+
+
+def write_ply(path, verts, faces):
+    verts = np.ascontiguousarray(verts, dtype="<f4")
+    rows = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", 3)])
+    rows["n"], rows["i"] = 3, faces
+    with open(path, "wb") as f:
+        f.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(verts)}\n"
+                 "property float x\nproperty float y\nproperty float z\n"
+                 f"element face {len(faces)}\nproperty list uchar int vertex_indices\n"
+                 "end_header\n").encode())
+        f.write(verts.tobytes())
+        f.write(rows.tobytes())
+
+
+def surface_distance(tmp_path, a, b):
+    """The library's two-way surface distance (isotile quality --reference): (mean, max)."""
+    import json
+    write_ply(tmp_path / "a.ply", *a)
+    write_ply(tmp_path / "b.ply", *b)
+    j = json.loads(run_cli("quality", tmp_path / "a.ply", "--reference", tmp_path / "b.ply",
+                           "--json"))
+    return j["hausdorff_mean"], j["hausdorff_max"]
+
+
+def compare_with_skimage(vol, level, spacing=(1.0, 1.0, 1.0), voxel=1.0, tmp_path=None,
+                         max_distance=0.5):
+    skimage = require("skimage.measure")
+    from skimage.measure import marching_cubes as sk_mc
+    for direction in ("descent", "ascent"):
+        v, f, n, val = isotile.marching_cubes(vol, level, spacing=spacing,
+                                              gradient_direction=direction)
+        sv, sf, sn, sval = sk_mc(vol, level, spacing=spacing, gradient_direction=direction)
+        ours, theirs = signed_volume(v, f), signed_volume(sv, sf)
+        # Same orientation (sign) and enclosed volume within 1%.
+        assert np.sign(ours) == np.sign(theirs) != 0, direction
+        assert abs(ours - theirs) <= 0.01 * abs(theirs), (ours, theirs)
+        # Same axis order and scale: the surfaces within half a voxel of each other both ways.
+        if tmp_path is None:
+            assert two_way_distance(v, sv) < 0.5 * voxel
+        else:
+            mean, worst = surface_distance(tmp_path, (v, f), (sv, sf))
+            assert mean < 0.01 * voxel and worst < max_distance * voxel, (mean, worst)
+        # Normals agree in direction where the vertices coincide; values as scikit-image's.
+        from scipy.spatial import cKDTree
+        d, i = cKDTree(sv).query(v)
+        same = d < 1e-3 * voxel
+        assert same.mean() > 0.9
+        # scikit-image's normals are the gradient in index space, isotile's in world space (spacing
+        # applied): the same where the spacing is isotropic, on the same side otherwise.
+        dots = np.einsum("ij,ij->i", n[same], sn[i[same]])
+        if len(set(spacing)) == 1:
+            assert np.median(dots) > 0.99
+        else:
+            assert dots.min() > 0
+        assert np.allclose(val[same], sval[i[same]], rtol=1e-5, atol=1e-5)
+    return v, f
+
+
+def test_sphere_against_skimage():
+    v, f = compare_with_skimage(sphere(), 0.0)
+    # A bright sphere: "descent" faces as scikit-image's, whose signed volume in (z, y, x) is
+    # negative (the mirror of isotile's outward winding in x, y, z).
+    assert signed_volume(v, f) > 0  # last call was "ascent"
+
+
+def test_anisotropic_spacing_against_skimage():
+    vol = sphere((30, 40, 50), radius=12.0)
+    v, _ = compare_with_skimage(vol, 0.0, spacing=(2.5, 1.0, 0.5), voxel=0.5)
+    extent = v.max(axis=0) - v.min(axis=0)
+    assert np.allclose(extent, [2 * 12 * 2.5, 2 * 12 * 1.0, 2 * 12 * 0.5], rtol=0.05)
+
+
+def test_axis_order_of_a_box():
+    vol = np.zeros((10, 20, 30), np.float32)
+    vol[2:5, 3:12, 4:25] = 1
+    v, _, _, _ = isotile.marching_cubes(vol, 0.5, spacing=(3, 2, 1))
+    assert np.allclose(v.min(axis=0), [1.5 * 3, 2.5 * 2, 3.5])
+    assert np.allclose(v.max(axis=0), [4.5 * 3, 11.5 * 2, 24.5])
+
+
+def test_bonsai_against_skimage(tmp_path):
+    vol = bonsai()
+    # Lewiner's tables resolve ambiguous cell faces by the asymptotic decider, isotile's (VTK's)
+    # by a fixed rule: where they choose differently, the two surfaces are up to sqrt(1/2) voxel
+    # apart (0.685 measured, over a mean of 0.0055).
+    compare_with_skimage(vol, 49.5, tmp_path=tmp_path, max_distance=0.5**0.5)
+    # scikit-image's "lorensen" (no decider) gives as many triangles, within half a voxel.
+    from skimage.measure import marching_cubes as sk_mc
+    v, f, _, _ = isotile.marching_cubes(vol, 49.5)
+    sv, sf, _, _ = sk_mc(vol, 49.5, method="lorensen")
+    assert len(f) == len(sf)
+    assert surface_distance(tmp_path, (v, f), (sv, sf))[1] < 0.51
+
+
+def every_layout(vol):
+    yield "C", vol
+    yield "Fortran", np.asfortranarray(vol)
+    yield "sliced", np.ascontiguousarray(np.pad(vol, 3))[3:-3:1, 3:-3, 3:-3]
+    yield "strided", vol[::2, :, 1:]
+    yield "transposed", vol.transpose(2, 0, 1)
+
+
+@pytest.mark.parametrize("dtype", ["int8", "uint8", "int16", "uint16", "int32", "uint32",
+                                   "float32", "float64", "bool", "float16", "int64", "uint64",
+                                   ">i2"])
+def test_every_dtype_and_layout(dtype):
+    base = sphere((26, 30, 34), radius=10.0)
+    vol = (base > 0) if dtype == "bool" else (base * 4 + 50).astype(dtype)
+    level = 0.5 if dtype == "bool" else 50.25
+    copies = dtype in ("float16", "int64", "uint64", ">i2")
+    for layout, v in every_layout(vol):
+        want = isotile.marching_cubes(np.ascontiguousarray(v, dtype=np.float64), level)
+        tracemalloc.start()
+        got = isotile.marching_cubes(v, level)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        for a, b in zip(got, want):
+            assert np.array_equal(a, b), (dtype, layout)
+        # Read in place: no allocation the size of the volume (NumPy's are traced); the
+        # documented copies make one.
+        if copies:
+            assert peak >= v.size * 2, (dtype, layout, peak)
+        else:
+            assert peak < v.size * max(v.itemsize, 1) // 2, (dtype, layout, peak)
+
+
+def test_reversed_axes_are_copied_and_right():
+    vol = sphere((20, 22, 24), center=(8, 9, 13), radius=6.0)
+    flipped = vol[::-1]
+    got = isotile.marching_cubes(flipped, 0.0)
+    want = isotile.marching_cubes(np.ascontiguousarray(flipped), 0.0)
+    for a, b in zip(got, want):
+        assert np.array_equal(a, b)
+
+
+def test_outputs_own_the_library_buffers_and_outlive_everything():
+    vol = sphere()
+    verts, faces, normals, values = isotile.marching_cubes(vol, 0.0)
+    keep = [a.copy() for a in (verts, faces, normals, values)]
+    assert not verts.flags.owndata and verts.base is not None
+    del vol
+    for _ in range(3):
+        gc.collect()
+    # Churn the allocator, so that freed buffers would be overwritten.
+    junk = [isotile.marching_cubes(sphere(radius=r), 0.0) for r in (8.0, 11.0, 14.0)]
+    del junk
+    gc.collect()
+    for a, b in zip((verts, faces, normals, values), keep):
+        assert np.array_equal(a, b)
+    faces_only = faces
+    del verts, normals, values
+    gc.collect()
+    assert np.array_equal(faces_only, keep[1])
+
+
+def test_no_leak_over_many_calls():
+    vol = sphere((64, 64, 64), radius=25.0)
+    def rss():
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    for _ in range(5):
+        isotile.marching_cubes(vol, 0.0)
+    gc.collect()
+    before = rss()
+    for _ in range(40):
+        isotile.marching_cubes(vol, 0.0)
+    gc.collect()
+    # Each mesh holds about 1 MB: forty leaked ones would show.
+    assert rss() - before < 16 << 20
+
+
+def test_errors_match_skimage():
+    require("skimage.measure")
+    from skimage.measure import marching_cubes as sk_mc
+    vol = sphere((10, 10, 10), radius=3.0)
+    # The range is the whole volume's, whatever the step: 7 is in it, but not in vol[::2, ::2, ::2].
+    odd = np.zeros((9, 9, 9), np.float32)
+    odd[1, 1, 1] = 10
+    cases = [
+        (lambda f: f(odd, 7.0, step_size=2), RuntimeError),
+        (lambda f: f(vol[0], 0.0), ValueError),              # 2-D
+        (lambda f: f(vol[None], 0.0), ValueError),           # 4-D
+        (lambda f: f(np.zeros((0, 4, 4), np.float32), 0.0), ValueError),   # empty
+        (lambda f: f(np.zeros((1, 4, 4), np.float32), 0.0), ValueError),   # too thin
+        (lambda f: f(vol, 100.0), ValueError),               # level above the range
+        (lambda f: f(vol, -100.0), ValueError),              # level below
+        (lambda f: f(np.zeros((4, 4, 4), np.float32), 0.0), RuntimeError),  # no surface
+        (lambda f: f(vol, 0.0, gradient_direction="up"), ValueError),
+        (lambda f: f(vol, 0.0, step_size=0), ValueError),
+        (lambda f: f(vol, 0.0, spacing=(1, 1)), ValueError),
+        (lambda f: f(vol, 0.0, method="fast"), ValueError),
+        (lambda f: f(vol, 0.0, mask=np.ones((9, 10, 10), bool)), ValueError),
+    ]
+    for call, error in cases:
+        with pytest.raises(error) as ours:
+            call(isotile.marching_cubes)
+        with pytest.raises(error) as theirs:
+            call(sk_mc)
+        assert str(ours.value)
+
+
+def test_errors_of_isotile_own():
+    vol = sphere((10, 10, 10), radius=3.0)
+    with pytest.raises(ValueError, match="NaN"):
+        isotile.marching_cubes(vol, float("nan"))
+    bad = vol.copy()
+    bad[1, 2, 3] = np.nan
+    with pytest.raises(ValueError, match=r"NaN or Inf \(first at x=3, y=2, z=1\)"):
+        isotile.marching_cubes(bad, 0.0)
+    with pytest.raises(TypeError):
+        isotile.marching_cubes(vol.astype(np.complex64), 0.0)
+    with pytest.raises(ValueError, match="threads"):
+        isotile.marching_cubes(vol, 0.0, threads=0)
+    with pytest.raises(ValueError, match="backend"):
+        isotile.marching_cubes(vol, 0.0, backend="cuda")
+    with pytest.raises(ValueError, match="quality"):
+        isotile.marching_cubes(vol, 0.0, method="macet", quality="best")
+    with pytest.raises(ValueError, match="Input volume should be a 3D numpy array"):
+        isotile.marching_cubes([[[0, 1], [0, 1]], [[0, 1], [0, 1]]], 0.5)
+
+
+def test_level_none_is_the_middle_of_the_range():
+    vol = sphere((20, 20, 20), radius=7.0)
+    mid = 0.5 * (float(vol.min()) + float(vol.max()))
+    for a, b in zip(isotile.marching_cubes(vol), isotile.marching_cubes(vol, mid)):
+        assert np.array_equal(a, b)
+
+
+def test_threads_do_not_change_the_result():
+    vol = sphere((60, 64, 68), radius=24.0)
+    one = isotile.marching_cubes(vol, 0.0, threads=1)
+    for t in (2, 3, None):
+        for a, b in zip(isotile.marching_cubes(vol, 0.0, threads=t), one):
+            assert np.array_equal(a, b)
+
+
+def test_step_size_is_a_strided_view():
+    vol = sphere((41, 45, 49), radius=15.0)
+    a = isotile.marching_cubes(vol, 0.0, step_size=2, spacing=(1.5, 1, 1))
+    b = isotile.marching_cubes(np.ascontiguousarray(vol[::2, ::2, ::2]), 0.0, spacing=(3, 2, 2))
+    for x, y in zip(a, b):
+        assert np.array_equal(x, y)
+    require("skimage.measure")
+    from skimage.measure import marching_cubes as sk_mc
+    sv, sf, _, _ = sk_mc(vol, 0.0, step_size=2, spacing=(1.5, 1, 1))
+    assert abs(signed_volume(a[0], a[1]) - signed_volume(sv, sf)) < 0.01 * abs(signed_volume(sv, sf))
+
+
+def test_mask_keeps_the_cells_inside_it():
+    vol = sphere((30, 30, 30), radius=11.0)
+    full = isotile.marching_cubes(vol, 0.0)
+    everywhere = isotile.marching_cubes(vol, 0.0, mask=np.ones(vol.shape, bool))
+    for a, b in zip(full, everywhere):
+        assert np.array_equal(a, b)
+    mask = np.zeros(vol.shape, bool)
+    mask[:, :, :16] = True  # cells with x in 0..14 have all eight corners inside
+    v, f, n, val = isotile.marching_cubes(vol, 0.0, mask=mask)
+    assert 0 < len(f) < len(full[1])
+    # The kept triangles are exactly the full mesh's triangles in those cells, same positions.
+    def triangles(verts, faces):
+        return {tuple(sorted(map(tuple, verts[t]))) for t in faces}
+    centroid_x = full[0][full[1]].mean(axis=1)[:, 2]
+    want = triangles(full[0], full[1][np.floor(centroid_x) <= 14])
+    assert triangles(v, f) == want
+    # No vertex left unused.
+    assert len(np.unique(f)) == len(v)
+
+
+def test_gil_is_released_during_the_work():
+    vol = sphere((200, 200, 200), radius=80.0)
+    counts = []
+    done = threading.Event()
+    def worker():
+        isotile.marching_cubes(vol, 0.0, threads=1)
+        done.set()
+    t = threading.Thread(target=worker)
+    start = time.perf_counter()
+    t.start()
+    n = 0
+    while not done.is_set():
+        n += 1
+    t.join()
+    elapsed = time.perf_counter() - start
+    # The main thread kept running Python while the extraction ran (with the GIL held, it would
+    # have waited for the whole call).
+    assert elapsed > 0.02
+    assert n > 10000, (n, elapsed)
+
+
+@pytest.mark.parametrize("method", ["mc", "macet", "dc"])
+def test_gl_backends_give_the_cpu_mesh(method):
+    vol = sphere((30, 34, 38), radius=12.0)
+    cpu = isotile.marching_cubes(vol, 0.0, method=method)
+    for backend, why in isotile.backends().items():
+        if backend == "cpu":
+            continue
+        if why:
+            # The library's reason, as the exception's message.
+            with pytest.raises(ValueError) as e:
+                isotile.marching_cubes(vol, 0.0, method=method, backend=backend)
+            assert str(e.value)
+            skip("gl", f"backend {backend} unavailable: {why}")
+        got = isotile.marching_cubes(vol, 0.0, method=method, backend=backend)
+        for a, b in zip(got, cpu):
+            assert np.array_equal(a, b), (backend, method)

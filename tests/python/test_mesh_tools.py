@@ -1,0 +1,63 @@
+# isotile.quality and isotile.simplify: the same numbers and meshes as the isotile program's
+# `quality --json` and `simplify` on the same mesh.
+import json
+
+import numpy as np
+import pytest
+
+import isotile
+from conftest import read_ply, run_cli, sphere
+
+
+@pytest.fixture
+def mesh_file(tmp_path):
+    vol = sphere((40, 44, 48), radius=16.0)
+    raw = tmp_path / "s_48x44x40_float32.raw"
+    vol.tofile(raw)
+    out = tmp_path / "s.ply"
+    run_cli("extract", raw, "--iso", "0.3", "--method", "macet", "-o", out)
+    return out
+
+
+def test_quality_is_the_program_s(mesh_file):
+    p, _, f = read_ply(mesh_file)
+    ours = isotile.quality(p, f, check_intersections=True)
+    theirs = json.loads(run_cli("quality", mesh_file, "--json", "--check-intersections"))
+    assert ours["triangles"] > 1000
+    for key, value in theirs.items():
+        if key == "mesh":
+            continue
+        assert ours[key] == value, key
+    # Axis order does not change the measures (the module's vertices are (z, y, x)).
+    swapped = isotile.quality(p[:, ::-1], f[:, ::-1])
+    assert swapped["radius_ratio_mean"] == pytest.approx(ours["radius_ratio_mean"], rel=1e-12)
+    assert swapped["euler"] == ours["euler"] and swapped["closed"]
+
+
+def test_simplify_is_the_program_s(mesh_file, tmp_path):
+    p, _, f = read_ply(mesh_file)
+    out = tmp_path / "simple.ply"
+    run_cli("simplify", mesh_file, out, "--ratio", "0.2")
+    want_p, _, want_f = read_ply(out)
+    for threads in (1, 2):
+        v, faces = isotile.simplify(p, f, ratio=0.2, threads=threads)
+        assert v.dtype == np.float32 and faces.dtype == np.int32
+        assert np.array_equal(v, want_p) and np.array_equal(faces, want_f)
+    v, faces = isotile.simplify(p, f, faces=500)
+    assert len(faces) <= 520  # the target, within what the topology allows
+    v2, f2 = isotile.simplify(p, f, max_error=0.05)
+    assert 0 < len(f2) < len(f)
+
+
+def test_mesh_tools_errors():
+    p = np.zeros((3, 3), np.float32)
+    with pytest.raises(ValueError, match="past the 3 vertices"):
+        isotile.quality(p, np.array([[0, 1, 3]]))
+    with pytest.raises(ValueError, match="vertices must be a"):
+        isotile.quality(p[:, :2], np.array([[0, 1, 2]]))
+    with pytest.raises(TypeError, match="integer"):
+        isotile.quality(p, np.array([[0.0, 1.0, 2.0]]))
+    with pytest.raises(ValueError, match="needs ratio"):
+        isotile.simplify(p, np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match="ratio"):
+        isotile.simplify(p, np.array([[0, 1, 2]]), ratio=1.5)
