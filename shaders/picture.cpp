@@ -69,8 +69,9 @@ std::string fixed3(double v) {
   return buf;
 }
 
+// The font and bar grow with the picture: 1 up to 599 pixels wide, 2 from 600x480, ...
 int bar_scale(int width, int height) {
-  return std::max(1, std::min(width / 400, height / 300));
+  return std::max(1, std::min(width / 300, height / 240));
 }
 
 }  // namespace
