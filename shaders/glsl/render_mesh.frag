@@ -1,6 +1,7 @@
 // `isotile render`'s fragment stage (mesh_render.cpp): the triangle's colour (quality on the ramp
 // of colour_ramp.h, normal, or solid), lit by a headlight from both sides, and with WIREFRAME its
-// edges darkened about one pixel wide.
+// edges darkened about one pixel wide
+// (fading out on triangles only a few pixels across).
 in vec3 v_bary;
 flat in vec3 v_normal;
 flat in float v_quality;
@@ -32,7 +33,10 @@ void main() {
   vec3 d = fwidth(v_bary);
   vec3 a = smoothstep(vec3(0.0), d * 1.2, v_bary);
   float edge = 1.0 - min(min(a.x, a.y), a.z);
-  colour = mix(colour, vec3(0.08), edge * 0.85);
+  // Triangles a few pixels across would be all edge: their lines fade out between 4 and 2
+  // pixels, so a dense mesh seen whole shows its colours, not a dark cloud.
+  float fade = 1.0 - clamp(max(max(d.x, d.y), d.z) * 4.0 - 1.0, 0.0, 1.0);
+  colour = mix(colour, vec3(0.08), edge * 0.85 * fade);
 #endif
   o_colour = vec4(colour, 1.0);
 }
