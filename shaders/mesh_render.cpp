@@ -3,15 +3,19 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <vector>
 
 #include "colour_ramp.h"
 #include "core/errors.h"
+#include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
+#include "core/mesh/ply_face_stream.h"
 #include "gl_context.h"
 #include "gl_program.h"
 
@@ -138,7 +142,15 @@ void parse_view(const std::string& view, RenderOptions& o) {
       view + "'");
 }
 
-Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats) {
+namespace {
+
+// Appends the triangles that follow to `out` until it holds at least `max` or they end.
+using NextTriangles = std::function<void(std::size_t max, std::vector<Tri>& out)>;
+
+// Draws the triangles `next` gives (indices into `positions`, already checked); `expected`, the
+// number of triangles or faces to come, only sizes the vertex buffer.
+Picture render_pieces(const std::vector<Vec3f>& positions, std::uint64_t expected,
+                      const NextTriangles& next, const RenderOptions& o, RenderStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   if (o.width < 1 || o.height < 1)
     throw InputError("the picture size must be at least 1x1, got " + std::to_string(o.width) + "x" +
@@ -149,7 +161,6 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
     throw InputError("--center must be three finite numbers");
   if (!std::isfinite(o.azimuth) || !(o.elevation >= -90 && o.elevation <= 90))
     throw InputError("the view's azimuth must be finite and its elevation in [-90, 90]");
-  check_face_indices(mesh);
   const int bar = o.colour == RenderColour::Quality ? colour_bar_height(o.width, o.height) : 0;
   if (o.height - bar < 8 || (bar > 0 && o.width < 64))
     throw InputError("a picture coloured by quality needs at least 64x" + std::to_string(bar + 8) +
@@ -160,15 +171,15 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
   V3 lo = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
            std::numeric_limits<double>::infinity()};
   V3 hi = {-lo[0], -lo[1], -lo[2]};
-  for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+  for (std::size_t i = 0; i < positions.size(); ++i)
     for (int a = 0; a < 3; ++a) {
-      const double v = mesh.positions[i][a];
+      const double v = positions[i][a];
       if (!std::isfinite(v))
         throw InputError("vertex " + std::to_string(i) + " has a non-finite coordinate");
       lo[a] = std::min(lo[a], v);
       hi[a] = std::max(hi[a], v);
     }
-  if (mesh.positions.empty()) lo = hi = {0, 0, 0};
+  if (positions.empty()) lo = hi = {0, 0, 0};
 
   Scope scope;  // throws InputError naming why when there is no context
   GLint max_renderbuffer = 0, max_viewport[2] = {};
@@ -188,8 +199,8 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
   V3 centre =
       o.center ? *o.center : V3{(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2};
   double xmin = 0, xmax = 0, ymin = 0, ymax = 0, dmin = 0, dmax = 0;
-  for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
-    const V3 p = sub(to_v3(mesh.positions[i]), centre);
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const V3 p = sub(to_v3(positions[i]), centre);
     const double x = dot(p, cam.right), y = dot(p, cam.up), d = -dot(p, cam.back);
     if (i == 0) xmin = xmax = x, ymin = ymax = y, dmin = dmax = d;
     xmin = std::min(xmin, x), xmax = std::max(xmax, x);
@@ -253,11 +264,10 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
   glBindVertexArray(target.vertex_array);
   check("preparing to render");
 
-  // The triangles (quads as two: 0 1 2 and 0 2 3), piece by piece.
-  const std::uint64_t ntri = mesh.triangles.size(), total = ntri + 2 * mesh.quads.size();
+  // The triangles, piece by piece; their quality's min, max and sum in drawing order.
   const std::uint64_t per_piece = std::max<std::uint64_t>(
       1, o.piece_triangles ? o.piece_triangles : kRenderPieceBytes / kBytesPerTriangle);
-  const std::uint64_t piece = std::min(per_piece, std::max<std::uint64_t>(total, 1));
+  const std::uint64_t piece = std::min(per_piece, std::max<std::uint64_t>(expected, 1));
   Buffer vertices(piece * kBytesPerTriangle, nullptr, GL_DYNAMIC_STORAGE_BIT);
   glVertexArrayVertexBuffer(target.vertex_array, 0, vertices.id(), 0,
                             kFloatsPerCorner * sizeof(float));
@@ -268,42 +278,49 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
     glVertexArrayAttribBinding(target.vertex_array, attr, 0);
   }
   std::vector<float> host(piece * 3 * kFloatsPerCorner);
-  std::uint64_t pieces = 0;
-  for (std::uint64_t first = 0; first < total; first += piece) {
-    const std::uint64_t count = std::min(piece, total - first);
-    tbb::parallel_for(std::uint64_t{0}, count, [&](std::uint64_t i) {
-      const std::uint64_t t = first + i;
-      std::array<std::uint32_t, 3> idx;
-      if (t < ntri) {
-        idx = mesh.triangles[t];
-      } else {
-        const Quad& q = mesh.quads[(t - ntri) / 2];
-        idx = (t - ntri) % 2 == 0 ? std::array<std::uint32_t, 3>{q[0], q[1], q[2]}
-                                  : std::array<std::uint32_t, 3>{q[0], q[2], q[3]};
+  std::vector<double> quality(piece);
+  std::vector<Tri> tris;
+  std::uint64_t pieces = 0, drawn = 0;
+  double qmin = 1, qmax = 0, qsum = 0;
+  for (;;) {
+    tris.clear();
+    next(piece, tris);
+    if (tris.empty()) break;
+    // `next` may overshoot by a polygon's fan: its triangles go in a piece of their own.
+    for (std::size_t first = 0; first < tris.size(); first += piece) {
+      const std::size_t count = std::min<std::size_t>(piece, tris.size() - first);
+      tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) {
+        const Tri& idx = tris[first + i];
+        const Vec3f& a = positions[idx[0]];
+        const Vec3f& b = positions[idx[1]];
+        const Vec3f& c = positions[idx[2]];
+        quality[i] = radius_ratio(a, b, c);
+        const V3 n = normalized(cross(sub(to_v3(b), to_v3(a)), sub(to_v3(c), to_v3(a))));
+        float* out = host.data() + i * 3 * kFloatsPerCorner;
+        for (int k = 0; k < 3; ++k, out += kFloatsPerCorner) {
+          const V3 p = sub(to_v3(positions[idx[k]]), centre);
+          out[0] = static_cast<float>(p[0]);
+          out[1] = static_cast<float>(p[1]);
+          out[2] = static_cast<float>(p[2]);
+          out[3] = static_cast<float>(quality[i]);
+          out[4] = static_cast<float>(n[0]);
+          out[5] = static_cast<float>(n[1]);
+          out[6] = static_cast<float>(n[2]);
+          out[7] = 0;
+        }
+      });
+      for (std::size_t i = 0; i < count; ++i) {
+        qmin = std::min(qmin, quality[i]);
+        qmax = std::max(qmax, quality[i]);
+        qsum += quality[i];
       }
-      const Vec3f& a = mesh.positions[idx[0]];
-      const Vec3f& b = mesh.positions[idx[1]];
-      const Vec3f& c = mesh.positions[idx[2]];
-      const float quality = static_cast<float>(radius_ratio(a, b, c));
-      const V3 n = normalized(cross(sub(to_v3(b), to_v3(a)), sub(to_v3(c), to_v3(a))));
-      float* out = host.data() + i * 3 * kFloatsPerCorner;
-      for (int k = 0; k < 3; ++k, out += kFloatsPerCorner) {
-        const V3 p = sub(to_v3(mesh.positions[idx[k]]), centre);
-        out[0] = static_cast<float>(p[0]);
-        out[1] = static_cast<float>(p[1]);
-        out[2] = static_cast<float>(p[2]);
-        out[3] = quality;
-        out[4] = static_cast<float>(n[0]);
-        out[5] = static_cast<float>(n[1]);
-        out[6] = static_cast<float>(n[2]);
-        out[7] = 0;
-      }
-    });
-    glNamedBufferSubData(vertices.id(), 0, static_cast<GLsizeiptr>(count * kBytesPerTriangle),
-                         host.data());
-    glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(count * 3));
-    check("drawing a piece of the mesh");
-    ++pieces;
+      glNamedBufferSubData(vertices.id(), 0, static_cast<GLsizeiptr>(count * kBytesPerTriangle),
+                           host.data());
+      glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(count * 3));
+      check("drawing a piece of the mesh");
+      ++pieces;
+      drawn += count;
+    }
   }
 
   std::vector<std::uint8_t> rgba(std::size_t(o.width) * o.height * 4);
@@ -322,18 +339,51 @@ Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats
   }
 
   RenderStats s;
-  s.triangles = total;
+  s.triangles = drawn;
   s.pieces = pieces;
-  if (o.colour == RenderColour::Quality) {
-    const QualityStats q = triangle_quality(mesh);
-    s.quality_min = q.min;
-    s.quality_mean = q.mean;
-    s.quality_max = q.max;
-    draw_colour_bar(pic, q.min, q.mean, q.max, total);
+  if (drawn > 0) {
+    s.quality_min = qmin;
+    s.quality_mean = qsum / static_cast<double>(drawn);
+    s.quality_max = qmax;
   }
+  if (o.colour == RenderColour::Quality)
+    draw_colour_bar(pic, s.quality_min, s.quality_mean, s.quality_max, drawn);
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (stats) *stats = s;
   return pic;
+}
+
+}  // namespace
+
+Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats) {
+  check_face_indices(mesh);
+  const std::uint64_t ntri = mesh.triangles.size(), total = ntri + 2 * mesh.quads.size();
+  std::uint64_t t = 0;
+  const NextTriangles next = [&](std::size_t max, std::vector<Tri>& out) {
+    for (; t < total && out.size() < max; ++t) {
+      if (t < ntri) {
+        out.push_back(mesh.triangles[t]);
+      } else {
+        const Quad& q = mesh.quads[(t - ntri) / 2];
+        out.push_back((t - ntri) % 2 == 0 ? Tri{q[0], q[1], q[2]} : Tri{q[0], q[2], q[3]});
+      }
+    }
+  };
+  return render_pieces(mesh.positions, total, next, o, stats);
+}
+
+Picture render_mesh_file(const std::filesystem::path& path, const RenderOptions& o,
+                         RenderStats* stats) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".ply")
+    if (std::optional<PlyFaceStream> ply = PlyFaceStream::open(path)) {
+      const NextTriangles next = [&](std::size_t max, std::vector<Tri>& out) {
+        ply->next(max, out);
+      };
+      return render_pieces(ply->positions(), ply->faces(), next, o, stats);
+    }
+  return render_mesh(read_mesh(path), o, stats);
 }
 
 }  // namespace isotile::gl

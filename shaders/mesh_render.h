@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -47,8 +48,11 @@ inline constexpr double kRenderMargin = 0.05;
 struct RenderStats {
   std::uint64_t triangles = 0;  // drawn (quads as two)
   std::uint64_t pieces = 0;
-  double quality_min = 0, quality_mean = 0, quality_max = 0;  // triangle_quality()'s
-  double seconds = 0;                                         // drawing and read-back
+  // Radius ratios of the drawn triangles (0 when there are none); the mean summed in drawing
+  // order. For a triangle mesh these are `isotile quality`'s min and max, and its mean but for
+  // the summation order; quads count as the two triangles drawn.
+  double quality_min = 0, quality_mean = 0, quality_max = 0;
+  double seconds = 0;  // drawing and read-back
 };
 
 // The defines of the render program for these options (gl_variants.cpp lists every combination).
@@ -62,5 +66,14 @@ void parse_view(const std::string& view, RenderOptions& o);
 // positive number, a non-finite centre or vertex, a picture too small for its colour bar;
 // throws like device() when there is no context.
 Picture render_mesh(const Mesh& mesh, const RenderOptions& o, RenderStats* stats = nullptr);
+
+// The mesh in a file (PLY, OBJ, STL, OFF). A binary little-endian PLY of the usual layout
+// (core/mesh/ply_face_stream.h: isotile's own, the tiler's streamed output) is drawn with only
+// its vertices in memory and its faces read piece by piece; any other file is read whole
+// (read_mesh). The same picture as render_mesh() of the file's mesh when its faces are all
+// triangles (a file mixing triangles and quads is drawn in file order, the mesh triangles
+// first). Throws as read_mesh() does for a file it cannot read.
+Picture render_mesh_file(const std::filesystem::path& path, const RenderOptions& o,
+                         RenderStats* stats = nullptr);
 
 }  // namespace isotile::gl

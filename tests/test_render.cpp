@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -216,6 +217,48 @@ TEST_F(Render, PiecesAndRunsGiveTheSamePicture) {
   EXPECT_TRUE(b.rgb == c.rgb);
 }
 
+// A binary PLY is drawn from its file with its faces read in pieces (core/mesh/ply_face_stream.h):
+// the picture of the mesh read whole, with or without normals in the file; an ASCII PLY (read
+// whole) gives it too. A face past the vertices and a file cut short are errors.
+TEST_F(Render, PlyFacesReadInPiecesGiveTheSamePicture) {
+  REQUIRE_GL();
+  ASSERT_EQ(run("extract field:torus:36 -q -o t.ply").code, 0);
+  ASSERT_EQ(run("extract field:torus:36 -q --normals -o tn.ply").code, 0);
+  ASSERT_EQ(run("extract field:torus:36 -q --ascii -o ta.ply").code, 0);
+  gl::RenderOptions o;
+  o.width = 240;
+  o.height = 200;
+  o.wireframe = true;
+  gl::RenderStats whole, streamed;
+  const Mesh mesh = read_mesh(dir_ / "t.ply");
+  const gl::Picture a = gl::render_mesh(mesh, o, &whole);
+  o.piece_triangles = 501;
+  for (const char* name : {"t.ply", "tn.ply", "ta.ply"}) {
+    const gl::Picture b = gl::render_mesh_file(dir_ / name, o, &streamed);
+    EXPECT_TRUE(a.rgb == b.rgb) << name;
+    EXPECT_EQ(streamed.triangles, mesh.triangles.size()) << name;
+    EXPECT_GT(streamed.pieces, 5u) << name;
+    EXPECT_EQ(streamed.quality_min, whole.quality_min) << name;
+    EXPECT_EQ(streamed.quality_max, whole.quality_max) << name;
+  }
+  const QualityStats q = triangle_quality(mesh);
+  EXPECT_EQ(whole.quality_min, q.min);
+  EXPECT_EQ(whole.quality_max, q.max);
+  EXPECT_NEAR(whole.quality_mean, q.mean, 1e-12);
+  // Cut short: the header and vertices whole, half the faces.
+  const std::string bytes = slurp(dir_ / "t.ply");
+  const std::size_t faces_at = bytes.find("end_header\n") + 11 + mesh.positions.size() * 12;
+  std::ofstream(dir_ / "cut.ply", std::ios::binary)
+      << bytes.substr(0, faces_at + (bytes.size() - faces_at) / 2);
+  EXPECT_THROW(gl::render_mesh_file(dir_ / "cut.ply", o), InputError);
+  // One index past the vertices (the last face's last corner).
+  std::string bad = bytes;
+  const std::uint32_t past = static_cast<std::uint32_t>(mesh.positions.size());
+  std::memcpy(bad.data() + bad.size() - 4, &past, 4);
+  std::ofstream(dir_ / "bad.ply", std::ios::binary) << bad;
+  EXPECT_THROW(gl::render_mesh_file(dir_ / "bad.ply", o), InputError);
+}
+
 // Same inputs, same bytes; and the same picture from the mesh in every format the reader takes.
 TEST_F(Render, SameBytesTwiceAndFromEveryFormat) {
   REQUIRE_GL_CLI();
@@ -239,8 +282,12 @@ TEST_F(Render, BadInputsAreOneLineErrorsWithNoFileLeft) {
   REQUIRE_GL_CLI();
   sphere();
   std::ofstream(dir_ / "bad.ply") << "ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n";
+  const std::string sphere_bytes = slurp(dir_ / "sphere.ply");
+  std::ofstream(dir_ / "cut.ply", std::ios::binary)
+      << sphere_bytes.substr(0, sphere_bytes.size() - 1000);
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"render bad.ply -o p.png", "bad.ply"},
+      {"render cut.ply -o p.png", "cut.ply"},
       {"render missing.ply -o p.png", "missing.ply"},
       {"render sphere.ply -o no/such/dir/p.png", "no/such/dir/p.png"},
       {"render sphere.ply -o p.png --size 0x0", "--size"},
@@ -259,7 +306,8 @@ TEST_F(Render, BadInputsAreOneLineErrorsWithNoFileLeft) {
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;
     EXPECT_EQ(r.err.rfind("isotile: error: ", 0), 0u) << args << ": " << r.err;
     EXPECT_NE(r.err.find(names), std::string::npos) << args << ": " << r.err;
-    EXPECT_EQ(stray_files({"sphere.ply", "bad.ply"}), std::vector<std::string>{}) << args;
+    EXPECT_EQ(stray_files({"sphere.ply", "bad.ply", "cut.ply"}), std::vector<std::string>{})
+        << args;
   }
 }
 

@@ -80,10 +80,12 @@ gl::RenderOptions render_options(const RenderArgs& a) {
   return o;
 }
 
-double draw(const Mesh& mesh, const gl::RenderOptions& o, const std::string& picture, bool quiet) {
+// Draws with `render` (render_mesh or render_mesh_file) and writes the picture.
+template <class Render>
+double draw(Render render, const gl::RenderOptions& o, const std::string& picture, bool quiet) {
   const auto t0 = std::chrono::steady_clock::now();
   gl::RenderStats stats;
-  const gl::Picture pic = gl::render_mesh(mesh, o, &stats);
+  const gl::Picture pic = render(o, &stats);
   gl::write_png(pic, picture);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   say(quiet, "rendered " + std::to_string(stats.triangles) + " triangles in " +
@@ -125,9 +127,10 @@ int run_render(const RenderArgs& a, bool quiet) {
 #ifdef ISOTILE_HAVE_GL
   check_picture_path(a.output);
   const gl::RenderOptions o = render_options(a);
-  say(quiet, "reading " + a.input);
-  const Mesh mesh = read_mesh(a.input);
-  draw(mesh, o, a.output, quiet);
+  say(quiet, "drawing " + a.input);
+  draw([&](const gl::RenderOptions& ro,
+           gl::RenderStats* st) { return gl::render_mesh_file(a.input, ro, st); },
+       o, a.output, quiet);
   return 0;
 #else
   (void)a;
@@ -138,7 +141,9 @@ int run_render(const RenderArgs& a, bool quiet) {
 
 double render_extracted(const Mesh& mesh, const std::string& picture, bool quiet) {
 #ifdef ISOTILE_HAVE_GL
-  return draw(mesh, render_options(RenderArgs{}), picture, quiet);
+  return draw([&](const gl::RenderOptions& ro,
+                  gl::RenderStats* st) { return gl::render_mesh(mesh, ro, st); },
+              render_options(RenderArgs{}), picture, quiet);
 #else
   (void)mesh;
   (void)picture;
@@ -148,11 +153,16 @@ double render_extracted(const Mesh& mesh, const std::string& picture, bool quiet
 }
 
 double render_extracted_file(const std::string& mesh_file, const std::string& picture, bool quiet) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const Mesh mesh = read_mesh(mesh_file);
-  const double t_read =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return t_read + render_extracted(mesh, picture, quiet);
+#ifdef ISOTILE_HAVE_GL
+  return draw([&](const gl::RenderOptions& ro,
+                  gl::RenderStats* st) { return gl::render_mesh_file(mesh_file, ro, st); },
+              render_options(RenderArgs{}), picture, quiet);
+#else
+  (void)mesh_file;
+  (void)picture;
+  (void)quiet;
+  throw InputError("this isotile was built without OpenGL (ISOTILE_GL=OFF): --render needs it");
+#endif
 }
 
 }  // namespace isotile

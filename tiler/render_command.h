@@ -29,7 +29,8 @@ void check_picture_path(const std::string& path);
 // `extract --render`: draws `mesh` (framed, iso view, coloured by quality, 800x600) into
 // `picture`; returns the seconds it took.
 double render_extracted(const Mesh& mesh, const std::string& picture, bool quiet);
-// The same for a mesh written to `mesh_file` (the out-of-core path).
+// The same for a mesh written to `mesh_file` (the out-of-core path): a binary PLY's faces are
+// read in pieces (shaders/mesh_render.h, render_mesh_file()).
 double render_extracted_file(const std::string& mesh_file, const std::string& picture, bool quiet);
 
 }  // namespace isotile
