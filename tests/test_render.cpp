@@ -195,6 +195,25 @@ TEST_F(Render, FacingTrianglesHaveTheirQualitysColour) {
   EXPECT_EQ(other, 0);
 }
 
+// A mesh without faces gives the background and a bar that says so, not an error.
+TEST_F(Render, EmptyMeshGivesAnEmptyPicture) {
+  REQUIRE_GL();
+  gl::RenderOptions o;
+  o.width = 200;
+  o.height = 150;
+  gl::RenderStats stats;
+  const gl::Picture pic = gl::render_mesh(Mesh{}, o, &stats);
+  EXPECT_EQ(stats.triangles, 0u);
+  EXPECT_EQ(stats.pieces, 0u);
+  const int band = o.height - gl::colour_bar_height(o.width, o.height);
+  for (int i = 0; i < o.width * band * 3; ++i) ASSERT_EQ(pic.rgb[i], 255) << i;
+  const gl::BarExtent bar = gl::colour_bar_extent(o.width, o.height);
+  int black = 0;  // the words "no triangles" under the bar
+  for (int y = bar.bottom; y < o.height; ++y)
+    for (int x = 0; x < o.width; ++x) black += pic.rgb[(std::size_t(y) * o.width + x) * 3] == 0;
+  EXPECT_GT(black, 40);
+}
+
 // The picture does not depend on how the triangles are cut into pieces, nor on the run.
 TEST_F(Render, PiecesAndRunsGiveTheSamePicture) {
   REQUIRE_GL();

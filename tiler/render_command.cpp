@@ -118,8 +118,8 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
   cmd->add_flag("--wireframe", a.wireframe, "Draw the triangles' edges");
   cmd->add_option("--zoom", a.zoom, "Magnify about the centre (default 1: the mesh fits)");
   cmd->add_option("--center,--centre", a.center,
-                  "X,Y,Z: the point in the middle of the picture (default: the mesh's bounding "
-                  "box centre)");
+                  "X,Y,Z: the point in the middle of the picture (default: the middle of the mesh "
+                  "as seen from the view)");
   return cmd;
 }
 
