@@ -35,6 +35,7 @@ packages=(
   libteem-dev libopenvdb-dev libboost-iostreams-dev libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev libopenmesh-dev libinsighttoolkit5-dev libopenmpi-dev openmpi-bin
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgl1-mesa-dev libosmesa6-dev python3-glad glslang-tools
+  libpng-dev
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
   help2man
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-skimage

@@ -116,8 +116,8 @@ if(TARGET isotile_gl)
   isotile_export_library(isotile_glad NAME glad INTERNAL)
   isotile_export_library(isotile_gl NAME gl
     HEADERS shaders/gl_backends.h
-    FIND_PACKAGES "OpenGL COMPONENTS EGL"
-    DEBIAN_DEPENDS libegl-dev)
+    FIND_PACKAGES "OpenGL COMPONENTS EGL" PNG
+    DEBIAN_DEPENDS libegl-dev libpng-dev)
 endif()
 
 install(EXPORT isotileTargets NAMESPACE isotile:: DESTINATION "${ISOTILE_CMAKE_DIR}"

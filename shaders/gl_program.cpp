@@ -53,6 +53,13 @@ GLuint& vertex_array() {
 
 std::string stage_source(const Stage& s, const std::string& defines) {
   std::string src = "#version 450 core\n";
+  // `isotile render`'s vertex and fragment stages stand alone: mc_common.glsl is the extractors'.
+  if (s.file.starts_with("render_")) {
+    src += defines;
+    src += "#line 1\n";
+    src += embedded_glsl(s.file);
+    return src;
+  }
   if (s.type == GL_COMPUTE_SHADER) src += "#define STAGE_COMPUTE\n";
   src += defines;
   src += "#line 1\n";

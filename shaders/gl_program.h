@@ -28,7 +28,8 @@ struct Stage {
 };
 
 // The source of one stage exactly as program() compiles it: "#version 450 core", the stage's
-// define, `defines`, mc_common.glsl, the included files the stage needs, then its file. Needs no
+// define, `defines`, mc_common.glsl, the included files the stage needs, then its file. The stages
+// of `isotile render` (render_*) are "#version 450 core", `defines` and their file only. Needs no
 // context (tests/test_glsl_variants.cpp checks every variant with glslang).
 std::string stage_source(const Stage& stage, const std::string& defines);
 

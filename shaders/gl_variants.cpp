@@ -5,6 +5,7 @@
 #include "core/extract/dual_contouring.h"
 #include "dc_gl_shared.h"
 #include "macet_gl.h"
+#include "mesh_render.h"
 
 namespace isotile::gl {
 
@@ -111,6 +112,20 @@ void add_benchmark_layouts(Variants& out) {
   }
 }
 
+// `isotile render`'s vertex and fragment program (mesh_render.cpp), per colouring and wireframe.
+void add_render(Variants& out) {
+  for (const RenderColour colour :
+       {RenderColour::Quality, RenderColour::Normal, RenderColour::Solid})
+    for (const bool wireframe : {false, true})
+      add(out,
+          std::string("render: ") +
+              (colour == RenderColour::Quality  ? "quality"
+               : colour == RenderColour::Normal ? "normal"
+                                                : "solid") +
+              (wireframe ? ", wireframe" : ""),
+          render_stages(), render_defines(colour, wireframe));
+}
+
 }  // namespace
 
 std::vector<ProgramVariant> program_variants() {
@@ -118,6 +133,7 @@ std::vector<ProgramVariant> program_variants() {
   add_edge_methods(v);
   add_dual_contouring(v);
   add_benchmark_layouts(v);
+  add_render(v);
   std::vector<ProgramVariant> out;
   out.reserve(v.size());
   for (auto& [key, variant] : v) out.push_back(std::move(variant));

@@ -19,6 +19,9 @@ struct ProgramVariant {
   std::vector<std::string> varyings;  // transform feedback, geometry-shader paths
 };
 
+// The stages of `isotile render`'s program (mesh_render.cpp).
+std::vector<Stage> render_stages();
+
 // Sorted by key, one entry per distinct program_key().
 std::vector<ProgramVariant> program_variants();
 

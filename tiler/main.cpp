@@ -52,6 +52,7 @@
 #endif
 #include "tiler/input_options.h"
 #include "tiler/mpi_launch.h"
+#include "tiler/render_command.h"
 #include "tiler/source_histogram.h"
 #include "tiler/tiled_extract.h"
 #ifdef ISOTILE_HAVE_MPI
@@ -214,6 +215,7 @@ struct ExtractArgs {
   std::string memory;  // empty: in core
   std::string frame = "world";
   double simplify = 1;  // fraction of faces kept; 1: off
+  std::string render;   // --render PICTURE.png: drawn from the written mesh
 };
 
 Method parse_method(const std::string& s) {
@@ -496,6 +498,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     if (!distributed.is_null()) j.update(distributed);
     write_text(args.stats, j.dump(2) + "\n");
   }
+  if (!args.render.empty()) render_extracted_file(args.output, args.render, g_quiet);
   progress("done in " + fmt_seconds(seconds_since(t_total)));
   return 0;
 }
@@ -511,6 +514,7 @@ int run_extract(const ExtractArgs& args) {
   const MeshFormat format = mesh_format_from_path(args.output);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   args.in.raw_options();  // --dims, --spacing, ... checked before anything is read
+  if (!args.render.empty()) check_picture_path(args.render);
   ExtractOptions options;
   options.method = parse_method(args.method);
   options.backend = parse_backend(args.backend);
@@ -614,14 +618,17 @@ int run_extract(const ExtractArgs& args) {
   // Positions go out in the volume's world frame; the measures below stay in the grid frame
   // (the volume border is a box there), as a streamed run's do.
   const MeshFrame frame = args.frame == "world" ? mesh_frame(view) : MeshFrame{};
+  double t_render = 0;  // --render draws the mesh as written
   if (frame.active) {
     Mesh world = mesh;
     apply_frame(frame, world);
     write_mesh(world, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+    if (!args.render.empty()) t_render = render_extracted(world, args.render, g_quiet);
   } else {
     write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+    if (!args.render.empty()) t_render = render_extracted(mesh, args.render, g_quiet);
   }
-  const double t_write = seconds_since(t0) + (simplifying ? 0.0 : t_release);
+  const double t_write = seconds_since(t0) - t_render + (simplifying ? 0.0 : t_release);
 
   if (args.stats.empty()) {
     progress("done in " + fmt_seconds(seconds_since(t_total)));
@@ -1134,6 +1141,9 @@ int main(int argc, char** argv) {
                           "Out of core: extract brick by brick, each brick's working set within "
                           "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
                           "file identical to an in-core run (default: in core)");
+  extract_cmd->add_option("--render", ex.render,
+                          "Also draw the mesh to this PNG picture (as `isotile render MESH -o "
+                          "PICTURE` with its defaults)");
 
   InputArgs info_in;
   bool info_json = false;
@@ -1201,7 +1211,11 @@ int main(int argc, char** argv) {
       "gl-info", "Describe the OpenGL device the gs and hp backends would use, and its limits");
   gl_info_cmd->add_flag("--json", gl_info_json, "Print JSON");
 
-  for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, simplify_cmd, demo_cmd}) cmd->fallthrough();
+  RenderArgs render_args;
+  auto* render_cmd = add_render_command(app, render_args);
+
+  for (auto* cmd : {extract_cmd, info_cmd, quality_cmd, simplify_cmd, demo_cmd, render_cmd})
+    cmd->fallthrough();
 
   try {
     app.parse(argc, argv);
@@ -1247,6 +1261,7 @@ int main(int argc, char** argv) {
         return finished(
             run_quality(quality_path, quality_json_flag, quality_intersections, quality_reference));
       if (*simplify_cmd) return finished(run_simplify(sa));
+      if (*render_cmd) return finished(run_render(render_args, g_quiet));
       if (*demo_cmd) {
         ExtractArgs d;
         d.in.input = "field:gyroid:128";

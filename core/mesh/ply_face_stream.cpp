@@ -1,0 +1,164 @@
+#include "core/mesh/ply_face_stream.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <sstream>
+#include <string>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+bool little_endian_host() {
+  const std::uint16_t one = 1;
+  unsigned char b;
+  std::memcpy(&b, &one, 1);
+  return b == 1;
+}
+
+}  // namespace
+
+std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& path) {
+  if (!little_endian_host()) return std::nullopt;
+  PlyFaceStream s;
+  s.path_ = path;
+  s.file_.reset(std::fopen(path.c_str(), "rb"));
+  if (!s.file_) throw IoError("cannot open " + path.string() + ": " + std::strerror(errno));
+  std::FILE* f = s.file_.get();
+  // The header, line by line (at most 64 KiB of it).
+  std::vector<std::string> lines;
+  std::string line;
+  std::size_t total = 0;
+  for (int c; (c = std::fgetc(f)) != EOF;) {
+    if (++total > 65536) return std::nullopt;
+    if (c == '\r') continue;
+    if (c != '\n') {
+      line += static_cast<char>(c);
+      continue;
+    }
+    lines.push_back(line);
+    if (line == "end_header") break;
+    line.clear();
+  }
+  if (lines.size() < 3 || lines.front() != "ply" || lines.back() != "end_header")
+    return std::nullopt;
+  std::uint64_t vertices = 0;
+  int props = 0, xyz[3] = {-1, -1, -1};
+  enum { None, Vertex, Face, Done } at = None;
+  bool binary_le = false, face_list = false;
+  for (std::size_t i = 1; i + 1 < lines.size(); ++i) {
+    std::istringstream in(lines[i]);
+    std::string kw;
+    in >> kw;
+    if (kw == "comment" || kw == "obj_info" || kw.empty()) continue;
+    if (kw == "format") {
+      std::string fmt, version;
+      in >> fmt >> version;
+      binary_le = fmt == "binary_little_endian" && version == "1.0";
+    } else if (kw == "element") {
+      std::string name;
+      std::uint64_t count = 0;
+      if (!(in >> name >> count)) return std::nullopt;
+      if (at == None && name == "vertex") {
+        at = Vertex;
+        vertices = count;
+      } else if (at == Vertex && name == "face") {
+        at = Face;
+        s.faces_ = count;
+      } else {
+        return std::nullopt;  // another element, or out of order
+      }
+    } else if (kw == "property") {
+      std::string type;
+      in >> type;
+      if (at == Vertex) {
+        std::string name;
+        in >> name;
+        if (type != "float" && type != "float32") return std::nullopt;
+        if (name == "x") xyz[0] = props;
+        if (name == "y") xyz[1] = props;
+        if (name == "z") xyz[2] = props;
+        ++props;
+      } else if (at == Face && !face_list && type == "list") {
+        std::string count_type, index_type, name;
+        in >> count_type >> index_type >> name;
+        if ((count_type != "uchar" && count_type != "uint8") ||
+            (name != "vertex_indices" && name != "vertex_index"))
+          return std::nullopt;
+        if (index_type == "int" || index_type == "int32") {
+          s.index_signed_ = true;
+        } else if (index_type == "uint64") {
+          s.index_bytes_ = 8;
+        } else if (index_type != "uint" && index_type != "uint32") {
+          return std::nullopt;
+        }
+        face_list = true;
+      } else {
+        return std::nullopt;
+      }
+    } else {
+      return std::nullopt;
+    }
+  }
+  if (!binary_le || at != Face || !face_list || xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0)
+    return std::nullopt;
+  if (vertices > 0xFFFFFFFFull)
+    throw CapacityError(path.string() + " has " + std::to_string(vertices) +
+                        " vertices; faces are read with 32-bit indices (at most 4294967295)");
+  // The vertices, a block at a time.
+  s.positions_.resize(vertices);
+  std::vector<float> block;
+  const std::uint64_t per_block = 1 << 16;
+  for (std::uint64_t v = 0; v < vertices; v += per_block) {
+    const std::uint64_t n = std::min(per_block, vertices - v);
+    block.resize(n * props);
+    if (std::fread(block.data(), sizeof(float) * props, n, f) != n)
+      throw InputError(path.string() + ": the vertices are cut short");
+    for (std::uint64_t k = 0; k < n; ++k)
+      for (int a = 0; a < 3; ++a) s.positions_[v + k][a] = block[k * props + xyz[a]];
+  }
+  return s;
+}
+
+bool PlyFaceStream::next(std::size_t max_triangles, std::vector<Tri>& out) {
+  if (read_ >= faces_) return false;
+  std::FILE* f = file_.get();
+  const std::uint64_t nv = positions_.size();
+  std::uint64_t idx[256];
+  unsigned char raw[256 * 8];
+  while (read_ < faces_ && out.size() < max_triangles) {
+    const int count = std::fgetc(f);
+    if (count == EOF) throw InputError(path_.string() + ": the faces are cut short");
+    if (count < 3)
+      throw InputError(path_.string() + ": face " + std::to_string(read_) + " has " +
+                       std::to_string(count) + " corners");
+    if (std::fread(raw, index_bytes_, count, f) != static_cast<std::size_t>(count))
+      throw InputError(path_.string() + ": the faces are cut short");
+    for (int k = 0; k < count; ++k) {
+      if (index_bytes_ == 8) {
+        std::memcpy(&idx[k], raw + k * 8, 8);
+      } else if (index_signed_) {
+        std::int32_t v;
+        std::memcpy(&v, raw + k * 4, 4);
+        idx[k] = v < 0 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(v);
+      } else {
+        std::uint32_t v;
+        std::memcpy(&v, raw + k * 4, 4);
+        idx[k] = v;
+      }
+      if (idx[k] >= nv)
+        throw InputError(path_.string() + ": face " + std::to_string(read_) +
+                         " references a vertex past the " + std::to_string(nv) + " vertices");
+    }
+    for (int k = 1; k + 1 < count; ++k)
+      out.push_back({static_cast<std::uint32_t>(idx[0]), static_cast<std::uint32_t>(idx[k]),
+                     static_cast<std::uint32_t>(idx[k + 1])});
+    ++read_;
+  }
+  return true;
+}
+
+}  // namespace isotile
