@@ -6,8 +6,10 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -206,6 +208,11 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     throw InputError(path + ": " + std::to_string(size) + " compressed bytes cannot hold " +
                      dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
   ImageHeaderCheck out;
+  if (gz)
+    out.compressed = ImageHeaderCheck::Compressed{
+        path, 0, offset + bytes, true,
+        dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples after " +
+            std::to_string(offset) + " header bytes"};
   if (std::isfinite(slope) && slope != 0 && (slope != 1 || (std::isfinite(inter) && inter != 0))) {
     out.rescaled = true;
     out.rescale_slope = slope;
@@ -347,6 +354,9 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
     if (available * kMaxDeflateRatio < bytes)
       throw InputError(path + ": " + std::to_string(available) + " compressed bytes cannot hold " +
                        dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
+    out.compressed = ImageHeaderCheck::Compressed{
+        file, offset, bytes, false,
+        dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples"};
     return out;
   }
   if (available < bytes)
@@ -355,6 +365,436 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
                      std::to_string(bytes));
   if (available == bytes) out.plain = PlainData{file, offset, *type, dims, endian};
   return out;
+}
+
+void verify_compressed(const ImageHeaderCheck& check) {
+  if (!check.compressed) return;
+  const ImageHeaderCheck::Compressed& c = *check.compressed;
+  std::ifstream f(c.file, std::ios::binary);
+  if (!f) throw IoError("cannot open " + c.file + ": " + std::strerror(errno));
+  f.seekg(static_cast<std::streamoff>(c.offset));
+  z_stream z{};
+  // 15 + 32: zlib or gzip, told apart by their headers (MetaIO writes zlib, NIfTI files are gzip).
+  if (inflateInit2(&z, 15 + 32) != Z_OK) throw IoError(c.file + ": out of memory for zlib");
+  std::vector<unsigned char> in(1 << 20), out(1 << 20);
+  std::uint64_t total = 0;
+  bool ended = false;
+  int code = Z_OK;
+  for (;;) {
+    if (z.avail_in == 0) {
+      f.read(reinterpret_cast<char*>(in.data()), static_cast<std::streamsize>(in.size()));
+      z.next_in = in.data();
+      z.avail_in = static_cast<uInt>(f.gcount());
+      if (z.avail_in == 0) break;  // the file ends
+    }
+    z.next_out = out.data();
+    z.avail_out = static_cast<uInt>(out.size());
+    code = inflate(&z, Z_NO_FLUSH);
+    total += out.size() - z.avail_out;
+    if (code == Z_STREAM_END) {
+      // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip.
+      if (c.whole_gzip) {
+        if (z.avail_in == 0 && f.peek() == std::ifstream::traits_type::eof()) {
+          ended = true;
+          break;
+        }
+        inflateReset(&z);
+        continue;
+      }
+      ended = true;
+      break;
+    }
+    if (code != Z_OK && code != Z_BUF_ERROR) break;
+    if (!c.whole_gzip && total > c.need) break;
+  }
+  inflateEnd(&z);
+  const std::string expected = std::to_string(c.need) + " bytes (" + c.what + ")";
+  if (code == Z_DATA_ERROR || code == Z_NEED_DICT || code == Z_MEM_ERROR || code == Z_STREAM_ERROR)
+    throw InputError(c.file + ": corrupt compressed data after " + std::to_string(total) +
+                     " of the " + expected + " expected" +
+                     (z.msg ? std::string(" (") + z.msg + ")" : ""));
+  if (!c.whole_gzip && total > c.need)
+    throw InputError(c.file + ": compressed data inflates to more than the " + expected +
+                     " expected (too long)");
+  if (!ended)
+    throw InputError(c.file + ": compressed data cut off: it inflates to " + std::to_string(total) +
+                     " bytes but " + expected + " were expected (truncated file)");
+  if (total < c.need || (!c.whole_gzip && total != c.need))
+    throw InputError(c.file + ": compressed data inflates to " + std::to_string(total) +
+                     " bytes but " + expected + " were expected" +
+                     (total < c.need ? " (too short)" : " (too long)"));
+}
+
+namespace {
+
+// Bytes of a file read where asked, bounds checked against its size.
+class FileBytes {
+ public:
+  explicit FileBytes(const std::string& path) : path_(path), f_(path, std::ios::binary) {
+    if (!f_) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    size_ = file_size_of(path);
+  }
+  std::uint64_t size() const { return size_; }
+  bool fits(std::uint64_t at, std::uint64_t n) const { return at <= size_ && n <= size_ - at; }
+  // n bytes at `at` (n small); false past the end.
+  bool read(std::uint64_t at, void* out, std::size_t n) {
+    if (!fits(at, n)) return false;
+    f_.clear();
+    f_.seekg(static_cast<std::streamoff>(at));
+    f_.read(static_cast<char*>(out), static_cast<std::streamsize>(n));
+    return static_cast<std::size_t>(f_.gcount()) == n;
+  }
+
+ private:
+  std::string path_;
+  std::ifstream f_;
+  std::uint64_t size_ = 0;
+};
+
+std::string hex_tag(std::uint16_t group, std::uint16_t element) {
+  char b[16];
+  std::snprintf(b, sizeof b, "(%04X,%04X)", group, element);
+  return b;
+}
+
+struct DicomWalk {
+  DicomWalk(FileBytes& f, const std::string& p) : file(f), path(p) {}
+  FileBytes& file;
+  const std::string& path;
+  bool implicit = false, big = false;
+  std::int64_t rows = -1, columns = -1, bits = -1, samples = 1, frames = 1;
+  bool pixel_found = false;
+  std::uint64_t pixel_at = 0, pixel_length = 0;
+  bool encapsulated = false;
+
+  [[noreturn]] void cut(const std::string& what, std::uint64_t at, std::uint64_t need) const {
+    throw InputError(path + ": DICOM " + what + " needs " + std::to_string(need) +
+                     " bytes from offset " + std::to_string(at) + " but the file holds " +
+                     std::to_string(file.size() > at ? file.size() - at : 0) +
+                     " there (truncated file)");
+  }
+  std::uint16_t u16(const unsigned char* p) const { return get<std::uint16_t>(p, big); }
+  std::uint32_t u32(const unsigned char* p) const { return get<std::uint32_t>(p, big); }
+
+  // Elements from `at` until `end` (a defined length), or until the item delimiter when
+  // `until_delimiter`. Returns the offset after the last element.
+  std::uint64_t dataset(std::uint64_t at, std::uint64_t end, bool until_delimiter, int depth,
+                        bool meta) {
+    if (depth > 32) throw InputError(path + ": DICOM sequences nested more than 32 deep");
+    while (until_delimiter || at < end) {
+      unsigned char h[12];
+      if (!file.read(at, h, 8)) {
+        if (!until_delimiter && at >= file.size() && depth == 0) return at;
+        cut("element header", at, 8);
+      }
+      const std::uint16_t group = u16(h), element = u16(h + 2);
+      if (meta && group != 0x0002) return at;
+      if (group == 0xFFFE) {
+        if (element == 0xE00D && until_delimiter) return at + 8;
+        throw InputError(path + ": malformed DICOM: delimiter " + hex_tag(group, element) +
+                         " at offset " + std::to_string(at));
+      }
+      std::uint64_t length = 0, header = 8;
+      char vr[3] = {0, 0, 0};
+      if (implicit && !meta) {
+        length = u32(h + 4);
+      } else {
+        vr[0] = static_cast<char>(h[4]);
+        vr[1] = static_cast<char>(h[5]);
+        if (!std::isupper(static_cast<unsigned char>(vr[0])) ||
+            !std::isupper(static_cast<unsigned char>(vr[1])))
+          throw InputError(path + ": malformed DICOM: element " + hex_tag(group, element) +
+                           " at offset " + std::to_string(at) + " has no value representation");
+        static const char* const kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
+                                            "SV", "UC", "UN", "UR", "UT", "UV"};
+        bool long_form = false;
+        for (const char* l : kLong) long_form = long_form || std::strcmp(l, vr) == 0;
+        if (long_form) {
+          if (!file.read(at, h, 12)) cut("element header", at, 12);
+          length = u32(h + 8);
+          header = 12;
+        } else {
+          length = u16(h + 6);
+        }
+      }
+      const std::uint64_t value = at + header;
+      const bool pixel = group == 0x7FE0 && element == 0x0010 && depth == 0;
+      if (length == 0xFFFFFFFFu) {
+        if (pixel) {
+          encapsulated = true;
+          pixel_found = true;
+          pixel_at = value;
+        }
+        at = sequence(value, depth + 1, pixel);
+        continue;
+      }
+      if (!file.fits(value, length))
+        cut(pixel ? "pixel data " + hex_tag(group, element) : "element " + hex_tag(group, element),
+            value, length);
+      if (pixel) {
+        pixel_found = true;
+        pixel_at = value;
+        pixel_length = length;
+      }
+      if (std::strcmp(vr, "SQ") == 0 && length > 0)
+        sequence_defined(value, value + length, depth + 1);
+      if (depth == 0 && group == 0x0028 && length >= 2 && length <= 16) {
+        unsigned char v[16];
+        file.read(value, v, static_cast<std::size_t>(length));
+        if (element == 0x0010) rows = u16(v);
+        if (element == 0x0011) columns = u16(v);
+        if (element == 0x0100) bits = u16(v);
+        if (element == 0x0002) samples = u16(v);
+        if (element == 0x0008) {
+          const std::string text(reinterpret_cast<char*>(v), static_cast<std::size_t>(length));
+          frames = std::max<std::int64_t>(1, std::atoll(text.c_str()));
+        }
+      }
+      if (meta && group == 0x0002 && element == 0x0010 && length <= 64) {
+        char ts[65] = {};
+        file.read(value, ts, static_cast<std::size_t>(length));
+        std::string uid(ts);
+        while (!uid.empty() && (uid.back() == ' ' || uid.back() == '\0')) uid.pop_back();
+        syntax = uid;
+      }
+      at = value + length;
+    }
+    return at;
+  }
+
+  // Items of a sequence of defined length.
+  void sequence_defined(std::uint64_t at, std::uint64_t end, int depth) {
+    while (at < end) {
+      unsigned char h[8];
+      if (!file.read(at, h, 8)) cut("sequence item", at, 8);
+      const std::uint32_t length = u32(h + 4);
+      if (u16(h) != 0xFFFE || u16(h + 2) != 0xE000)
+        throw InputError(path + ": malformed DICOM sequence at offset " + std::to_string(at));
+      if (length == 0xFFFFFFFFu) {
+        at = dataset(at + 8, 0, true, depth, false);
+      } else {
+        if (!file.fits(at + 8, length)) cut("sequence item", at + 8, length);
+        dataset(at + 8, at + 8 + length, false, depth, false);
+        at += 8 + length;
+      }
+    }
+  }
+
+  // Items of a sequence of undefined length (or encapsulated pixel data's fragments), to its
+  // delimiter; returns the offset after it.
+  std::uint64_t sequence(std::uint64_t at, int depth, bool fragments) {
+    for (;;) {
+      unsigned char h[8];
+      if (!file.read(at, h, 8)) cut(fragments ? "encapsulated pixel data" : "sequence item", at, 8);
+      const std::uint16_t group = u16(h), element = u16(h + 2);
+      const std::uint32_t length = u32(h + 4);
+      if (group == 0xFFFE && element == 0xE0DD) return at + 8;
+      if (group != 0xFFFE || element != 0xE000)
+        throw InputError(path + ": malformed DICOM sequence at offset " + std::to_string(at));
+      if (length == 0xFFFFFFFFu && !fragments) {
+        at = dataset(at + 8, 0, true, depth, false);
+        continue;
+      }
+      if (length == 0xFFFFFFFFu || !file.fits(at + 8, length))
+        cut(fragments ? "pixel data fragment" : "sequence item", at + 8, length);
+      if (!fragments) dataset(at + 8, at + 8 + length, false, depth, false);
+      at += 8 + length;
+    }
+  }
+
+  std::string syntax;
+};
+
+}  // namespace
+
+void check_dicom_file(const std::string& path) {
+  FileBytes file(path);
+  unsigned char marker[4];
+  if (!file.read(128, marker, 4) || std::memcmp(marker, "DICM", 4) != 0) return;
+  DicomWalk w{file, path};
+  const std::uint64_t after_meta = w.dataset(132, file.size(), false, 0, true);
+  if (w.syntax == "1.2.840.10008.1.2.1.99") return;  // deflated: GDCM inflates and judges it
+  w.implicit = w.syntax == "1.2.840.10008.1.2";
+  w.big = w.syntax == "1.2.840.10008.1.2.2";
+  w.dataset(after_meta, file.size(), false, 0, false);
+  if (w.rows < 0 && w.columns < 0) return;  // no image (GDCM says what it is)
+  if (!w.pixel_found)
+    throw InputError(path + ": DICOM image of " + std::to_string(w.columns) + "x" +
+                     std::to_string(w.rows) + " pixels has no pixel data (truncated file?)");
+  if (w.encapsulated || w.rows <= 0 || w.columns <= 0 || w.bits <= 0) return;
+  const std::uint64_t bits =
+      static_cast<std::uint64_t>(w.rows) * static_cast<std::uint64_t>(w.columns) *
+      static_cast<std::uint64_t>(std::max<std::int64_t>(w.samples, 1)) *
+      static_cast<std::uint64_t>(w.frames) * static_cast<std::uint64_t>(w.bits);
+  const std::uint64_t need = (bits + 7) / 8;
+  if (w.pixel_length < need)
+    throw InputError(path + ": DICOM pixel data holds " + std::to_string(w.pixel_length) +
+                     " bytes but " + std::to_string(w.columns) + "x" + std::to_string(w.rows) +
+                     " pixels x " + std::to_string(w.frames) + " frames of " +
+                     std::to_string(w.bits) + " bits need " + std::to_string(need));
+}
+
+void check_dicom_input(const std::string& input) {
+  std::error_code ec;
+  const fs::path dir =
+      fs::is_directory(input, ec) ? fs::path(input) : fs::path(input).parent_path();
+  for (const auto& e : fs::directory_iterator(dir.empty() ? fs::path(".") : dir, ec))
+    if (e.is_regular_file(ec)) check_dicom_file(e.path().string());
+}
+
+void check_tiff_file(const std::string& path) {
+  FileBytes file(path);
+  unsigned char h[16];
+  if (!file.read(0, h, 8))
+    throw InputError(path + ": not a TIFF file (" + std::to_string(file.size()) + " bytes)");
+  const bool little = h[0] == 'I' && h[1] == 'I';
+  if (!little && !(h[0] == 'M' && h[1] == 'M'))
+    throw InputError(path + ": not a TIFF file (no II or MM byte-order mark)");
+  const bool swap = little != (std::endian::native == std::endian::little);
+  const std::uint16_t version = get<std::uint16_t>(h + 2, swap);
+  if (version != 42 && version != 43)
+    throw InputError(path + ": not a TIFF file (version " + std::to_string(version) + ")");
+  const bool big = version == 43;
+  std::uint64_t ifd = 0;
+  if (big) {
+    if (!file.read(0, h, 16)) throw InputError(path + ": BigTIFF header truncated");
+    ifd = get<std::uint64_t>(h + 8, swap);
+  } else {
+    ifd = get<std::uint32_t>(h + 4, swap);
+  }
+  const auto cut = [&](int page, const std::string& what, std::uint64_t at, std::uint64_t n) {
+    throw InputError(path + ": TIFF page " + std::to_string(page) + ": " + what + " needs " +
+                     std::to_string(n) + " bytes from offset " + std::to_string(at) +
+                     " but the file holds " + std::to_string(file.size()) +
+                     " bytes (truncated file)");
+  };
+  static const std::size_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4,
+                                            8, 4, 8, 4, 0, 0, 8, 8, 8};
+  std::vector<std::uint64_t> seen;
+  int page = 0;
+  while (ifd != 0) {
+    ++page;
+    if (std::find(seen.begin(), seen.end(), ifd) != seen.end() || page > 1000000)
+      throw InputError(path + ": TIFF page directories form a loop");
+    seen.push_back(ifd);
+    const std::size_t count_size = big ? 8 : 2, entry_size = big ? 20 : 12,
+                      inline_size = big ? 8 : 4;
+    if (!file.read(ifd, h, count_size)) cut(page, "its directory", ifd, count_size);
+    const std::uint64_t entries = big ? get<std::uint64_t>(h, swap) : get<std::uint16_t>(h, swap);
+    if (!file.fits(ifd + count_size, entries * entry_size + inline_size))
+      cut(page, "its directory", ifd, count_size + entries * entry_size + inline_size);
+    std::uint64_t width = 0, height = 0, bps = 1, spp = 1, compression = 1, rows_per_strip = 0,
+                  tile_w = 0, tile_h = 0;
+    std::vector<std::uint64_t> offsets, counts;
+    for (std::uint64_t e = 0; e < entries; ++e) {
+      unsigned char d[20];
+      const std::uint64_t at = ifd + count_size + e * entry_size;
+      file.read(at, d, entry_size);
+      const std::uint16_t tag = get<std::uint16_t>(d, swap), type = get<std::uint16_t>(d + 2, swap);
+      const std::uint64_t n =
+          big ? get<std::uint64_t>(d + 4, swap) : get<std::uint32_t>(d + 4, swap);
+      const std::size_t size = type < 19 ? kTypeSize[type] : 0;
+      if (size == 0) continue;  // unknown types are skipped by libtiff too
+      if (n > (std::uint64_t{1} << 40) / size)
+        throw InputError(path + ": TIFF page " + std::to_string(page) + ": tag " +
+                         std::to_string(tag) + " claims " + std::to_string(n) + " values");
+      const std::uint64_t bytes = n * size;
+      std::uint64_t where = at + (big ? 12 : 8);
+      if (bytes > inline_size) {
+        where = big ? get<std::uint64_t>(d + 12, swap) : get<std::uint32_t>(d + 8, swap);
+        if (!file.fits(where, bytes))
+          cut(page, "tag " + std::to_string(tag) + "'s values", where, bytes);
+      }
+      const auto value = [&](std::uint64_t i) -> std::uint64_t {
+        unsigned char v[8];
+        file.read(where + i * size, v, size);
+        if (size == 2) return get<std::uint16_t>(v, swap);
+        if (size == 4) return get<std::uint32_t>(v, swap);
+        if (size == 8) return get<std::uint64_t>(v, swap);
+        return v[0];
+      };
+      if (n == 0) continue;
+      switch (tag) {
+        case 256:
+          width = value(0);
+          break;
+        case 257:
+          height = value(0);
+          break;
+        case 258:
+          bps = value(0);
+          break;
+        case 259:
+          compression = value(0);
+          break;
+        case 277:
+          spp = value(0);
+          break;
+        case 278:
+          rows_per_strip = value(0);
+          break;
+        case 322:
+          tile_w = value(0);
+          break;
+        case 323:
+          tile_h = value(0);
+          break;
+        case 273:
+        case 324:
+          if (n > (std::uint64_t{1} << 24))
+            throw InputError(path + ": TIFF page " + std::to_string(page) + ": " +
+                             std::to_string(n) + " strips");
+          offsets.resize(n);
+          for (std::uint64_t i = 0; i < n; ++i) offsets[i] = value(i);
+          break;
+        case 279:
+        case 325:
+          if (n > (std::uint64_t{1} << 24))
+            throw InputError(path + ": TIFF page " + std::to_string(page) + ": " +
+                             std::to_string(n) + " strips");
+          counts.resize(n);
+          for (std::uint64_t i = 0; i < n; ++i) counts[i] = value(i);
+          break;
+        default:
+          break;
+      }
+    }
+    if (offsets.size() != counts.size())
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " has " +
+                       std::to_string(offsets.size()) + " strip offsets but " +
+                       std::to_string(counts.size()) + " byte counts");
+    std::uint64_t held = 0;
+    for (std::size_t i = 0; i < offsets.size(); ++i) {
+      if (!file.fits(offsets[i], counts[i]))
+        cut(page, (tile_w ? "tile " : "strip ") + std::to_string(i), offsets[i], counts[i]);
+      held += counts[i];
+    }
+    if (compression == 1 && width > 0 && height > 0 && width < (1u << 30) && height < (1u << 30) &&
+        bps <= 64 && spp <= 64) {
+      std::uint64_t need = 0;
+      if (tile_w && tile_h) {
+        const std::uint64_t across = (width + tile_w - 1) / tile_w,
+                            down = (height + tile_h - 1) / tile_h;
+        need = across * down * ((tile_w * spp * bps + 7) / 8) * tile_h;
+      } else {
+        const std::uint64_t rows =
+            rows_per_strip && rows_per_strip < height ? rows_per_strip : height;
+        const std::uint64_t row_bytes = (width * spp * bps + 7) / 8;
+        // The last strip may be short.
+        need = row_bytes * height;
+        (void)rows;
+      }
+      if (held < need)
+        throw InputError(path + ": TIFF page " + std::to_string(page) + " of " +
+                         std::to_string(width) + "x" + std::to_string(height) + " " +
+                         std::to_string(bps) + "-bit samples needs " + std::to_string(need) +
+                         " bytes but its strips hold " + std::to_string(held));
+    }
+    const std::uint64_t next_at = ifd + count_size + entries * entry_size;
+    unsigned char nx[8];
+    file.read(next_at, nx, inline_size);
+    ifd = big ? get<std::uint64_t>(nx, swap) : get<std::uint32_t>(nx, swap);
+  }
 }
 
 }  // namespace isotile
