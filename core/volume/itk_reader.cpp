@@ -327,8 +327,8 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
       std::vector<double> steps(files.size() - 1);
       for (std::size_t k = 1; k < files.size(); ++k) steps[k - 1] = d[k] - d[k - 1];
       std::vector<double> sorted = steps;
-      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-      const double typical = sorted[sorted.size() / 2];
+      std::nth_element(sorted.begin(), sorted.begin() + (sorted.size() - 1) / 2, sorted.end());
+      const double typical = sorted[(sorted.size() - 1) / 2];
       std::size_t worst = 0;
       for (std::size_t k = 1; k < steps.size(); ++k)
         if (std::abs(steps[k] - typical) > std::abs(steps[worst] - typical)) worst = k;
