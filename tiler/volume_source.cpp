@@ -114,7 +114,7 @@ class RawFileSource final : public VolumeSource {
 // planes read are kept for the next box.
 class GzipRawSource final : public VolumeSource {
  public:
-  explicit GzipRawSource(const PlainLayout& layout) : swap_(layout.swap) {
+  explicit GzipRawSource(const PlainLayout& layout) : file_name_(layout.file), swap_(layout.swap) {
     name = layout.file;
     type = layout.type;
     dims = layout.dims;
@@ -190,10 +190,10 @@ class GzipRawSource final : public VolumeSource {
       int code = Z_OK;
       const char* message = gzerror(file_, &code);
       if (n < 0 || (code != Z_OK && code != Z_BUF_ERROR))
-        throw InputError(name + ": corrupt gzip data (" +
+        throw InputError(file_name_ + ": corrupt gzip data (" +
                          std::string(message ? message : "bad gzip data") + ")");
       if (n == 0 || code == Z_BUF_ERROR)
-        throw InputError(name + ": gzip data ends after " +
+        throw InputError(file_name_ + ": gzip data cut off: it ends after " +
                          std::to_string(static_cast<std::uint64_t>(next_plane_) * plane_bytes_ +
                                         done + static_cast<std::size_t>(std::max(n, 0))) +
                          " bytes but " + volume_text() + " (truncated file)");
@@ -215,16 +215,16 @@ class GzipRawSource final : public VolumeSource {
     int code = Z_OK;
     const char* message = gzerror(file_, &code);
     if (n == 1)
-      throw InputError(name + ": gzip data holds more than the " +
+      throw InputError(file_name_ + ": gzip data holds more than the " +
                        std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2])) +
                        " bytes " + volume_text().substr(0, volume_text().find(" samples")) +
                        " samples need (too long)");
     if (code == Z_BUF_ERROR)
-      throw InputError(name + ": gzip data cut off in its trailer after all " +
+      throw InputError(file_name_ + ": gzip data cut off in its trailer after all " +
                        std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2])) +
                        " bytes (truncated file)");
     if (n < 0 || code != Z_OK)
-      throw InputError(name + ": corrupt gzip data (" +
+      throw InputError(file_name_ + ": corrupt gzip data (" +
                        std::string(message ? message : "bad gzip data") + ")");
     end_checked_ = true;
   }
@@ -235,6 +235,7 @@ class GzipRawSource final : public VolumeSource {
   }
 
   gzFile file_ = nullptr;
+  std::string file_name_;  // the file holding the stream (a NRRD header's data file)
   bool swap_ = false;
   std::size_t plane_bytes_ = 0;
   std::int64_t next_plane_ = 0;
