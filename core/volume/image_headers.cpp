@@ -501,10 +501,17 @@ struct DicomWalk {
       } else {
         vr[0] = static_cast<char>(h[4]);
         vr[1] = static_cast<char>(h[5]);
-        if (!std::isupper(static_cast<unsigned char>(vr[0])) ||
-            !std::isupper(static_cast<unsigned char>(vr[1])))
+        // Only the standard's VRs: GDCM reads an element with another as implicit VR, taking
+        // the VR's bytes for a length (hundreds of MB), or asserts on it in the meta group.
+        static const char kVrs[] =
+            "AEASATCSDADSDTFLFDISLOLTOBODOFOLOVOWPNSHSLSQSSSTSVTMUCUIULUNURUSUTUV";
+        bool known = false;
+        for (std::size_t i = 0; i + 1 < sizeof kVrs; i += 2)
+          known = known || (kVrs[i] == vr[0] && kVrs[i + 1] == vr[1]);
+        if (!known)
           throw InputError(path + ": malformed DICOM: element " + hex_tag(group, element) +
-                           " at offset " + std::to_string(at) + " has no value representation");
+                           " at offset " + std::to_string(at) +
+                           " has no valid value representation");
         static const char* const kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
                                             "SV", "UC", "UN", "UR", "UT", "UV"};
         bool long_form = false;
@@ -549,6 +556,12 @@ struct DicomWalk {
           const std::string text(reinterpret_cast<char*>(v), static_cast<std::size_t>(length));
           frames = std::max<std::int64_t>(1, std::atoll(text.c_str()));
         }
+      }
+      if (meta && group == 0x0002 && element == 0x0000 && length == 4) {
+        unsigned char v[4];
+        file.read(value, v, 4);
+        meta_length = true;
+        meta_length_end = value + 4 + u32(v);
       }
       if (meta && group == 0x0002 && element == 0x0010 && length <= 64) {
         char ts[65] = {};
@@ -603,16 +616,40 @@ struct DicomWalk {
   }
 
   std::string syntax;
+  bool meta_length = false;  // (0002,0000) present
+  std::uint64_t meta_length_end = 0;
 };
 
 }  // namespace
 
-void check_dicom_file(const std::string& path) {
+void check_dicom_file(const std::string& path, bool given) {
   FileBytes file(path);
   unsigned char marker[4];
-  if (!file.read(128, marker, 4) || std::memcmp(marker, "DICM", 4) != 0) return;
+  if (!file.read(128, marker, 4) || std::memcmp(marker, "DICM", 4) != 0) {
+    if (!given) return;  // other files in a series' directory: GDCM's scanner passes them by
+    // A file given by name without the marker: GDCM would parse it as implicit VR from its first
+    // byte, and size its allocations by whatever lengths it finds there.
+    DicomWalk w{file, path};
+    w.implicit = true;
+    try {
+      w.dataset(0, file.size(), false, 0, false);
+    } catch (const InputError& e) {
+      throw InputError(path +
+                       ": not a DICOM file (no DICM marker, and not a readable implicit-VR "
+                       "data set: " +
+                       std::string(e.what()).substr(path.size() + 2) + ")");
+    }
+    return;
+  }
   DicomWalk w{file, path};
   const std::uint64_t after_meta = w.dataset(132, file.size(), false, 0, true);
+  // GDCM asserts on a file that ends with its meta group, or whose group length disagrees.
+  if (w.meta_length && after_meta != w.meta_length_end)
+    throw InputError(path + ": malformed DICOM: the file meta group length says it ends at byte " +
+                     std::to_string(w.meta_length_end) + ", its elements end at " +
+                     std::to_string(after_meta));
+  if (after_meta >= file.size())
+    throw InputError(path + ": DICOM file ends after its meta information (truncated file)");
   if (w.syntax == "1.2.840.10008.1.2.1.99") return;  // deflated: GDCM inflates and judges it
   w.implicit = w.syntax == "1.2.840.10008.1.2";
   w.big = w.syntax == "1.2.840.10008.1.2.2";
@@ -638,8 +675,11 @@ void check_dicom_input(const std::string& input) {
   std::error_code ec;
   const fs::path dir =
       fs::is_directory(input, ec) ? fs::path(input) : fs::path(input).parent_path();
+  const bool file = !fs::is_directory(input, ec);
+  if (file) check_dicom_file(input, true);
   for (const auto& e : fs::directory_iterator(dir.empty() ? fs::path(".") : dir, ec))
-    if (e.is_regular_file(ec)) check_dicom_file(e.path().string());
+    if (e.is_regular_file(ec) && !(file && fs::equivalent(e.path(), input, ec)))
+      check_dicom_file(e.path().string(), false);
 }
 
 void check_tiff_file(const std::string& path) {
@@ -671,6 +711,7 @@ void check_tiff_file(const std::string& path) {
   static const std::size_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4,
                                             8, 4, 8, 4, 0, 0, 8, 8, 8};
   std::vector<std::uint64_t> seen;
+  std::array<std::uint64_t, 4> first{};  // page 1's width, height, bits and samples
   int page = 0;
   while (ifd != 0) {
     ++page;
@@ -684,7 +725,7 @@ void check_tiff_file(const std::string& path) {
     if (!file.fits(ifd + count_size, entries * entry_size + inline_size))
       cut(page, "its directory", ifd, count_size + entries * entry_size + inline_size);
     std::uint64_t width = 0, height = 0, bps = 1, spp = 1, compression = 1, rows_per_strip = 0,
-                  tile_w = 0, tile_h = 0;
+                  tile_w = 0, tile_h = 0, subfile = 0;
     std::vector<std::uint64_t> offsets, counts;
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
@@ -715,6 +756,9 @@ void check_tiff_file(const std::string& path) {
       };
       if (n == 0) continue;
       switch (tag) {
+        case 254:
+          subfile = value(0);
+          break;
         case 256:
           width = value(0);
           break;
@@ -789,6 +833,22 @@ void check_tiff_file(const std::string& path) {
                          std::to_string(width) + "x" + std::to_string(height) + " " +
                          std::to_string(bps) + "-bit samples needs " + std::to_string(need) +
                          " bytes but its strips hold " + std::to_string(held));
+    }
+    // ITK sizes its buffer by the first page and reads every page into it: pages of another
+    // size, or reduced-resolution and mask pages it counts differently, would overrun it.
+    if (subfile & 5)
+      throw InputError(path + ": TIFF page " + std::to_string(page) +
+                       " is a reduced-resolution or mask image (NewSubfileType " +
+                       std::to_string(subfile) + "); a volume is a stack of full pages");
+    if (page == 1) {
+      first = {width, height, bps, spp};
+    } else if (std::array<std::uint64_t, 4>{width, height, bps, spp} != first) {
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " is " +
+                       std::to_string(width) + "x" + std::to_string(height) + " with " +
+                       std::to_string(spp) + " samples of " + std::to_string(bps) +
+                       " bits where page 1 is " + std::to_string(first[0]) + "x" +
+                       std::to_string(first[1]) + " with " + std::to_string(first[3]) +
+                       " samples of " + std::to_string(first[2]) + " bits");
     }
     const std::uint64_t next_at = ifd + count_size + entries * entry_size;
     unsigned char nx[8];

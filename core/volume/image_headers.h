@@ -36,8 +36,9 @@ ImageHeaderCheck check_metaimage_header(const std::string& path);
 // DICOM Part 10 files (with the "DICM" marker), walked element by element before GDCM sees them:
 // every element must lie within the file and the pixel data must hold the Rows x Columns x
 // samples x frames its header says (GDCM reads a cut-off slice as zeros with a warning only, and
-// aborts on some cut-off headers). Files without the marker are left to GDCM.
-void check_dicom_file(const std::string& path);
+// aborts on some cut-off headers). Files without the marker are left to GDCM, unless `given` (the
+// input named by the user), when they must parse as an implicit-VR data set.
+void check_dicom_file(const std::string& path, bool given = false);
 // The same for the DICOM files of a series input: the directory's files, or those beside a file.
 void check_dicom_input(const std::string& input);
 
