@@ -711,7 +711,8 @@ void check_tiff_file(const std::string& path) {
   static const std::size_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4,
                                             8, 4, 8, 4, 0, 0, 8, 8, 8};
   std::vector<std::uint64_t> seen;
-  std::array<std::uint64_t, 4> first{};  // page 1's width, height, bits and samples
+  std::array<std::uint64_t, 4> first{};       // page 1's width, height, bits and samples
+  std::array<std::uint64_t, 3> first_kind{};  // its photometric, planar configuration, format
   int page = 0;
   while (ifd != 0) {
     ++page;
@@ -725,7 +726,7 @@ void check_tiff_file(const std::string& path) {
     if (!file.fits(ifd + count_size, entries * entry_size + inline_size))
       cut(page, "its directory", ifd, count_size + entries * entry_size + inline_size);
     std::uint64_t width = 0, height = 0, bps = 1, spp = 1, compression = 1, rows_per_strip = 0,
-                  tile_w = 0, tile_h = 0, subfile = 0;
+                  tile_w = 0, tile_h = 0, subfile = 0, photometric = 1, planar = 1, format = 1;
     std::vector<std::uint64_t> offsets, counts;
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
@@ -757,7 +758,19 @@ void check_tiff_file(const std::string& path) {
       if (n == 0) continue;
       switch (tag) {
         case 254:
-          subfile = value(0);
+          subfile |= value(0);
+          break;
+        case 255:  // the old SubfileType: 2 is a reduced-resolution image, as libtiff maps it
+          if (value(0) == 2) subfile |= 1;
+          break;
+        case 262:
+          photometric = value(0);
+          break;
+        case 284:
+          planar = value(0);
+          break;
+        case 339:
+          format = value(0);
           break;
         case 256:
           width = value(0);
@@ -842,6 +855,14 @@ void check_tiff_file(const std::string& path) {
                        std::to_string(subfile) + "); a volume is a stack of full pages");
     if (page == 1) {
       first = {width, height, bps, spp};
+      first_kind = {photometric, planar, format};
+    } else if (std::array<std::uint64_t, 3>{photometric, planar, format} != first_kind) {
+      throw InputError(path + ": TIFF page " + std::to_string(page) +
+                       " stores its samples differently from page 1 (photometric " +
+                       std::to_string(photometric) + ", planar " + std::to_string(planar) +
+                       ", sample format " + std::to_string(format) + " against " +
+                       std::to_string(first_kind[0]) + ", " + std::to_string(first_kind[1]) + ", " +
+                       std::to_string(first_kind[2]) + ")");
     } else if (std::array<std::uint64_t, 4>{width, height, bps, spp} != first) {
       throw InputError(path + ": TIFF page " + std::to_string(page) + " is " +
                        std::to_string(width) + "x" + std::to_string(height) + " with " +
