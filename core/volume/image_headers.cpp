@@ -462,12 +462,38 @@ std::string hex_tag(std::uint16_t group, std::uint16_t element) {
   return b;
 }
 
+// The VR of the elements GDCM and ITK read through typed attributes (image geometry, pixel
+// description, identification); nullptr for the others.
+const char* expected_vr(std::uint16_t group, std::uint16_t element) {
+  struct Known {
+    std::uint16_t group, element;
+    const char* vr;
+  };
+  static constexpr Known kKnown[] = {
+      {0x0002, 0x0000, "UL"}, {0x0002, 0x0001, "OB"}, {0x0002, 0x0002, "UI"},
+      {0x0002, 0x0003, "UI"}, {0x0002, 0x0010, "UI"}, {0x0002, 0x0012, "UI"},
+      {0x0008, 0x0016, "UI"}, {0x0008, 0x0018, "UI"}, {0x0008, 0x0060, "CS"},
+      {0x0018, 0x0050, "DS"}, {0x0018, 0x0088, "DS"}, {0x0020, 0x000D, "UI"},
+      {0x0020, 0x000E, "UI"}, {0x0020, 0x0011, "IS"}, {0x0020, 0x0012, "IS"},
+      {0x0020, 0x0013, "IS"}, {0x0020, 0x0032, "DS"}, {0x0020, 0x0037, "DS"},
+      {0x0020, 0x1041, "DS"}, {0x0028, 0x0002, "US"}, {0x0028, 0x0004, "CS"},
+      {0x0028, 0x0006, "US"}, {0x0028, 0x0008, "IS"}, {0x0028, 0x0010, "US"},
+      {0x0028, 0x0011, "US"}, {0x0028, 0x0030, "DS"}, {0x0028, 0x0100, "US"},
+      {0x0028, 0x0101, "US"}, {0x0028, 0x0102, "US"}, {0x0028, 0x0103, "US"},
+      {0x0028, 0x1050, "DS"}, {0x0028, 0x1051, "DS"}, {0x0028, 0x1052, "DS"},
+      {0x0028, 0x1053, "DS"}, {0x0028, 0x1054, "LO"}, {0x7FE0, 0x0010, "OB"}};
+  for (const Known& k : kKnown)
+    if (k.group == group && k.element == element) return k.vr;
+  return nullptr;
+}
+
 struct DicomWalk {
   DicomWalk(FileBytes& f, const std::string& p) : file(f), path(p) {}
   FileBytes& file;
   const std::string& path;
   bool implicit = false, big = false;
   std::int64_t rows = -1, columns = -1, bits = -1, samples = 1, frames = 1;
+  std::int64_t bits_stored = -1, high_bit = -1;
   bool pixel_found = false;
   std::uint64_t pixel_at = 0, pixel_length = 0;
   bool encapsulated = false;
@@ -517,6 +543,13 @@ struct DicomWalk {
           throw InputError(path + ": malformed DICOM: element " + hex_tag(group, element) +
                            " at offset " + std::to_string(at) +
                            " has no valid value representation");
+        // GDCM reads these through typed attributes and asserts when the VR is another.
+        if (const char* want = expected_vr(group, element);
+            want && !(want[0] == vr[0] && want[1] == vr[1]) &&
+            !(group == 0x7FE0 && std::strcmp(vr, "OW") == 0))
+          throw InputError(path + ": malformed DICOM: element " + hex_tag(group, element) +
+                           " at offset " + std::to_string(at) + " has VR " + vr +
+                           " where the standard says " + want);
         static const char* const kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
                                             "SV", "UC", "UN", "UR", "UT", "UV"};
         bool long_form = false;
@@ -556,6 +589,8 @@ struct DicomWalk {
         if (element == 0x0010) rows = u16(v);
         if (element == 0x0011) columns = u16(v);
         if (element == 0x0100) bits = u16(v);
+        if (element == 0x0101) bits_stored = u16(v);
+        if (element == 0x0102) high_bit = u16(v);
         if (element == 0x0002) samples = u16(v);
         if (element == 0x0008) {
           const std::string text(reinterpret_cast<char*>(v), static_cast<std::size_t>(length));
@@ -659,6 +694,15 @@ void check_dicom_file(const std::string& path, bool given) {
   w.implicit = w.syntax == "1.2.840.10008.1.2";
   w.big = w.syntax == "1.2.840.10008.1.2.2";
   w.dataset(after_meta, file.size(), false, 0, false);
+  // GDCM asserts on pixel descriptions outside these.
+  if (w.samples != 1 && w.samples != 3 && w.samples != 4)
+    throw InputError(path + ": DICOM SamplesPerPixel is " + std::to_string(w.samples) +
+                     " (1, 3 or 4)");
+  if (w.bits_stored >= 0 && w.bits >= 0 &&
+      (w.bits_stored > w.bits || (w.high_bit >= 0 && w.high_bit >= w.bits_stored)))
+    throw InputError(path + ": DICOM BitsAllocated " + std::to_string(w.bits) + ", BitsStored " +
+                     std::to_string(w.bits_stored) + " and HighBit " + std::to_string(w.high_bit) +
+                     " do not fit one another");
   if (w.rows < 0 && w.columns < 0) return;  // no image (GDCM says what it is)
   if (!w.pixel_found)
     throw InputError(path + ": DICOM image of " + std::to_string(w.columns) + "x" +
@@ -741,6 +785,11 @@ void check_tiff_file(const std::string& path) {
       const std::uint64_t n =
           big ? get<std::uint64_t>(d + 4, swap) : get<std::uint32_t>(d + 4, swap);
       const std::size_t size = type < 19 ? kTypeSize[type] : 0;
+      // ITK lists every custom tag through TIFFGetField with one pointer, where libtiff's
+      // DotRange takes two: ITK then writes through a stray pointer (found by the fuzz replay).
+      if (tag == 336)
+        throw InputError(path + ": TIFF page " + std::to_string(page) +
+                         " has a DotRange tag, which ITK's TIFF reader cannot read safely");
       if (size == 0) continue;  // unknown types are skipped by libtiff too
       if (n > (std::uint64_t{1} << 40) / size)
         throw InputError(path + ": TIFF page " + std::to_string(page) + ": tag " +
