@@ -726,6 +726,10 @@ TEST_F(DamagedInputs, CompressedNiftiAndMetaImageMustInflateToEverySample) {
   fs::copy_file(dir_ / "good.nii.gz", dir_ / "UPPER.NII.GZ");
   EXPECT_EQ(triangles("UPPER.MHA"), want);
   EXPECT_EQ(triangles("UPPER.NII.GZ"), want);
+  write_itk((dir_ / "detached.mhd").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1},
+            {0, 0, 0}, kIdentity3);
+  fs::copy_file(dir_ / "detached.mhd", dir_ / "DETACHED.MHD");
+  EXPECT_EQ(triangles("DETACHED.MHD"), want);
 
   const std::string nii = testing::slurp(dir_ / "good.nii.gz");
   expect_refused(write("cut.nii.gz", nii.substr(0, nii.size() * 2 / 3)),
