@@ -290,8 +290,13 @@ void check_dicom_input(const std::string& input) {
   const bool file = !fs::is_directory(input, ec);
   if (file) check_dicom_file(input, true);
   for (const auto& e : fs::directory_iterator(dir.empty() ? fs::path(".") : dir, ec))
-    if (e.is_regular_file(ec) && !(file && fs::equivalent(e.path(), input, ec)))
-      check_dicom_file(e.path().string(), false);
+    if (e.is_regular_file(ec) && !(file && fs::equivalent(e.path(), input, ec))) {
+      try {
+        check_dicom_file(e.path().string(), false);
+      } catch (const IoError&) {
+        // A file beside the series that cannot be opened: GDCM's scan passes it by too.
+      }
+    }
 }
 
 }  // namespace isotile
