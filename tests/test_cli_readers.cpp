@@ -85,6 +85,27 @@ TEST_F(CliReaders, ItkThroughTheModuleAsInTheLibrary) {
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }
 
+// A .vdb cut short anywhere, even by its last byte (which OpenVDB alone would not notice), is
+// refused in one line, in core, out of core and by info, and leaves no output.
+TEST_F(CliReaders, TruncatedVdbIsRefused) {
+  const std::string bytes = testing::slurp(write_vdb());
+  ASSERT_GT(bytes.size(), 1000u);
+  for (const std::size_t keep :
+       {bytes.size() - 1, bytes.size() * 3 / 4, bytes.size() / 2, std::size_t{200}}) {
+    std::ofstream(dir_ / "cut.vdb", std::ios::binary) << bytes.substr(0, keep);
+    for (const char* command :
+         {"-q extract cut.vdb --iso 0 -o cut.ply",
+          "-q extract cut.vdb --iso 0 -o cut.ply --memory 1MiB", "-q info cut.vdb"}) {
+      fs::remove(dir_ / "cut.ply");
+      const CliResult r = run(command);
+      EXPECT_EQ(r.code, 1) << command << " at " << keep << " bytes: " << r.err;
+      EXPECT_NE(r.err.find("cut.vdb"), std::string::npos) << r.err;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+      EXPECT_FALSE(fs::exists(dir_ / "cut.ply")) << command << " at " << keep;
+    }
+  }
+}
+
 // The dynamic loader's log of a run that reads a procedural field names neither library.
 TEST_F(CliReaders, OtherInputsLoadNeitherLibrary) {
   const CliResult r = run("-q extract field:sphere:16 -o out.ply", "LD_DEBUG=libs");

@@ -3,6 +3,7 @@
 // with positions mapped through the header's transform; real files from ../shared/data; corrupt
 // and truncated headers give one clear error line.
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <cmath>
 #include <cstring>
@@ -520,7 +521,11 @@ TEST_F(DicomDir, UnevenOrDuplicateSlicesAreErrors) {
   copy(53);  // 52 missing: a 2 mm step among 1 mm steps
   CliResult r = run("extract . -o out.ply --iso 60 -q");
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.err.find("non-uniform slice spacing"), std::string::npos) << r.err;
+  // The gap is named by the files on either side and its size against the typical step.
+  EXPECT_NE(r.err.find("a gap of 2 mm between 00000053.dcm and 00000051.dcm where the slices lie "
+                       "1 mm apart (about 1 slice missing)"),
+            std::string::npos)
+      << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
   fs::remove(dir_ / "00000053.dcm");
   copy(51, "copy_of_51.dcm");
@@ -613,7 +618,7 @@ TEST_F(BadHeaders, NiftiAndMetaImage) {
   std::string et = mha;
   et.replace(et.find("MET_FLOAT"), 9, "MET_LONG_LONG");
   expect_one_line(write("type.mha", et), "ElementType 'MET_LONG_LONG' is not supported");
-  expect_one_line(write("junk.tif", std::string(64, 'x')), "not a readable TIFF file");
+  expect_one_line(write("junk.tif", std::string(64, 'x')), "not a TIFF file");
 }
 
 TEST_F(BadHeaders, Mrc) {
@@ -634,6 +639,249 @@ TEST_F(BadHeaders, Mrc) {
   std::string ext = mrc;
   ext[95] = static_cast<char>(0x80);  // NSYMBT negative
   expect_one_line(write("ext.mrc", ext), "NSYMBT");
+}
+
+// --- damaged and foreign inputs (issue 38) ---------------------------------------------------
+
+// Copies of good files cut short or corrupted at run time: every one must be refused with one
+// line naming the file, in core, out of core (--memory) and by `info`, and leave no output.
+class DamagedInputs : public CliTest {
+ protected:
+  std::string write(const std::string& name, const std::string& bytes) {
+    std::ofstream(dir_ / name, std::ios::binary) << bytes;
+    return name;
+  }
+  static std::string gzip(const std::string& bytes) {
+    std::string out(compressBound(static_cast<uLong>(bytes.size())) + 64, '\0');
+    z_stream z{};
+    deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY);  // gzip wrapper
+    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(bytes.data()));
+    z.avail_in = static_cast<uInt>(bytes.size());
+    z.next_out = reinterpret_cast<Bytef*>(out.data());
+    z.avail_out = static_cast<uInt>(out.size());
+    EXPECT_EQ(deflate(&z, Z_FINISH), Z_STREAM_END);
+    out.resize(z.total_out);
+    deflateEnd(&z);
+    return out;
+  }
+  static std::string zlib(const std::string& bytes) {
+    uLongf n = compressBound(static_cast<uLong>(bytes.size()));
+    std::string out(n, '\0');
+    EXPECT_EQ(compress2(reinterpret_cast<Bytef*>(out.data()), &n,
+                        reinterpret_cast<const Bytef*>(bytes.data()),
+                        static_cast<uLong>(bytes.size()), 6),
+              Z_OK);
+    out.resize(n);
+    return out;
+  }
+  // extract in core, extract out of core and info: exit 1, one line naming `file` and holding
+  // `what`, no output file.
+  void expect_refused(const std::string& file, const std::string& what, bool out_of_core = true,
+                      const std::string& named = "") {
+    std::vector<std::string> commands = {"extract '" + file + "' -o out.ply --iso 0.5 -q",
+                                         "info '" + file + "'"};
+    if (out_of_core)
+      commands.push_back("extract '" + file + "' -o out.ply --iso 0.5 -q --memory 1MiB");
+    for (const std::string& c : commands) {
+      const CliResult r = run(c);
+      EXPECT_EQ(r.code, 1) << c << ": " << r.err;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c << ": " << r.err;
+      EXPECT_NE(r.err.find(what), std::string::npos) << c << ": " << r.err;
+      EXPECT_NE(r.err.find(named.empty() ? fs::path(file).filename().string() : named),
+                std::string::npos)
+          << r.err;
+      EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << c;
+    }
+  }
+  std::uint64_t triangles(const std::string& file, const std::string& more = "",
+                          const std::string& iso = "0.5") {
+    const CliResult r =
+        run("extract '" + file + "' -o ok.ply --iso " + iso + " -q --stats - " + more);
+    EXPECT_EQ(r.code, 0) << file << ": " << r.err;
+    const std::size_t at = r.out.find("\"triangles\":");
+    return at == std::string::npos ? 0 : std::stoull(r.out.substr(at + 12));
+  }
+};
+
+TEST_F(DamagedInputs, CompressedNiftiAndMetaImageMustInflateToEverySample) {
+  REQUIRE_ITK();
+  const Volume raw = make_field_volume(*parse_field_spec("field:sphere:40"));
+  write_itk((dir_ / "good.nii.gz").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1},
+            {0, 0, 0}, kIdentity3);
+  write_itk((dir_ / "plain.mha").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1},
+            {0, 0, 0}, kIdentity3);
+  const std::uint64_t want = triangles("good.nii.gz");
+  ASSERT_GT(want, 500u);
+  // A compressed MetaImage: the plain one's header with its samples deflated as MetaIO does.
+  const std::string plain = testing::slurp(dir_ / "plain.mha");
+  const std::size_t data_at = plain.find("ElementDataFile = LOCAL\n") + 24;
+  const std::string packed = zlib(plain.substr(data_at));
+  std::string header = plain.substr(0, data_at);
+  header.insert(header.find("ElementType"), "CompressedData = True\nCompressedDataSize = " +
+                                                std::to_string(packed.size()) + "\n");
+  write("good.mha", header + packed);
+  EXPECT_EQ(triangles("good.mha"), want);
+  // Names match in any case.
+  fs::copy_file(dir_ / "good.mha", dir_ / "UPPER.MHA");
+  fs::copy_file(dir_ / "good.nii.gz", dir_ / "UPPER.NII.GZ");
+  EXPECT_EQ(triangles("UPPER.MHA"), want);
+  EXPECT_EQ(triangles("UPPER.NII.GZ"), want);
+  write_itk((dir_ / "detached.mhd").string(), raw.bytes(), raw.type(), raw.dims(), {1, 1, 1},
+            {0, 0, 0}, kIdentity3);
+  fs::copy_file(dir_ / "detached.mhd", dir_ / "DETACHED.MHD");
+  EXPECT_EQ(triangles("DETACHED.MHD"), want);
+
+  const std::string nii = testing::slurp(dir_ / "good.nii.gz");
+  expect_refused(write("cut.nii.gz", nii.substr(0, nii.size() * 2 / 3)),
+                 "compressed data cut off: it inflates to");
+  expect_refused(write("trailer.nii.gz", nii.substr(0, nii.size() - 4)), "compressed data cut off");
+  std::string flipped = nii;
+  flipped[flipped.size() / 2] = static_cast<char>(flipped[flipped.size() / 2] ^ 0x55);
+  expect_refused(write("flipped.nii.gz", flipped), "corrupt compressed data");
+  // A whole gzip stream that holds too few samples: the header of a bigger volume.
+  const std::string nii_plain = [&] {
+    gzFile f = gzopen((dir_ / "good.nii.gz").string().c_str(), "rb");
+    std::string out(1 << 20, '\0');
+    const int n = gzread(f, out.data(), static_cast<unsigned>(out.size()));
+    gzclose(f);
+    out.resize(static_cast<std::size_t>(std::max(n, 0)));
+    return out;
+  }();
+  ASSERT_GT(nii_plain.size(), raw.byte_size());
+  expect_refused(write("short.nii.gz", gzip(nii_plain.substr(0, nii_plain.size() - 4000))),
+                 "expected (too short)");
+
+  const std::string mha = testing::slurp(dir_ / "good.mha");
+  expect_refused(write("cut.mha", mha.substr(0, mha.size() - packed.size() / 3)),
+                 "compressed data cut off");
+  // Header says more samples than the stream holds.
+  std::string dims = mha;
+  dims.replace(dims.find("DimSize = 40 40 40"), 18, "DimSize = 40 40 41");
+  expect_refused(write("dims.mha", dims), "(too short)");
+  expect_refused(write("CUT.MHA", mha.substr(0, mha.size() - packed.size() / 3)),
+                 "compressed data cut off");
+}
+
+TEST_F(DamagedInputs, GzipRawInCoreAndOutOfCore) {
+  const std::string gz =
+      testing::slurp(fs::path(ISOTILE_TEST_DATA) / "nucleon_41x41x41_uint8.raw.gz");
+  ASSERT_GT(gz.size(), 100u);
+  write("good_41x41x41_uint8.raw.gz", gz);
+  ASSERT_GT(triangles("good_41x41x41_uint8.raw.gz", "", "60"), 100u);
+  expect_refused(write("half_41x41x41_uint8.raw.gz", gz.substr(0, gz.size() / 2)), "truncated");
+  // Only the trailer (CRC and length) cut: every sample is there, the stream is not whole.
+  expect_refused(write("trailer_41x41x41_uint8.raw.gz", gz.substr(0, gz.size() - 4)), "truncated");
+  std::string bad = gz;
+  bad[bad.size() - 6] = static_cast<char>(bad[bad.size() - 6] ^ 0x1);  // the CRC
+  expect_refused(write("crc_41x41x41_uint8.raw.gz", bad), "gzip");
+}
+
+TEST_F(DamagedInputs, NrrdRawAndGzipMustHoldEverySample) {
+  const std::string gz =
+      testing::slurp(fs::path(ISOTILE_TEST_DATA) / "nucleon_41x41x41_uint8.raw.gz");
+  const std::string header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 41 41 41\n";
+  write("good.nrrd", header + "encoding: gzip\n\n" + gz);
+  ASSERT_GT(triangles("good.nrrd", "", "60"), 100u);
+  // teem takes a cut-off gzip stream for the end of the data and leaves the rest as it was.
+  expect_refused(write("cut.nrrd", header + "encoding: gzip\n\n" + gz.substr(0, gz.size() / 2)),
+                 "compressed data cut off");
+  expect_refused(write("trailer.nrrd", header + "encoding: gzip\n\n" + gz.substr(0, gz.size() - 4)),
+                 "compressed data cut off");
+  // Detached gzip data, read slab by slab out of core.
+  write("data.raw.gz", gz.substr(0, gz.size() - 4));
+  expect_refused(write("detached.nhdr", header + "encoding: gzip\ndata file: data.raw.gz\n\n"),
+                 "cut off", true, "data.raw.gz");
+}
+
+TEST_F(DamagedInputs, GzipMrcIsReadDirectlyAndMustBeWhole) {
+  const Volume raw = make_field_volume(*parse_field_spec("field:sphere:24"));
+  write_mrc(dir_ / "good.mrc", raw, MrcSpec{});
+  const std::string mrc = testing::slurp(dir_ / "good.mrc");
+  const std::uint64_t want = triangles("good.mrc");
+  ASSERT_GT(want, 100u);
+  write("emdb.map.gz", gzip(mrc));
+  EXPECT_EQ(triangles("emdb.map.gz"), want);
+  EXPECT_EQ(triangles("emdb.map.gz", "--memory 1MiB"), want);
+  write("UPPER.MRC.GZ", gzip(mrc));
+  EXPECT_EQ(triangles("UPPER.MRC.GZ"), want);
+  const std::string gz = gzip(mrc);
+  expect_refused(write("cut.map.gz", gz.substr(0, gz.size() / 2)), "gzip data cut off");
+  expect_refused(write("short.ccp4.gz", gzip(mrc.substr(0, mrc.size() - 100))), "(too short)");
+  expect_refused(write("long.map.gz", gzip(mrc + "xxxx")), "(too long)");
+}
+
+TEST_F(DamagedInputs, ForeignFormatsAreNamedByTheirContent) {
+  const std::string bucky = "bucky_32x32x32_uint8.raw";
+  expect_refused(write("map.map.bz2", std::string("BZh91AY&SY") + std::string(40, '\0')),
+                 "bzip2-compressed data, which isotile does not read; decompress it first (bunzip2",
+                 false);
+  // The name says raw, the content says otherwise: content wins.
+  expect_refused(write(bucky, std::string("\xfd"
+                                          "7zXZ",
+                                          5) +
+                                  std::string(40, '\0')),
+                 "xz-compressed data", false);
+  expect_refused(write("v.nii", std::string("\x28\xb5\x2f\xfd", 4) + std::string(40, '\0')),
+                 "zstd-compressed data", false);
+  expect_refused(write("v.h5", std::string("\x89HDF\r\n\x1a\n", 8) + std::string(40, '\0')),
+                 "an HDF5 file", false);
+  expect_refused(write("v.vtk", "# vtk DataFile Version 3.0\nimage\nBINARY\n"), "a legacy VTK file",
+                 false);
+  expect_refused(write("v.vti", "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\">\n"),
+                 "a VTK XML file", false);
+  fs::create_directories(dir_ / "v.zarr");
+  write("v.zarr/.zarray", "{}");
+  expect_refused("v.zarr", "a Zarr store", false);
+}
+
+TEST_F(DamagedInputs, DicomSliceCutShort) {
+  REQUIRE_ITK();
+  const fs::path series = testing::shared_volume("dicom_uih_t1_head_slab");
+  ISOTILE_REQUIRE_SHARED(series);
+  fs::create_directories(dir_ / "s");
+  for (int n = 60; n < 66; ++n) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%08d.dcm", n);
+    std::string bytes = testing::slurp(series / name);
+    if (n == 62) bytes.resize(bytes.size() - 50000);  // rows of pixels lost
+    if (n == 64) bytes.resize(5000);                  // the header cut
+    write("s/" + std::string(name), bytes);
+  }
+  const CliResult r = run("extract s -o out.ply --iso 60 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("truncated file"), std::string::npos) << r.err;
+  expect_refused("s/00000062.dcm", "needs 471040 bytes");  // any file of the series
+  fs::remove(dir_ / "s" / "00000062.dcm");
+  expect_refused("s", "00000064.dcm: DICOM");
+  write("s/00000064.dcm", testing::slurp(series / "00000064.dcm"));
+  // 62 missing: the 2 mm step is named by its two files, against the typical 1 mm.
+  expect_refused(
+      "s", "a gap of 2 mm between 00000063.dcm and 00000061.dcm where the slices lie 1 mm apart");
+}
+
+TEST_F(DamagedInputs, TiffCutShort) {
+  REQUIRE_ITK();
+  const fs::path tif = testing::shared_volume("tiff_arabidopsis_embryo/arabidopsis-embryo.tif");
+  ISOTILE_REQUIRE_SHARED(tif);
+  const std::string bytes = testing::slurp(tif);
+  write("UPPER.TIF", bytes);
+  const CliResult ok = run("info UPPER.TIF");
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  expect_refused(write("cut.tif", bytes.substr(0, bytes.size() / 2)), "(truncated file)");
+  // A stack of single pages with one cut: the directory of slices is refused.
+  fs::create_directories(dir_ / "pages");
+  const Volume v = field_as("field:sphere:16", ScalarType::UInt16);
+  const std::size_t plane = 16 * 16 * sizeof(std::uint16_t);
+  for (int k = 0; k < 16; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "s_%03d.tif", k);
+    write_itk((dir_ / "pages" / name).string(), v.bytes() + k * plane, ScalarType::UInt16,
+              {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  }
+  ASSERT_EQ(run("info pages").code, 0);
+  const std::string page = testing::slurp(dir_ / "pages" / "s_007.tif");
+  write("pages/s_007.tif", page.substr(0, page.size() - 300));
+  expect_refused("pages", "s_007.tif: TIFF page 1");
 }
 
 }  // namespace

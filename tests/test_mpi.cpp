@@ -215,6 +215,33 @@ TEST_F(MpiCli, GzipInputsAndOtherCommandsAreRefused) {
   EXPECT_EQ(stray_files(), std::vector<std::string>{});
 }
 
+// Damaged inputs fail on every rank count as they do in one process: one line naming the file,
+// no output. A raw file one plane short (read in place by each rank) and a gzip'd NRRD cut off
+// (read whole by each rank).
+TEST_F(MpiCli, DamagedInputsAreRefusedAsInOneProcess) {
+  write_raw(dir_ / "v.raw", 36);
+  std::filesystem::resize_file(dir_ / "v.raw", 36 * 36 * 35 * 2);
+  const std::string gz = slurp(fs::path(ISOTILE_TEST_DATA) / "nucleon_41x41x41_uint8.raw.gz");
+  std::ofstream(dir_ / "cut.nrrd", std::ios::binary)
+      << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 41 41 41\nencoding: gzip\n\n"
+      << gz.substr(0, gz.size() / 2);
+  for (const auto& [input, what] :
+       {std::pair<std::string, std::string>{"v.raw --dims 36,36,36 --type uint16 --iso 2000",
+                                            "v.raw: file holds 90720 bytes but 36x36x36 uint16"},
+        {"cut.nrrd --iso 60", "cut.nrrd: compressed data cut off"}}) {
+    for (int ranks : {1, 3}) {
+      const CliResult r = run_mpi(ranks, input + " --memory 96KiB -o out.ply");
+      EXPECT_EQ(r.code, 1) << input << " on " << ranks << " ranks: " << r.err;
+      EXPECT_NE(r.err.find(what), std::string::npos) << r.err;
+      std::size_t lines = 0;
+      for (std::size_t p = 0; (p = r.err.find("isotile: error:", p)) != std::string::npos; ++p)
+        ++lines;
+      EXPECT_EQ(lines, 1u) << r.err;
+      EXPECT_EQ(stray_files({"v.raw", "cut.nrrd"}), std::vector<std::string>{}) << input;
+    }
+  }
+}
+
 TEST_F(MpiCli, ALauncherWhoseTasksMpiSeesAloneIsRefused) {
   // srun without a PMI plugin: every task would be a world of one writing the whole mesh.
   const CliResult r = run("-q extract field:gyroid:40 --memory 96KiB -o out.ply",

@@ -42,6 +42,7 @@
 #include "core/mesh/self_intersections.h"
 #include "core/mesh/surface_distance.h"
 #include "core/simplify/simplify.h"
+#include "core/volume/image_headers.h"
 #include "core/volume/itk_reader.h"
 #include "core/volume/otsu_isovalue.h"
 #include "core/volume/procedural_fields.h"
@@ -773,6 +774,7 @@ int run_info(const InputArgs& in, bool as_json) {
   const InputKind kind = input_kind(in.input);
   // A directory of several DICOM series: list them, for --series.
   if (kind == InputKind::Dicom && raw.series.empty() && std::filesystem::is_directory(in.input)) {
+    check_dicom_input(in.input);  // before GDCM scans the files (image_headers.h)
     const std::vector<DicomSeriesInfo> series = list_dicom_series(in.input);
     if (series.size() > 1) {
       json list = json::array();

@@ -114,7 +114,7 @@ class RawFileSource final : public VolumeSource {
 // planes read are kept for the next box.
 class GzipRawSource final : public VolumeSource {
  public:
-  explicit GzipRawSource(const PlainLayout& layout) : swap_(layout.swap) {
+  explicit GzipRawSource(const PlainLayout& layout) : file_name_(layout.file), swap_(layout.swap) {
     name = layout.file;
     type = layout.type;
     dims = layout.dims;
@@ -141,6 +141,7 @@ class GzipRawSource final : public VolumeSource {
   void rewind() override {
     if (gzrewind(file_) != 0) throw IoError("cannot rewind " + name);
     next_plane_ = 0;
+    end_checked_ = false;
     kept_.clear();
     kept_lo_ = 0;
   }
@@ -160,6 +161,7 @@ class GzipRawSource final : public VolumeSource {
       while (next_plane_ < k) skip_plane();
       read_plane(dst);
     }
+    if (next_plane_ == dims[2] && !end_checked_) check_end();
     // Keep the last planes: the next slab's lower halo starts at most this far back.
     const std::int64_t keep = std::min<std::int64_t>(box.extent(2), keep_planes_);
     kept_lo_ = box.hi[2] - keep;
@@ -185,24 +187,55 @@ class GzipRawSource final : public VolumeSource {
       const unsigned chunk =
           static_cast<unsigned>(std::min<std::size_t>(plane_bytes_ - done, 1u << 30));
       const int n = gzread(file_, dst + done, chunk);
-      if (n <= 0) {
-        int code = Z_OK;
-        const char* message = gzerror(file_, &code);
-        throw InputError(name + ": " +
-                         (n == 0 ? std::string("gzip data ends before the volume does")
-                                 : std::string(message ? message : "bad gzip data")));
-      }
+      int code = Z_OK;
+      const char* message = gzerror(file_, &code);
+      if (n < 0 || (code != Z_OK && code != Z_BUF_ERROR))
+        throw InputError(file_name_ + ": corrupt gzip data (" +
+                         std::string(message ? message : "bad gzip data") + ")");
+      if (n == 0 || code == Z_BUF_ERROR)
+        throw InputError(file_name_ + ": gzip data cut off: it ends after " +
+                         std::to_string(static_cast<std::uint64_t>(next_plane_) * plane_bytes_ +
+                                        done + static_cast<std::size_t>(std::max(n, 0))) +
+                         " bytes but " + volume_text() + " (truncated file)");
       done += static_cast<std::size_t>(n);
     }
     if (swap_) swap_sample_bytes(dst, plane_bytes_ / scalar_size(type), scalar_size(type));
     ++next_plane_;
   }
+  std::string volume_text() const {
+    return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) +
+           " " + std::string(scalar_name(type)) + " samples need " +
+           std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2]));
+  }
+  // After the last plane: nothing more, and the gzip trailer (CRC, length) as zlib checks it, so
+  // that a stream cut in its last bytes or corrupt is an error, as when read in core.
+  void check_end() {
+    char extra;
+    const int n = gzread(file_, &extra, 1);
+    int code = Z_OK;
+    const char* message = gzerror(file_, &code);
+    if (n == 1)
+      throw InputError(file_name_ + ": gzip data holds more than the " +
+                       std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2])) +
+                       " bytes " + volume_text().substr(0, volume_text().find(" samples")) +
+                       " samples need (too long)");
+    if (code == Z_BUF_ERROR)
+      throw InputError(file_name_ + ": gzip data cut off in its trailer after all " +
+                       std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2])) +
+                       " bytes (truncated file)");
+    if (n < 0 || code != Z_OK)
+      throw InputError(file_name_ + ": corrupt gzip data (" +
+                       std::string(message ? message : "bad gzip data") + ")");
+    end_checked_ = true;
+  }
+  bool end_checked_ = false;
   void skip_plane() {
     std::vector<char> scratch(plane_bytes_);
     read_plane(scratch.data());
   }
 
   gzFile file_ = nullptr;
+  std::string file_name_;  // the file holding the stream (a NRRD header's data file)
   bool swap_ = false;
   std::size_t plane_bytes_ = 0;
   std::int64_t next_plane_ = 0;

@@ -17,10 +17,40 @@ struct ImageHeaderCheck {
   bool rescaled = false;           // NIfTI's scl_slope/scl_inter change the values
   double rescale_slope = 1;
   double rescale_intercept = 0;
+  // Compressed samples, which only inflating them shows to be all there (verify_compressed).
+  struct Compressed {
+    std::string file;          // holding the compressed stream
+    std::uint64_t offset = 0;  // where the stream starts in it
+    std::uint64_t need = 0;    // bytes it must inflate to
+    bool whole_gzip = false;   // NIfTI .nii.gz: the file is one gzip stream, header included,
+                               // and may run on past `need`; else a zlib stream of exactly need
+    std::string what;          // the samples, e.g. "256x256x133 uint8 samples"
+  };
+  std::optional<Compressed> compressed;
 };
 
 // Throw InputError naming the file and the field at fault, IoError when it cannot be read.
 ImageHeaderCheck check_nifti_header(const std::string& path);
 ImageHeaderCheck check_metaimage_header(const std::string& path);
+
+// DICOM Part 10 files (with the "DICM" marker), walked element by element before GDCM sees them:
+// every element must lie within the file and the pixel data must hold the Rows x Columns x
+// samples x frames its header says (GDCM reads a cut-off slice as zeros with a warning only, and
+// aborts on some cut-off headers). Files without the marker are left to GDCM, unless `given` (the
+// input named by the user), when they must parse as an implicit-VR data set.
+void check_dicom_file(const std::string& path, bool given = false);
+// The same for the DICOM files of a series input: the directory's files, or those beside a file.
+void check_dicom_input(const std::string& input);
+
+// TIFF files (classic and BigTIFF), every page's directory walked before ITK sees them: the
+// directories, their values and every strip or tile must lie within the file, and uncompressed
+// pages must hold the samples their size says.
+void check_tiff_file(const std::string& path);
+
+// Inflates a checked header's compressed samples (without keeping them) and throws InputError,
+// naming the file, the bytes expected and those found, when the stream is cut off, corrupt, or
+// does not hold exactly the samples (ITK's readers would otherwise fill the rest with zeros and
+// say nothing, or print a warning only).
+void verify_compressed(const ImageHeaderCheck& check);
 
 }  // namespace isotile

@@ -167,7 +167,9 @@ struct FileHeader {
 };
 
 FileHeader read_header(itk::ImageIOBase& io, const std::string& file) {
-  if (!io.CanReadFile(file.c_str())) {
+  // MetaIO's CanRead wants the extension in lower case; isotile's own header check has already
+  // judged a MetaImage file (.MHA included).
+  if (!dynamic_cast<itk::MetaImageIO*>(&io) && !io.CanReadFile(file.c_str())) {
     std::string name = io.GetNameOfClass();  // e.g. TIFFImageIO
     if (name.ends_with("ImageIO")) name.resize(name.size() - 7);
     throw InputError(file + ": not a readable " + name + " file");
@@ -319,11 +321,36 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
           throw InputError(
               input.path + ": slices " + files[k - 1] + " and " + files[k] +
               " lie at the same position (duplicates or several stacks in one series)");
-        if (std::abs(s - step) > 1e-3 * step + 1e-4)
-          throw InputError(input.path + ": non-uniform slice spacing (" + std::to_string(s) +
-                           " mm between " + fs::path(files[k - 1]).filename().string() + " and " +
-                           fs::path(files[k]).filename().string() + ", " + std::to_string(step) +
-                           " mm on average); isotile does not resample");
+      }
+      // Steps are judged against the typical (median) one: a missing slice makes one step twice
+      // as long, and it is that step, not the first that differs from the mean, that is named.
+      std::vector<double> steps(files.size() - 1);
+      for (std::size_t k = 1; k < files.size(); ++k) steps[k - 1] = d[k] - d[k - 1];
+      std::vector<double> sorted = steps;
+      std::nth_element(sorted.begin(), sorted.begin() + (sorted.size() - 1) / 2, sorted.end());
+      const double typical = sorted[(sorted.size() - 1) / 2];
+      std::size_t worst = 0;
+      for (std::size_t k = 1; k < steps.size(); ++k)
+        if (std::abs(steps[k] - typical) > std::abs(steps[worst] - typical)) worst = k;
+      const double s = steps[worst];
+      if (std::abs(s - typical) > 1e-3 * typical + 1e-4 ||
+          std::abs(step - typical) > 1e-3 * typical + 1e-4) {
+        const std::string a = fs::path(files[worst]).filename().string();
+        const std::string b = fs::path(files[worst + 1]).filename().string();
+        char text[1024];
+        if (s > typical * 1.5) {
+          const long missing = std::lround(s / typical) - 1;
+          std::snprintf(text, sizeof text,
+                        "a gap of %g mm between %s and %s where the slices lie %g mm apart "
+                        "(about %ld slice%s missing)",
+                        s, a.c_str(), b.c_str(), typical, missing, missing == 1 ? "" : "s");
+        } else {
+          std::snprintf(text, sizeof text,
+                        "non-uniform slice spacing: %g mm between %s and %s where the slices lie "
+                        "%g mm apart",
+                        s, a.c_str(), b.c_str(), typical);
+        }
+        throw InputError(input.path + ": " + text + "; isotile does not resample");
       }
       const Vec3d last{h.back().origin[0] - h[0].origin[0], h.back().origin[1] - h[0].origin[1],
                        h.back().origin[2] - h[0].origin[2]};

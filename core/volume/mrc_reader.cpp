@@ -9,12 +9,16 @@
 // the same axis order (cryo-EM maps put the offset in ORIGIN, crystallographic maps in the start
 // fields; where both are given they add). Non-orthogonal cells (angles other than 90 degrees)
 // become the volume's direction cosines.
+#include <zlib.h>
+
 #include <algorithm>
 #include <bit>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <vector>
 
 #include "core/errors.h"
@@ -25,6 +29,50 @@ namespace isotile {
 namespace {
 
 constexpr std::size_t kHeaderBytes = 1024;
+// deflate shrinks data by at most about 1032:1 (as in image_headers.cpp).
+constexpr std::uint64_t kMaxDeflateRatio = 1032;
+
+// gzip'd maps (.map.gz, as EMDB distributes them) are recognised by their first bytes.
+bool is_gzip(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  unsigned char b[2] = {};
+  return f.read(reinterpret_cast<char*>(b), 2) && b[0] == 0x1f && b[1] == 0x8b;
+}
+
+struct GzCloser {
+  void operator()(gzFile f) const { gzclose_r(f); }
+};
+using GzFile = std::unique_ptr<gzFile_s, GzCloser>;
+
+GzFile open_gz(const std::string& path) {
+  errno = 0;
+  GzFile f(gzopen(path.c_str(), "rb"));
+  if (!f)
+    throw IoError("cannot open " + path + ": " + (errno ? std::strerror(errno) : "out of memory"));
+  gzbuffer(f.get(), 1u << 20);
+  return f;
+}
+
+// Up to n bytes from a gzip stream; InputError for corrupt or cut-off data.
+std::size_t gz_read(const std::string& path, gzFile f, void* out, std::size_t n) {
+  std::size_t done = 0;
+  while (done < n) {
+    const auto want = static_cast<unsigned>(std::min<std::size_t>(n - done, 1u << 30));
+    const int got = gzread(f, static_cast<char*>(out) + done, want);
+    int code = Z_OK;
+    const char* message = gzerror(f, &code);
+    if (got < 0 || (code != Z_OK && code != Z_BUF_ERROR)) {
+      if (code == Z_ERRNO) throw IoError("cannot read " + path + ": " + std::strerror(errno));
+      throw InputError(path + ": corrupt gzip data (" + std::string(message ? message : "") + ")");
+    }
+    if (code == Z_BUF_ERROR)
+      throw InputError(path + ": gzip data cut off after " + std::to_string(done + got) +
+                       " bytes of the " + std::to_string(n) + " expected here (truncated file)");
+    done += static_cast<std::size_t>(got);
+    if (static_cast<unsigned>(got) < want) break;
+  }
+  return done;
+}
 
 struct MrcLayout {
   VolumeHeader header;
@@ -32,7 +80,9 @@ struct MrcLayout {
   int axis[3];        // volume axis (0 X, 1 Y, 2 Z) of columns, rows, sections
   int mode = 2;
   bool swap = false;
+  bool gzip = false;
   std::uint64_t offset = 0;
+  std::uint64_t bytes = 0;  // of samples, as stored
 };
 
 template <class T>
@@ -74,12 +124,19 @@ MrcLayout mrc_layout(const std::string& path) {
   std::error_code ec;
   const std::uint64_t size = std::filesystem::file_size(path, ec);
   if (ec) throw IoError("cannot open " + path + ": " + ec.message());
-  unsigned char h[kHeaderBytes];
-  f.read(reinterpret_cast<char*>(h), kHeaderBytes);
-  if (static_cast<std::size_t>(f.gcount()) != kHeaderBytes)
-    throw InputError(path + ": MRC header truncated (" + std::to_string(f.gcount()) +
-                     " of 1024 bytes)");
   MrcLayout m;
+  m.gzip = is_gzip(path);
+  unsigned char h[kHeaderBytes];
+  std::size_t got = 0;
+  if (m.gzip) {
+    const GzFile gz = open_gz(path);
+    got = gz_read(path, gz.get(), h, kHeaderBytes);
+  } else {
+    f.read(reinterpret_cast<char*>(h), kHeaderBytes);
+    got = static_cast<std::size_t>(f.gcount());
+  }
+  if (got != kHeaderBytes)
+    throw InputError(path + ": MRC header truncated (" + std::to_string(got) + " of 1024 bytes)");
   // MACHST says the byte order; old files leave it empty, so a plausible mode decides then.
   const bool little_stamp = h[212] == 0x44 && (h[213] == 0x41 || h[213] == 0x44);
   const bool big_stamp = h[212] == 0x11 && h[213] == 0x11;
@@ -152,7 +209,15 @@ MrcLayout mrc_layout(const std::string& path) {
     throw InputError(path + ": MRC extended header size NSYMBT is " + std::to_string(nsymbt));
   const std::uint64_t bytes = checked_volume_bytes(type, dims) / scalar_size(type) * stored;
   m.offset = kHeaderBytes + static_cast<std::uint64_t>(nsymbt);
-  if (size != m.offset + bytes)
+  m.bytes = bytes;
+  // A gzip'd map's size is known only once inflated (read_mrc checks it): here only that the
+  // compressed bytes could hold it, before anything is allocated.
+  if (m.gzip && size * kMaxDeflateRatio < m.offset + bytes)
+    throw InputError(path + ": " + std::to_string(size) + " compressed bytes cannot hold the " +
+                     std::to_string(m.offset + bytes) + " bytes the MRC header (" +
+                     std::to_string(m.n[0]) + "x" + std::to_string(m.n[1]) + "x" +
+                     std::to_string(m.n[2]) + ", mode " + std::to_string(m.mode) + ") says");
+  if (!m.gzip && size != m.offset + bytes)
     throw InputError(path + ": file holds " + std::to_string(size) + " bytes but the MRC header (" +
                      std::to_string(m.n[0]) + "x" + std::to_string(m.n[1]) + "x" +
                      std::to_string(m.n[2]) + ", mode " + std::to_string(m.mode) + ", " +
@@ -195,7 +260,7 @@ MrcLayout mrc_layout(const std::string& path) {
     v.world = w;
   }
   const bool in_order = m.axis[0] == 0 && m.axis[1] == 1 && m.axis[2] == 2;
-  if (in_order && m.mode != 12)
+  if (in_order && m.mode != 12 && !m.gzip)
     v.plain = PlainData{path, m.offset, type, dims,
                         m.swap != !native_little ? Endian::Big : Endian::Little};
   return m;
@@ -212,9 +277,24 @@ Volume read_mrc(const std::string& path) {
   const VolumeHeader& h = m.header;
   Volume volume(h.type, h.dims, h.spacing, h.origin);
   volume.set_world(h.world);
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
-  f.seekg(static_cast<std::streamoff>(m.offset));
+  std::ifstream f;
+  GzFile gz;
+  if (m.gzip) {
+    gz = open_gz(path);
+    std::vector<unsigned char> skip(
+        static_cast<std::size_t>(std::min<std::uint64_t>(m.offset, 1u << 20)));
+    for (std::uint64_t left = m.offset; left > 0;) {
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, skip.size()));
+      if (gz_read(path, gz.get(), skip.data(), n) != n)
+        throw InputError(path + ": decompresses to fewer bytes than the MRC header's " +
+                         std::to_string(m.offset) + " header bytes");
+      left -= n;
+    }
+  } else {
+    f.open(path, std::ios::binary);
+    if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+    f.seekg(static_cast<std::streamoff>(m.offset));
+  }
   const std::size_t stored = m.mode == 12 ? 2 : scalar_size(h.type);
   const std::size_t out_size = scalar_size(h.type);
   // One section at a time, scattered into X, Y, Z order.
@@ -224,9 +304,20 @@ Volume read_mrc(const std::string& path) {
   const std::int64_t sc = stride[m.axis[0]], sr = stride[m.axis[1]], ss = stride[m.axis[2]];
   auto* out = reinterpret_cast<unsigned char*>(volume.bytes());
   for (std::int64_t s = 0; s < m.n[2]; ++s) {
-    f.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
-    if (static_cast<std::size_t>(f.gcount()) != buf.size())
-      throw IoError("cannot read " + path + ": file is shorter than its header says");
+    if (m.gzip) {
+      const std::size_t got = gz_read(path, gz.get(), buf.data(), buf.size());
+      if (got != buf.size())
+        throw InputError(
+            path + ": decompresses to " +
+            std::to_string(m.offset + static_cast<std::uint64_t>(s) * buf.size() + got) +
+            " bytes but the MRC header (" + std::to_string(m.n[0]) + "x" + std::to_string(m.n[1]) +
+            "x" + std::to_string(m.n[2]) + ", mode " + std::to_string(m.mode) + ") says " +
+            std::to_string(m.offset + m.bytes) + " (too short)");
+    } else {
+      f.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(buf.size()));
+      if (static_cast<std::size_t>(f.gcount()) != buf.size())
+        throw IoError("cannot read " + path + ": file is shorter than its header says");
+    }
     for (std::int64_t r = 0; r < m.n[1]; ++r)
       for (std::int64_t c = 0; c < m.n[0]; ++c) {
         const unsigned char* src = buf.data() + static_cast<std::size_t>(r * m.n[0] + c) * stored;
@@ -239,6 +330,14 @@ Volume read_mrc(const std::string& path) {
           if (m.swap) std::reverse(dst, dst + stored);
         }
       }
+  }
+  if (m.gzip) {
+    // Reading on also makes zlib check the gzip trailer (CRC and length).
+    char extra;
+    if (gz_read(path, gz.get(), &extra, 1) != 0)
+      throw InputError(path + ": decompresses to more than the " +
+                       std::to_string(m.offset + m.bytes) +
+                       " bytes the MRC header says (too long)");
   }
   check_finite(volume.view(), path);
   return volume;

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "core/errors.h"
+#include "core/volume/image_headers.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -176,10 +177,49 @@ struct IoStateNixer {
   }
 };
 
+// Where a gzip-encoded NRRD's stream lies (the data file and its offset), for
+// verify_compressed: teem takes a stream cut short as the end of the data and leaves the rest of
+// the samples as they were. Nothing for other encodings and several data files.
+std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path) {
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  nio->keepNrrdDataFileOpen = AIR_TRUE;
+  {
+    std::lock_guard lock(teem_mutex());
+    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
+      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  }
+  if (nio->encoding != nrrdEncodingGzip || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
+    return std::nullopt;
+  const HeaderInfo h = header_info(path, *nrrd);
+  ImageHeaderCheck::Compressed c;
+  c.need = checked_volume_bytes(h.type, h.dims);
+  c.what = std::to_string(h.dims[0]) + "x" + std::to_string(h.dims[1]) + "x" +
+           std::to_string(h.dims[2]) + " " + std::string(scalar_name(h.type)) + " samples";
+  if (nio->dataFNArr->len == 1) {
+    std::filesystem::path data = nio->dataFN[0];
+    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
+    c.file = data.string();
+  } else {
+    if (!nio->dataFile) return std::nullopt;
+    const long at = std::ftell(nio->dataFile);
+    if (at < 0) return std::nullopt;
+    c.file = path;
+    c.offset = static_cast<std::uint64_t>(at);
+  }
+  return c;
+}
+
 }  // namespace
 
 Volume read_nrrd(const std::string& path) {
   probe_file(path);
+  if (std::optional<ImageHeaderCheck::Compressed> gz = gzip_stream(path)) {
+    ImageHeaderCheck check;
+    check.compressed = std::move(gz);
+    verify_compressed(check);
+  }
   std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
   {
     std::lock_guard lock(teem_mutex());

@@ -209,7 +209,10 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
       int code = Z_OK;
       const char* message = gzerror(file.get(), &code);
       if (code == Z_BUF_ERROR)
-        throw InputError(path + ": truncated gzip data (" + gz_message(path, message) + ")");
+        throw InputError(
+            path + ": truncated gzip data: it ends after " + std::to_string(done) + " of the " +
+            std::to_string(need) + " bytes " + dims_string(volume.dims()) + " " +
+            std::string(scalar_name(volume.type())) + " needs (" + gz_message(path, message) + ")");
       if (code != Z_OK) throw_gz_error(path, file.get());
       throw InputError(
           size_mismatch(path, "decompresses to", done, volume.dims(), volume.type(), need));
@@ -226,7 +229,9 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
   int code = Z_OK;
   const char* message = gzerror(file.get(), &code);
   if (code == Z_BUF_ERROR)
-    throw InputError(path + ": truncated gzip data (" + gz_message(path, message) + ")");
+    throw InputError(path + ": truncated gzip data: all " + std::to_string(need) +
+                     " bytes are there but the stream's end (CRC and length) is cut off (" +
+                     gz_message(path, message) + ")");
   if (code != Z_OK) throw_gz_error(path, file.get());
 }
 

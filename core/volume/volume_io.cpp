@@ -5,10 +5,12 @@
 #include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <type_traits>
 
 #include <tbb/blocked_range.h>
@@ -48,6 +50,60 @@ bool has_dicom_marker(const std::string& path) {
   return std::memcmp(b + 128, "DICM", 4) == 0;
 }
 
+// Formats isotile does not read, recognised by their content whatever the name says, so that a
+// .vti or a .map.bz2 is named for what it is rather than taken for raw samples. Throws InputError
+// saying what the file is and what to do with it.
+void refuse_foreign_content(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    for (const char* marker : {".zarray", ".zgroup", "zarr.json"})
+      if (std::filesystem::exists(std::filesystem::path(path) / marker, ec))
+        throw InputError(
+            path + ": a Zarr store (" + marker +
+            "), which isotile does not read; export the array to raw samples (e.g. "
+            "zarr.open(path)[:].tofile('out.raw') in Python) and pass --dims and --type");
+    return;
+  }
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return;  // the reader names the problem
+  char b[1032] = {};
+  f.read(b, sizeof b);
+  const std::size_t n = static_cast<std::size_t>(f.gcount());
+  const auto at = [&](std::size_t offset, const char* magic, std::size_t len) {
+    return n >= offset + len && std::memcmp(b + offset, magic, len) == 0;
+  };
+  const auto refuse = [&](const std::string& what, const std::string& todo) {
+    throw InputError(path + ": " + what + ", which isotile does not read; " + todo);
+  };
+  // bzip2: "BZh", the block size, then a block or the end-of-stream marker.
+  if (at(0, "BZh", 3) && n >= 10 && b[3] >= '1' && b[3] <= '9' &&
+      (at(4, "\x31\x41\x59\x26\x53\x59", 6) || at(4, "\x17\x72\x45\x38\x50\x90", 6)))
+    refuse("bzip2-compressed data", "decompress it first (bunzip2 -k FILE) and read the result");
+  if (at(0,
+         "\xfd"
+         "7zXZ\0",
+         6))
+    refuse("xz-compressed data", "decompress it first (unxz -k FILE) and read the result");
+  if (at(0, "\x28\xb5\x2f\xfd", 4))
+    refuse("zstd-compressed data", "decompress it first (unzstd FILE) and read the result");
+  // HDF5's signature lies at 0, 512, 1024, ... (after a user block).
+  if (at(0, "\x89HDF\r\n\x1a\n", 8) || at(512, "\x89HDF\r\n\x1a\n", 8) ||
+      at(1024, "\x89HDF\r\n\x1a\n", 8))
+    refuse("an HDF5 file",
+           "export the dataset to raw samples (h5dump -d /DATASET -b LE -o out.raw FILE) and pass "
+           "--dims and --type");
+  if (at(0, "# vtk DataFile Version", 22))
+    refuse("a legacy VTK file",
+           "convert it to MetaImage or NIfTI (e.g. ParaView's Save Data as .mha, or VTK's "
+           "vtkMetaImageWriter)");
+  const std::string_view head(b, n);
+  if ((head.starts_with("<?xml") || head.starts_with("<VTKFile")) &&
+      head.find("<VTKFile") != std::string_view::npos)
+    refuse("a VTK XML file",
+           "convert it to MetaImage or NIfTI (e.g. ParaView's Save Data as .mha, or VTK's "
+           "vtkMetaImageWriter)");
+}
+
 bool is_tiff_name(const std::string& s) {
   return ends_with_ci(s, ".tif") || ends_with_ci(s, ".tiff");
 }
@@ -80,13 +136,28 @@ ItkInput itk_input(const std::string& input, InputKind kind, const RawOptions& r
 ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
   if (kind == InputKind::Nifti) return check_nifti_header(input);
   if (kind == InputKind::MetaImage) return check_metaimage_header(input);
-  if (kind == InputKind::Tiff) {
+  if (kind == InputKind::Tiff) check_tiff_file(input);
+  if (kind == InputKind::TiffStack) {
     std::error_code ec;
-    const auto size = std::filesystem::file_size(input, ec);
-    if (ec) throw IoError("cannot open " + input + ": " + ec.message());
-    if (size < 8)
-      throw InputError(input + ": not a TIFF file (" + std::to_string(size) + " bytes)");
+    if (std::filesystem::is_directory(input, ec)) {
+      for (const auto& e : std::filesystem::directory_iterator(input, ec))
+        if (e.is_regular_file(ec) && is_tiff_name(e.path().string()))
+          check_tiff_file(e.path().string());
+    } else {
+      // Numbered slices, from 0 or 1 on, as the ITK reader takes them.
+      for (int i = 0;; ++i) {
+        char name[4096];
+        if (std::snprintf(name, sizeof name, input.c_str(), i) >= static_cast<int>(sizeof name))
+          break;
+        if (!std::filesystem::is_regular_file(name, ec)) {
+          if (i == 0) continue;
+          break;
+        }
+        check_tiff_file(name);
+      }
+    }
   }
+  if (kind == InputKind::Dicom) check_dicom_input(input);
   return {};
 }
 
@@ -180,6 +251,7 @@ void apply_overrides(const RawOptions& raw, Vec3d& spacing, Vec3d& origin,
 
 InputKind input_kind(const std::string& input) {
   if (parse_field_spec(input)) return InputKind::Field;
+  refuse_foreign_content(input);
   std::error_code ec;
   if (std::filesystem::is_directory(input, ec)) {
     for (const auto& e : std::filesystem::directory_iterator(input, ec))
@@ -192,6 +264,8 @@ InputKind input_kind(const std::string& input) {
   if (ext == ".nrrd" || ext == ".nhdr") return InputKind::Nrrd;
   if (ext == ".vdb") return InputKind::Vdb;
   if (ext == ".mrc" || ext == ".map" || ext == ".ccp4" || ext == ".mrcs") return InputKind::Mrc;
+  for (const char* mrc : {".mrc.gz", ".map.gz", ".ccp4.gz", ".mrcs.gz"})
+    if (ends_with_ci(input, mrc)) return InputKind::Mrc;
   if (ext == ".nii" || ends_with_ci(input, ".nii.gz")) return InputKind::Nifti;
   if (ext == ".mha" || ext == ".mhd") return InputKind::MetaImage;
   if (ext == ".dcm" || ext == ".ima") return InputKind::Dicom;
@@ -302,7 +376,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   } else if (kind == InputKind::Mrc) {
     volume = read_mrc(input);
   } else {
-    check_before_itk(input, kind);
+    verify_compressed(check_before_itk(input, kind));
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
     volume = Volume(info.type, info.dims, info.spacing, info.origin);

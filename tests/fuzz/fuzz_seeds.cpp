@@ -678,6 +678,71 @@ Seed random_vdb_seed(std::uint32_t seed) {
   return {"vdb_random_" + std::to_string(seed), Bytes(text.begin(), text.end()), true};
 }
 
+namespace {
+
+// A multi-frame 8-bit DICOM file (explicit VR little endian), element by element: one file that
+// GDCM reads as a volume of `frames` slices.
+std::string dicom_multiframe(const std::vector<std::uint8_t>& pixels, int columns, int rows,
+                             int frames) {
+  std::string body;
+  const auto element = [](std::string& out, std::uint16_t group, std::uint16_t elem, const char* vr,
+                          std::string value) {
+    if (value.size() % 2)
+      value += (std::string(vr) == "UI" || std::string(vr) == "OB") ? '\0' : ' ';
+    const auto put16 = [&](std::uint16_t v) {
+      out += static_cast<char>(v & 0xff);
+      out += static_cast<char>(v >> 8);
+    };
+    put16(group);
+    put16(elem);
+    out += vr;
+    if (std::string(vr) == "OB" || std::string(vr) == "OW") {
+      put16(0);
+      const auto n = static_cast<std::uint32_t>(value.size());
+      for (int b = 0; b < 4; ++b) out += static_cast<char>((n >> (8 * b)) & 0xff);
+    } else {
+      put16(static_cast<std::uint16_t>(value.size()));
+    }
+    out += value;
+  };
+  const auto us = [](std::uint16_t v) {
+    return std::string{static_cast<char>(v & 0xff), static_cast<char>(v >> 8)};
+  };
+  const std::string sop_class = "1.2.840.10008.5.1.4.1.1.7.2", sop = "1.2.826.0.1.3680043.2.1.1";
+  std::string meta;
+  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
+  element(meta, 0x0002, 0x0002, "UI", sop_class);
+  element(meta, 0x0002, 0x0003, "UI", sop);
+  element(meta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2.1");
+  std::string group_length;
+  const auto n = static_cast<std::uint32_t>(meta.size());
+  element(group_length, 0x0002, 0x0000, "UL",
+          std::string{static_cast<char>(n & 0xff), static_cast<char>((n >> 8) & 0xff),
+                      static_cast<char>((n >> 16) & 0xff), static_cast<char>(n >> 24)});
+  element(body, 0x0008, 0x0016, "UI", sop_class);
+  element(body, 0x0008, 0x0018, "UI", sop);
+  element(body, 0x0008, 0x0060, "CS", "OT");
+  element(body, 0x0020, 0x000D, "UI", "1.2.826.0.1.3680043.2.1.2");
+  element(body, 0x0020, 0x000E, "UI", "1.2.826.0.1.3680043.2.1.3");
+  element(body, 0x0020, 0x0013, "IS", "1");
+  element(body, 0x0020, 0x0032, "DS", "0\\0\\0");
+  element(body, 0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0");
+  element(body, 0x0028, 0x0002, "US", us(1));
+  element(body, 0x0028, 0x0004, "CS", "MONOCHROME2");
+  element(body, 0x0028, 0x0008, "IS", std::to_string(frames));
+  element(body, 0x0028, 0x0010, "US", us(static_cast<std::uint16_t>(rows)));
+  element(body, 0x0028, 0x0011, "US", us(static_cast<std::uint16_t>(columns)));
+  element(body, 0x0028, 0x0030, "DS", "1\\1");
+  element(body, 0x0028, 0x0100, "US", us(8));
+  element(body, 0x0028, 0x0101, "US", us(8));
+  element(body, 0x0028, 0x0102, "US", us(7));
+  element(body, 0x0028, 0x0103, "US", us(0));
+  element(body, 0x7FE0, 0x0010, "OB", std::string(pixels.begin(), pixels.end()));
+  return std::string(128, '\0') + "DICM" + group_length + meta + body;
+}
+
+}  // namespace
+
 std::vector<Seed> image_seeds() {
   std::vector<Seed> seeds;
   // MRC: a little-endian float map in X, Y, Z order, a big-endian int16 map in another axis
@@ -767,6 +832,21 @@ std::vector<Seed> image_seeds() {
         write_itk(p.string(), f.data(), ScalarType::Float32, {4, 3, 5}, {1, 2, 3}, {5, 6, 7}, d);
       seeds.push_back({w.name, with_selector(w.selector, read_text(p))});
     }
+  }
+  // A gzip'd MRC map, as EMDB distributes them.
+  seeds.push_back({"mrc_float_xyz_gz", with_selector(7, gzip(std::string(seeds[0].bytes.begin() + 1,
+                                                                         seeds[0].bytes.end())))});
+  if (itk_available()) {
+    ScratchDir dir;
+    std::vector<std::uint8_t> u8(4 * 3 * 5);
+    for (std::size_t i = 0; i < u8.size(); ++i) u8[i] = static_cast<std::uint8_t>((i * 37) % 101);
+    write_itk((dir / "e.tif").string(), u8.data(), ScalarType::UInt8, {4, 3, 5}, {1, 1, 1},
+              {0, 0, 0}, kIdentity3);
+    seeds.push_back({"tiff_multipage", with_selector(5, read_text(dir / "e.tif"))});
+    write_itk((dir / "f.nii.gz").string(), u8.data(), ScalarType::UInt8, {4, 3, 5}, {1, 2, 3},
+              {5, 6, 7}, kIdentity3);
+    seeds.push_back({"nifti_gz", with_selector(6, read_text(dir / "f.nii.gz"))});
+    seeds.push_back({"dicom_multiframe", with_selector(4, dicom_multiframe(u8, 4, 3, 5))});
   }
   seeds.push_back({"mrc_truncated", with_selector(0, std::string(100, '\0')), false});
   return seeds;

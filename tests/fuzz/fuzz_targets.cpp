@@ -229,10 +229,11 @@ int fuzz_vdb(const std::uint8_t* data, std::size_t size) {
 }
 
 int fuzz_image(const std::uint8_t* data, std::size_t size) {
-  static const char* const kNames[] = {"input.mrc", "input.nii", "input.mha", "input.map"};
+  static const char* const kNames[] = {"input.mrc", "input.nii", "input.mha",    "input.map",
+                                       "input.dcm", "input.tif", "input.nii.gz", "input.map.gz"};
   const std::uint8_t sel = size > 0 ? data[0] : 0;
   Files files;
-  const fs::path path = files.add(kNames[sel & 3], data + (size > 0), size - (size > 0));
+  const fs::path path = files.add(kNames[sel & 7], data + (size > 0), size - (size > 0));
   try {
     check_volume("fuzz_image", read_volume(path.string()));
     return 0;

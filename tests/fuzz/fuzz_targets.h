@@ -17,9 +17,10 @@
 //              .nhdr header up to and including the first "\n\n" followed by the bytes of its
 //              data file, which is written as "data.bin" beside it ("data file: data.bin").
 //   fuzz_vdb   all bytes: the .vdb file.
-//   fuzz_image byte 0: bits 0-1 the format (0 .mrc, 1 .nii, 2 .mha, 3 .map); bytes 1..: the
-//              file, read through read_volume (isotile's MRC reader; ITK's NIfTI and MetaImage
-//              readers behind isotile's header checks).
+//   fuzz_image byte 0: bits 0-2 the format (0 .mrc, 1 .nii, 2 .mha, 3 .map, 4 .dcm, 5 .tif,
+//              6 .nii.gz, 7 .map.gz); bytes 1..: the file, read through read_volume (isotile's
+//              MRC reader; ITK's NIfTI, MetaImage and TIFF readers and GDCM behind isotile's
+//              header checks).
 //
 // Each target returns 0 when the reader returned a value that passed the checks and 1 when it
 // threw isotile::Error (the libFuzzer drivers ignore this and return 0). Not thread-safe: one

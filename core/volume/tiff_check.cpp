@@ -1,0 +1,224 @@
+// TIFF page directories walked before ITK reads the file (image_headers.h).
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/volume/file_bytes.h"
+#include "core/volume/image_headers.h"
+
+namespace isotile {
+
+using file_check::FileBytes;
+using file_check::get;
+
+void check_tiff_file(const std::string& path) {
+  FileBytes file(path);
+  unsigned char h[16];
+  if (!file.read(0, h, 8))
+    throw InputError(path + ": not a TIFF file (" + std::to_string(file.size()) + " bytes)");
+  const bool little = h[0] == 'I' && h[1] == 'I';
+  if (!little && !(h[0] == 'M' && h[1] == 'M'))
+    throw InputError(path + ": not a TIFF file (no II or MM byte-order mark)");
+  const bool swap = little != (std::endian::native == std::endian::little);
+  const std::uint16_t version = get<std::uint16_t>(h + 2, swap);
+  if (version != 42 && version != 43)
+    throw InputError(path + ": not a TIFF file (version " + std::to_string(version) + ")");
+  const bool big = version == 43;
+  std::uint64_t ifd = 0;
+  if (big) {
+    if (!file.read(0, h, 16)) throw InputError(path + ": BigTIFF header truncated");
+    ifd = get<std::uint64_t>(h + 8, swap);
+  } else {
+    ifd = get<std::uint32_t>(h + 4, swap);
+  }
+  const auto cut = [&](int page, const std::string& what, std::uint64_t at, std::uint64_t n) {
+    throw InputError(path + ": TIFF page " + std::to_string(page) + ": " + what + " needs " +
+                     std::to_string(n) + " bytes from offset " + std::to_string(at) +
+                     " but the file holds " + std::to_string(file.size()) +
+                     " bytes (truncated file)");
+  };
+  static const std::size_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4,
+                                            8, 4, 8, 4, 0, 0, 8, 8, 8};
+  std::vector<std::uint64_t> seen;
+  std::array<std::uint64_t, 4> first{};       // page 1's width, height, bits and samples
+  std::array<std::uint64_t, 3> first_kind{};  // its photometric, planar configuration, format
+  int page = 0;
+  while (ifd != 0) {
+    ++page;
+    if (std::find(seen.begin(), seen.end(), ifd) != seen.end() || page > 1000000)
+      throw InputError(path + ": TIFF page directories form a loop");
+    seen.push_back(ifd);
+    const std::size_t count_size = big ? 8 : 2, entry_size = big ? 20 : 12,
+                      inline_size = big ? 8 : 4;
+    if (!file.read(ifd, h, count_size)) cut(page, "its directory", ifd, count_size);
+    const std::uint64_t entries = big ? get<std::uint64_t>(h, swap) : get<std::uint16_t>(h, swap);
+    if (!file.fits(ifd + count_size, entries * entry_size + inline_size))
+      cut(page, "its directory", ifd, count_size + entries * entry_size + inline_size);
+    std::uint64_t width = 0, height = 0, bps = 1, spp = 1, compression = 1, rows_per_strip = 0,
+                  tile_w = 0, tile_h = 0, subfile = 0, photometric = 1, planar = 1, format = 1;
+    std::vector<std::uint64_t> offsets, counts;
+    for (std::uint64_t e = 0; e < entries; ++e) {
+      unsigned char d[20];
+      const std::uint64_t at = ifd + count_size + e * entry_size;
+      file.read(at, d, entry_size);
+      const std::uint16_t tag = get<std::uint16_t>(d, swap), type = get<std::uint16_t>(d + 2, swap);
+      const std::uint64_t n =
+          big ? get<std::uint64_t>(d + 4, swap) : get<std::uint32_t>(d + 4, swap);
+      const std::size_t size = type < 19 ? kTypeSize[type] : 0;
+      // ITK lists every custom tag through TIFFGetField with one pointer, where libtiff's
+      // DotRange takes two: ITK then writes through a stray pointer (found by the fuzz replay).
+      if (tag == 336)
+        throw InputError(path + ": TIFF page " + std::to_string(page) +
+                         " has a DotRange tag, which ITK's TIFF reader cannot read safely");
+      // libtiff declares DateTime 20 characters long and keeps what the file holds; ITK copies
+      // 20 from it whatever the count (a heap over-read, found by the fuzz replay under ASan).
+      if (tag == 306 && n < 20)
+        throw InputError(path + ": TIFF page " + std::to_string(page) + "'s DateTime holds " +
+                         std::to_string(n) + " characters where TIFF says 20");
+      if (size == 0) continue;  // unknown types are skipped by libtiff too
+      if (n > (std::uint64_t{1} << 40) / size)
+        throw InputError(path + ": TIFF page " + std::to_string(page) + ": tag " +
+                         std::to_string(tag) + " claims " + std::to_string(n) + " values");
+      const std::uint64_t bytes = n * size;
+      std::uint64_t where = at + (big ? 12 : 8);
+      if (bytes > inline_size) {
+        where = big ? get<std::uint64_t>(d + 12, swap) : get<std::uint32_t>(d + 8, swap);
+        if (!file.fits(where, bytes))
+          cut(page, "tag " + std::to_string(tag) + "'s values", where, bytes);
+      }
+      const auto value = [&](std::uint64_t i) -> std::uint64_t {
+        unsigned char v[8];
+        file.read(where + i * size, v, size);
+        if (size == 2) return get<std::uint16_t>(v, swap);
+        if (size == 4) return get<std::uint32_t>(v, swap);
+        if (size == 8) return get<std::uint64_t>(v, swap);
+        return v[0];
+      };
+      if (n == 0) continue;
+      switch (tag) {
+        case 254:
+          subfile |= value(0);
+          break;
+        case 255:  // the old SubfileType: 2 is a reduced-resolution image, as libtiff maps it
+          if (value(0) == 2) subfile |= 1;
+          break;
+        case 262:
+          photometric = value(0);
+          break;
+        case 284:
+          planar = value(0);
+          break;
+        case 339:
+          format = value(0);
+          break;
+        case 256:
+          width = value(0);
+          break;
+        case 257:
+          height = value(0);
+          break;
+        case 258:
+          bps = value(0);
+          break;
+        case 259:
+          compression = value(0);
+          break;
+        case 277:
+          spp = value(0);
+          break;
+        case 278:
+          rows_per_strip = value(0);
+          break;
+        case 322:
+          tile_w = value(0);
+          break;
+        case 323:
+          tile_h = value(0);
+          break;
+        case 273:
+        case 324:
+          if (n > (std::uint64_t{1} << 24))
+            throw InputError(path + ": TIFF page " + std::to_string(page) + ": " +
+                             std::to_string(n) + " strips");
+          offsets.resize(n);
+          for (std::uint64_t i = 0; i < n; ++i) offsets[i] = value(i);
+          break;
+        case 279:
+        case 325:
+          if (n > (std::uint64_t{1} << 24))
+            throw InputError(path + ": TIFF page " + std::to_string(page) + ": " +
+                             std::to_string(n) + " strips");
+          counts.resize(n);
+          for (std::uint64_t i = 0; i < n; ++i) counts[i] = value(i);
+          break;
+        default:
+          break;
+      }
+    }
+    if (offsets.size() != counts.size())
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " has " +
+                       std::to_string(offsets.size()) + " strip offsets but " +
+                       std::to_string(counts.size()) + " byte counts");
+    std::uint64_t held = 0;
+    for (std::size_t i = 0; i < offsets.size(); ++i) {
+      if (!file.fits(offsets[i], counts[i]))
+        cut(page, (tile_w ? "tile " : "strip ") + std::to_string(i), offsets[i], counts[i]);
+      held += counts[i];
+    }
+    if (compression == 1 && width > 0 && height > 0 && width < (1u << 30) && height < (1u << 30) &&
+        bps <= 64 && spp <= 64) {
+      std::uint64_t need = 0;
+      if (tile_w && tile_h) {
+        const std::uint64_t across = (width + tile_w - 1) / tile_w,
+                            down = (height + tile_h - 1) / tile_h;
+        need = across * down * ((tile_w * spp * bps + 7) / 8) * tile_h;
+      } else {
+        const std::uint64_t rows =
+            rows_per_strip && rows_per_strip < height ? rows_per_strip : height;
+        const std::uint64_t row_bytes = (width * spp * bps + 7) / 8;
+        // The last strip may be short.
+        need = row_bytes * height;
+        (void)rows;
+      }
+      if (held < need)
+        throw InputError(path + ": TIFF page " + std::to_string(page) + " of " +
+                         std::to_string(width) + "x" + std::to_string(height) + " " +
+                         std::to_string(bps) + "-bit samples needs " + std::to_string(need) +
+                         " bytes but its strips hold " + std::to_string(held));
+    }
+    // ITK sizes its buffer by the first page and reads every page into it: pages of another
+    // size, or reduced-resolution and mask pages it counts differently, would overrun it.
+    if (subfile & 5)
+      throw InputError(path + ": TIFF page " + std::to_string(page) +
+                       " is a reduced-resolution or mask image (NewSubfileType " +
+                       std::to_string(subfile) + "); a volume is a stack of full pages");
+    if (page == 1) {
+      first = {width, height, bps, spp};
+      first_kind = {photometric, planar, format};
+    } else if (std::array<std::uint64_t, 3>{photometric, planar, format} != first_kind) {
+      throw InputError(path + ": TIFF page " + std::to_string(page) +
+                       " stores its samples differently from page 1 (photometric " +
+                       std::to_string(photometric) + ", planar " + std::to_string(planar) +
+                       ", sample format " + std::to_string(format) + " against " +
+                       std::to_string(first_kind[0]) + ", " + std::to_string(first_kind[1]) + ", " +
+                       std::to_string(first_kind[2]) + ")");
+    } else if (std::array<std::uint64_t, 4>{width, height, bps, spp} != first) {
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " is " +
+                       std::to_string(width) + "x" + std::to_string(height) + " with " +
+                       std::to_string(spp) + " samples of " + std::to_string(bps) +
+                       " bits where page 1 is " + std::to_string(first[0]) + "x" +
+                       std::to_string(first[1]) + " with " + std::to_string(first[3]) +
+                       " samples of " + std::to_string(first[2]) + " bits");
+    }
+    const std::uint64_t next_at = ifd + count_size + entries * entry_size;
+    unsigned char nx[8];
+    file.read(next_at, nx, inline_size);
+    ifd = big ? get<std::uint64_t>(nx, swap) : get<std::uint32_t>(nx, swap);
+  }
+}
+
+}  // namespace isotile
