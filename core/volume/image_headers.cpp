@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/volume/file_bytes.h"
 
 namespace isotile {
 
@@ -39,15 +40,7 @@ std::string dims_text(const Index3& d) {
   return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
 
-template <class T>
-T get(const unsigned char* p, bool swap) {
-  T v;
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, p, sizeof(T));
-  if (swap) std::reverse(b, b + sizeof(T));
-  std::memcpy(&v, b, sizeof(T));
-  return v;
-}
+using file_check::get;
 
 std::optional<ScalarType> nifti_type(int datatype) {
   switch (datatype) {

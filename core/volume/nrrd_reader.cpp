@@ -177,6 +177,26 @@ struct IoStateNixer {
   }
 };
 
+// The file holding a NRRD's data (one detached file, or the header's own) and where its bytes
+// begin in it (0 for a detached file, before any byte skip); nothing when teem did not keep the
+// attached file open where it stopped reading the header.
+struct DataStart {
+  std::string file;
+  std::uint64_t offset = 0;
+};
+std::optional<DataStart> data_start(const std::string& path, const NrrdIoState& nio) {
+  if (nio.dataFNArr->len == 1) {
+    std::filesystem::path data = nio.dataFN[0];
+    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
+    return DataStart{data.string(), 0};
+  }
+  // Attached: the samples follow the header in the same file.
+  if (!nio.dataFile) return std::nullopt;
+  const long at = std::ftell(nio.dataFile);
+  if (at < 0) return std::nullopt;
+  return DataStart{path, static_cast<std::uint64_t>(at)};
+}
+
 // Where a gzip-encoded NRRD's stream lies (the data file and its offset), for
 // verify_compressed: teem takes a stream cut short as the end of the data and leaves the rest of
 // the samples as they were. Nothing for other encodings and several data files.
@@ -197,17 +217,10 @@ std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path)
   c.need = checked_volume_bytes(h.type, h.dims);
   c.what = std::to_string(h.dims[0]) + "x" + std::to_string(h.dims[1]) + "x" +
            std::to_string(h.dims[2]) + " " + std::string(scalar_name(h.type)) + " samples";
-  if (nio->dataFNArr->len == 1) {
-    std::filesystem::path data = nio->dataFN[0];
-    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
-    c.file = data.string();
-  } else {
-    if (!nio->dataFile) return std::nullopt;
-    const long at = std::ftell(nio->dataFile);
-    if (at < 0) return std::nullopt;
-    c.file = path;
-    c.offset = static_cast<std::uint64_t>(at);
-  }
+  const std::optional<DataStart> start = data_start(path, *nio);
+  if (!start) return std::nullopt;
+  c.file = start->file;
+  c.offset = start->offset;
   return c;
 }
 
@@ -264,19 +277,10 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
   else if (nio->encoding != nrrdEncodingRaw)
     return std::nullopt;
   const std::uint64_t bytes = checked_volume_bytes(h.type, h.dims);
-  std::uint64_t start = 0;  // where the data file's samples begin, before byte skip
-  if (nio->dataFNArr->len == 1) {
-    std::filesystem::path data = nio->dataFN[0];
-    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
-    out.data_file = data.string();
-  } else {
-    // Attached: the samples follow the header in the same file.
-    if (!nio->dataFile) return std::nullopt;
-    const long at = std::ftell(nio->dataFile);
-    if (at < 0) return std::nullopt;
-    out.data_file = path;
-    start = static_cast<std::uint64_t>(at);
-  }
+  const std::optional<DataStart> data = data_start(path, *nio);
+  if (!data) return std::nullopt;
+  out.data_file = data->file;
+  const std::uint64_t start = data->offset;  // where the samples begin, before byte skip
   if (out.gzip) {
     if (nio->byteSkip != 0) return std::nullopt;
     out.offset = start;
