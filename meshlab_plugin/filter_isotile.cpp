@@ -6,6 +6,7 @@
 
 #include <QDir>
 #include <chrono>
+#include <cmath>
 #include <exception>
 #include <future>
 #include <mutex>
@@ -207,11 +208,11 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
   par.addParam(RichString("series", "", "DICOM series",
                           "DICOM series UID where the file's directory holds several; empty: "
                           "the series of the file chosen"));
-  par.addParam(
-      RichFloat("iso", static_cast<float>(d.iso), "Isovalue", "Samples at or above it are inside"));
-  par.addParam(RichBool("iso_auto", d.iso_auto, "Choose the isovalue",
-                        "Otsu's threshold of the samples' histogram, as isotile extract --iso "
-                        "auto (the isovalue above is then ignored; the log gives the value)"));
+  // No parameter of its own for the automatic isovalue: meshlabserver 2020.09 aborts on a script
+  // that lacks a declared parameter, so a new one would break every existing script.
+  par.addParam(RichFloat("iso", static_cast<float>(d.iso), "Isovalue",
+                         "Samples at or above it are inside; nan: chosen from the samples (Otsu's "
+                         "threshold, as isotile extract --iso auto; the log gives the value)"));
   par.addParam(RichEnum("method", d.method, choices(ml::kMethodNames, 3), "Method",
                         "Marching Cubes; Macet (better-shaped triangles); Dual Contouring"));
   par.addParam(RichEnum("macet_quality", d.macet_quality, choices(ml::kMacetQualityNames, 2),
@@ -278,7 +279,7 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   p.spacing = par.getString("spacing").trimmed().toStdString();
   p.series = par.getString("series").trimmed().toStdString();
   p.iso = par.getFloat("iso");
-  p.iso_auto = par.getBool("iso_auto");
+  p.iso_auto = std::isnan(p.iso);
   p.method = par.getEnum("method");
   p.macet_quality = par.getEnum("macet_quality");
   p.macet_relax = par.getFloat("macet_relax");
