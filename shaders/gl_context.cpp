@@ -4,6 +4,7 @@
 #include <EGL/eglext.h>
 #include <dlfcn.h>
 #include <glad/gl.h>
+#include <link.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -29,6 +30,24 @@ using OsmesaCreateFn = OSMesaContext (*)(const int*, OSMesaContext);
 using OsmesaMakeCurrentFn = unsigned char (*)(OSMesaContext, void*, unsigned, int, int);
 using OsmesaGetProcFn = GLADapiproc (*)(const char*);
 using OsmesaDestroyFn = void (*)(OSMesaContext);
+
+// Keeps the Mesa DRI drivers loaded now loaded until the process ends. eglTerminate unloads
+// them, and their own allocations, referenced only from their globals, would then read as leaks
+// to LeakSanitizer (the sanitizer pass fails on them); loaded, they stay reachable, as they did
+// before shutdown() existed. The handles are kept on purpose (RTLD_NODELETE).
+void pin_dri_drivers() {
+  std::vector<std::string> drivers;
+  dl_iterate_phdr(
+      [](dl_phdr_info* info, std::size_t, void* out) {
+        const std::string_view name = info->dlpi_name ? info->dlpi_name : "";
+        if (name.find("/dri/") != std::string_view::npos && name.ends_with("_dri.so"))
+          static_cast<std::vector<std::string>*>(out)->emplace_back(name);
+        return 0;
+      },
+      &drivers);
+  // dlopen outside the iteration, which holds the loader's lock.
+  for (const std::string& d : drivers) dlopen(d.c_str(), RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
+}
 
 struct Context {
   DeviceInfo info;
@@ -61,6 +80,7 @@ struct Context {
   }
   // The context and its display, after release().
   void destroy() {
+    pin_dri_drivers();
     if (osmesa) {
       if (osmesa_destroy) osmesa_destroy(osmesa);
       osmesa = nullptr;

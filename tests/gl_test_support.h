@@ -86,6 +86,10 @@ class BuiltProgramsListed : public ::testing::Environment {
     }
     std::printf("gl_test_support: %d programs built, each listed in gl::program_variants()\n",
                 built);
+    // The GL test programs end as the CLI does: the context and its objects deleted, in order,
+    // before exit (under OSMesa, LeakSanitizer's tracer sometimes crashed at exit among
+    // llvmpipe's threads of a context left alive).
+    gl::shutdown();
   }
 };
 inline ::testing::Environment* const kBuiltProgramsListed =
