@@ -165,10 +165,15 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     to.memory = memory;
     to.format = MeshFormat::Ply;
     to.simplify = p.simplify;
-    to.progress = [&](std::string_view pass, std::int64_t done, std::int64_t total) {
-      report(static_cast<int>(5 + 85 * done / std::max<std::int64_t>(total, 1)),
-             std::string(pass) + " " + std::to_string(done) + "/" + std::to_string(total));
-    };
+    isotile::Progress bricks([&](const ProgressUpdate& u) {
+      const double done = (static_cast<double>(u.brick) + u.fraction) /
+                          static_cast<double>(std::max<std::int64_t>(u.bricks, 1));
+      report(static_cast<int>(5 + 85 * done), std::string(stage_name(u.stage)) + " " +
+                                                  std::to_string(u.brick + 1) + "/" +
+                                                  std::to_string(u.bricks));
+      return true;
+    });
+    to.progress = &bricks;
     const TiledResult t = extract_tiled(*source, to, mesh_file);
     r.bricks = t.plan.total();
     r.triangles_extracted = p.simplify < 1 ? t.triangles_extracted : t.triangles;

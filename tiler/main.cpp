@@ -80,6 +80,29 @@ void progress(const std::string& message) {
   if (!g_quiet) std::fprintf(stderr, "isotile: %s\n", message.c_str());
 }
 
+// The library's progress as lines on stderr: about twenty per stage of a tiled run (one per
+// brick done, thinned), else one per tenth of a stage.
+bool print_progress(const ProgressUpdate& u) {
+  static Stage last_stage = Stage::Read;
+  static int last_tenth = 0;
+  if (u.bricks > 1) {
+    const std::int64_t step = std::max<std::int64_t>(1, u.bricks / 20);
+    if (u.fraction >= 1 && ((u.brick + 1) % step == 0 || u.brick + 1 == u.bricks))
+      progress(std::string(stage_name(u.stage)) + ": " + std::to_string(u.brick + 1) + "/" +
+               std::to_string(u.bricks) + " bricks");
+    return true;
+  }
+  const int tenth = static_cast<int>(u.fraction * 10);
+  if (u.fraction == 0 || u.stage != last_stage) last_tenth = 0;
+  last_stage = u.stage;
+  if (tenth > last_tenth) {
+    last_tenth = tenth;
+    progress(std::string(stage_name(u.stage)) + ": " + std::to_string(tenth * 10) + "%");
+  }
+  return true;
+}
+Progress g_progress{print_progress};
+
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
@@ -242,12 +265,7 @@ SimplifyOptions simplify_options(double ratio, std::uint64_t faces, double max_e
   o.max_error = max_error;
   o.min_quality = min_quality;
   o.relax = relax;
-  o.progress = [](std::string_view pass, std::int64_t done, std::int64_t total) {
-    const std::int64_t step = std::max<std::int64_t>(1, total / 10);
-    if (done != total && done % step != 0) return;
-    progress("simplify " + std::string(pass) + ": " + std::to_string(done) + "/" +
-             std::to_string(total) + " regions");
-  };
+  o.progress = &g_progress;
   return o;
 }
 
@@ -380,13 +398,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     throw InputError(
         "--check-intersections needs the whole mesh in memory; drop --memory, or run "
         "`isotile quality --check-intersections` on the output");
-  to.progress = [&](std::string_view pass, std::int64_t done, std::int64_t total) {
-    // About twenty lines per pass, whatever the brick count.
-    const std::int64_t step = std::max<std::int64_t>(1, total / 20);
-    if (done != total && done % step != 0) return;
-    progress(std::string(pass) + ": " + std::to_string(done) + "/" + std::to_string(total) +
-             " bricks");
-  };
+  to.progress = &g_progress;
   TiledResult r;
   Index3 dims{0, 0, 0};
   ScalarType type = ScalarType::Float32;

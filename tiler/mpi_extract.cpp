@@ -331,13 +331,18 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
       const auto tb = Clock::now();
       try {
         injected(b, "count");
+        if (options.progress && me == 0) {
+          // Inside the try: a cancel becomes this rank's error, which every rank agrees on.
+          options.progress->set_brick(b - lo, hi - lo);
+          options.progress->begin(Stage::Count, 1);
+        }
         bricks->count(b);
+        if (me == 0) progress_advance(options.progress);
       } catch (const std::exception& e) {
         error = brick_error(b, e);
       }
       count_seconds[static_cast<std::size_t>(b)] = since(tb);
       ++mine.bricks_counted;
-      if (options.progress && me == 0) options.progress("count", b - lo + 1, hi - lo);
     }
     mpi.agree(error);
   }
@@ -405,13 +410,17 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
       try {
         injected(b, "extract");
         injected(b, "kill");
+        if (options.progress && me == 0) {
+          options.progress->set_brick(done++, todo);
+          options.progress->begin(Stage::Extract, 1);
+        }
         bricks->extract(b, write, quality, result);
+        if (me == 0) progress_advance(options.progress);
       } catch (const std::exception& e) {
         error = brick_error(b, e);
       }
       extract_seconds[static_cast<std::size_t>(b)] = since(tb);
       ++mine.bricks_extracted;
-      if (options.progress && me == 0) options.progress("extract", ++done, todo);
     }
     const std::string closing = mf->close();
     mpi.agree(error.empty() ? closing : error);

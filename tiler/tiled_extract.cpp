@@ -59,8 +59,12 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
           // A buffer is free again once the brick two before is done.
           return {b, bricks.read_for_count(b, buffers[static_cast<std::size_t>(b) % in_flight])};
         }) & tbb::make_filter<Read, void>(tbb::filter_mode::serial_in_order, [&](const Read& r) {
+          if (options.progress) {
+            options.progress->set_brick(r.brick, total);
+            options.progress->begin(Stage::Count, 1);
+          }
           bricks.count(r.brick, r.view);
-          if (options.progress) options.progress("count", r.brick + 1, total);
+          progress_advance(options.progress);
         }));
   }
   bricks.scan(result);
@@ -124,8 +128,11 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
                 }) &
             tbb::make_filter<Done, void>(tbb::filter_mode::serial_in_order, [&](const Done& d) {
               bricks.write(*d.records, write);
-              if (d.part->last && options.progress)
-                options.progress("extract", d.part->brick + 1, total);
+              if (d.part->last && options.progress) {
+                options.progress->set_brick(d.part->brick, total);
+                options.progress->begin(Stage::Extract, 1);
+                options.progress->advance();
+              }
             }));
   }
   result.seconds_extract = since(t0);

@@ -48,7 +48,9 @@ struct TiledOptions {
   // the output is touched; true writes the empty mesh.
   bool allow_empty = true;
   // Called after each brick of each pass ("count", "extract").
-  std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress;
+  // Told of each brick counted and extracted (Stage::Count, Stage::Extract, the brick set);
+  // null: nobody listens. Cancelling throws Cancelled and leaves no output file.
+  Progress* progress = nullptr;
 };
 
 struct TiledResult {

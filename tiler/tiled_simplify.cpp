@@ -219,7 +219,11 @@ class TiledSimplification {
         ++result.bricks_extracted;
       }
       result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
-      if (opt_.progress) opt_.progress("simplify", b + 1, bricks);
+      if (opt_.progress) {
+        opt_.progress->set_brick(b, bricks);
+        opt_.progress->begin(Stage::Simplify, 1);
+        opt_.progress->advance();
+      }
     }
     result.seconds_extract = since(t0);
 
@@ -233,9 +237,11 @@ class TiledSimplification {
     keep_ = spilled_faces_ > 0
                 ? std::min(1.0, static_cast<double>(target) / static_cast<double>(spilled_faces_))
                 : 1.0;
+    if (opt_.progress) opt_.progress->set_brick(0, 1);
+    progress_begin(opt_.progress, Stage::Simplify, cells);
     for (std::int64_t c = 0; c < cells; ++c) {
       seam_cell(c, result);
-      if (opt_.progress) opt_.progress("seams", c + 1, cells);
+      progress_advance(opt_.progress);
     }
     result.seconds_seams = since(t0);
 
@@ -267,7 +273,11 @@ class TiledSimplification {
         plane_faces[c.faces.box.lo[2] + static_cast<std::int64_t>(r) / ny] +=
             c.faces.count[r] * mult;
       }
-      if (opt_.progress) opt_.progress("count", b + 1, bricks);
+      if (opt_.progress) {
+        opt_.progress->set_brick(b, bricks);
+        opt_.progress->begin(Stage::Count, 1);
+        opt_.progress->advance();
+      }
     }
   }
 

@@ -16,6 +16,7 @@
 #include "core/extract/macet.h"
 #include "core/mesh/mesh.h"
 #include "core/mesh/mesh_topology.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -45,6 +46,9 @@ struct ExtractOptions {
   // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
   // core/extract/marching_cubes.h and core/extract/brick_sites.h.
   Box3 cells{};
+  // Told of the extraction's progress (Stage::Count, Stage::Extract, Stage::MacetSearch); null:
+  // nobody listens. Cancelling throws Cancelled.
+  Progress* progress = nullptr;
 };
 
 // Samples beyond a brick's cells that `options` needs the view to hold.

@@ -340,8 +340,8 @@ double round_ceiling(const std::vector<std::vector<double>>& costs, std::uint64_
 // reduction evenly instead of where it costs least); without one (an error bound only), each
 // region collapses all it may. The regions are then put back together in cell order.
 PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
-                    const RegionOptions& base, std::string_view name,
-                    const SimplifyOptions& options, SimplifyStats& stats) {
+                    const RegionOptions& base, const SimplifyOptions& options,
+                    SimplifyStats& stats) {
   const std::int64_t cells = grid.total();
   std::vector<std::uint64_t> start(cells + 1, 0);
   std::vector<std::int64_t> cell_of(in.triangles.size());
@@ -456,11 +456,10 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
   }
 
   std::vector<Region> out(nr);
-  std::atomic<std::int64_t> done{0};
+  progress_begin(options.progress, Stage::Simplify, static_cast<std::int64_t>(nr));
   tbb::parallel_for(std::size_t{0}, nr, std::size_t{1}, [&](std::size_t r) {
     out[r] = sims[r]->finish();
-    const std::int64_t d = ++done;
-    if (options.progress) options.progress(name, d, static_cast<std::int64_t>(nr));
+    progress_advance(options.progress);
   });
 
   // Back together. A vertex shared by regions was locked in each, so all give the same position;
@@ -622,9 +621,9 @@ Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& op
     const double held = kSeamFaces * static_cast<double>(count_shared(m, grid)) * (1 - keep);
     target1 = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
   }
-  PassResult p1 = run_pass(m, grid, target1, ro, "collapse", options, stats);
+  PassResult p1 = run_pass(m, grid, target1, ro, options, stats);
   stats.regions += p1.regions;
-  PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, "seams", options, stats);
+  PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, options, stats);
   stats.seam_regions += p2.regions;
   return weld(p2.mesh);
 }

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/simplify/quadric.h"
 
 namespace isotile {
@@ -49,7 +50,9 @@ struct SimplifyOptions {
   double min_quality = 0.3;
   bool relax = true;  // flips and tangential relaxation after the collapses
   // Called as regions complete, with the pass ("collapse", "seams") and counts.
-  std::function<void(std::string_view pass, std::int64_t done, std::int64_t total)> progress = {};
+  // Told of regions as they complete (Stage::Simplify, one unit per region, per pass); null:
+  // nobody listens. Cancelling throws Cancelled.
+  Progress* progress = nullptr;
 };
 
 struct SimplifyStats {
