@@ -195,10 +195,9 @@ QString FilterIsotile::filterName(FilterIDType filter) const {
 QString FilterIsotile::filterInfo(FilterIDType filter) const {
   switch (filter) {
     case FP_ISOSURFACE:
-      return "Extracts a volume file's isosurface as a new layer with isotile (Marching Cubes, "
-             "Macet or Dual Contouring; CPU or OpenGL; in core or brick by brick). Face quality: "
-             "radius ratio (1: equilateral). Leave Isovalue at nan for an automatic one; the "
-             "log shows the samples' range. See <i>Schmitz, Dietrich, Comba</i>, SIBGRAPI 2009.";
+      // Short: the dialog shows it above 18 fields, on screens down to 1280x800.
+      return "A volume file's isosurface as a new layer (isotile: Marching Cubes, Macet, Dual "
+             "Contouring). Isovalue nan: automatic; the log shows the samples' range.";
     case FP_SIMPLIFY:
       return "Simplifies the current mesh by edge collapses that keep its topology, its border "
              "(boundary vertices do not move) and well-shaped triangles (no new triangle below "
