@@ -432,8 +432,10 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
   to_meshlab(start, 0);
   const auto t0 = std::chrono::steady_clock::now();
   isotile::SimplifyStats stats;
+  // run_simplify() reports no progress yet; `progress` (stage, fraction) is where it would go.
   const isotile::Mesh out = on_own_thread<isotile::Mesh>(
-      to_meshlab, [&](const ml::Progress&) { return ml::run_simplify(in, p, &stats); });
+      to_meshlab,
+      [&](const ml::Progress& /*progress*/) { return ml::run_simplify(in, p, &stats); });
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   to_meshlab("simplified to " + std::to_string(out.triangles.size()) + " triangles", 1);

@@ -213,6 +213,9 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
       r.range = value_range(volume.view());
     }
     report("extracting (" + std::string(method_name(o.method)) + ")", 0.3);
+    // extract() and simplify() report no progress of their own yet: the stage stands until they
+    // return. A library callback (stage, fraction of it) maps onto `report`, e.g. the extraction
+    // onto 0.3 + 0.3 * fraction.
     r.mesh = extract(volume.view(), o);
     r.triangles_extracted = r.mesh.triangles.size();
     if (r.mesh.triangles.empty()) no_surface();
