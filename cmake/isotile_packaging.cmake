@@ -59,6 +59,8 @@ shape-preserving simplification.")
 # The plugin API is MeshLab 2020.09's exactly; libmeshlab-common lives in MeshLab's private
 # folder, which shlibdeps is told about but where it finds no shlibs entry.
 set(CPACK_DEBIAN_MESHLAB_PACKAGE_DEPENDS "meshlab (>= 2020.09), meshlab (<< 2020.10)")
+# The filter's messages point to `isotile info` for a volume's header and range.
+set(CPACK_DEBIAN_MESHLAB_PACKAGE_RECOMMENDS isotile)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS "/usr/lib/${CMAKE_LIBRARY_ARCHITECTURE}/meshlab")
 
 set(CPACK_DEBIAN_PYTHON_PACKAGE_NAME python3-isotile)

@@ -4,11 +4,15 @@
 #include <vcg/complex/algorithms/update/color.h>
 #include <vcg/complex/algorithms/update/normal.h>
 
+#include <QApplication>
 #include <QDir>
+#include <QMainWindow>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <exception>
 #include <future>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -31,18 +35,55 @@ QStringList choices(const char* const* names, int n) {
   return out;
 }
 
+// True inside MeshLab's GUI (its main window exists), false in meshlabserver. The two differ
+// in what they show: the GUI logs a failed filter's message itself ("Filter failed: ...") and
+// shows progress in its status bar; meshlabserver prints neither the message (only "Problem
+// with filter") nor a line break after a progress text.
+bool in_gui() {
+  for (QWidget* w : QApplication::topLevelWidgets())
+    if (qobject_cast<QMainWindow*>(w)) return true;
+  return false;
+}
+
+// The one place where isotile's progress, a stage and the fraction of the run done (0..1),
+// becomes MeshLab's callback. Call it on MeshLab's thread only (the callback may touch widgets).
+// The GUI shows the text in its status bar and the percentage in its bar; meshlabserver prints
+// the text whenever the percentage changes, so it gets the percentage and a line of its own.
+class MeshlabProgress {
+ public:
+  explicit MeshlabProgress(vcg::CallBackPos* cb) : cb_(cb), gui_(in_gui()) {}
+  void operator()(const std::string& stage, double fraction) {
+    if (!cb_) return;
+    const int percent = static_cast<int>(std::lround(std::clamp(fraction, 0.0, 1.0) * 100));
+    if (percent == percent_ && stage == stage_) return;
+    percent_ = percent;
+    stage_ = stage;
+    const std::string text =
+        gui_ ? "isotile: " + stage : "isotile: " + stage + " (" + std::to_string(percent) + "%)\n";
+    cb_(percent, text.c_str());
+  }
+
+ private:
+  vcg::CallBackPos* cb_;
+  bool gui_;
+  int percent_ = -1;
+  std::string stage_;
+};
+
 // Runs `work` on a thread of its own (see filter_isotile.h) while this thread hands its progress
 // to MeshLab's callback, which may touch widgets and so must stay on MeshLab's thread. Rethrows
 // what `work` threw.
 template <class T, class Work>
-T on_own_thread(vcg::CallBackPos* cb, Work&& work) {
+T on_own_thread(MeshlabProgress& to_meshlab, Work&& work) {
   std::mutex m;
-  int percent = 0;
-  std::string what;
-  const ml::Progress progress = [&](int p, const std::string& w) {
+  double fraction = 0;
+  std::string stage;
+  bool reported = false;
+  const ml::Progress progress = [&](const std::string& s, double f) {
     std::lock_guard<std::mutex> lock(m);
-    percent = p;
-    what = w;
+    fraction = f;
+    stage = s;
+    reported = true;
   };
   std::packaged_task<T()> task([&] {
 #ifdef ISOTILE_HAVE_GL
@@ -56,12 +97,13 @@ T on_own_thread(vcg::CallBackPos* cb, Work&& work) {
   });
   std::future<T> done = task.get_future();
   std::thread worker(std::move(task));
-  while (done.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) {
-    if (!cb) continue;
+  auto hand_over = [&] {
     std::lock_guard<std::mutex> lock(m);
-    cb(percent, what.c_str());
-  }
+    if (reported) to_meshlab(stage, fraction);
+  };
+  while (done.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) hand_over();
   worker.join();
+  hand_over();        // the last stage, even of a run shorter than one wait
   return done.get();  // rethrows
 }
 
@@ -105,6 +147,27 @@ void fill(MeshModel& m, const isotile::Mesh& mesh) {
   set_quality(m);
 }
 
+// The isosurface filter's colouring: each face's quality (radius ratio) on MeshLab's ramp, red 0
+// to blue 1.
+void colour_by_quality(MeshModel& m) {
+  m.updateDataMask(MeshModel::MM_FACECOLOR);
+  vcg::tri::UpdateColor<CMeshO>::PerFaceQualityRamp(m.cm, 0, 1);
+}
+
+// True when every face's colour is the ramp colour of its quality, as colour_by_quality() paints
+// it: colours that can be painted again from the simplified mesh's quality.
+bool coloured_by_quality(const MeshModel& m) {
+  if (!m.hasDataMask(MeshModel::MM_FACECOLOR) || !m.hasDataMask(MeshModel::MM_FACEQUALITY))
+    return false;
+  for (const CFaceO& f : m.cm.face) {
+    if (f.IsD()) continue;
+    vcg::Color4b ramp;
+    ramp.SetColorRamp(0, 1, f.cQ());
+    if (f.cC() != ramp) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 FilterIsotile::FilterIsotile() {
@@ -132,17 +195,9 @@ QString FilterIsotile::filterName(FilterIDType filter) const {
 QString FilterIsotile::filterInfo(FilterIDType filter) const {
   switch (filter) {
     case FP_ISOSURFACE:
-      return "Extracts the isosurface of a volume file (raw, raw.gz, NRRD/NHDR, OpenVDB, NIfTI, "
-             "MetaImage, TIFF, MRC/CCP4, a DICOM series through any of its files) as a new "
-             "layer, in the volume's world coordinates, with isotile: Marching Cubes, Macet "
-             "(Marching Cubes with edge "
-             "transformations: well-shaped triangles) or table-driven Dual Contouring, on the "
-             "CPU or in OpenGL shaders, in core or brick by brick within a memory budget, "
-             "optionally simplified. Per-face quality is the triangle's radius ratio (1: "
-             "equilateral), per-vertex quality the worst of its faces.<br>"
-             "A raw file named NAME_XxYxZ_TYPE.raw[.gz] needs no dims or type.<br>See: "
-             "<i>Schmitz, Dietrich, Comba</i>, <b>\"Efficient and High Quality Contouring of "
-             "Isosurfaces on Uniform Grids\"</b>, SIBGRAPI 2009.";
+      // Short: the dialog shows it above 18 fields, on screens down to 1280x800.
+      return "A volume file's isosurface as a new layer (isotile: Marching Cubes, Macet, Dual "
+             "Contouring). Isovalue nan: automatic; the log shows the samples' range.";
     case FP_SIMPLIFY:
       return "Simplifies the current mesh by edge collapses that keep its topology, its border "
              "(boundary vertices do not move) and well-shaped triangles (no new triangle below "
@@ -168,8 +223,10 @@ int FilterIsotile::getPreConditions(QAction* a) const {
 
 int FilterIsotile::postCondition(QAction* a) const {
   if (ID(a) == FP_ISOSURFACE) return MeshModel::MM_NONE;  // a new layer
+  // New faces and vertices: their quality, and colours painted again or dropped.
   return MeshModel::MM_GEOMETRY_AND_TOPOLOGY_CHANGE | MeshModel::MM_FACEQUALITY |
-         MeshModel::MM_VERTQUALITY;
+         MeshModel::MM_VERTQUALITY | MeshModel::MM_FACECOLOR | MeshModel::MM_VERTCOLOR |
+         MeshModel::MM_VERTTEXCOORD | MeshModel::MM_WEDGTEXCOORD;
 }
 
 void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParameterList& par) {
@@ -186,58 +243,60 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                            "and up to which the cleanup works"));
     return;
   }
+  // Short labels, the details in the help: 18 fields fit a 1280x800 screen only so. The names
+  // stay as they are: meshlabserver 2020.09 aborts on a script lacking a declared parameter.
   const ml::IsosurfaceParams d;
-  par.addParam(RichOpenFile("file", "",
-                            QStringList() << "*.raw *.gz *.nrrd *.nhdr *.vdb *.nii *.mha *.mhd "
-                                             "*.tif *.tiff *.mrc *.map *.ccp4 *.dcm"
-                                          << "*",
-                            "Volume file",
-                            "raw, raw.gz, NRRD/NHDR, OpenVDB, NIfTI, MetaImage, TIFF (multi-page), "
-                            "MRC/CCP4, or any file of a DICOM series"));
-  par.addParam(RichString("dims", "", "Dimensions",
+  QStringList patterns;
+  for (const char* pattern : ml::kVolumeFilePatterns) patterns << pattern;
+  par.addParam(RichOpenFile("file", "", patterns, "Volume file",
+                            "raw, raw.gz, NRRD/NHDR, OpenVDB, NIfTI, MetaImage, TIFF, MRC/CCP4, or "
+                            "any file of a DICOM series. Choose it with the '...' button: MeshLab "
+                            "2020.09 ignores a path typed into the box"));
+  par.addParam(RichString("dims", "", "Raw dims",
                           "Raw files whose name does not say: samples along x,y,z, e.g. "
                           "256,256,128; empty otherwise"));
-  par.addParam(RichString("type", "", "Sample type",
+  par.addParam(RichString("type", "", "Raw type",
                           "Raw files whose name does not say: int8, uint8, int16, uint16, int32, "
                           "uint32, float32 or float64; empty otherwise"));
-  par.addParam(
-      RichString("endian", "", "Byte order", "Raw files: little (default) or big; empty: little"));
+  par.addParam(RichString("endian", "", "Raw byte order",
+                          "Raw files: little (default) or big; empty: little"));
   par.addParam(RichString("spacing", "", "Spacing",
                           "Sample spacing x,y,z, e.g. 0.5,0.5,1 (overrides the file's); empty: "
                           "the file's, or 1"));
   par.addParam(RichString("series", "", "DICOM series",
-                          "DICOM series UID where the file's directory holds several; empty: "
-                          "the series of the file chosen"));
-  // No parameter of its own for the automatic isovalue: meshlabserver 2020.09 aborts on a script
-  // that lacks a declared parameter, so a new one would break every existing script.
-  par.addParam(RichFloat("iso", static_cast<float>(d.iso), "Isovalue",
-                         "Samples at or above it are inside; nan: chosen from the samples (Otsu's "
-                         "threshold, as isotile extract --iso auto; the log gives the value)"));
+                          "DICOM series UID where the file's folder holds several; empty: the "
+                          "series of the file chosen"));
+  // NaN, shown as "nan", is the automatic isovalue: no parameter of its own, which would break
+  // every existing script (see above).
+  par.addParam(RichFloat("iso", std::numeric_limits<float>::quiet_NaN(), "Isovalue (nan: auto)",
+                         "Samples at or above it are inside. nan (the default): chosen from the "
+                         "samples (Otsu's threshold, as isotile extract --iso auto). The log "
+                         "shows the samples' range and the isovalue used: this dialog cannot "
+                         "show them when the file is chosen"));
   par.addParam(RichEnum("method", d.method, choices(ml::kMethodNames, 3), "Method",
                         "Marching Cubes; Macet (better-shaped triangles); Dual Contouring"));
   par.addParam(RichEnum("macet_quality", d.macet_quality, choices(ml::kMacetQualityNames, 2),
                         "Macet quality",
                         "fast: closed-form push of the edge end points; max: adds a local "
                         "search for the worst triangles (much slower)"));
-  par.addParam(RichFloat("macet_relax", static_cast<float>(d.macet_relax), "Macet relaxation",
+  par.addParam(RichFloat("macet_relax", static_cast<float>(d.macet_relax), "Macet relax",
                          "Macet only: moves samples pinned in one-sample-thin features, in [0, "
                          "0.5) edge lengths; 0: off"));
-  par.addParam(RichEnum("dc_solver", d.dc_solver, choices(ml::kDcSolverNames, 3),
-                        "Dual Contouring vertex placement",
-                        "mass point (best triangles), particle (the paper's minimizer), QEF "
-                        "(sharp features)"));
-  par.addParam(RichEnum("dc_hermite", d.dc_hermite, choices(ml::kDcHermiteNames, 2),
-                        "Dual Contouring Hermite data",
-                        "central differences, or ENO (kink-aware: sharper edges and corners)"));
+  par.addParam(RichEnum("dc_solver", d.dc_solver, choices(ml::kDcSolverNames, 3), "DC solver",
+                        "Dual Contouring's vertex placement: mass point (best triangles), "
+                        "particle (the paper's minimizer), QEF (sharp features)"));
+  par.addParam(RichEnum("dc_hermite", d.dc_hermite, choices(ml::kDcHermiteNames, 2), "DC Hermite",
+                        "Dual Contouring's Hermite data: central differences, or ENO "
+                        "(kink-aware: sharper edges and corners)"));
   par.addParam(RichEnum("dc_vertices", d.dc_vertices, choices(ml::kDcVerticesNames, 2),
-                        "Dual Contouring vertices",
-                        "patch: one vertex per surface patch of a cell, a manifold mesh; cell: "
-                        "one vertex per cell (the paper's table; non-manifold edges where a cell "
-                        "holds several sheets)"));
+                        "DC vertices",
+                        "Dual Contouring: patch: one vertex per surface patch of a cell, a "
+                        "manifold mesh; cell: one vertex per cell (the paper's table; "
+                        "non-manifold edges where a cell holds several sheets)"));
   par.addParam(RichEnum("backend", d.backend, choices(ml::kBackendNames, 4), "Backend",
                         "Auto (the CPU: no GPU path is measured faster yet; docs/gl.md), CPU, "
                         "or OpenGL: geometry shader or HistoPyramid"));
-  par.addParam(RichString("memory", QString::fromStdString(d.memory), "Memory budget",
+  par.addParam(RichString("memory", QString::fromStdString(d.memory), "Memory",
                           "Extract brick by brick within this working set, e.g. 512MiB; 0: in "
                           "core. MeshLab still holds the whole result"));
   par.addParam(RichFloat("simplify", static_cast<float>(d.simplify), "Simplify",
@@ -246,13 +305,14 @@ void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParam
                         "Vertex normals from the volume's gradient; otherwise from the faces"));
   par.addParam(RichBool("colour_by_quality", false, "Colour by quality",
                         "Colour the faces by their radius ratio on MeshLab's red (0) to blue "
-                        "(1) ramp"));
+                        "(1) ramp; simplifying the layer paints them again"));
 }
 
 bool FilterIsotile::fail(const QString& message) {
   errorMessage = message;
-  // meshlabserver prints only "Problem with filter"; the log reaches its output.
-  Log(GLLogStream::SYSTEM, "isotile: %s", qUtf8Printable(message));
+  // The GUI logs the message itself ("Filter failed: ..."); meshlabserver prints only "Problem
+  // with filter", so there the log carries it.
+  if (!in_gui()) Log(GLLogStream::SYSTEM, "isotile: %s", qUtf8Printable(message));
   return false;
 }
 
@@ -293,32 +353,37 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   const bool colour = par.getBool("colour_by_quality");
   const std::string temp = QDir::tempPath().toStdString();
 
+  MeshlabProgress to_meshlab(cb);
   const ml::IsosurfaceResult r = on_own_thread<ml::IsosurfaceResult>(
-      cb, [&](const ml::Progress& progress) { return ml::run_isosurface(p, temp, progress); });
-  if (r.mesh.triangles.empty())
-    return fail(QString("no surface at isovalue %1 in %2 (see its value range with `isotile "
-                        "info`)")
-                    .arg(r.iso)
-                    .arg(QString::fromStdString(p.file)));
+      to_meshlab,
+      [&](const ml::Progress& progress) { return ml::run_isosurface(p, temp, progress); });
 
   // The layer appears only now that its mesh is complete; a failure while filling it removes it.
-  MeshModel* m = md.addNewMesh("", QString::fromStdString(r.layer_name), true);
+  // A name of its own: MeshLab's own disambiguation ("name(1)") cuts at dots and drops the rest.
+  const std::string label = ml::unique_name(r.layer_name, [&](const std::string& name) {
+    for (const MeshModel* other : md.meshList)
+      if (other->label() == QString::fromStdString(name)) return true;
+    return false;
+  });
+  MeshModel* m = md.addNewMesh("", QString::fromStdString(label), true);
   try {
     fill(*m, r.mesh);
   } catch (...) {
     md.delMesh(m);
     throw;
   }
-  if (colour) {
-    m->updateDataMask(MeshModel::MM_FACECOLOR);
-    vcg::tri::UpdateColor<CMeshO>::PerFaceQualityRamp(m->cm, 0, 1);
-  }
+  if (colour) colour_by_quality(*m);
+  Log("isotile: layer '%s': %s", label.c_str(), r.description.c_str());
+  if (r.range)
+    Log("isotile: samples from %.10g to %.10g; isovalue %.10g%s", r.range->first, r.range->second,
+        r.iso, p.iso_auto ? " (automatic: Otsu's threshold of the samples)" : "");
+  else
+    Log("isotile: isovalue %.10g", r.iso);
   Log("isotile: %llu triangles, %zu vertices; radius ratio min %.4f, mean %.4f; %lld brick(s) "
       "on %s; %.2f s",
       static_cast<unsigned long long>(r.mesh.triangles.size()), r.mesh.positions.size(),
       r.quality.min, r.quality.mean, static_cast<long long>(r.bricks), r.backend.c_str(),
       r.seconds);
-  if (p.iso_auto) Log("isotile: isovalue %g (Otsu's threshold of the samples)", r.iso);
   if (p.simplify < 1)
     Log("isotile: simplified from %llu triangles",
         static_cast<unsigned long long>(r.triangles_extracted));
@@ -352,20 +417,49 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
       t[k] = index[static_cast<std::size_t>(vcg::tri::Index(m->cm, f.cV(k)))];
     in.triangles.push_back(t);
   }
+  // What the new faces and vertices can carry over: the quality ramp the isosurface filter
+  // painted is painted again from the new quality; other colours and texture coordinates
+  // belonged to faces and vertices that no longer exist.
+  const bool recolour = coloured_by_quality(*m);
+  QStringList dropped;
+  if (m->hasDataMask(MeshModel::MM_FACECOLOR) && !recolour) dropped << "face colours";
+  if (m->hasDataMask(MeshModel::MM_VERTCOLOR)) dropped << "vertex colours";
+  if (m->hasDataMask(MeshModel::MM_VERTTEXCOORD) || m->hasDataMask(MeshModel::MM_WEDGTEXCOORD))
+    dropped << "texture coordinates";
+
+  MeshlabProgress to_meshlab(cb);
+  const std::string start = "simplifying " + std::to_string(in.triangles.size()) + " triangles";
+  to_meshlab(start, 0);
   const auto t0 = std::chrono::steady_clock::now();
   isotile::SimplifyStats stats;
-  const isotile::Mesh out = on_own_thread<isotile::Mesh>(
-      cb, [&](const ml::Progress&) { return ml::run_simplify(in, p, &stats); });
+  const isotile::Mesh out =
+      on_own_thread<isotile::Mesh>(to_meshlab, [&](const ml::Progress& progress) {
+        // Short of 100% until the end: meshlabserver prints a text only when the percentage
+        // changes, and the end has a text of its own.
+        return ml::run_simplify(in, p, &stats,
+                                [&](const std::string&, double f) { progress(start, 0.95 * f); });
+      });
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  to_meshlab("simplified to " + std::to_string(out.triangles.size()) + " triangles", 1);
   m->cm.Clear();
+  if (!dropped.isEmpty())
+    m->clearDataMask(MeshModel::MM_FACECOLOR | MeshModel::MM_VERTCOLOR |
+                     MeshModel::MM_VERTTEXCOORD | MeshModel::MM_WEDGTEXCOORD);
   fill(*m, out);
+  if (recolour) colour_by_quality(*m);
   const isotile::QualityStats q = isotile::triangle_quality(out);
   Log("isotile: simplified %llu to %llu triangles; radius ratio min %.4f, mean %.4f; %llu "
       "non-manifold vertices split and welded back; %.2f s",
       static_cast<unsigned long long>(stats.faces_before),
       static_cast<unsigned long long>(out.triangles.size()), q.min, q.mean,
       static_cast<unsigned long long>(stats.split_vertices), seconds);
+  if (recolour) Log("isotile: faces coloured again by their new quality");
+  if (!dropped.isEmpty())
+    Log("isotile: dropped the layer's %s: they belonged to the faces and vertices the "
+        "simplification replaced (colour by quality again with Filters > Color Creation and "
+        "Processing)",
+        qUtf8Printable(dropped.join(", ")));
   return true;
 }
 

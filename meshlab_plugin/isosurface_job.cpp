@@ -22,6 +22,10 @@
 
 namespace isotile::meshlab {
 
+const char* const kVolumeFilePatterns[21] = {
+    "*.raw", "*.gz",  "*.nrrd", "*.nhdr", "*.vdb",  "*.nii",  "*.mha",
+    "*.mhd", "*.tif", "*.tiff", "*.mrc",  "*.mrcs", "*.map",  "*.ccp4",
+    "*.dcm", "*.ima", "*.DCM",  "*.IMA",  "*.TIF",  "*.TIFF", "*"};
 const char* const kMethodNames[3] = {"Marching Cubes", "Macet", "Dual Contouring"};
 const char* const kMacetQualityNames[2] = {"fast", "max"};
 const char* const kDcSolverNames[3] = {"mass point", "particle", "QEF"};
@@ -71,6 +75,30 @@ std::string format_iso(double iso) {
   return buf;
 }
 
+std::string format_value(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+// The file's name without the extensions the readers know (".nii.gz" whole).
+std::string file_stem(const std::string& file) {
+  std::string name = fs::path(file).filename().string();
+  if (name.empty()) name = fs::path(file).parent_path().filename().string();  // "dir/"
+  auto strip = [&](std::string_view ext) {
+    if (name.size() > ext.size() && name.compare(name.size() - ext.size(), ext.size(), ext) == 0) {
+      name.resize(name.size() - ext.size());
+      return true;
+    }
+    return false;
+  };
+  strip(".gz");
+  for (std::string_view ext : {".raw", ".nii", ".nrrd", ".nhdr", ".vdb", ".mha", ".mhd", ".tiff",
+                               ".tif", ".mrc", ".mrcs", ".map", ".ccp4", ".dcm", ".ima"})
+    if (strip(ext)) break;
+  return name;
+}
+
 ExtractOptions extract_options(const IsosurfaceParams& p) {
   ExtractOptions o;
   o.method = static_cast<Method>(checked_choice(p.method, kMethodNames, "method"));
@@ -97,7 +125,8 @@ ExtractOptions extract_options(const IsosurfaceParams& p) {
               : backend == 2 ? Backend::GeometryShader
               : backend == 3 ? Backend::HistoPyramid
                              : Backend::Auto;
-  if (!p.iso_auto && !std::isfinite(p.iso)) throw InputError("iso must be a finite number");
+  if (!p.iso_auto && !std::isfinite(p.iso))
+    throw InputError("iso must be a finite number, or nan for the automatic isovalue");
   o.iso = p.iso;
   o.normals = p.normals;
   return o;
@@ -105,11 +134,31 @@ ExtractOptions extract_options(const IsosurfaceParams& p) {
 
 }  // namespace
 
+std::string layer_name(const std::string& file, const std::string& series_description,
+                       std::string_view method, double iso) {
+  std::string base = series_description;
+  if (base.empty()) base = file_stem(file);
+  if (base.empty()) base = "volume";
+  std::string name = base + " " + std::string(method) + " iso" + format_iso(iso);
+  for (char& c : name)
+    if (c == '.' || c == '/' || c == '\\') c = '_';
+  return name;
+}
+
+std::string unique_name(const std::string& name,
+                        const std::function<bool(const std::string&)>& taken) {
+  if (!taken(name)) return name;
+  for (int n = 2;; ++n) {
+    std::string candidate = name + " (" + std::to_string(n) + ")";
+    if (!taken(candidate)) return candidate;
+  }
+}
+
 IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& temp_dir,
                                 const Progress& progress) {
   const auto t0 = Clock::now();
-  auto report = [&](int percent, const std::string& what) {
-    if (progress) progress(percent, what);
+  auto report = [&](const std::string& stage, double fraction) {
+    if (progress) progress(stage, fraction);
   };
   if (p.file.empty())
     throw InputError(
@@ -131,20 +180,58 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
   raw.series = p.series;
   const std::uint64_t memory =
       p.memory.empty() || p.memory == "0" ? 0 : parse_memory_size(p.memory);
+  const std::string file_name = fs::path(p.file).filename().string();
 
   IsosurfaceResult r;
   r.backend = std::string(backend_name(backend));
+  // A DICOM series is named by its description (a file's name, "00000060.dcm", says nothing).
+  std::string series_description, series_uid;
+  if (p.file.rfind("field:", 0) != 0 && input_kind(p.file) == InputKind::Dicom) {
+    report("reading the DICOM series' headers", 0.01);
+    const VolumeHeader h = read_volume_header(p.file, raw);
+    series_description = h.series_description;
+    series_uid = h.series_uid;
+  }
+  // No surface: say where the samples lie, and the way out.
+  auto no_surface = [&]() {
+    std::string m = "no surface at isovalue " + format_value(o.iso) + " in " + p.file;
+    if (r.range)
+      m += ": the samples range from " + format_value(r.range->first) + " to " +
+           format_value(r.range->second) +
+           (o.iso > r.range->second ? ", all below it" : ", all at or above it");
+    throw InputError(m + "; set iso inside the range, or to nan for the automatic isovalue");
+  };
   if (memory == 0) {
-    report(5, "reading " + p.file);
+    report("reading " + file_name, 0.02);
     const Volume volume = read_volume(p.file, raw);
-    if (p.iso_auto) o.iso = otsu_isovalue(value_histogram(volume.view()));
-    report(30, "extracting");
+    if (p.iso_auto) {
+      report("choosing the isovalue", 0.25);
+      const ValueHistogram h = value_histogram(volume.view());
+      r.range = std::pair(h.min, h.max);
+      o.iso = otsu_isovalue(h);
+    } else {
+      r.range = value_range(volume.view());
+    }
+    // The library's progress (its stage, the fraction of it) onto MeshLab's bar: the
+    // extraction from 30% to 60%, the simplification from 60% to 90%.
+    auto span = [&](double from, double width) {
+      return [&report, from, width](const ProgressUpdate& u) {
+        report(std::string(stage_name(u.stage)), from + width * u.fraction);
+        return true;
+      };
+    };
+    report("extracting (" + std::string(method_name(o.method)) + ")", 0.3);
+    isotile::Progress extracting(span(0.3, 0.3));
+    o.progress = &extracting;
     r.mesh = extract(volume.view(), o);
     r.triangles_extracted = r.mesh.triangles.size();
+    if (r.mesh.triangles.empty()) no_surface();
     if (p.simplify < 1) {
-      report(60, "simplifying");
+      report("simplifying", 0.6);
+      isotile::Progress simplifying(span(0.6, 0.3));
       SimplifyOptions so;
       so.ratio = p.simplify;
+      so.progress = &simplifying;
       r.mesh = simplify(r.mesh, so);
     }
     // Into the volume's world frame (its orientation), as `isotile extract` writes it.
@@ -156,8 +243,10 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     const fs::path mesh_file = tmp.path / "bricks.ply";
     auto source = open_volume_source(p.file, raw, memory);
     if (p.iso_auto) {
-      report(5, "reading the samples' histogram for the isovalue");
-      o.iso = otsu_isovalue(source_histogram(*source, memory));
+      report("reading the samples' histogram for the isovalue", 0.02);
+      const ValueHistogram h = source_histogram(*source, memory);
+      r.range = std::pair(h.min, h.max);
+      o.iso = otsu_isovalue(h);
     }
     TiledOptions to;
     to.frame = mesh_frame(source->origin, source->world);
@@ -168,29 +257,49 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     isotile::Progress bricks([&](const ProgressUpdate& u) {
       const double done = (static_cast<double>(u.brick) + u.fraction) /
                           static_cast<double>(std::max<std::int64_t>(u.bricks, 1));
-      report(static_cast<int>(5 + 85 * done), std::string(stage_name(u.stage)) + " " +
-                                                  std::to_string(u.brick + 1) + "/" +
-                                                  std::to_string(u.bricks));
+      report(std::string(stage_name(u.stage)) + " brick " + std::to_string(u.brick + 1) + "/" +
+                 std::to_string(u.bricks),
+             0.05 + 0.85 * done);
       return true;
     });
     to.progress = &bricks;
     const TiledResult t = extract_tiled(*source, to, mesh_file);
     r.bricks = t.plan.total();
     r.triangles_extracted = p.simplify < 1 ? t.triangles_extracted : t.triangles;
-    report(90, "loading the bricks' mesh");
+    if (t.faces == 0) {
+      if (!r.range) {
+        report("reading the samples' range", 0.9);
+        const ValueHistogram h = source_histogram(*source, memory);
+        r.range = std::pair(h.min, h.max);
+      }
+      no_surface();
+    }
+    report("loading the bricks' mesh", 0.9);
     r.mesh = read_mesh(mesh_file);
   }
-  report(95, "measuring");
+  report("measuring the triangles", 0.95);
   r.quality = triangle_quality(r.mesh);
-  r.layer_name = fs::path(p.file).filename().string() + " " + std::string(method_name(o.method)) +
-                 " " + format_iso(o.iso);
   r.iso = o.iso;
+  r.layer_name = layer_name(p.file, series_description, method_name(o.method), o.iso);
+  r.description = p.file;
+  if (!series_description.empty() || !series_uid.empty())
+    r.description += ", DICOM series '" + series_description + "' (" + series_uid + ")";
+  r.description += ", " + std::string(kMethodNames[p.method]);
+  if (o.method == Method::Macet)
+    r.description += std::string(" ") + kMacetQualityNames[p.macet_quality];
+  r.description += ", isovalue " + format_value(o.iso);
   r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
 }
 
-Mesh run_simplify(const Mesh& mesh, const SimplifyParams& p, SimplifyStats* stats) {
+Mesh run_simplify(const Mesh& mesh, const SimplifyParams& p, SimplifyStats* stats,
+                  const Progress& progress) {
+  isotile::Progress regions([&](const ProgressUpdate& u) {
+    if (progress) progress(std::string(stage_name(u.stage)), u.fraction);
+    return true;
+  });
   SimplifyOptions o;
+  o.progress = &regions;
   o.ratio = p.faces > 0 ? 0 : p.ratio;
   o.faces = p.faces;
   o.max_error = p.max_error;

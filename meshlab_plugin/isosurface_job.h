@@ -7,7 +7,9 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "core/mesh/mesh.h"
 #include "core/mesh/mesh_quality.h"
@@ -36,6 +38,10 @@ struct IsosurfaceParams {
   bool normals = false;      // gradient normals from the volume (else MeshLab's own)
 };
 
+// The file parameter's name patterns (one filter: MeshLab 2020.09 joins them with spaces), every
+// extension the readers know, and "*" for DICOM files without one.
+extern const char* const kVolumeFilePatterns[21];
+
 // The choices of the enum parameters, in index order, as the dialog shows them.
 extern const char* const kMethodNames[3];
 extern const char* const kMacetQualityNames[2];
@@ -46,9 +52,13 @@ extern const char* const kBackendNames[4];
 
 struct IsosurfaceResult {
   Mesh mesh;
-  std::string layer_name;  // "<file name> <method> <iso>"
-  double iso = 0;          // the isovalue used (chosen, with iso_auto)
-  std::string backend;     // where it ran ("cpu", "gs", "hp")
+  std::string layer_name;   // layer_name(): no dots, which MeshLab would cut
+  std::string description;  // for the log: the file, DICOM series, method, isovalue in full
+  double iso = 0;           // the isovalue used (chosen, with iso_auto)
+  // The samples' lowest and highest value, where the run read them (always in core; brick by
+  // brick with iso_auto, or when there is no surface).
+  std::optional<std::pair<double, double>> range;
+  std::string backend;  // where it ran ("cpu", "gs", "hp")
   std::int64_t bricks = 1;
   std::uint64_t triangles_extracted = 0;
   QualityStats quality;
@@ -56,8 +66,19 @@ struct IsosurfaceResult {
   std::string note;  // what the caller should log besides (e.g. a fallback), or empty
 };
 
-// Progress: percent (0..100) and what is being done.
-using Progress = std::function<void(int percent, const std::string& what)>;
+// Progress: what is being done (the stage) and the fraction of the whole run done, in [0, 1].
+using Progress = std::function<void(const std::string& stage, double fraction)>;
+
+// The layer's name: the file's name without its extensions (a DICOM series: its description,
+// else its folder's name), the method and the isovalue, with every '.' (MeshLab's layer list cuts
+// a label at its last dot) and path separator replaced: "ch2 macet iso60_5".
+std::string layer_name(const std::string& file, const std::string& series_description,
+                       std::string_view method, double iso);
+
+// `name`, or "name (2)", "name (3)", ... : the first that `taken` refuses, so that extracting
+// the same file again gives a layer of its own name.
+std::string unique_name(const std::string& name,
+                        const std::function<bool(const std::string&)>& taken);
 
 // Throws isotile::Error (InputError, IoError, CapacityError) with a message for the user: a bad
 // or missing file, a malformed field, a feature not available yet, a GPU backend without GL.
@@ -75,6 +96,8 @@ struct SimplifyParams {
   double max_error = 0;
   double min_quality = 0.3;
 };
-Mesh run_simplify(const Mesh& mesh, const SimplifyParams& params, SimplifyStats* stats);
+// `progress` hears the library's stage and the fraction of it done.
+Mesh run_simplify(const Mesh& mesh, const SimplifyParams& params, SimplifyStats* stats,
+                  const Progress& progress = {});
 
 }  // namespace isotile::meshlab

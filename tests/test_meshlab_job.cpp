@@ -2,8 +2,13 @@
 // sees for bad fields (runs in every build, sanitizers included).
 #include "meshlab_plugin/isosurface_job.h"
 
+#include <fnmatch.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
+
+#include <algorithm>
+#include <iterator>
+#include <vector>
 
 #include <cmath>
 #include <filesystem>
@@ -43,40 +48,104 @@ std::string message_of(const IsosurfaceParams& p) {
 TEST(MeshlabJob, ExtractsNamesTheLayerAndReportsProgress) {
   IsosurfaceParams p = nucleon();
   p.method = 1;
-  int last = -1;
+  double last = -1;
   bool ordered = true;
-  const IsosurfaceResult r = run_isosurface(p, "", [&](int percent, const std::string&) {
-    ordered = ordered && percent >= last;
-    last = percent;
+  std::vector<std::string> stages;
+  const IsosurfaceResult r = run_isosurface(p, "", [&](const std::string& stage, double fraction) {
+    ordered = ordered && fraction >= last && fraction <= 1;
+    last = fraction;
+    stages.push_back(stage);
   });
   EXPECT_TRUE(ordered);
-  EXPECT_GT(last, 50);
+  EXPECT_GT(last, 0.5);
+  ASSERT_GE(stages.size(), 3u);
+  EXPECT_EQ(stages.front(), "reading nucleon_41x41x41_uint8.raw.gz");
+  EXPECT_EQ(stages[1], "extracting (macet)");
   EXPECT_GT(r.mesh.triangles.size(), 1000u);
-  EXPECT_EQ(r.layer_name, "nucleon_41x41x41_uint8.raw.gz macet 60.5");
+  // No dot for MeshLab's layer list to cut at; the full story goes to the log.
+  EXPECT_EQ(r.layer_name, "nucleon_41x41x41_uint8 macet iso60_5");
+  EXPECT_EQ(r.description, kNucleon + ", Macet fast, isovalue 60.5");
+  ASSERT_TRUE(r.range.has_value());
+  EXPECT_EQ(*r.range, value_range(read_volume(kNucleon).view()));
   EXPECT_EQ(r.backend, "cpu");
   EXPECT_EQ(r.bricks, 1);
   EXPECT_GT(r.quality.mean, 0.8);
   EXPECT_EQ(r.quality.triangles, r.mesh.triangles.size());
 }
 
+TEST(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
+  EXPECT_EQ(layer_name("/data/ch2.nii.gz", "", "macet", 60.5), "ch2 macet iso60_5");
+  EXPECT_EQ(layer_name("v_8x8x8_float32.raw", "", "mc", -0.25), "v_8x8x8_float32 mc iso-0_25");
+  EXPECT_EQ(layer_name("/d/scan.v2.nrrd", "", "dc", 3), "scan_v2 dc iso3");
+  EXPECT_EQ(layer_name("/d/1-001.dcm", "T1 3D/SAG 1.0mm", "mc", 300), "T1 3D_SAG 1_0mm mc iso300");
+  EXPECT_EQ(layer_name("/d/series/", "", "mc", 1), "series mc iso1");
+  const std::vector<std::string> layers = {"a mc iso1", "a mc iso1 (2)"};
+  auto taken = [&](const std::string& n) {
+    return std::find(layers.begin(), layers.end(), n) != layers.end();
+  };
+  EXPECT_EQ(unique_name("b mc iso1", taken), "b mc iso1");
+  EXPECT_EQ(unique_name("a mc iso1", taken), "a mc iso1 (3)");
+}
+
+// The file dialog's patterns cover every extension the readers know, and the shipped script
+// lists them as the filter declares them.
+TEST(MeshlabJob, FilePatternsCoverEveryFormat) {
+  auto matched = [](const std::string& name) {
+    for (const char* pattern : kVolumeFilePatterns)
+      if (std::string(pattern) != "*" && ::fnmatch(pattern, name.c_str(), 0) == 0) return true;
+    return false;
+  };
+  for (const char* name : {"a.raw",  "a.raw.gz", "a.nrrd", "a.nhdr", "a.vdb", "a.nii",  "a.nii.gz",
+                           "a.mha",  "a.mhd",    "a.tif",  "a.tiff", "a.mrc", "a.mrcs", "a.map",
+                           "a.ccp4", "a.map.gz", "a.dcm",  "a.ima",  "a.IMA", "a.DCM"})
+    EXPECT_TRUE(matched(name)) << name;
+  std::ifstream in(ISOTILE_MESHLAB_EXAMPLE);
+  const std::string example((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::size_t n = std::size(kVolumeFilePatterns);
+  std::string declared = "exts_cardinality=\"" + std::to_string(n) + "\"";
+  for (std::size_t i = 0; i < n; ++i)
+    declared += " exts_val" + std::to_string(i) + "=\"" + kVolumeFilePatterns[i] + "\"";
+  EXPECT_NE(example.find(declared), std::string::npos)
+      << "the example should declare: " << declared;
+}
+
+TEST(MeshlabJob, NoSurfaceNamesTheRangeInCoreAndBrickByBrick) {
+  const auto [lo, hi] = value_range(read_volume(kNucleon).view());
+  const std::string range = "the samples range from " + std::to_string(static_cast<int>(lo)) +
+                            " to " + std::to_string(static_cast<int>(hi));
+  IsosurfaceParams p = nucleon();
+  p.iso = 1000;
+  EXPECT_EQ(message_of(p), "no surface at isovalue 1000 in " + kNucleon + ": " + range +
+                               ", all below it; set iso inside the range, or to nan for the "
+                               "automatic isovalue");
+  p.memory = "256KiB";
+  EXPECT_NE(message_of(p).find(range + ", all below it"), std::string::npos) << message_of(p);
+  p.memory = "0";
+  p.iso = -1;
+  EXPECT_NE(message_of(p).find(range + ", all at or above it"), std::string::npos) << message_of(p);
+}
+
 TEST(MeshlabJob, BricksAndSimplification) {
   IsosurfaceParams p = nucleon();
   const IsosurfaceResult whole = run_isosurface(p, "", {});
   p.memory = "256KiB";
-  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
+  // A folder of this test's own (the shared one may hold other runs' folders meanwhile).
+  const std::filesystem::path temp =
+      std::filesystem::path(::testing::TempDir()) / ("isotile-job-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(temp);
+  const IsosurfaceResult bricked = run_isosurface(p, temp.string(), {});
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
   EXPECT_EQ(bricked.mesh.positions, whole.mesh.positions);
+  // No intermediate file left.
+  EXPECT_TRUE(std::filesystem::is_empty(temp));
+  std::filesystem::remove_all(temp);
   p.memory = "0";
   p.simplify = 0.2;
   const IsosurfaceResult simplified = run_isosurface(p, "", {});
   EXPECT_EQ(simplified.triangles_extracted, whole.mesh.triangles.size());
   EXPECT_NEAR(static_cast<double>(simplified.mesh.triangles.size()),
               0.2 * whole.mesh.triangles.size(), 0.02 * 0.2 * whole.mesh.triangles.size());
-  // No intermediate file left in the temporary folder.
-  for (const auto& e : std::filesystem::directory_iterator(::testing::TempDir()))
-    EXPECT_EQ(e.path().filename().string().rfind("isotile-meshlab-", 0), std::string::npos)
-        << e.path();
 }
 
 TEST(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
@@ -88,10 +157,13 @@ TEST(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
   EXPECT_EQ(whole.iso, otsu_isovalue(value_histogram(v.view())));
   EXPECT_GT(whole.mesh.triangles.size(), 1000u);
   EXPECT_NE(whole.layer_name.find(" mc "), std::string::npos) << whole.layer_name;
+  ASSERT_TRUE(whole.range.has_value());
+  EXPECT_EQ(*whole.range, value_range(v.view()));
   p.memory = "256KiB";
   const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.iso, whole.iso);
+  EXPECT_EQ(bricked.range, whole.range);
   EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
 }
 
@@ -189,6 +261,14 @@ TEST(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
   apply_frame(mesh_frame(v.view()), expected);
   ASSERT_GT(expected.triangles.size(), 1000u);
   const IsosurfaceResult whole = run_isosurface(p, "", {});
+  // The layer is named after the series' description, which the log gives with its UID.
+  const VolumeHeader h = read_volume_header(p.file);
+  ASSERT_FALSE(h.series_description.empty());
+  EXPECT_EQ(whole.layer_name, layer_name("", h.series_description, "mc", 300));
+  EXPECT_NE(
+      whole.description.find("DICOM series '" + h.series_description + "' (" + h.series_uid + ")"),
+      std::string::npos)
+      << whole.description;
   EXPECT_EQ(whole.mesh.positions, expected.positions);
   EXPECT_EQ(whole.mesh.triangles, expected.triangles);
   // The series cannot be read by region: a budget below the whole volume (35 MiB) is refused.

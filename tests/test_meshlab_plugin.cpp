@@ -4,13 +4,16 @@
 // MeshLab's layout in the test's folder: nothing on the system changes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
@@ -23,7 +26,8 @@ namespace fs = std::filesystem;
 
 struct ServerRun {
   int code = -1;
-  std::string log;
+  std::string log;  // standard output, then standard error
+  std::string out;  // standard output alone
 };
 
 class MeshlabServer : public isotile::testing::TempDirTest {
@@ -64,16 +68,20 @@ class MeshlabServer : public isotile::testing::TempDirTest {
     return s;
   }
 
-  // meshlabserver running `mlx` (and writing `output` when given).
-  ServerRun run(const std::string& mlx, const std::string& output = "out.ply") {
+  // meshlabserver running `mlx` (and writing `output` when given, with `options` such as
+  // "-m fc fq sa" or "-i in.ply" added).
+  ServerRun run(const std::string& mlx, const std::string& output = "out.ply",
+                const std::string& options = "") {
     std::ofstream(dir_ / "script.mlx") << mlx;
     const std::string cmd = "cd '" + dir_.string() + "' && xvfb-run -a '" +
                             (dir_ / "prefix/bin/meshlabserver").string() + "' -s script.mlx" +
-                            (output.empty() ? "" : " -o " + output) + " > log.txt 2>&1";
+                            (output.empty() ? "" : " -o " + output) + " " + options +
+                            " > log.txt 2> err.txt";
     const int status = std::system(cmd.c_str());
     ServerRun r;
     r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.log = slurp(dir_ / "log.txt");
+    r.out = slurp(dir_ / "log.txt");
+    r.log = r.out + slurp(dir_ / "err.txt");
     return r;
   }
 
@@ -111,6 +119,98 @@ constexpr MethodCase kMethods[] = {{"0", "0", "0", "--method mc"},
                                    {"2", "0", "1", "--method dc --dc-vertices cell"}};
 
 const std::string kNucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+
+const std::string kSimplifyFilter =
+    " <filter name=\"Simplification: Shape-Preserving Edge Collapse (isotile)\">\n"
+    "  <Param type=\"RichFloat\" name=\"ratio\" value=\"0.1\"/>\n"
+    "  <Param type=\"RichInt\" name=\"faces\" value=\"0\"/>\n"
+    "  <Param type=\"RichFloat\" name=\"max_error\" value=\"0\"/>\n"
+    "  <Param type=\"RichFloat\" name=\"min_quality\" value=\"0.3\"/>\n"
+    " </filter>\n";
+
+// `mlx` with the simplify filter appended.
+std::string then_simplify(std::string mlx) {
+  mlx.insert(mlx.find("</FilterScript>"), kSimplifyFilter);
+  return mlx;
+}
+
+// The faces of an ASCII PLY that MeshLab wrote with face colour and quality (-m fc fq sa).
+struct PlyFace {
+  int rgb[3];
+  float quality;
+};
+std::vector<PlyFace> read_ascii_ply_faces(const fs::path& file) {
+  std::ifstream in(file);
+  std::string line;
+  std::size_t vertices = 0, faces = 0;
+  std::vector<std::string> face_props;
+  bool in_face = false;
+  while (std::getline(in, line) && line != "end_header") {
+    std::istringstream w(line);
+    std::string word, kind;
+    w >> word;
+    if (word == "element") {
+      std::size_t n = 0;
+      w >> kind >> n;
+      in_face = kind == "face";
+      (kind == "vertex" ? vertices : faces) = n;
+    } else if (word == "property" && in_face) {
+      std::string type, name;
+      w >> type;
+      if (type == "list") w >> type >> type;
+      w >> name;
+      face_props.push_back(name);
+    }
+  }
+  for (std::size_t i = 0; i < vertices; ++i) std::getline(in, line);
+  std::vector<PlyFace> out;
+  for (std::size_t i = 0; i < faces && std::getline(in, line); ++i) {
+    std::istringstream w(line);
+    PlyFace f{{-1, -1, -1}, -1};
+    for (const std::string& name : face_props) {
+      if (name == "vertex_indices") {
+        int n = 0, v = 0;
+        w >> n;
+        for (int k = 0; k < n; ++k) w >> v;
+      } else if (name == "quality") {
+        w >> f.quality;
+      } else {
+        int c = 0;
+        w >> c;
+        if (name == "red") f.rgb[0] = c;
+        if (name == "green") f.rgb[1] = c;
+        if (name == "blue") f.rgb[2] = c;
+      }
+    }
+    out.push_back(f);
+  }
+  EXPECT_EQ(out.size(), faces) << file;
+  return out;
+}
+
+// MeshLab's red-yellow-green-cyan-blue ramp over [0, 1] (vcg::Color4b::SetColorRamp), which the
+// isosurface filter paints by quality.
+void ramp(float v, int rgb[3]) {
+  static const float stops[5][3] = {
+      {255, 0, 0}, {255, 255, 0}, {0, 255, 0}, {0, 255, 255}, {0, 0, 255}};
+  const float step = 0.25f;
+  int seg = 0;
+  if (v < 0) {
+    v = 0;
+  } else {
+    while (seg < 4 && v >= step) {
+      v -= step;
+      ++seg;
+    }
+  }
+  if (seg == 4) {
+    for (int c = 0; c < 3; ++c) rgb[c] = static_cast<int>(stops[4][c]);
+    return;
+  }
+  const float x = v / step;
+  for (int c = 0; c < 3; ++c)
+    rgb[c] = static_cast<int>(stops[seg + 1][c] * x + stops[seg][c] * (1.0f - x));
+}
 
 TEST_F(MeshlabServer, EveryMethodGivesTheCliMeshOnASmallVolume) {
   for (const MethodCase& c : kMethods) {
@@ -160,7 +260,9 @@ TEST_F(MeshlabServer, IsoAutoGivesTheCliMeshAndLogsTheValue) {
     const ServerRun r =
         run(script({{"file", kNucleon}, {"iso", "nan"}, {"method", "0"}, {"memory", memory}}));
     ASSERT_EQ(r.code, 0) << memory << "\n" << r.log;
-    EXPECT_NE(r.log.find("(Otsu's threshold of the samples)"), std::string::npos) << r.log;
+    EXPECT_NE(r.out.find(" (automatic: Otsu's threshold of the samples)\n"), std::string::npos)
+        << r.out;
+    EXPECT_NE(r.out.find("isotile: samples from "), std::string::npos) << r.out;
     expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"), cli(kNucleon + " --iso auto"), memory);
   }
 }
@@ -183,6 +285,10 @@ TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
     const ServerRun r = run(script(c.values));
     EXPECT_NE(r.code, 0) << c.says << "\n" << r.log;
     EXPECT_NE(r.log.find(c.says), std::string::npos) << r.log;
+    // Once in meshlabserver's output.
+    const std::size_t first = r.out.find(c.says);
+    EXPECT_NE(first, std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find(c.says, first + 1), std::string::npos) << r.out;
     EXPECT_NE(r.log.find("Problem with filter"), std::string::npos) << r.log;
     EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << c.says;
   }
@@ -202,16 +308,7 @@ TEST_F(MeshlabServer, BricksSimplificationAndTheSimplifyFilter) {
   const isotile::Mesh quarter = isotile::read_mesh(dir_ / "out.ply");
   EXPECT_NEAR(static_cast<double>(quarter.triangles.size()), 0.25 * full.triangles.size(),
               0.02 * 0.25 * full.triangles.size());
-  std::string two = script({{"file", kNucleon}, {"iso", "60.5"}});
-  const std::string simplify =
-      " <filter name=\"Simplification: Shape-Preserving Edge Collapse (isotile)\">\n"
-      "  <Param type=\"RichFloat\" name=\"ratio\" value=\"0.1\"/>\n"
-      "  <Param type=\"RichInt\" name=\"faces\" value=\"0\"/>\n"
-      "  <Param type=\"RichFloat\" name=\"max_error\" value=\"0\"/>\n"
-      "  <Param type=\"RichFloat\" name=\"min_quality\" value=\"0.3\"/>\n"
-      " </filter>\n";
-  two.insert(two.find("</FilterScript>"), simplify);
-  r = run(two);
+  r = run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})));
   ASSERT_EQ(r.code, 0) << r.log;
   EXPECT_NE(r.log.find("simplified"), std::string::npos) << r.log;
   const isotile::Mesh tenth = isotile::read_mesh(dir_ / "out.ply");
@@ -221,6 +318,116 @@ TEST_F(MeshlabServer, BricksSimplificationAndTheSimplifyFilter) {
   EXPECT_EQ(t.nonmanifold_edges, 0u);
   EXPECT_EQ(t.euler, isotile::mesh_topology(full).euler);
   EXPECT_GE(isotile::triangle_quality(tenth).min, 0.2);
+}
+
+// Simplifying a layer the isosurface filter coloured by quality paints it again from the new
+// faces' quality; other colours are dropped, saying so.
+TEST_F(MeshlabServer, SimplifyRecoloursTheQualityRampAndDropsOtherColours) {
+  ServerRun r =
+      run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})), "out.ply", "-m fc fq sa");
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.out.find("isotile: faces coloured again by their new quality\n"), std::string::npos)
+      << r.log;
+  const std::vector<PlyFace> faces = read_ascii_ply_faces(dir_ / "out.ply");
+  ASSERT_GT(faces.size(), 100u);
+  std::size_t off = 0, shades = 0;
+  std::set<int> reds;
+  for (const PlyFace& f : faces) {
+    int want[3];
+    ramp(f.quality, want);
+    // The PLY holds the quality in decimal: one step of rounding either way.
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(f.rgb[c] - want[c]) > 1) {
+        ++off;
+        break;
+      }
+    reds.insert(f.rgb[0] * 65536 + f.rgb[1] * 256 + f.rgb[2]);
+  }
+  shades = reds.size();
+  EXPECT_EQ(off, 0u) << "of " << faces.size() << " faces";
+  EXPECT_GT(shades, 50u);  // a ramp, not one colour
+  const isotile::Mesh simplified = isotile::read_mesh(dir_ / "out.ply");
+  const isotile::QualityStats q = isotile::triangle_quality(simplified);
+  EXPECT_NEAR(
+      q.min,
+      std::min_element(faces.begin(), faces.end(),
+                       [](const PlyFace& a, const PlyFace& b) { return a.quality < b.quality; })
+          ->quality,
+      1e-5);
+
+  // Colours of its own (grey, not the ramp of the quality): dropped, and the log says so.
+  {
+    std::ifstream in(dir_ / "out.ply");
+    std::ofstream grey(dir_ / "grey.ply");
+    std::string line;
+    bool body = false;
+    std::size_t vertices = 0, seen = 0;
+    while (std::getline(in, line)) {
+      if (!body) {
+        if (line.rfind("element vertex ", 0) == 0) vertices = std::stoul(line.substr(15));
+        body = line == "end_header";
+        grey << line << "\n";
+        continue;
+      }
+      if (seen++ < vertices) {
+        grey << line << "\n";
+        continue;
+      }
+      // "3 a b c r g b alpha quality": the colour becomes 128 128 128.
+      std::istringstream w(line);
+      std::string n, a, b, c, red, green, blue, alpha, quality;
+      w >> n >> a >> b >> c >> red >> green >> blue >> alpha >> quality;
+      grey << n << " " << a << " " << b << " " << c << " 128 128 128 " << alpha << " " << quality
+           << "\n";
+    }
+  }
+  const std::string only_simplify =
+      "<!DOCTYPE FilterScript>\n<FilterScript>\n" + kSimplifyFilter + "</FilterScript>\n";
+  r = run(only_simplify, "out2.ply", "-i grey.ply");
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.out.find("isotile: dropped the layer's face colours"), std::string::npos) << r.log;
+  EXPECT_EQ(r.out.find("coloured again"), std::string::npos) << r.log;
+}
+
+// meshlabserver prints progress texts with no line break: the plugin's end their own lines.
+TEST_F(MeshlabServer, ProgressAndMessagesOneALine) {
+  const ServerRun r = run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})));
+  ASSERT_EQ(r.code, 0) << r.log;
+  std::istringstream lines(r.out);
+  int progress = 0;
+  for (std::string line; std::getline(lines, line);) {
+    const std::size_t at = line.find("isotile: ");
+    if (at == std::string::npos) continue;
+    EXPECT_EQ(at, 0u) << "'" << line << "' runs into what came before";
+    EXPECT_EQ(line.find("isotile: ", at + 1), std::string::npos) << line;
+    if (line.size() > 2 && line.compare(line.size() - 2, 2, "%)") == 0) ++progress;
+  }
+  // The progress is polled every 0.1 s, so a small volume shows the extraction's last stage
+  // only; the simplify filter reports its start and end.
+  EXPECT_GE(progress, 3) << r.out;
+  EXPECT_NE(r.out.find("isotile: simplifying "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" triangles (100%)\n"), std::string::npos) << r.out;
+  // The layer: a name without dots; the file and isovalue in full in the log.
+  EXPECT_NE(r.out.find("isotile: layer 'nucleon_41x41x41_uint8 macet iso60_5': " + kNucleon +
+                       ", Macet fast, isovalue 60.5\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("isotile: samples from "), std::string::npos) << r.out;
+}
+
+// The same file extracted twice in one document gives two layers of distinct, whole names.
+TEST_F(MeshlabServer, ExtractingAgainGivesADistinctName) {
+  std::string twice = script({{"file", kNucleon}, {"iso", "60.5"}, {"method", "0"}});
+  const std::size_t begin = twice.find(" <filter ");
+  const std::size_t end = twice.find("</FilterScript>");
+  twice.insert(end, twice.substr(begin, end - begin));
+  const ServerRun r = run(twice);
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.out.find("isotile: layer 'nucleon_41x41x41_uint8 mc iso60_5': "), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("isotile: layer 'nucleon_41x41x41_uint8 mc iso60_5 (2)': "),
+            std::string::npos)
+      << r.out;
 }
 
 TEST_F(MeshlabServer, GlBackendsRunBesideMeshLabsOwnContext) {

@@ -208,6 +208,13 @@ for p in "${packages[@]}"; do
   [ -n "$deb" ] || fail "cpack made no ${p}_${version}-*.deb: $(ls "$tmp/debs")"
   debs+=("$deb")
   echo "check_install: $(basename "$deb"): Depends: $(dpkg-deb -f "$deb" Depends)"
+  # The filter's messages name `isotile info`: the plugin's package recommends the CLI's.
+  if [ "$p" = meshlab-plugin-isotile ]; then
+    recommends=$(dpkg-deb -f "$deb" Recommends)
+    grep -qE '(^|, )isotile($| |,)' <<<"$recommends" ||
+      fail "$p recommends '$recommends', not isotile"
+    echo "check_install: $(basename "$deb"): Recommends: $recommends"
+  fi
 done
 
 apt=(env DEBIAN_FRONTEND=noninteractive $sudo apt-get -o DPkg::Lock::Timeout=900 -y -q)
