@@ -254,7 +254,7 @@ py::dict quality_of(const py::array& vertices, const py::array& faces, bool chec
     if (check_intersections) crossing = self_intersections(mesh).pairs;
     return 0;
   });
-  // The keys of `isotile quality --json` (tiler/main.cpp).
+  // The keys of `isotile quality --json` (tiler/cli/quality_command.cpp).
   py::dict d;
   d["triangles"] = q.triangles;
   d["vertices"] = mesh.positions.size();

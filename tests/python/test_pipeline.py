@@ -73,7 +73,8 @@ def test_extract_matches_the_cli(tmp_path, monkeypatch, source, options, flags, 
     assert steady(mesh.stats) == steady(cli_stats)
     # save() writes what the run wrote.
     mesh.save("saved_" + name)
-    assert (tmp_path / "py" / ("saved_" + name)).read_bytes() == (tmp_path / "py" / name).read_bytes()
+    saved = (tmp_path / "py" / ("saved_" + name)).read_bytes()
+    assert saved == (tmp_path / "py" / name).read_bytes()
 
 
 def test_a_file_and_iso_auto_match_the_cli(tmp_path, monkeypatch, ball):
