@@ -5,7 +5,14 @@
 // PipelineInput and PipelineOptions and present the result; the checks, the messages and the
 // numbers are the library's.
 //
-//   PipelineResult r = run_pipeline({.path = "ct.nrrd"}, {.iso_auto = true, .output = "ct.ply"});
+//   PipelineInput in;
+//   in.path = "ct.nrrd";
+//   PipelineOptions o;
+//   o.iso_auto = true;         // Otsu's threshold, as --iso auto
+//   o.memory = "512MiB";       // out of core; empty: in core, the mesh returned in r.mesh
+//   o.output = "ct.ply";
+//   o.stats = true;
+//   const PipelineResult r = run_pipeline(in, o);   // r.stats: what --stats writes
 //
 // In core the mesh is returned (in the frame it is written in) and, with `output`, written. Out of
 // core (`memory` set) it is streamed into `output` (binary PLY or STL) and only the counts and the
