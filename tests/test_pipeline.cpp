@@ -118,14 +118,22 @@ TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
   o.iso_auto = true;
   o.memory = "256KiB";
   o.simplify = 0.5;
-  o.stats = true;
+  o.quality = true;  // the radius ratios alone, as the plugin shows them
   o.output = (dir_ / "job.ply").string();
   const PipelineResult r = run_pipeline(input("field:sphere:48"), o);
   EXPECT_GT(r.bricks, 1);
   EXPECT_LT(r.triangles, r.triangles_extracted);
   EXPECT_EQ(r.quality.triangles, r.triangles);
+  EXPECT_GT(r.quality.mean, 0.5);
+  EXPECT_TRUE(r.stats.is_null());
   const Mesh back = read_mesh(dir_ / "job.ply");
   EXPECT_EQ(back.triangles.size(), r.triangles);
+  // In core, the mesh comes back with its measures.
+  o.memory.clear();
+  o.output.clear();
+  const PipelineResult c = run_pipeline(input("field:sphere:48"), o);
+  EXPECT_EQ(c.quality.triangles, c.mesh.triangles.size());
+  EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
 }
 
 TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {

@@ -76,7 +76,7 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   to.format = format;
   to.simplify = options.simplify;
   // The radius-ratio statistics cost a fifth of a streamed run; only the stats report them.
-  to.quality = options.stats;
+  to.quality = options.stats || options.quality;
   if (options.ascii) throw InputError("--memory writes binary PLY or STL; drop --ascii");
   if (options.check_intersections)
     throw InputError(
@@ -356,6 +356,7 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
   result.backend = choice.backend;
   result.triangles = mesh.triangles.size() + 2 * mesh.quads.size();
   result.vertices = mesh.positions.size();
+  if (options.quality && !options.stats) result.quality = triangle_quality(mesh);
   if (options.stats) {
     t0 = Clock::now();
     const QualityStats q = triangle_quality(mesh);

@@ -71,6 +71,9 @@ struct PipelineOptions {
   bool ascii = false;  // ASCII PLY
   // Build PipelineResult::stats (the measures cost time: topology, quality, distances).
   bool stats = false;
+  // Measure the radius ratios alone (PipelineResult::quality), as a front end that shows them
+  // without the other statistics does (the MeshLab plugin); stats implies it.
+  bool quality = false;
   // In core: hand the mesh back in PipelineResult::mesh (else it is dropped after the write).
   bool keep_mesh = true;
   // Told of the run's progress (handed down to every stage); cancelling throws Cancelled and
@@ -92,7 +95,7 @@ struct PipelineResult {
   std::int64_t bricks = 1;
   std::uint64_t triangles = 0, vertices = 0;  // of the final mesh (quads count as two)
   std::uint64_t triangles_extracted = 0;      // before simplification
-  QualityStats quality;  // of the final mesh, when stats (out of core: when stats)
+  QualityStats quality;  // of the final mesh, when options.stats or options.quality
   StatsJson stats;       // `isotile extract --stats`'s object, when options.stats; else null
 };
 

@@ -3,14 +3,11 @@
 // launcher an out-of-core run goes distributed (tiler/mpi_extract.h).
 #include "tiler/cli/commands.h"
 
-#include <tbb/global_control.h>
-
 #include <cmath>
 #include <cstdlib>
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
-#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
 #include "core/volume/procedural_fields.h"
 #include "tiler/brick_plan.h"
