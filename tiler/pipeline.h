@@ -100,7 +100,9 @@ struct PipelineResult {
 };
 
 // Throws InputError for bad options or input (one message naming the problem), IoError,
-// CapacityError, Cancelled; no output file is left behind on any error.
+// CapacityError, Cancelled. The output is written whole or not at all (core/mesh/atomic_file.h):
+// an error or a cancel before the write completes leaves no file (and an earlier one as it was);
+// only the `written` callback and the measures run after it.
 PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& options);
 
 // The checks of the options alone that run_pipeline() makes first (simplify and macet_relax in

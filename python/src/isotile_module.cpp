@@ -555,7 +555,9 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     try {
       const py::object go =
           bridge.callable(std::string(stage_name(u.stage)), u.brick, u.bricks, u.fraction);
-      if (!go.cast<bool>()) bridge.declined = true;
+      const int truth = PyObject_IsTrue(go.ptr());  // any object, as Python's `if` takes it
+      if (truth < 0) throw py::error_already_set();
+      if (truth == 0) bridge.declined = true;
     } catch (py::error_already_set& e) {
       bridge.error.emplace(std::move(e));
     }
