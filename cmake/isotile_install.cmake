@@ -77,8 +77,10 @@ isotile_export_library(isotile_core NAME core
     core/mesh/mesh_io.h
     core/mesh/mesh_quality.h
     core/mesh/mesh_topology.h
+    core/progress.h
     core/simplify/quadric.h
     core/simplify/simplify.h
+    core/volume/otsu_isovalue.h
     core/volume/scalar_type.h
     core/volume/volume.h
     core/volume/volume_io.h
@@ -100,18 +102,24 @@ if(ISOTILE_ITK)
 else()
   isotile_export_library(isotile_itk NAME itk INTERNAL)
 endif()
-# The tiler links MPI's C library when built with distributed extraction.
-set(tiler_mpi "")
+# The tiler's pipeline hands its statistics out as nlohmann::json (header-only); it links MPI's C
+# library when built with distributed extraction.
+set(tiler_packages nlohmann_json)
+set(tiler_debian nlohmann-json3-dev)
 if(ISOTILE_HAVE_MPI)
-  set(tiler_mpi FIND_PACKAGES "MPI COMPONENTS C" DEBIAN_DEPENDS libopenmpi-dev)
+  list(APPEND tiler_packages "MPI COMPONENTS C")
+  list(APPEND tiler_debian libopenmpi-dev)
 endif()
 isotile_export_library(isotile_tiler NAME tiler
   HEADERS
     tiler/brick_plan.h
     tiler/input_options.h
+    tiler/pipeline.h
+    tiler/stats_json.h
     tiler/tiled_extract.h
     tiler/volume_source.h
-  ${tiler_mpi})
+  FIND_PACKAGES ${tiler_packages}
+  DEBIAN_DEPENDS ${tiler_debian})
 if(TARGET isotile_gl)
   isotile_export_library(isotile_glad NAME glad INTERNAL)
   isotile_export_library(isotile_gl NAME gl

@@ -66,11 +66,13 @@ set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS_PRIVATE_DIRS "/usr/lib/${CMAKE_LIBRARY_ARCHIT
 set(CPACK_DEBIAN_PYTHON_PACKAGE_NAME python3-isotile)
 set(CPACK_DEBIAN_PYTHON_PACKAGE_SECTION python)
 set(CPACK_DEBIAN_PYTHON_DESCRIPTION "isosurface meshes from volumes on uniform grids (Python 3)
-isotile for NumPy arrays: marching_cubes as a drop-in for scikit-image's, with Macet and Dual
-Contouring, mesh quality measures and simplification, on isotile's multithreaded C++ library.")
-# The extension is built against this Python's ABI and imports NumPy; shlibdeps sees neither.
+isotile for NumPy arrays and volume files: marching_cubes as a drop-in for scikit-image's, with
+Macet and Dual Contouring, extract() on the isotile program's pipeline, mesh quality measures and
+simplification, on isotile's multithreaded C++ library.")
+# The extension is built against this Python's ABI and imports NumPy; shlibdeps sees neither. It
+# loads the OpenVDB and ITK reader modules of the isotile package, from the same build.
 math(EXPR isotile_python_next "${Python_VERSION_MINOR} + 1")
 set(CPACK_DEBIAN_PYTHON_PACKAGE_DEPENDS
-    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${isotile_python_next}), python3-numpy")
+    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${isotile_python_next}), python3-numpy, isotile (= ${PROJECT_VERSION}-${CPACK_DEBIAN_PACKAGE_RELEASE})")
 
 include(CPack)

@@ -1,7 +1,7 @@
-// The isotile program's OpenVDB and ITK readers: the modules of core/volume/reader_modules.h,
-// loaded the first time they are needed. This file takes the place of the readers themselves in
-// the program (tiler/CMakeLists.txt), so a run that reads neither format never loads OpenVDB or
-// ITK.
+// The OpenVDB and ITK readers of the isotile program and the Python extension: the modules of
+// core/volume/reader_modules.h, loaded the first time they are needed. This file takes the place
+// of the readers themselves in those objects (tiler/CMakeLists.txt, python/CMakeLists.txt), so a
+// run that reads neither format never loads OpenVDB or ITK.
 #include <dlfcn.h>
 
 #include <filesystem>
@@ -16,17 +16,34 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Loads `file` from where it is installed (ISOTILE_MODULE_DIR, relative to the program's folder)
-// or, in the build tree, from the program's folder, and returns its table. Throws IoError naming
-// `input`, the module and why, when neither works (a broken or partial installation).
+// The folder of the object (program or shared library) that holds this code, found with dladdr
+// on one of its functions: the isotile program, the Python extension or a plugin loaded into
+// MeshLab alike, whatever the host process is. /proc/self/exe's folder if dladdr cannot say.
+fs::path own_folder() {
+  std::error_code ec;
+  Dl_info info{};
+  if (dladdr(reinterpret_cast<void*>(&own_folder), &info) != 0 && info.dli_fname != nullptr &&
+      *info.dli_fname != '\0') {
+    const fs::path object = fs::canonical(info.dli_fname, ec);
+    if (!ec) return object.parent_path();
+  }
+  const fs::path program = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::path(".") : program.parent_path();
+}
+
+// Loads `file` from where it is installed relative to the object holding this code
+// (ISOTILE_MODULE_DIR, from that object's install folder), from that object's own folder (the
+// build tree), or from the absolute install folder (ISOTILE_MODULE_INSTALL_DIR: a host that
+// was moved or copied), and returns its table. Throws IoError naming `input`, the module and why,
+// when none works (a broken or partial installation).
 template <class Table>
 const Table& load_module(const char* file, const char* entry, const char* formats,
                          const std::string& input) {
   std::error_code ec;
-  const fs::path program = fs::read_symlink("/proc/self/exe", ec);
-  const fs::path dir = ec ? fs::path(".") : program.parent_path();
+  const fs::path dir = own_folder();
   std::string looked, why;
-  for (const fs::path& path : {(dir / ISOTILE_MODULE_DIR / file).lexically_normal(), dir / file}) {
+  for (const fs::path& path : {(dir / ISOTILE_MODULE_DIR / file).lexically_normal(), dir / file,
+                               fs::path(ISOTILE_MODULE_INSTALL_DIR) / file}) {
     looked += (looked.empty() ? "" : ", ") + path.string();
     if (!fs::exists(path, ec)) continue;
     void* module = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);

@@ -5,6 +5,12 @@
 Macet and Dual Contouring besides Marching Cubes. ``isotile.quality`` measures a mesh and
 ``isotile.simplify`` simplifies one. See docs/python.md.
 
+``isotile.extract`` is ``isotile extract`` for Python: the library's one pipeline (the program's,
+the MeshLab plugin's) on a file, a DICOM directory, a procedural field, a ``Volume`` from
+``isotile.read_volume`` or an array; in core it returns a ``Mesh``, out of core (``memory=``) it
+streams the mesh into ``output=``. Its statistics are ``--stats``'s. ``read_mesh`` and
+``write_mesh`` read and write the formats the library writes (PLY, OBJ, STL, OFF).
+
 Volumes are read in place, without a copy, for int8, uint8, int16, uint16, int32, uint32,
 float32, float64 and bool arrays in any memory layout whose strides are non-negative multiples
 of the item size (C or Fortran order, slices such as ``vol[::2, :, 10:]``). Anything else is
@@ -13,11 +19,17 @@ axes (negative strides), unaligned or byte-swapped data to a C-ordered array. Th
 own the library's buffers (no copy).
 """
 
+import json as _json
+import os as _os
+
 import numpy as _np
 
 from . import _isotile
 
-__all__ = ["marching_cubes", "quality", "simplify", "backends"]
+__all__ = ["marching_cubes", "quality", "simplify", "backends", "extract", "read_volume",
+           "Volume", "Mesh", "read_mesh", "write_mesh", "Cancelled"]
+
+Cancelled = _isotile.Cancelled
 
 _IN_PLACE = {_np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "int32", "uint32",
                                    "float32", "float64", "bool")}
@@ -183,3 +195,186 @@ def simplify(vertices, triangles, /, *, ratio=None, faces=None, max_error=None, 
 def backends():
     """{backend name: "" when this machine can run it, else why it cannot}."""
     return _isotile.backends()
+
+
+# --- files, volumes and the pipeline -------------------------------------------------------------
+
+def _triple_text(value):
+    """(x, y, z) as the CLI's text "x,y,z" (repr: exact for floats); text passes through."""
+    if value is None or isinstance(value, str):
+        return value
+    return ",".join(repr(v) if isinstance(v, float) else str(v) for v in value)
+
+
+def _raw_options(dims, type, spacing, origin, endian, series):
+    return {"dims": _triple_text(dims), "type": type, "spacing": _triple_text(spacing),
+            "origin": _triple_text(origin), "endian": endian, "series": series}
+
+
+class Volume:
+    """Samples on a uniform grid: ``samples`` indexed [z, y, x] (x fastest, as files store them),
+    ``spacing`` and ``origin`` (x, y, z) and ``direction`` (3x3, column a the world direction of
+    index axis a; the identity for a plain grid).
+
+    ``isotile.read_volume`` makes one from a file, with the samples in the library's buffer
+    (read-only, no copy); ``Volume(samples, spacing, origin, direction)`` wraps an array.
+    """
+
+    def __init__(self, samples, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), direction=None):
+        self._handle = None
+        self.samples = _np.asarray(samples)
+        if self.samples.ndim != 3:
+            raise ValueError("samples must be a 3-D array indexed [z, y, x]")
+        self.spacing = tuple(float(v) for v in spacing)
+        self.origin = tuple(float(v) for v in origin)
+        self.direction = None if direction is None else [[float(v) for v in row]
+                                                         for row in direction]
+        self.name = "array"
+
+    @classmethod
+    def _from_handle(cls, handle):
+        v = cls.__new__(cls)
+        v._handle = handle
+        v.samples = handle.samples
+        v.spacing = tuple(handle.spacing)
+        v.origin = tuple(handle.world_origin)
+        v.direction = [list(row) for row in handle.direction]
+        v.name = handle.name
+        return v
+
+    def __repr__(self):
+        z, y, x = self.samples.shape
+        return f"Volume({self.name!r}, {x}x{y}x{z} {self.samples.dtype}, spacing={self.spacing})"
+
+
+def read_volume(path, *, dims=None, type=None, spacing=None, origin=None, endian="little",
+                series=None):
+    """Read any input ``isotile extract`` reads: a volume file (NRRD, NIfTI, MetaImage, TIFF,
+    MRC, DICOM, OpenVDB, raw), a DICOM or TIFF directory, a numbered TIFF pattern or a
+    procedural field ``field:NAME:N``. ``dims``, ``type``, ``spacing``, ``origin``, ``endian`` and
+    ``series`` are the CLI's ``--dims`` ... ``--series`` (a tuple or the CLI's text). Returns a
+    ``Volume``; ``extract(volume)`` gives the same mesh as ``extract(path)``."""
+    handle = _isotile.read_volume(_os.fspath(path),
+                                  _raw_options(dims, type, spacing, origin, endian, series))
+    return Volume._from_handle(handle)
+
+
+class Mesh:
+    """A mesh as the library makes it: ``vertices`` (V, 3) float32 (x, y, z), ``faces`` (F, 3)
+    triangles, ``quads`` (Q, 4) (Dual Contouring with ``quads=True``; else empty), ``normals``
+    (V, 3) float32 or None, and ``stats``: the dict ``isotile extract --stats`` writes (None when
+    not asked for). ``save(path)`` writes it as ``isotile extract -o path`` does."""
+
+    def __init__(self, vertices, faces, quads=None, normals=None, stats=None):
+        self.vertices = vertices
+        self.faces = faces
+        self.quads = quads if quads is not None else _np.zeros((0, 4), _np.uint32)
+        self.normals = normals
+        self.stats = stats
+
+    def save(self, path, *, ascii=False):
+        """Write the mesh: .ply (binary, or ASCII with ascii=True), .obj, .stl or .off, by
+        extension (normals in PLY and OBJ). The file is replaced whole or not at all."""
+        write_mesh(path, self, ascii=ascii)
+
+    def __repr__(self):
+        return (f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles, "
+                f"{len(self.quads)} quads)")
+
+
+def read_mesh(path):
+    """Read a .ply, .obj, .stl or .off file into a ``Mesh`` (stats None)."""
+    vertices, faces, quads, normals = _isotile.read_mesh(_os.fspath(path))
+    return Mesh(vertices, faces, quads, normals)
+
+
+def write_mesh(path, mesh, *, ascii=False):
+    """Write ``mesh`` (a ``Mesh``, or a (vertices, faces) pair) to ``path`` as the library writes
+    meshes: .ply (binary; ascii=True for text), .obj, .stl or .off by extension."""
+    if isinstance(mesh, Mesh):
+        v, f, q, n = mesh.vertices, mesh.faces, mesh.quads, mesh.normals
+    else:
+        v, f = mesh
+        q = n = None
+    _isotile.write_mesh(_np.asarray(v), _np.asarray(f), None if q is None else _np.asarray(q),
+                        None if n is None else _np.asarray(n), _os.fspath(path), bool(ascii))
+
+
+_EXTRACT_OPTIONS = ("method", "quality", "macet_relax", "dc_solver", "dc_hermite", "dc_vertices",
+                    "quads", "backend", "normals", "frame", "simplify", "check_intersections",
+                    "allow_empty", "memory", "output", "ascii", "stats")
+_FILE_OPTIONS = ("dims", "type", "spacing", "origin", "endian", "series")
+
+
+def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, dc_solver="mass",
+            dc_hermite="central", dc_vertices="patch", quads=False, backend="auto",
+            normals=False, frame="world", simplify=1.0, check_intersections=False,
+            allow_empty=False, memory=None, output=None, ascii=False, stats=True, threads=None,
+            progress=None, dims=None, type=None, spacing=None, origin=None, endian="little",
+            series=None, direction=None):
+    """Extract an isosurface, as ``isotile extract`` does (the same library pipeline).
+
+    Parameters
+    ----------
+    source : path, Volume or (Z, Y, X) array
+        Anything the CLI reads (a volume file, a DICOM or TIFF directory, ``field:NAME:N``), a
+        ``Volume`` from ``read_volume`` (the same mesh as its path), or an array indexed
+        [z, y, x] (``spacing``, ``origin`` and ``direction`` then describe it, in x, y, z).
+    iso : float or "auto"
+        The isovalue (samples >= iso are inside), or "auto": Otsu's threshold of the samples.
+        Required except for procedural fields, which have their own (as in the CLI).
+    method, quality, macet_relax, dc_solver, dc_hermite, dc_vertices, quads, backend, normals,
+    frame, simplify, check_intersections, allow_empty, ascii
+        The CLI's options of the same names (``--dc-solver`` is ``dc_solver``, ...), with its
+        defaults and checks.
+    memory : str or int, optional
+        Out of core: each brick's working set within this many bytes ("256MiB", "2GB", or an
+        int), the mesh streamed into ``output`` (binary .ply or .stl) as ``--memory`` does.
+    output : path, optional
+        Also write the mesh there (in core); required with ``memory``.
+    stats : bool
+        Measure the result: the dict of ``--stats`` (the same keys and values; "output" is None
+        without an output file).
+    threads : int, optional
+        At most this many worker threads (None: every core); the result does not depend on it.
+    progress : callable, optional
+        ``progress(stage, brick, bricks, fraction)`` during the run ("count", "extract",
+        "simplify", ...); a false return value cancels the run (``isotile.Cancelled``) and an
+        exception it raises cancels it and propagates. Ctrl-C raises KeyboardInterrupt within a
+        fraction of a second at the library's next report; a cancelled run leaves no file.
+    dims, type, spacing, origin, endian, series
+        For files: the CLI's raw-input options (a tuple or the CLI's text).
+    direction : 3x3, optional
+        For arrays: the world direction of each index axis (columns).
+
+    Returns
+    -------
+    Mesh
+        In core: the mesh (in the world frame unless frame="grid") with its ``stats``.
+    dict or None
+        Out of core (``memory``): the stats; the mesh is in ``output``.
+    """
+    options = {"iso": iso}
+    local = locals()
+    for key in _EXTRACT_OPTIONS:
+        options[key] = local[key]
+    if options["output"] is not None:
+        options["output"] = _os.fspath(options["output"])
+    if isinstance(source, Volume):
+        if source._handle is not None:
+            src = source._handle
+        else:
+            src = _readable(source.samples, "samples")
+            options.update(spacing=source.spacing, origin=source.origin,
+                           direction=source.direction, name=source.name)
+    elif isinstance(source, (str, bytes, _os.PathLike)):
+        src = _os.fsdecode(_os.fspath(source))
+        options.update(_raw_options(dims, type, spacing, origin, endian, series))
+    else:
+        src = _readable(source, "source")
+        options.update(spacing=spacing, origin=origin, direction=direction)
+    mesh, stats_text = _isotile.run_pipeline(src, options, progress, threads)
+    stats_dict = None if stats_text is None else _json.loads(stats_text)
+    if mesh is None:
+        return stats_dict
+    return Mesh(*mesh, stats=stats_dict)

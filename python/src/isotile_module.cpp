@@ -1,29 +1,38 @@
 // The `isotile._isotile` extension: NumPy arrays onto the library's views and meshes, and the
-// library's calls with the GIL released. What users call, and the scikit-image conventions
+// library's calls with the GIL released; files through the library's pipeline (tiler/pipeline.h),
+// the same run as the isotile program's. What users call, and the scikit-image conventions
 // (axis order, level, winding), live in the pure-Python layer (python/isotile/__init__.py); this
 // file only maps arrays and calls core.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
+#include <filesystem>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "core/errors.h"
 #include "core/extract/cell_mask.h"
 #include "core/extract/cell_ranges.h"
 #include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
 #include "core/mesh/mesh_topology.h"
 #include "core/mesh/self_intersections.h"
 #include "core/simplify/simplify.h"
 #include "core/volume/volume_io.h"
+#include "tiler/input_options.h"
+#include "tiler/pipeline.h"
 #ifdef ISOTILE_PYTHON_GL
 #include "shaders/gl_backends.h"
 #endif
@@ -245,7 +254,7 @@ py::dict quality_of(const py::array& vertices, const py::array& faces, bool chec
     if (check_intersections) crossing = self_intersections(mesh).pairs;
     return 0;
   });
-  // The keys of `isotile quality --json` (tiler/main.cpp).
+  // The keys of `isotile quality --json` (tiler/cli/quality_command.cpp).
   py::dict d;
   d["triangles"] = q.triangles;
   d["vertices"] = mesh.positions.size();
@@ -327,6 +336,346 @@ std::vector<std::pair<double, double>> time_library_calls(const py::array& volum
   return out;
 }
 
+// --- files, volumes and the pipeline (isotile.extract, read_volume, read_mesh, write_mesh) -----
+
+// A volume read by the library (isotile.read_volume): its samples stay in the library's buffer
+// and are shown to NumPy in place; extract() hands the same view back to the pipeline, so that
+// extract(read_volume(path)) and extract(path) make the same mesh.
+struct VolumeHandle {
+  Volume volume;
+  std::string name;  // the path it was read from
+};
+
+// The raw-input options as the CLI takes them (text: "256,256,128", "uint16", ...), with the
+// CLI's checks and messages (tiler/input_options.h).
+RawOptions raw_options_of(const py::dict& o) {
+  const auto text = [&](const char* key) {
+    return o.contains(key) && !o[key].is_none() ? py::str(o[key]).cast<std::string>()
+                                                : std::string();
+  };
+  RawOptions raw = parse_input_text({.dims = text("dims"),
+                                     .type = text("type"),
+                                     .spacing = text("spacing"),
+                                     .origin = text("origin"),
+                                     .endian = text("endian")},
+                                    "");
+  raw.series = text("series");
+  return raw;
+}
+
+std::shared_ptr<VolumeHandle> read_volume_py(const std::string& path, const py::dict& raw_text) {
+  const RawOptions raw = raw_options_of(raw_text);
+  auto handle = std::make_shared<VolumeHandle>();
+  handle->name = path;
+  {
+    py::gil_scoped_release release;
+    handle->volume = read_volume(path, raw);
+  }
+  return handle;
+}
+
+// The samples [z, y, x] (x fastest, as read), read-only, kept alive by the handle.
+py::array samples_of(const py::object& self) {
+  const auto& h = self.cast<const VolumeHandle&>();
+  const VolumeView v = h.volume.view();
+  const auto item = static_cast<py::ssize_t>(scalar_size(v.type));
+  const char* format = nullptr;
+  switch (v.type) {
+    case ScalarType::Int8:
+      format = "i1";
+      break;
+    case ScalarType::UInt8:
+      format = "u1";
+      break;
+    case ScalarType::Int16:
+      format = "i2";
+      break;
+    case ScalarType::UInt16:
+      format = "u2";
+      break;
+    case ScalarType::Int32:
+      format = "i4";
+      break;
+    case ScalarType::UInt32:
+      format = "u4";
+      break;
+    case ScalarType::Float32:
+      format = "f4";
+      break;
+    case ScalarType::Float64:
+      format = "f8";
+      break;
+  }
+  py::array a(py::dtype(format), {v.dims[2], v.dims[1], v.dims[0]},
+              {item * v.strides[2], item * v.strides[1], item * v.strides[0]}, v.data, self);
+  a.attr("flags").attr("writeable") = false;
+  return a;
+}
+
+// The options of isotile.extract (its keywords, checked by the library).
+PipelineOptions pipeline_options_of(const py::dict& o) {
+  const auto has = [&](const char* key) { return o.contains(key) && !o[key].is_none(); };
+  const auto str = [&](const char* key, const char* fallback) {
+    return has(key) ? o[key].cast<std::string>() : std::string(fallback);
+  };
+  const auto flag = [&](const char* key) { return has(key) && o[key].cast<bool>(); };
+  const auto pick = [](const std::string& v, const char* what,
+                       std::initializer_list<const char*> choices) {
+    std::string list;
+    for (const char* c : choices) {
+      if (v == c) return v;
+      list += (list.empty() ? "" : ", ") + std::string(c);
+    }
+    throw py::value_error(std::string(what) + " must be one of " + list + ", not '" + v + "'");
+  };
+  PipelineOptions p;
+  ExtractOptions& e = p.extract;
+  e.method = parse_method(str("method", "mc"));
+  e.backend = parse_backend(str("backend", "auto"));
+  e.normals = flag("normals");
+  const std::string solver =
+      pick(str("dc_solver", "mass"), "dc_solver", {"mass", "particle", "qef"});
+  e.dc_solver = solver == "particle" ? DcSolver::Particle
+                : solver == "qef"    ? DcSolver::Qef
+                                     : DcSolver::MassPoint;
+  e.dc_hermite = pick(str("dc_hermite", "central"), "dc_hermite", {"central", "eno"}) == "eno"
+                     ? DcHermite::Eno
+                     : DcHermite::Central;
+  e.dc_vertices = pick(str("dc_vertices", "patch"), "dc_vertices", {"patch", "cell"}) == "cell"
+                      ? DcVertices::Cell
+                      : DcVertices::Patch;
+  e.quality = pick(str("quality", "fast"), "quality", {"fast", "max"}) == "max"
+                  ? MacetQuality::Max
+                  : MacetQuality::Fast;
+  e.macet_relax = has("macet_relax") ? o["macet_relax"].cast<double>() : 0.0;
+  e.keep_quads = flag("quads");
+  if (has("iso")) {
+    const py::object iso = o["iso"];
+    if (py::isinstance<py::str>(iso)) {
+      if (iso.cast<std::string>() != "auto")
+        throw py::value_error("iso must be a number or 'auto', not '" + iso.cast<std::string>() +
+                              "'");
+      p.iso_auto = true;
+    } else {
+      p.iso = iso.cast<double>();
+    }
+  }
+  p.world_frame = pick(str("frame", "world"), "frame", {"world", "grid"}) == "world";
+  p.simplify = has("simplify") ? o["simplify"].cast<double>() : 1.0;
+  p.check_intersections = flag("check_intersections");
+  p.allow_empty = flag("allow_empty");
+  if (has("memory")) {
+    const py::object m = o["memory"];
+    p.memory = py::isinstance<py::str>(m) ? m.cast<std::string>()
+                                          : std::to_string(m.cast<std::uint64_t>());
+  }
+  if (has("output")) p.output = py::str(o["output"]).cast<std::string>();
+  p.ascii = flag("ascii");
+  p.stats = !o.contains("stats") || o["stats"].cast<bool>();
+  return p;
+}
+
+// Progress and cancel between the library's threads and Python: the library's callback takes
+// the GIL, looks for a pending signal (Ctrl-C) and calls the user's callable; either's exception
+// is kept and the run cancelled. While the run goes on in a thread of its own, the calling thread
+// (Python's main thread, the only one that runs signal handlers) looks for signals every 20 ms,
+// so that Ctrl-C cancels the run within a fraction of a second whichever thread reports.
+struct ProgressBridge {
+  py::object callable;                         // None: only signals are watched
+  std::optional<py::error_already_set> error;  // under the GIL
+  bool declined = false;                       // the callable returned a false value
+};
+
+py::object make_mesh_tuple(Mesh&& mesh) {
+  auto* result = new Result;
+  result->mesh = std::move(mesh);
+  py::capsule owner = owner_of(result);
+  const Mesh& m = result->mesh;
+  const auto q = static_cast<py::ssize_t>(m.quads.size());
+  py::array quads(py::dtype::of<std::uint32_t>(), {q, py::ssize_t{4}},
+                  {py::ssize_t{4 * sizeof(std::uint32_t)}, py::ssize_t{sizeof(std::uint32_t)}},
+                  m.quads.empty() ? nullptr : m.quads.data()->data(), owner);
+  py::object normals = py::none();
+  if (!m.normals.empty()) normals = vec3_array(m.normals, owner);
+  return py::make_tuple(vec3_array(m.positions, owner),
+                        face_array(m.triangles, m.positions.size(), owner), quads, normals);
+}
+
+// Runs the pipeline on `source` (a path, a VolumeHandle, or a 3-D array [z, y, x] with spacing,
+// origin and direction in x, y, z). Returns (mesh tuple or None, stats JSON text or None).
+py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
+                          const py::object& progress, std::optional<int> threads) {
+  if (threads && *threads < 1) throw py::value_error("threads must be at least 1");
+  PipelineInput input;
+  VolumeView view;
+  py::object keep_alive = source;  // the samples stay referenced through the run
+  if (py::isinstance<py::str>(source)) {
+    input.path = source.cast<std::string>();
+    input.raw = raw_options_of(options);
+  } else if (py::isinstance<VolumeHandle>(source)) {
+    const auto& h = source.cast<const VolumeHandle&>();
+    view = h.volume.view();
+    input.path = h.name;
+    input.volume = &view;
+  } else {
+    const py::array a = source.cast<py::array>();
+    const auto triple = [&](const char* key, Vec3d fallback) {
+      if (!options.contains(key) || options[key].is_none()) return fallback;
+      const auto v = options[key].cast<std::vector<double>>();
+      if (v.size() != 3) throw py::value_error(std::string(key) + " must be three numbers");
+      return Vec3d{v[0], v[1], v[2]};
+    };
+    view = view_of(a, triple("spacing", {1, 1, 1}), "source");
+    view.origin = triple("origin", {0, 0, 0});
+    if (options.contains("direction") && !options["direction"].is_none()) {
+      const auto d = options["direction"].cast<std::vector<std::vector<double>>>();
+      if (d.size() != 3 || d[0].size() != 3 || d[1].size() != 3 || d[2].size() != 3)
+        throw py::value_error("direction must be a 3x3 matrix");
+      WorldFrame w{view.origin, {}};
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) w.direction[3 * r + c] = d[r][c];
+      view.world = w;
+    }
+    input.path = options.contains("name") ? options["name"].cast<std::string>() : "array";
+    input.volume = &view;
+    keep_alive = a;
+  }
+  PipelineOptions po = pipeline_options_of(options);
+
+  ProgressBridge bridge;
+  if (!progress.is_none()) bridge.callable = progress;
+  Progress reporter([&bridge](const ProgressUpdate& u) {
+    py::gil_scoped_acquire gil;
+    if (bridge.error || bridge.declined) return false;
+    if (PyErr_CheckSignals() != 0) {  // on the main thread only; the watcher below covers others
+      bridge.error.emplace();
+      return false;
+    }
+    if (!bridge.callable) return true;
+    try {
+      const py::object go =
+          bridge.callable(std::string(stage_name(u.stage)), u.brick, u.bricks, u.fraction);
+      const int truth = PyObject_IsTrue(go.ptr());  // any object, as Python's `if` takes it
+      if (truth < 0) throw py::error_already_set();
+      if (truth == 0) bridge.declined = true;
+    } catch (py::error_already_set& e) {
+      bridge.error.emplace(std::move(e));
+    }
+    return !bridge.error && !bridge.declined;
+  });
+  po.progress = &reporter;
+
+  PipelineResult result;
+  std::exception_ptr failure;
+  {
+    py::gil_scoped_release release;
+    std::mutex mutex;
+    std::condition_variable cv;
+    bool done = false;
+    std::thread worker([&] {
+      try {
+        // The process's limit (not an arena's), so that the stats' "threads" says it, as the
+        // CLI's --threads does.
+        std::optional<tbb::global_control> limit;
+        if (threads) limit.emplace(tbb::global_control::max_allowed_parallelism, *threads);
+        result = run_pipeline(input, po);
+      } catch (...) {
+        failure = std::current_exception();
+      }
+      std::lock_guard lock(mutex);
+      done = true;
+      cv.notify_all();
+    });
+    std::unique_lock lock(mutex);
+    while (!cv.wait_for(lock, std::chrono::milliseconds(20), [&] { return done; })) {
+      lock.unlock();
+      {
+        py::gil_scoped_acquire gil;
+        if (!bridge.error && PyErr_CheckSignals() != 0) bridge.error.emplace();
+        if (bridge.error) reporter.cancel();
+      }
+      lock.lock();
+    }
+    lock.unlock();
+    worker.join();
+  }
+  if (bridge.error) {
+    // A run that finished before it saw the cancel is undone: an interrupted call leaves no file.
+    if (!failure && !po.output.empty()) {
+      std::error_code ec;
+      std::filesystem::remove(po.output, ec);
+    }
+    throw std::move(*bridge.error);
+  }
+  if (failure) std::rethrow_exception(failure);  // Cancelled (declined) included
+  py::object mesh = py::none();
+  if (po.memory.empty()) mesh = make_mesh_tuple(std::move(result.mesh));
+  py::object stats = py::none();
+  if (po.stats) stats = py::str(result.stats.dump());
+  return py::make_tuple(mesh, stats);
+}
+
+// A mesh from arrays (vertices (V, 3), triangles (F, 3), quads (Q, 4) or None, normals (V, 3)
+// or None): copied, as Mesh owns its arrays; indices are checked by the writer.
+Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py::object& quads,
+                    const py::object& normals) {
+  Mesh mesh;
+  const auto rows = [](const py::array& a, int width, const char* what) {
+    if (a.ndim() != 2 || a.shape(1) != width)
+      throw py::value_error(std::string(what) + " must be an (N, " + std::to_string(width) +
+                            ") array");
+  };
+  rows(vertices, 3, "vertices");
+  const auto v = py::array_t<float, py::array::forcecast | py::array::c_style>::ensure(vertices);
+  if (!v) throw py::type_error("vertices must be numeric");
+  mesh.positions.resize(static_cast<std::size_t>(v.shape(0)));
+  std::copy_n(v.data(), 3 * v.shape(0),
+              mesh.positions.empty() ? nullptr : mesh.positions[0].data());
+  const auto indices = [&](const py::array& a, int width, const char* what, auto& out) {
+    rows(a, width, what);
+    if (a.size() > 0 && a.dtype().kind() != 'i' && a.dtype().kind() != 'u')
+      throw py::type_error(std::string(what) + " must be an integer array");
+    const auto f = py::array_t<std::int64_t, py::array::forcecast | py::array::c_style>::ensure(a);
+    out.resize(static_cast<std::size_t>(f.shape(0)));
+    for (py::ssize_t i = 0; i < f.shape(0); ++i)
+      for (int c = 0; c < width; ++c) {
+        const std::int64_t idx = f.data()[i * width + c];
+        if (idx < 0 || idx >= v.shape(0))
+          throw py::value_error(std::string(what) + " row " + std::to_string(i) +
+                                " refers to vertex " + std::to_string(idx) + ", past the " +
+                                std::to_string(v.shape(0)) + " vertices");
+        out[i][c] = static_cast<std::uint32_t>(idx);
+      }
+  };
+  indices(faces, 3, "faces", mesh.triangles);
+  if (!quads.is_none()) indices(quads.cast<py::array>(), 4, "quads", mesh.quads);
+  if (!normals.is_none()) {
+    const py::array na = normals.cast<py::array>();
+    rows(na, 3, "normals");
+    if (na.shape(0) != v.shape(0)) throw py::value_error("normals must have one row per vertex");
+    const auto n = py::array_t<float, py::array::forcecast | py::array::c_style>::ensure(na);
+    mesh.normals.resize(mesh.positions.size());
+    std::copy_n(n.data(), 3 * n.shape(0), mesh.normals.empty() ? nullptr : mesh.normals[0].data());
+  }
+  return mesh;
+}
+
+void write_mesh_py(const py::array& vertices, const py::array& faces, const py::object& quads,
+                   const py::object& normals, const std::string& path, bool ascii) {
+  const Mesh mesh = mesh_of_arrays(vertices, faces, quads, normals);
+  py::gil_scoped_release release;
+  write_mesh(mesh, path, {.format = std::nullopt, .ascii = ascii, .write_normals = true});
+}
+
+py::object read_mesh_py(const std::string& path) {
+  Mesh mesh;
+  {
+    py::gil_scoped_release release;
+    mesh = read_mesh(path);
+  }
+  return make_mesh_tuple(std::move(mesh));
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_isotile, m) {
@@ -334,9 +683,12 @@ PYBIND11_MODULE(_isotile, m) {
 #ifdef ISOTILE_PYTHON_GL
   isotile::gl::register_gl_backends();
 #endif
+  static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_Exception);
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
+    } catch (const Cancelled& e) {
+      PyErr_SetString(cancelled.ptr(), e.what());
     } catch (const InputError& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
     } catch (const IoError& e) {
@@ -359,6 +711,30 @@ PYBIND11_MODULE(_isotile, m) {
         py::arg("threads"));
   m.def("_time_library_calls", &time_library_calls, py::arg("volume"), py::arg("level"),
         py::arg("method"), py::arg("normals"), py::arg("threads"), py::arg("repeats"));
+  py::class_<VolumeHandle, std::shared_ptr<VolumeHandle>>(m, "VolumeHandle")
+      .def_property_readonly("samples", [](const py::object& self) { return samples_of(self); })
+      .def_property_readonly("spacing", [](const VolumeHandle& h) { return h.volume.spacing(); })
+      .def_property_readonly("origin", [](const VolumeHandle& h) { return h.volume.origin(); })
+      .def_property_readonly("world_origin",
+                             [](const VolumeHandle& h) {
+                               return h.volume.world() ? h.volume.world()->origin
+                                                       : h.volume.origin();
+                             })
+      .def_property_readonly("direction",
+                             [](const VolumeHandle& h) {
+                               const Mat3 d =
+                                   h.volume.world() ? h.volume.world()->direction : kIdentity3;
+                               return std::vector<std::vector<double>>{
+                                   {d[0], d[1], d[2]}, {d[3], d[4], d[5]}, {d[6], d[7], d[8]}};
+                             })
+      .def_property_readonly("name", [](const VolumeHandle& h) { return h.name; });
+  m.def("read_volume", &read_volume_py, py::arg("path"), py::arg("raw"));
+  m.def("run_pipeline", &run_pipeline_py, py::arg("source"), py::arg("options"),
+        py::arg("progress"), py::arg("threads"),
+        "the library's pipeline (tiler/pipeline.h) -> (mesh arrays or None, stats JSON or None)");
+  m.def("read_mesh", &read_mesh_py, py::arg("path"));
+  m.def("write_mesh", &write_mesh_py, py::arg("vertices"), py::arg("faces"), py::arg("quads"),
+        py::arg("normals"), py::arg("path"), py::arg("ascii"));
   m.def(
       "backends",
       [] {

@@ -67,7 +67,8 @@ check_reader_modules() {
 }
 
 # The installed Python module (under $1 on sys.path, or Debian's own dist-packages when empty),
-# in Debian's python3: its mesh of a small volume has the installed program's face count.
+# in Debian's python3: its mesh of a small volume has the installed program's face count, and it
+# loads the installed OpenVDB reader module.
 check_python_module() {
   local dir=$1 want got
   (cd "$tmp" && "$2" -q extract "$nucleon" --iso 49.5 -o py-cli.ply)
@@ -77,6 +78,14 @@ import gzip, sys, numpy as np, isotile
 where = sys.argv[2] or "/usr/lib/python3/dist-packages/"
 assert isotile.__file__.startswith(where), isotile.__file__
 vol = np.frombuffer(gzip.open(sys.argv[1]).read(), np.uint8).reshape(41, 41, 41)
+# The OpenVDB reader module, found from the installed extension (tiler/reader_modules.cpp):
+# only the module itself calls this file "not a readable OpenVDB file".
+open("bad.vdb", "w").write("not OpenVDB\n")
+try:
+    isotile.read_volume("bad.vdb")
+    raise SystemExit("the installed module read a file that is not OpenVDB")
+except (OSError, ValueError) as e:
+    assert "not a readable OpenVDB file" in str(e), e
 print(len(isotile.marching_cubes(vol, 49.5)[1]))' "$nucleon" "$dir") ||
     fail "import isotile from ${dir:-dist-packages}"
   [ "$got" = "$want" ] || fail "the installed module's mesh has $got faces, the program's $want"

@@ -29,6 +29,12 @@ def test_python_md_snippets_run(tmp_path, monkeypatch):
     # What the snippets say they make.
     assert (tmp_path / "surface.ply").stat().st_size > 1000
     assert (tmp_path / "surface.vtu").stat().st_size > 1000
+    for name in ("ellipsoid.ply", "gyroid.ply", "gyroid.obj", "gyroid.stl"):
+        assert (tmp_path / name).stat().st_size > 1000, name
+    # The out-of-core file is the in-core run's.
+    import isotile
+    isotile.extract("field:gyroid:96", output=tmp_path / "in_core.ply", stats=False)
+    assert (tmp_path / "in_core.ply").read_bytes() == (tmp_path / "gyroid.ply").read_bytes()
 
 
 def test_readme_import_line():

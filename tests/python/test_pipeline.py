@@ -1,0 +1,319 @@
+# isotile.extract, read_volume, read_mesh and write_mesh: the library's pipeline, the same run as
+# `isotile extract`. The mesh files and the stats must be the CLI's byte for byte (the stats
+# without their timing and memory keys, as the CLI's own tests compare them); a Volume read first
+# gives the path's mesh; progress, cancel and Ctrl-C stop a run and leave no file. Small volumes
+# (fields, files the tests write), so that the suite stays fast.
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+import isotile
+from conftest import cli, skip
+
+# Keys that differ between two runs of the same extraction (the CLI's tests leave them out too).
+VOLATILE = ("seconds", "peak_rss_mb")
+
+
+def steady(stats):
+    return {k: v for k, v in stats.items() if k not in VOLATILE}
+
+
+def write_ball(path, dtype=np.uint8, shape=(30, 34, 38)):
+    """A bright ball in a raw file named as the CLI parses it (NAME_XxYxZ_TYPE.raw)."""
+    z, y, x = np.indices(shape)
+    d = np.sqrt((x - 18.3) ** 2 + (y - 16.1) ** 2 + (z - 14.2) ** 2)
+    samples = np.clip(200 - d * 12, 0, 255).astype(dtype)
+    name = f"ball_{shape[2]}x{shape[1]}x{shape[0]}_{np.dtype(dtype).name}.raw"
+    samples.tofile(path / name)
+    return path / name, samples
+
+
+def run_cli_in(folder, *args):
+    folder.mkdir(exist_ok=True)
+    r = subprocess.run([cli(), "-q", "extract", *map(str, args)], cwd=folder,
+                       capture_output=True, text=True)
+    return r
+
+
+@pytest.fixture
+def ball(tmp_path):
+    return write_ball(tmp_path)[0]
+
+
+# The CLI and extract() on the same input, in two folders with the same relative output name.
+CASES = [
+    ("field:sphere:32", {}, []),
+    ("field:gyroid:36", {"method": "dc", "normals": True}, ["--method", "dc", "--normals"]),
+    ("field:torus:32", {"method": "macet", "quality": "max"}, ["--method", "macet",
+                                                              "--quality", "max"]),
+    ("field:gyroid:32", {"simplify": 0.4}, ["--simplify", "0.4"]),
+    ("field:csg-box:24", {"method": "dc", "quads": True, "dc_vertices": "cell"},
+     ["--method", "dc", "--quads", "--dc-vertices", "cell"]),
+    ("field:sphere:24", {"frame": "grid", "check_intersections": True},
+     ["--frame", "grid", "--check-intersections"]),
+]
+
+
+@pytest.mark.parametrize("source,options,flags", CASES)
+@pytest.mark.parametrize("name", ["mesh.ply", "mesh.obj"])
+def test_extract_matches_the_cli(tmp_path, monkeypatch, source, options, flags, name):
+    r = run_cli_in(tmp_path / "cli", source, "-o", name, "--stats", "stats.json", *flags)
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "py").mkdir()
+    monkeypatch.chdir(tmp_path / "py")
+    mesh = isotile.extract(source, output=name, **options)
+    assert (tmp_path / "py" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes()
+    cli_stats = json.loads((tmp_path / "cli" / "stats.json").read_text())
+    assert steady(mesh.stats) == steady(cli_stats)
+    # save() writes what the run wrote.
+    mesh.save("saved_" + name)
+    saved = (tmp_path / "py" / ("saved_" + name)).read_bytes()
+    assert saved == (tmp_path / "py" / name).read_bytes()
+
+
+def test_a_file_and_iso_auto_match_the_cli(tmp_path, monkeypatch, ball):
+    for iso, flags in ((100.5, ["--iso", "100.5", "--method", "dc"]), ("auto", ["--iso", "auto"])):
+        r = run_cli_in(tmp_path / "cli", ball, "-o", "m.ply", "--stats", "s.json", *flags)
+        assert r.returncode == 0, r.stderr
+        monkeypatch.chdir(tmp_path)
+        mesh = isotile.extract(ball, iso, method="dc" if iso != "auto" else "mc")
+        mesh.save(tmp_path / "py.ply")
+        assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli" / "m.ply").read_bytes()
+        want = steady(json.loads((tmp_path / "cli" / "s.json").read_text()))
+        got = steady(mesh.stats)
+        assert got.pop("output") is None  # no output file asked for
+        want.pop("output")
+        assert got == want
+    assert mesh.stats["iso_auto"]["rule"] == "otsu"
+
+
+def test_a_volume_read_first_gives_the_paths_mesh(tmp_path, ball):
+    volume = isotile.read_volume(ball)
+    z, y, x = volume.samples.shape
+    assert (x, y, z) == (38, 34, 30)
+    assert volume.samples.dtype == np.uint8 and not volume.samples.flags.writeable
+    assert np.array_equal(volume.samples, write_ball(tmp_path / "..", np.uint8)[1])
+    for options in ({"iso": 90}, {"iso": "auto", "method": "macet"}, {"iso": 120, "method": "dc"}):
+        a = isotile.extract(volume, **options)
+        b = isotile.extract(ball, **options)
+        for key in ("vertices", "faces", "quads"):
+            assert np.array_equal(getattr(a, key), getattr(b, key)), key
+        a.save(tmp_path / "a.ply")
+        b.save(tmp_path / "b.ply")
+        assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+        assert steady(a.stats) == steady(b.stats)
+    # An array with the volume's geometry gives the same mesh (only the name differs).
+    c = isotile.extract(np.array(volume.samples), 90, spacing=volume.spacing,
+                        origin=volume.origin)
+    d = isotile.extract(volume, 90)
+    assert np.array_equal(c.vertices, d.vertices) and np.array_equal(c.faces, d.faces)
+    assert c.stats["input"] == "array" and d.stats["input"] == str(ball)
+
+
+def test_raw_options_are_the_clis(tmp_path):
+    samples = write_ball(tmp_path)[1]
+    plain = tmp_path / "plain.dat"
+    samples.astype(">u2").tofile(plain)
+    v = isotile.read_volume(plain, dims=(38, 34, 30), type="uint16", endian="big",
+                            spacing=(0.5, 1.0, 2.0))
+    assert v.spacing == (0.5, 1.0, 2.0)
+    assert np.array_equal(v.samples, samples.astype(np.uint16))
+    m = isotile.extract(plain, 100, dims="38,34,30", type="uint16", endian="big",
+                        spacing="0.5,1,2")
+    r = run_cli_in(tmp_path / "cli", plain, "--dims", "38,34,30", "--type", "uint16", "--endian",
+                   "big", "--spacing", "0.5,1,2", "--iso", "100", "-o", "m.ply")
+    assert r.returncode == 0, r.stderr
+    m.save(tmp_path / "py.ply")
+    assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli" / "m.ply").read_bytes()
+    with pytest.raises(ValueError, match="dims must be three comma-separated numbers"):
+        isotile.read_volume(plain, dims=(38, 34), type="uint16")
+
+
+@pytest.mark.parametrize("flags,options", [
+    ([], {}),
+    (["--method", "macet"], {"method": "macet"}),
+    (["--simplify", "0.5"], {"simplify": 0.5}),
+])
+def test_out_of_core_matches_the_cli(tmp_path, monkeypatch, ball, flags, options):
+    for source, iso in ((ball, ["--iso", "auto"]), ("field:gyroid:48", [])):
+        r = run_cli_in(tmp_path / "cli", source, *iso, "--memory", "300KiB", "-o", "m.ply",
+                       "--stats", "s.json", *flags)
+        assert r.returncode == 0, r.stderr
+        (tmp_path / "py").mkdir(exist_ok=True)
+        monkeypatch.chdir(tmp_path / "py")
+        stats = isotile.extract(source, "auto" if iso else None, memory="300KiB",
+                                output="m.ply", **options)
+        assert stats["bricks"] > 1
+        assert (tmp_path / "py" / "m.ply").read_bytes() == (tmp_path / "cli" / "m.ply").read_bytes()
+        assert steady(stats) == steady(json.loads((tmp_path / "cli" / "s.json").read_text()))
+
+
+def test_out_of_core_gives_the_in_core_file(tmp_path):
+    isotile.extract("field:gyroid:48", memory=300 * 1024, output=tmp_path / "ooc.ply")
+    isotile.extract("field:gyroid:48", output=tmp_path / "in.ply", stats=False)
+    assert (tmp_path / "ooc.ply").read_bytes() == (tmp_path / "in.ply").read_bytes()
+
+
+def test_errors_are_the_clis(tmp_path, ball):
+    with pytest.raises(ValueError, match="--iso is required for a volume file"):
+        isotile.extract(ball)
+    with pytest.raises(ValueError, match="no pair of samples|range"):
+        isotile.extract(ball, 300)
+    assert isotile.extract(ball, 300, allow_empty=True).faces.shape == (0, 3)
+    with pytest.raises(ValueError, match="streams the mesh into a file"):
+        isotile.extract(ball, 100, memory="1MiB")
+    with pytest.raises(ValueError, match="macet-relax applies to --method macet only"):
+        isotile.extract(ball, 100, macet_relax=0.2)
+    with pytest.raises(ValueError, match="method must be"):
+        isotile.extract(ball, 100, method="marching")
+    with pytest.raises(ValueError, match="iso must be a number or 'auto'"):
+        isotile.extract(ball, "otsu")
+    with pytest.raises(ValueError, match="--simplify gives triangles"):
+        isotile.extract("field:sphere:16", method="dc", quads=True, simplify=0.5)
+    with pytest.raises(OSError):
+        isotile.extract(tmp_path / "missing.nrrd", 1)
+    with pytest.raises(ValueError):
+        isotile.extract(ball, 100, output=tmp_path / "mesh.xyz")
+    assert not (tmp_path / "mesh.xyz").exists()
+
+
+# --- progress, cancel, Ctrl-C: a tiled run of many bricks (the loops that report today) --------
+
+MANY_BRICKS = dict(memory="256KiB")
+
+
+def test_progress_reports_every_brick_of_both_passes(tmp_path):
+    calls = []
+    stats = isotile.extract("field:gyroid:96", output=tmp_path / "m.ply",
+                            progress=lambda *a: calls.append(a) or True, **MANY_BRICKS)
+    bricks = stats["bricks"]
+    assert bricks >= 20
+    for stage in ("count", "extract"):
+        done = {b for s, b, n, f in calls if s == stage and f == 1.0}
+        assert done == set(range(bricks)), stage
+        assert all(n == bricks for s, b, n, f in calls if s == stage)
+    assert all(0.0 <= f <= 1.0 for *_, f in calls)
+
+
+def left_in(folder):
+    return sorted(p.name for p in pathlib.Path(folder).iterdir())
+
+
+def test_a_false_return_cancels_and_leaves_no_file(tmp_path):
+    seen = []
+
+    def stop_after_ten(stage, brick, bricks, fraction):
+        seen.append(stage)
+        return len(seen) < 10
+
+    with pytest.raises(isotile.Cancelled):
+        isotile.extract("field:gyroid:96", output=tmp_path / "m.ply", progress=stop_after_ten,
+                        **MANY_BRICKS)
+    assert len(seen) == 10  # not called again once it said stop
+    assert left_in(tmp_path) == []
+
+
+def test_the_callbacks_exception_cancels_and_propagates(tmp_path):
+    class Stop(Exception):
+        pass
+
+    def fail(stage, brick, bricks, fraction):
+        if stage == "extract" and brick == 3:
+            raise Stop("enough")
+        return True
+
+    with pytest.raises(Stop, match="enough"):
+        isotile.extract("field:gyroid:96", output=tmp_path / "m.ply", progress=fail,
+                        **MANY_BRICKS)
+    assert left_in(tmp_path) == []
+
+
+def test_ctrl_c_raises_keyboard_interrupt_within_half_a_second_and_leaves_no_file(tmp_path):
+    sent = []
+
+    def interrupt(stage, brick, bricks, fraction):
+        if stage == "count" and brick == 5 and not sent:
+            sent.append(time.monotonic())
+            os.kill(os.getpid(), signal.SIGINT)
+        return True
+
+    with pytest.raises(KeyboardInterrupt):
+        isotile.extract("field:gyroid:128", output=tmp_path / "m.ply", progress=interrupt,
+                        **MANY_BRICKS)
+    assert sent
+    assert time.monotonic() - sent[0] < 0.5
+    assert left_in(tmp_path) == []
+    # Without a progress callable too: the signal is watched all the same.
+    import threading
+    timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
+    start = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            # Enough bricks to outlast the timer many times over.
+            isotile.extract("field:gyroid:256", output=tmp_path / "n.ply", stats=False,
+                            **MANY_BRICKS)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 0.05 + 0.5
+    assert left_in(tmp_path) == []
+
+
+# --- mesh files ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["m.ply", "m.obj", "m.stl", "m.off"])
+def test_read_mesh_and_write_mesh_round_trip_the_clis_files(tmp_path, name):
+    r = run_cli_in(tmp_path, "field:gyroid:24", "--method", "dc", "--normals", "-o", name)
+    assert r.returncode == 0, r.stderr
+    mesh = isotile.read_mesh(tmp_path / name)
+    assert len(mesh.faces) > 100 and mesh.vertices.dtype == np.float32
+    isotile.write_mesh(tmp_path / ("again_" + name), mesh)
+    assert (tmp_path / ("again_" + name)).read_bytes() == (tmp_path / name).read_bytes()
+    isotile.write_mesh(tmp_path / "pair.ply", (mesh.vertices, mesh.faces))
+    assert np.array_equal(isotile.read_mesh(tmp_path / "pair.ply").faces, mesh.faces)
+    with pytest.raises(ValueError, match="past the"):
+        isotile.write_mesh(tmp_path / "bad.ply", (mesh.vertices, mesh.faces + len(mesh.vertices)))
+    assert not (tmp_path / "bad.ply").exists()
+
+
+# --- reader modules: loaded from the extension's folder in a Python process ------------------
+
+def write_mha(path, samples, spacing=(1.0, 1.0, 1.0)):
+    z, y, x = samples.shape
+    header = ("ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+              f"DimSize = {x} {y} {z}\nElementSpacing = {spacing[0]} {spacing[1]} {spacing[2]}\n"
+              "Offset = 0 0 0\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n")
+    path.write_bytes(header.encode() + samples.astype("<f4").tobytes())
+
+
+def loaded_objects():
+    return pathlib.Path("/proc/self/maps").read_text()
+
+
+def test_a_module_backed_format_loads_its_reader_module_into_python(tmp_path, monkeypatch):
+    package = pathlib.Path(isotile.__file__).parent
+    if not (package / "libisotile_itk_reader.so").exists():
+        skip("itk", "this build has no ITK reader module (ISOTILE_ITK=OFF)")
+    z, y, x = np.indices((20, 22, 24))
+    samples = 9.0 - np.sqrt((x - 11.5) ** 2 + (y - 10.5) ** 2 + (z - 9.5) ** 2)
+    write_mha(tmp_path / "ball.mha", samples)
+    volume = isotile.read_volume(tmp_path / "ball.mha")
+    # Found beside the extension (tiler/reader_modules.cpp), not through the isotile program.
+    assert os.path.realpath(package / "libisotile_itk_reader.so") in loaded_objects()
+    assert np.array_equal(volume.samples, samples.astype(np.float32))
+    r = run_cli_in(tmp_path / "cli", tmp_path / "ball.mha", "--iso", "0", "-o", "m.ply",
+                   "--stats", "s.json")
+    assert r.returncode == 0, r.stderr
+    monkeypatch.chdir(tmp_path)
+    mesh = isotile.extract(tmp_path / "ball.mha", 0, output="cli/py.ply")
+    assert (tmp_path / "cli" / "py.ply").read_bytes() == (tmp_path / "cli" / "m.ply").read_bytes()
+    want = steady(json.loads((tmp_path / "cli" / "s.json").read_text()))
+    got = steady(mesh.stats)
+    assert got.pop("output") == "cli/py.ply" and want.pop("output") == "m.ply"
+    assert got == want

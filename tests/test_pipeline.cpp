@@ -1,0 +1,195 @@
+// The library's one extraction pipeline (tiler/pipeline.h), as a front end other than the CLI
+// calls it (the MeshLab plugin's job: a file, auto iso, in core or under a memory budget,
+// simplify, quality): the same mesh as extract() on the same volume, samples in memory giving
+// the path's run, the out-of-core file equal to the in-core one, the options' Progress handed
+// down, cancel leaving no file, and the errors before any output. The CLI's own tests check that
+// `isotile extract` over it kept its behaviour.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/extract/extract.h"
+#include "core/mesh/mesh_io.h"
+#include "core/volume/procedural_fields.h"
+#include "test_support.h"
+#include "tiler/pipeline.h"
+
+namespace isotile {
+namespace {
+
+namespace fs = std::filesystem;
+
+class Pipeline : public testing::TempDirTest {
+ protected:
+  Pipeline() : TempDirTest("isotile-pipeline-") {}
+};
+
+PipelineInput input(const std::string& path, const VolumeView* volume = nullptr) {
+  PipelineInput in;
+  in.path = path;
+  in.volume = volume;
+  return in;
+}
+
+StatsJson steady(StatsJson j) {
+  j.erase("seconds");
+  j.erase("peak_rss_mb");
+  return j;
+}
+
+TEST_F(Pipeline, InCoreIsExtractOnTheSameVolume) {
+  const FieldSpec spec{FieldKind::Gyroid, 40};
+  const Volume volume = make_field_volume(spec);
+  for (const Method method : {Method::MarchingCubes, Method::Macet, Method::DualContouring}) {
+    PipelineOptions o;
+    o.extract.method = method;
+    o.extract.backend = Backend::Cpu;
+    o.stats = true;
+    const PipelineResult r = run_pipeline(input("field:gyroid:40"), o);
+    ExtractOptions e = o.extract;
+    e.iso = field_default_iso(spec.kind);
+    const Mesh want = extract(volume.view(), e);
+    ASSERT_GT(want.triangles.size(), 1000u);
+    EXPECT_EQ(r.mesh.positions, want.positions) << method_name(method);
+    EXPECT_EQ(r.mesh.triangles, want.triangles) << method_name(method);
+    EXPECT_EQ(r.triangles, want.triangles.size());
+    EXPECT_EQ(r.stats["triangles"], want.triangles.size());
+    EXPECT_EQ(r.stats["method"], method_name(method));
+    EXPECT_TRUE(r.stats["output"].is_null());
+    EXPECT_TRUE(r.stats.contains("distance_max"));  // a field's distance to its surface
+    EXPECT_EQ(r.quality.triangles, want.triangles.size());
+  }
+}
+
+TEST_F(Pipeline, SamplesInMemoryGiveThePathsRun) {
+  const Volume volume = read_volume("field:torus:36");
+  const VolumeView view = volume.view();
+  PipelineOptions o;
+  o.iso_auto = true;
+  o.stats = true;
+  o.extract.method = Method::DualContouring;
+  const PipelineResult a = run_pipeline(input("field:torus:36"), o);
+  const PipelineResult b = run_pipeline(input("field:torus:36", &view), o);
+  ASSERT_TRUE(a.auto_iso.has_value());
+  EXPECT_EQ(a.iso, b.iso);
+  EXPECT_EQ(a.mesh.positions, b.mesh.positions);
+  EXPECT_EQ(a.mesh.triangles, b.mesh.triangles);
+  EXPECT_EQ(steady(a.stats), steady(b.stats));
+  EXPECT_EQ(a.stats["iso_auto"]["rule"], "otsu");
+}
+
+TEST_F(Pipeline, OutOfCoreWritesTheInCoreFileAndReportsEveryBrick) {
+  PipelineOptions in_core;
+  in_core.output = (dir_ / "in.ply").string();
+  in_core.keep_mesh = false;
+  const PipelineResult a = run_pipeline(input("field:gyroid:64"), in_core);
+  EXPECT_TRUE(a.mesh.positions.empty());  // not kept
+  std::vector<ProgressUpdate> updates;
+  Progress progress([&](const ProgressUpdate& u) {
+    updates.push_back(u);
+    return true;
+  });
+  PipelineOptions tiled = in_core;
+  tiled.output = (dir_ / "out.ply").string();
+  tiled.memory = "256KiB";
+  tiled.stats = true;
+  tiled.progress = &progress;
+  std::vector<std::string> log;
+  tiled.log = [&](const std::string& line) { log.push_back(line); };
+  const PipelineResult b = run_pipeline(input("field:gyroid:64"), tiled);
+  ASSERT_GT(b.bricks, 4);
+  EXPECT_EQ(slurp(dir_ / "out.ply"), slurp(dir_ / "in.ply"));
+  EXPECT_EQ(b.triangles, a.triangles);
+  EXPECT_EQ(b.stats["bricks"], b.bricks);
+  EXPECT_EQ(b.stats["memory_budget"], 256u * 1024);
+  std::int64_t extracted = 0;
+  for (const ProgressUpdate& u : updates)
+    if (u.stage == Stage::Extract && u.fraction == 1) ++extracted;
+  EXPECT_EQ(extracted, b.bricks);
+  ASSERT_FALSE(log.empty());
+  EXPECT_NE(log.front().find("brick by brick within 256KiB"), std::string::npos) << log.front();
+}
+
+TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
+  PipelineOptions o;
+  o.iso_auto = true;
+  o.memory = "256KiB";
+  o.simplify = 0.5;
+  o.quality = true;  // the radius ratios alone, as the plugin shows them
+  o.output = (dir_ / "job.ply").string();
+  const PipelineResult r = run_pipeline(input("field:sphere:48"), o);
+  EXPECT_GT(r.bricks, 1);
+  EXPECT_LT(r.triangles, r.triangles_extracted);
+  EXPECT_EQ(r.quality.triangles, r.triangles);
+  EXPECT_GT(r.quality.mean, 0.5);
+  EXPECT_TRUE(r.stats.is_null());
+  const Mesh back = read_mesh(dir_ / "job.ply");
+  EXPECT_EQ(back.triangles.size(), r.triangles);
+  // In core, the mesh comes back with its measures.
+  o.memory.clear();
+  o.output.clear();
+  const PipelineResult c = run_pipeline(input("field:sphere:48"), o);
+  EXPECT_EQ(c.quality.triangles, c.mesh.triangles.size());
+  EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
+}
+
+TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {
+  int calls = 0;
+  Progress progress([&](const ProgressUpdate&) { return ++calls < 5; });
+  PipelineOptions o;
+  o.output = (dir_ / "m.ply").string();
+  o.memory = "256KiB";
+  o.progress = &progress;
+  EXPECT_THROW(run_pipeline(input("field:gyroid:64"), o), Cancelled);
+  EXPECT_EQ(calls, 5);
+  EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+TEST_F(Pipeline, TheWrittenCallbackSeesTheMeshAsWritten) {
+  PipelineOptions o;
+  o.output = (dir_ / "m.ply").string();
+  std::size_t seen = 0;
+  o.written = [&](const Mesh& m) { seen = m.triangles.size(); };
+  const PipelineResult r = run_pipeline(input("field:sphere:24"), o);
+  EXPECT_GT(seen, 100u);
+  EXPECT_EQ(seen, r.mesh.triangles.size());
+  EXPECT_EQ(read_mesh(dir_ / "m.ply").triangles.size(), seen);
+}
+
+TEST_F(Pipeline, BadOptionsFailBeforeAnyOutput) {
+  const auto fails = [&](const PipelineInput& in, const PipelineOptions& o, const char* text) {
+    try {
+      run_pipeline(in, o);
+      ADD_FAILURE() << "no error, expected: " << text;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(text), std::string::npos) << e.what();
+    }
+  };
+  PipelineOptions o;
+  o.memory = "1MiB";
+  fails(input("field:sphere:16"), o, "give an output");
+  const Volume volume = read_volume("field:sphere:16");
+  const VolumeView view = volume.view();
+  o.output = (dir_ / "m.ply").string();
+  fails(input("field:sphere:16", &view), o, "reads its input from a file");
+  o = {};
+  fails(input((dir_ / "v_8x8x8_uint8.raw").string()), o, "--iso is required");
+  o.iso = 0;
+  o.extract.macet_relax = 0.2;
+  fails(input("field:sphere:16"), o, "--macet-relax applies to --method macet only");
+  o.extract.macet_relax = 0.7;
+  fails(input("field:sphere:16"), o, "macet_relax must be in [0, 0.5)");
+  o = {};
+  o.simplify = 0;
+  fails(input("field:sphere:16"), o, "simplify must be in (0, 1]");
+  o = {};
+  o.output = (dir_ / "m.xyz").string();
+  EXPECT_ANY_THROW(run_pipeline(input("field:sphere:16"), o));
+  EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+}  // namespace
+}  // namespace isotile

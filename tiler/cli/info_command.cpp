@@ -1,0 +1,176 @@
+// `isotile info INPUT [--json]`: what a volume holds, and what `extract --iso auto` would choose.
+#include "tiler/cli/commands.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <vector>
+
+#include "core/errors.h"
+#include "core/volume/image_headers.h"
+#include "core/volume/itk_reader.h"
+#include "core/volume/otsu_isovalue.h"
+#include "core/volume/procedural_fields.h"
+#include "core/volume/volume_io.h"
+#include "tiler/stats_json.h"
+
+namespace isotile::cli {
+
+namespace {
+
+using json = StatsJson;
+
+// Where each index axis points in LPS world space: the letter of its largest component
+// (L/R along x, P/A along y, S/I along z), e.g. "LPS" for an axis-aligned NIfTI/DICOM axial scan.
+std::string axis_letters(const Mat3& d) {
+  std::string out;
+  for (int a = 0; a < 3; ++a) {
+    int best = 0;
+    for (int r = 1; r < 3; ++r)
+      if (std::abs(d[3 * r + a]) > std::abs(d[3 * best + a])) best = r;
+    const bool plus = d[3 * best + a] > 0;
+    out += "LPS"[best] == 'L'   ? (plus ? 'L' : 'R')
+           : "LPS"[best] == 'P' ? (plus ? 'P' : 'A')
+                                : (plus ? 'S' : 'I');
+  }
+  return out;
+}
+
+}  // namespace
+
+CLI::App* add_info_command(CLI::App& app, InfoArgs& args) {
+  auto* info_cmd =
+      app.add_subcommand("info", "Describe a volume: dims, type, value range, histogram");
+  args.in.add_to(*info_cmd);
+  info_cmd->add_flag("--json", args.json, "Print JSON");
+  return info_cmd;
+}
+
+int run_info(const InfoArgs& args) {
+  const InputArgs& in = args.in;
+  const bool as_json = args.json;
+  const RawOptions raw = in.raw_options();
+  const InputKind kind = input_kind(in.input);
+  // A directory of several DICOM series: list them, for --series.
+  if (kind == InputKind::Dicom && raw.series.empty() && std::filesystem::is_directory(in.input)) {
+    check_dicom_input(in.input);  // before GDCM scans the files (image_headers.h)
+    const std::vector<DicomSeriesInfo> series = list_dicom_series(in.input);
+    if (series.size() > 1) {
+      json list = json::array();
+      for (const DicomSeriesInfo& s : series)
+        list.push_back({{"uid", s.uid},
+                        {"description", s.description},
+                        {"dims", {s.columns, s.rows, s.files}}});
+      if (as_json) {
+        std::cout << json{{"input", in.input}, {"series", list}}.dump(2) << "\n";
+        return 0;
+      }
+      std::printf("input    %s: %zu DICOM series (choose one with --series UID)\n",
+                  in.input.c_str(), series.size());
+      for (const DicomSeriesInfo& s : series)
+        std::printf("  %s  %lld x %lld x %lld  %s\n", s.uid.c_str(),
+                    static_cast<long long>(s.columns), static_cast<long long>(s.rows),
+                    static_cast<long long>(s.files), s.description.c_str());
+      return 0;
+    }
+  }
+  const bool has_header =
+      kind != InputKind::Raw && kind != InputKind::Field && kind != InputKind::Vdb;
+  const VolumeHeader header = has_header ? read_volume_header(in.input, raw) : VolumeHeader{};
+  const Volume volume = read_volume(in.input, raw);
+  const VolumeView v = volume.view();
+  const auto [lo, hi] = value_range(v);
+  constexpr int kBins = 16;
+  std::array<std::uint64_t, kBins> hist{};
+  // A cheap whole-volume histogram: one pass, per-slab counts merged in slab order.
+  std::vector<std::array<std::uint64_t, kBins>> slabs(v.dims[2]);
+  const double width = hi > lo ? (hi - lo) / kBins : 1.0;
+  tbb::parallel_for(std::int64_t{0}, v.dims[2], [&](std::int64_t k) {
+    auto& h = slabs[k];
+    h.fill(0);
+    for (std::int64_t j = 0; j < v.dims[1]; ++j)
+      for (std::int64_t i = 0; i < v.dims[0]; ++i) {
+        const int b = static_cast<int>((v.value(i, j, k) - lo) / width);
+        ++h[std::clamp(b, 0, kBins - 1)];
+      }
+  });
+  for (const auto& h : slabs)
+    for (int b = 0; b < kBins; ++b) hist[b] += h[b];
+  const WorldFrame world = v.world ? *v.world : WorldFrame{v.origin, kIdentity3};
+
+  json j;
+  j["input"] = in.input;
+  j["dims"] = v.dims;
+  j["type"] = scalar_name(v.type);
+  j["format"] = has_header ? header.format : std::string(input_kind_name(kind));
+  j["spacing"] = v.spacing;
+  j["origin"] = v.origin;
+  // The world frame the mesh is written in (extract --frame world).
+  j["world_origin"] = world.origin;
+  j["direction"] = {{world.direction[0], world.direction[1], world.direction[2]},
+                    {world.direction[3], world.direction[4], world.direction[5]},
+                    {world.direction[6], world.direction[7], world.direction[8]}};
+  j["orientation"] = axis_letters(world.direction);
+  j["rescaled"] = header.rescaled;
+  if (header.rescaled)
+    j["rescale"] = {{"slope", header.rescale_slope}, {"intercept", header.rescale_intercept}};
+  if (!header.series_uid.empty()) {
+    j["series_uid"] = header.series_uid;
+    j["series_description"] = header.series_description;
+  }
+  j["bytes"] = volume.byte_size();
+  j["min"] = lo;
+  j["max"] = hi;
+  json bins = json::array();
+  for (int b = 0; b < kBins; ++b)
+    bins.push_back({{"from", lo + b * width}, {"to", lo + (b + 1) * width}, {"count", hist[b]}});
+  j["histogram"] = bins;
+  // What `extract --iso auto` would choose (null for a volume of one value: no threshold).
+  std::optional<double> auto_iso;
+  try {
+    auto_iso = otsu_isovalue(value_histogram(v));
+  } catch (const InputError&) {
+  }
+  j["iso_auto"] = auto_iso ? json(*auto_iso) : json(nullptr);
+  if (const auto field = parse_field_spec(in.input))
+    j["default_iso"] = field_default_iso(field->kind);
+  if (as_json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::printf("input    %s\n", in.input.c_str());
+  std::printf("dims     %lld x %lld x %lld\n", static_cast<long long>(v.dims[0]),
+              static_cast<long long>(v.dims[1]), static_cast<long long>(v.dims[2]));
+  std::printf("type     %s (%zu bytes)\n", std::string(scalar_name(v.type)).c_str(),
+              volume.byte_size());
+  std::printf("spacing  %g, %g, %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
+  std::printf("format   %s\n", j["format"].get<std::string>().c_str());
+  if (!header.series_uid.empty())
+    std::printf("series   %s  %s\n", header.series_uid.c_str(), header.series_description.c_str());
+  std::printf("origin   %g, %g, %g\n", v.origin[0], v.origin[1], v.origin[2]);
+  std::printf(
+      "world    origin %g, %g, %g; axes toward %s (LPS); direction columns (%g, %g, %g) "
+      "(%g, %g, %g) (%g, %g, %g)\n",
+      world.origin[0], world.origin[1], world.origin[2], axis_letters(world.direction).c_str(),
+      world.direction[0], world.direction[3], world.direction[6], world.direction[1],
+      world.direction[4], world.direction[7], world.direction[2], world.direction[5],
+      world.direction[8]);
+  if (header.rescaled)
+    std::printf("rescale  value = stored x %g + %g (range and histogram in these units)\n",
+                header.rescale_slope, header.rescale_intercept);
+  std::printf("range    %g .. %g\n", lo, hi);
+  std::printf("histogram\n");
+  for (int b = 0; b < kBins; ++b)
+    std::printf("  %12g .. %-12g %llu\n", lo + b * width, lo + (b + 1) * width,
+                static_cast<unsigned long long>(hist[b]));
+  if (auto_iso)
+    std::printf("iso auto %.10g (Otsu's threshold: what extract --iso auto chooses)\n", *auto_iso);
+  return 0;
+}
+
+}  // namespace isotile::cli

@@ -1,0 +1,425 @@
+#include "tiler/pipeline.h"
+
+#include <malloc.h>
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <utility>
+
+#include "core/errors.h"
+#include "core/mesh/atomic_file.h"
+#include "core/mesh/field_distance.h"
+#include "core/mesh/mesh_frame.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/self_intersections.h"
+#include "core/volume/procedural_fields.h"
+#include "tiler/brick_plan.h"
+#include "tiler/source_histogram.h"
+#include "tiler/volume_source.h"
+
+namespace isotile {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using Log = std::function<void(const std::string&)>;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::string fmt_seconds(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f s", s);
+  return buf;
+}
+
+// Gives the heap's free blocks back to the kernel. A process that keeps freed blocks for reuse
+// (the CLI: mallopt in tiler/cli) would otherwise hold them through the next stage.
+void return_freed_memory() {
+#ifdef __GLIBC__
+  malloc_trim(0);
+#endif
+}
+
+// Frees the volume's samples and gives every freed block back to the kernel, so that the output
+// file's pages (tmpfs or page cache) can take the volume's place instead of being fresh pages:
+// on the development machines a 4 GiB volume's 3.4 GB mesh was written at 0.35 GB/s without the
+// trim, 1.9 GB/s with it (docs/benchmarks.md, "In-core stages at scale").
+void release_volume(Volume& volume) {
+  volume = Volume();
+  return_freed_memory();
+}
+
+std::string_view quality_name(MacetQuality q) {
+  return q == MacetQuality::Max ? "max" : "fast";
+}
+std::string_view dc_vertices_name(DcVertices v) {
+  return v == DcVertices::Cell ? "cell" : "patch";
+}
+
+std::string dims_text(const Index3& d) {
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
+}
+
+// Out of core: brick by brick within options.memory, streamed into options.output.
+PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& options,
+                         const ExtractOptions& extract, MeshFormat format, const Log& log,
+                         Clock::time_point t_total) {
+  if (input.volume)
+    throw InputError("an out-of-core run (memory) reads its input from a file; drop memory");
+  TiledOptions to;
+  to.extract = extract;
+  to.memory = parse_memory_size(options.memory);
+  to.allow_empty = options.allow_empty;
+  to.format = format;
+  to.simplify = options.simplify;
+  // The radius-ratio statistics cost a fifth of a streamed run; only the stats report them.
+  to.quality = options.stats || options.quality;
+  if (options.ascii) throw InputError("--memory writes binary PLY or STL; drop --ascii");
+  if (options.check_intersections)
+    throw InputError(
+        "--check-intersections needs the whole mesh in memory; drop --memory, or run "
+        "`isotile quality --check-intersections` on the output");
+  to.progress = options.progress;
+  auto source = open_volume_source(input.path, input.raw, to.memory);
+  check_grid_geometry(source->spacing, source->origin, source->world, input.path);
+  if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);
+  StatsJson auto_iso;
+  PipelineResult result;
+  if (options.iso_auto) {
+    log("reading " + input.path + " once for --iso auto's histogram");
+    auto_iso = choose_isovalue(source_histogram(*source, to.memory), to.extract.iso, log);
+    result.auto_iso = to.extract.iso;
+  }
+  log("extracting " + input.path + " (" + dims_text(source->dims) + " " +
+      std::string(scalar_name(source->type)) + ") brick by brick within " + options.memory +
+      (source->in_memory() ? " (this input cannot be read by region: read whole first)" : ""));
+  const TiledResult r = extract_tiled(*source, to, options.output);
+  log((to.simplify < 1
+           ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
+           : std::string("extracted ")) +
+      std::to_string(r.triangles) + " triangles, " + std::to_string(r.vertices) + " vertices in " +
+      std::to_string(r.plan.total()) + " bricks of " + std::to_string(r.plan.brick[0]) + "x" +
+      std::to_string(r.plan.brick[1]) + "x" + std::to_string(r.plan.brick[2]) + " cells");
+  result.iso = to.extract.iso;
+  result.backend = r.backend;
+  result.bricks = r.plan.total();
+  result.triangles = r.triangles;
+  result.vertices = r.vertices;
+  result.triangles_extracted = to.simplify < 1 ? r.triangles_extracted : r.triangles;
+  result.quality = r.quality;
+  if (options.stats)
+    result.stats = tiled_stats({.input = input.path,
+                                .output = options.output,
+                                .dims = source->dims,
+                                .type = source->type,
+                                .extract = &to.extract,
+                                .auto_iso = auto_iso,
+                                .result = &r,
+                                .world_frame = to.frame.active,
+                                .memory = to.memory,
+                                .region_reads = !source->in_memory(),
+                                .simplify = to.simplify,
+                                .seconds_total = seconds_since(t_total)});
+  return result;
+}
+
+}  // namespace
+
+StatsJson choose_isovalue(const ValueHistogram& histogram, double& iso, const Log& log) {
+  iso = otsu_isovalue(histogram);
+  std::ostringstream s;
+  s.precision(10);
+  s << "--iso auto: " << iso << " (Otsu's threshold; the samples range from " << histogram.min
+    << " to " << histogram.max << ")";
+  if (log) log(s.str());
+  return {{"rule", "otsu"}, {"min", histogram.min}, {"max", histogram.max}};
+}
+
+StatsJson tiled_stats(const TiledStatsInput& in) {
+  const ExtractOptions& options = *in.extract;
+  const TiledResult& r = *in.result;
+  StatsJson j;
+  j["input"] = in.input;
+  j["output"] = in.output;
+  j["dims"] = in.dims;
+  j["type"] = scalar_name(in.type);
+  j["iso"] = options.iso;
+  if (!in.auto_iso.is_null()) j["iso_auto"] = in.auto_iso;
+  j["method"] = method_name(options.method);
+  if (options.method == Method::Macet) {
+    j["quality"] = quality_name(options.quality);
+    j["macet_relax"] = options.macet_relax;
+  }
+  if (options.method == Method::DualContouring)
+    j["dc_vertices"] = dc_vertices_name(options.dc_vertices);
+  j["backend"] = backend_name(r.backend);
+  j["backend_reason"] = choose_backend(options).reason;
+  j["threads"] = stats_threads();
+  j["frame"] = in.world_frame ? "world" : "grid";
+  j["triangles"] = r.triangles;
+  j["vertices"] = r.vertices;
+  j.update(quality_json(r.quality));
+  // Topology needs every edge's faces at once; a streamed run does not hold them.
+  for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "closed", "watertight"})
+    j[key] = nullptr;
+  j["bricks"] = r.plan.total();
+  j["brick_cells"] = r.plan.brick;
+  j["brick_grid"] = r.plan.count;
+  j["bricks_extracted"] = r.bricks_extracted;
+  j["memory_budget"] = in.memory;
+  j["region_reads"] = in.region_reads;
+  j["largest_brick_bytes"] = r.largest_brick_bytes;
+  j["seconds"] = {
+      {"count", r.seconds_count}, {"extract", r.seconds_extract}, {"total", in.seconds_total}};
+  const TiledResult::Stages& st = r.stages;
+  j["seconds"]["stages"] = {{"read", st.read},   {"count", st.count},     {"extract", st.extract},
+                            {"index", st.index}, {"records", st.records}, {"write", st.write}};
+  if (in.simplify < 1) {
+    j["simplify"] = in.simplify;
+    j["triangles_before"] = r.triangles_extracted;
+    j["simplify_target_faces"] = r.simplify.target_faces;
+    // Bricks are simplified with their seams locked, then the seams in cells of a grid shifted by
+    // half a brick: the result depends on this plan (docs/simplify.md).
+    j["simplify_brick_plan"] = {
+        {"brick_cells", r.plan.brick}, {"brick_grid", r.plan.count}, {"seam_grid", r.seam_cells}};
+    j["simplify_collapses"] = r.simplify.collapses;
+    j["simplify_split_vertices"] = r.simplify.split_vertices;
+    j["simplify_unlinked_faces"] = r.simplify.unlinked_faces;
+    // The distance needs the extracted and the simplified mesh whole.
+    j["simplify_hausdorff_mean"] = nullptr;
+    j["simplify_hausdorff_max"] = nullptr;
+    j["seconds"]["seams"] = r.seconds_seams;
+  }
+  j["peak_rss_mb"] = peak_rss_mb();
+  return j;
+}
+
+void check_pipeline_options(const PipelineOptions& options) {
+  if (!(options.simplify > 0 && options.simplify <= 1))
+    throw InputError("simplify must be in (0, 1] (1: off), got " +
+                     std::to_string(options.simplify));
+  const ExtractOptions& eo = options.extract;
+  if (!(eo.macet_relax >= 0 && eo.macet_relax < 0.5))
+    throw InputError("macet_relax must be in [0, 0.5), got " + std::to_string(eo.macet_relax));
+  if (eo.macet_relax > 0 && eo.method != Method::Macet)
+    throw InputError("--macet-relax applies to --method macet only");
+  choose_backend(eo);  // InputError when the method cannot run on the backend asked for
+}
+
+PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& options) {
+  const auto t_total = Clock::now();
+  const Log log = [&](const std::string& line) {
+    if (options.log) options.log(line);
+  };
+  const bool tiled = !options.memory.empty();
+  if (tiled && options.output.empty())
+    throw InputError("an out-of-core run (memory) streams the mesh into a file: give an output");
+  // A bad output name fails before any time is spent reading: its folder, its kind (a device or
+  // FIFO cannot take the streamed writer's positioned writes) and its extension.
+  MeshFormat format = MeshFormat::Ply;
+  if (!options.output.empty()) {
+    check_output(options.output, tiled && options.simplify >= 1);
+    format = mesh_format_from_path(options.output);
+  }
+  check_pipeline_options(options);
+  ExtractOptions eo = options.extract;
+  eo.cells = {};
+  eo.progress = options.progress;
+  BackendChoice choice = choose_backend(eo);
+  const Backend backend = choice.backend;
+
+  const std::optional<FieldSpec> field = parse_field_spec(input.path);
+  if (options.iso && !options.iso_auto) {
+    if (!std::isfinite(*options.iso))
+      throw InputError("--iso must be a finite number or 'auto', got '" +
+                       std::to_string(*options.iso) + "'");
+    eo.iso = *options.iso;
+  } else if (field && !options.iso_auto) {
+    eo.iso = field_default_iso(field->kind);
+  } else if (!options.iso_auto) {
+    throw InputError(
+        "--iso is required for a volume file: a number, or 'auto' for Otsu's "
+        "threshold of the samples (`isotile info " +
+        input.path + "` shows their range and histogram)");
+  }
+  const bool simplifying = options.simplify < 1;
+  if (simplifying && eo.keep_quads) throw InputError("--simplify gives triangles; drop --quads");
+  if (tiled) return run_tiled(input, options, eo, format, log, t_total);
+
+  // In core.
+  Volume volume;
+  VolumeView view;
+  double t_read = 0;
+  auto t0 = Clock::now();
+  if (input.volume) {
+    view = *input.volume;
+  } else {
+    log("reading " + input.path);
+    volume = read_volume(input.path, input.raw);
+    t_read = seconds_since(t0);
+    // Only extract() and the repairs below read the samples; the rest of this run uses the
+    // view's dims and frame, so its data pointer is cleared when the samples are released.
+    view = volume.view();
+  }
+  check_grid_geometry(view.spacing, view.origin, view.world, input.path);
+  if (!input.volume)
+    log("read " + dims_text(view.dims) + " " + std::string(scalar_name(view.type)) + " in " +
+        fmt_seconds(t_read));
+
+  PipelineResult result;
+  StatsJson auto_iso;
+  if (options.iso_auto) {
+    auto_iso = choose_isovalue(value_histogram(view), eo.iso, log);
+    result.auto_iso = eo.iso;
+  }
+  log("extracting (" + std::string(method_name(eo.method)) + ", " +
+      std::string(backend_name(backend)) + ", iso " + std::to_string(eo.iso) + ")");
+  t0 = Clock::now();
+  Mesh mesh = extract(view, eo, &choice);
+  const double t_extract = seconds_since(t0);
+  // No face: found from the mesh, at no cost to a run that has one. The range is a cheap pass.
+  if (mesh.triangles.empty() && mesh.quads.empty() && !options.allow_empty) {
+    const auto [lo, hi] = value_range(view);
+    if (!(lo < eo.iso && eo.iso <= hi)) throw_no_surface(eo.iso, std::pair(lo, hi));
+  }
+  log("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
+      std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
+  result.triangles_extracted = mesh.triangles.size() + 2 * mesh.quads.size();
+
+  // Dual Contouring's patch repairs (reported by the stats) are the last reader of the samples.
+  std::optional<DcPatchRepairs> repairs;
+  double t_repairs = 0;
+  if (options.stats && eo.method == Method::DualContouring && eo.dc_vertices == DcVertices::Patch) {
+    t0 = Clock::now();
+    repairs = dual_contouring_patch_repairs(view, eo.iso);
+    t_repairs = seconds_since(t0);
+  }
+  // Nothing below reads the samples, and simplification and the write both gain from their
+  // memory; the time is counted in the stage that comes next.
+  t0 = Clock::now();
+  if (!input.volume) release_volume(volume);
+  view.data = nullptr;
+  const double t_release = seconds_since(t0);
+
+  // The extracted mesh is kept past simplification only for the stats' distance measure.
+  std::optional<Mesh> extracted;
+  SimplifyStats sstats;
+  double t_simplify = 0;
+  if (simplifying) {
+    log("simplifying to " + std::to_string(options.simplify) + " of the faces");
+    t0 = Clock::now();
+    SimplifyOptions so;
+    so.ratio = options.simplify;
+    so.min_quality = 0.3;
+    so.relax = true;
+    so.progress = options.progress;
+    Mesh simplified = simplify(mesh, so, &sstats);
+    t_simplify = seconds_since(t0) + t_release;
+    log("simplified to " + std::to_string(simplified.triangles.size()) + " triangles in " +
+        fmt_seconds(t_simplify));
+    if (options.stats) extracted = std::move(mesh);
+    mesh = std::move(simplified);
+  }
+
+  // Positions go out in the volume's world frame; the measures below stay in the grid frame (the
+  // volume border is a box there), as a streamed run's do.
+  const MeshFrame frame = options.world_frame ? mesh_frame(view) : MeshFrame{};
+  std::optional<Mesh> world;  // the mesh in the world frame, when that is not the grid frame
+  double t_write = 0;
+  if (!options.output.empty()) {
+    log("writing " + options.output);
+    t0 = Clock::now();
+    // The simplifier's freed memory would otherwise stay resident through the measures: peak RSS
+    // 13.8 GB against 9.5 GB for 22M triangles simplified to a tenth with the stats.
+    if (simplifying) return_freed_memory();
+    double t_hook = 0;
+    const Mesh* written = &mesh;
+    if (frame.active) {
+      world = mesh;
+      apply_frame(frame, *world);
+      written = &*world;
+    }
+    write_mesh(*written, options.output,
+               {.format = format, .ascii = options.ascii, .write_normals = true});
+    if (options.written) {
+      const auto t_h = Clock::now();
+      options.written(*written);
+      t_hook = seconds_since(t_h);
+    }
+    t_write = seconds_since(t0) - t_hook + (simplifying ? 0.0 : t_release);
+  }
+
+  result.iso = eo.iso;
+  result.backend = choice.backend;
+  result.triangles = mesh.triangles.size() + 2 * mesh.quads.size();
+  result.vertices = mesh.positions.size();
+  if (options.quality && !options.stats) result.quality = triangle_quality(mesh);
+  if (options.stats) {
+    t0 = Clock::now();
+    const QualityStats q = triangle_quality(mesh);
+    result.quality = q;
+    const TopologyStats topo = mesh_topology(mesh, volume_border(view, eo.method));
+    StatsJson& j = result.stats;
+    j["input"] = input.path;
+    j["output"] = options.output.empty() ? StatsJson(nullptr) : StatsJson(options.output);
+    j["dims"] = view.dims;
+    j["type"] = scalar_name(view.type);
+    j["iso"] = eo.iso;
+    if (!auto_iso.is_null()) j["iso_auto"] = auto_iso;
+    j["method"] = method_name(eo.method);
+    if (eo.method == Method::Macet) {
+      j["quality"] = quality_name(eo.quality);
+      j["macet_relax"] = eo.macet_relax;
+    }
+    j["backend"] = backend_name(choice.backend);
+    j["backend_reason"] = choice.reason;
+    j["threads"] = stats_threads();
+    j["frame"] = frame.active ? "world" : "grid";
+    j["triangles"] = result.triangles;
+    j["vertices"] = result.vertices;
+    j.update(quality_json(q));
+    j.update(topology_json(topo, true));
+    j["bricks"] = 1;
+    if (eo.method == Method::DualContouring) {
+      j["dc_vertices"] = dc_vertices_name(eo.dc_vertices);
+      if (repairs) {
+        j["dc_flipped_faces"] = repairs->flipped_faces;
+        j["dc_border_cut_cells"] = repairs->border_cut_cells;
+      }
+    }
+    if (options.check_intersections) j["self_intersections"] = self_intersections(mesh).pairs;
+    if (extracted) {
+      j["simplify"] = options.simplify;
+      j.update(simplify_json(sstats, *extracted, mesh,
+                             {1 / view.spacing[0], 1 / view.spacing[1], 1 / view.spacing[2]}));
+    }
+    if (field) {
+      const FieldDistance d = field_distance(*field, mesh, view.origin, view.spacing);
+      const bool none = mesh.positions.empty();  // no vertex: no distance
+      j["distance_mean"] = none ? StatsJson(nullptr) : StatsJson(d.mean);
+      j["distance_max"] = none ? StatsJson(nullptr) : StatsJson(d.max);
+    }
+    const double t_measure = seconds_since(t0) + t_repairs;
+    j["seconds"] = {{"read", t_read},
+                    {"extract", t_extract},
+                    {"write", t_write},
+                    {"measure", t_measure},
+                    {"total", seconds_since(t_total)}};
+    if (simplifying) j["seconds"]["simplify"] = t_simplify;
+    j["peak_rss_mb"] = peak_rss_mb();
+  }
+  if (options.keep_mesh) {
+    if (world) {
+      result.mesh = std::move(*world);
+    } else {
+      if (frame.active) apply_frame(frame, mesh);
+      result.mesh = std::move(mesh);
+    }
+  }
+  return result;
+}
+
+}  // namespace isotile

@@ -1,0 +1,75 @@
+#include "tiler/stats_json.h"
+
+#include <sys/resource.h>
+#include <tbb/global_control.h>
+
+#include "core/mesh/surface_distance.h"
+
+namespace isotile {
+
+StatsJson quality_json(const QualityStats& q) {
+  StatsJson j;
+  const auto measured = [&](double v) {
+    return q.triangles > 0 ? StatsJson(v) : StatsJson(nullptr);
+  };
+  j["radius_ratio_min"] = measured(q.min);
+  j["radius_ratio_mean"] = measured(q.mean);
+  j["radius_ratio_q001"] = measured(q.q001);
+  j["radius_ratio_q01"] = measured(q.q01);
+  j["radius_ratio_median"] = measured(q.median);
+  j["radius_ratio_histogram"] = q.histogram;
+  j["degenerate_triangles"] = q.degenerate;
+  return j;
+}
+
+StatsJson topology_json(const TopologyStats& t, bool border_known) {
+  StatsJson j;
+  j["boundary_edges"] = t.boundary_edges;
+  j["border_boundary_edges"] = t.border_boundary_edges;
+  j["nonmanifold_edges"] = t.nonmanifold_edges;
+  j["nonmanifold_vertices"] = t.nonmanifold_vertices;
+  j["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;
+  j["euler"] = t.euler;
+  j["components"] = t.components;
+  j["closed"] = t.faces > 0 ? StatsJson(t.closed) : StatsJson(nullptr);
+  j["watertight"] = border_known && t.faces > 0 ? StatsJson(t.watertight) : StatsJson(nullptr);
+  return j;
+}
+
+StatsJson simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& after,
+                        const Vec3d& scale) {
+  StatsJson j;
+  j["triangles_before"] = s.faces_before;
+  j["simplify_target_faces"] = s.target_faces;
+  j["simplify_regions"] = s.regions;
+  j["simplify_seam_regions"] = s.seam_regions;
+  j["simplify_collapses"] = s.collapses;
+  j["simplify_flips"] = s.flips;
+  j["simplify_relaxed"] = s.relaxed;
+  j["simplify_boundary_vertices"] = s.boundary_vertices;
+  j["simplify_split_vertices"] = s.split_vertices;
+  j["simplify_split_copies"] = s.split_copies;
+  j["simplify_unlinked_faces"] = s.unlinked_faces;
+  const SurfaceDistance d = surface_distance(before, after, {.scale = scale});
+  j["simplify_hausdorff_mean"] = d.mean();
+  j["simplify_hausdorff_max"] = d.max();
+  const OneWayDistance& worst = d.a_to_b.max >= d.b_to_a.max ? d.a_to_b : d.b_to_a;
+  j["simplify_hausdorff_max_at"] = {worst.max_at[0] / scale[0], worst.max_at[1] / scale[1],
+                                    worst.max_at[2] / scale[2]};
+  j["simplify_hausdorff_max_direction"] =
+      d.a_to_b.max >= d.b_to_a.max ? "input to result" : "result to input";
+  return j;
+}
+
+double peak_rss_mb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+int stats_threads() {
+  return static_cast<int>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
+}  // namespace isotile

@@ -1,0 +1,39 @@
+// The pieces of the statistics JSON that `isotile extract --stats`, `simplify --stats` and
+// `quality --json` share (docs/cli.md lists the keys): built in the library, so that every way in
+// (the CLI, Python, the MeshLab plugin) reports the same keys with the same values.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include "core/mesh/mesh.h"
+#include "core/mesh/mesh_quality.h"
+#include "core/mesh/mesh_topology.h"
+#include "core/simplify/simplify.h"
+#include "core/volume/volume.h"
+
+namespace isotile {
+
+using StatsJson = nlohmann::ordered_json;
+
+// radius_ratio_* and degenerate_triangles. A measure without a value (the radius ratios of no
+// triangle) is null, never a made-up 0.
+StatsJson quality_json(const QualityStats& q);
+
+// Edge and component counts, closed and watertight. `border_known`: the mesh's volume box is
+// known (an extraction); a mesh read from a file has none, so whether its boundary lies on a
+// volume border cannot be told: watertight is null. A mesh without faces is neither closed nor
+// open: both are null.
+StatsJson topology_json(const TopologyStats& t, bool border_known);
+
+// Keys of a simplification; `scale` turns mesh units into voxels where known. Measures the
+// two-way distance between `before` and `after`.
+StatsJson simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& after,
+                        const Vec3d& scale);
+
+// The process's peak resident set so far, MB.
+double peak_rss_mb();
+
+// Worker threads the run may use (TBB's current limit), the stats' "threads".
+int stats_threads();
+
+}  // namespace isotile
