@@ -438,7 +438,7 @@ int run_extract_tiled(const ExtractArgs& args, const ExtractOptions& options, Me
     region_reads = !source->in_memory();
     if (args.iso == "auto") {
       progress("reading " + args.in.input + " once for --iso auto's histogram");
-      auto_iso = choose_isovalue(source_histogram(*source, to.memory), to.extract.iso);
+      auto_iso = choose_isovalue(source_histogram(*source, to.memory, &g_progress), to.extract.iso);
     }
     progress(
         "extracting " + args.in.input + " (" + std::to_string(dims[0]) + "x" +
@@ -567,7 +567,9 @@ int run_extract(const ExtractArgs& args) {
 
   progress("reading " + args.in.input);
   auto t0 = Clock::now();
-  Volume volume = read_volume(args.in.input, args.in.raw_options());
+  RawOptions raw = args.in.raw_options();
+  raw.progress = &g_progress;
+  Volume volume = read_volume(args.in.input, raw);
   const double t_read = seconds_since(t0);
   // Only extract() and the repairs below read the samples; the rest of this run uses the view's
   // dims and frame, so its data pointer is cleared when the samples are released.
@@ -582,6 +584,7 @@ int run_extract(const ExtractArgs& args) {
   progress("extracting (" + std::string(method_name(options.method)) + ", " +
            std::string(backend_name(backend)) + ", iso " + std::to_string(options.iso) + ")");
   t0 = Clock::now();
+  options.progress = &g_progress;
   Mesh mesh = extract(view, options, &choice);
   const double t_extract = seconds_since(t0);
   // No face: found from the mesh, at no cost to a run that has one. The range is a cheap pass.
@@ -635,10 +638,14 @@ int run_extract(const ExtractArgs& args) {
   if (frame.active) {
     Mesh world = mesh;
     apply_frame(frame, world);
-    write_mesh(world, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+    write_mesh(
+        world, args.output,
+        {.format = format, .ascii = args.ascii, .write_normals = true, .progress = &g_progress});
     if (!args.render.empty()) t_render = render_extracted(world, args.render, g_quiet);
   } else {
-    write_mesh(mesh, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+    write_mesh(
+        mesh, args.output,
+        {.format = format, .ascii = args.ascii, .write_normals = true, .progress = &g_progress});
     if (!args.render.empty()) t_render = render_extracted(mesh, args.render, g_quiet);
   }
   const double t_write = seconds_since(t0) - t_render + (simplifying ? 0.0 : t_release);
@@ -1034,11 +1041,30 @@ extern "C" void on_signal(int sig) {
   std::raise(sig);
 }
 
+// The first SIGINT or SIGTERM cancels the run through g_progress (only a lock-free atomic store
+// here: async-signal-safe); the work stops at its next unit, its files are removed as the
+// exception unwinds, and main prints "isotile: cancelled" and exits 128 + the signal. A second one
+// ends the process at once (on_signal).
+volatile std::sig_atomic_t g_cancel_signal = 0;
+extern "C" void on_cancel_signal(int sig) {
+  g_cancel_signal = sig;
+  g_progress.cancel();
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+}
+
+int cancelled() {
+  std::fprintf(stderr, "isotile: cancelled\n");
+  return 128 + (g_cancel_signal ? static_cast<int>(g_cancel_signal) : SIGINT);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  // Under MPI each rank dies at the signal (mpirun forwards it to every rank): a rank cancelling
+  // alone would leave the others waiting in a collective.
+  std::signal(SIGINT, launched_by_mpi() ? on_signal : on_cancel_signal);
+  std::signal(SIGTERM, launched_by_mpi() ? on_signal : on_cancel_signal);
   if (launched_by_mpi()) {
 #ifdef ISOTILE_HAVE_MPI
     try {
@@ -1291,6 +1317,8 @@ int main(int argc, char** argv) {
     } catch (const isotile::AgreedError& e) {
       return fail(e.what(), true);
 #endif
+    } catch (const isotile::Cancelled&) {
+      return cancelled();
     } catch (const isotile::Error& e) {
       return fail(e.what(), false);
     } catch (const std::bad_alloc&) {
