@@ -328,5 +328,40 @@ TEST_F(ProgressFiles, TiledExtractionCancelledLeavesNothing) {
   }
 }
 
+// Out of core with --simplify: the bricks' extraction and simplification report within their
+// brick; cancelled anywhere, neither the output, its temporary nor a scratch file is left.
+TEST_F(ProgressFiles, TiledSimplificationCancelledLeavesNothing) {
+  TiledOptions to;
+  to.extract.iso = 0;
+  to.extract.backend = Backend::Cpu;
+  to.memory = std::uint64_t{1} << 20;
+  to.simplify = 0.3;
+  const fs::path out = dir_ / "simplified.ply";
+  Recorder rec;
+  Progress progress(rec.callback());
+  to.progress = &progress;
+  const TiledResult r = extract_tiled(*open_volume_source("field:gyroid:48", {}), to, out);
+  ASSERT_GT(r.plan.total(), 2);
+  fs::remove(out);
+  std::map<std::int64_t, int> simplified;
+  for (const auto& u : rec.updates)
+    if (u.stage == Stage::Simplify && u.bricks > 1) simplified[u.brick] += u.fraction == 1.0;
+  for (std::int64_t b = 0; b < r.plan.total(); ++b) EXPECT_EQ(simplified[b], 1) << b;
+  // Reports inside the bricks too, not only one per brick.
+  EXPECT_GT(rec.updates.size(), 4 * static_cast<std::size_t>(r.plan.total()));
+
+  const auto calls = static_cast<std::int64_t>(rec.updates.size());
+  // (Parallel loops make a few more or fewer calls from run to run: 9/10 stays within.)
+  for (std::int64_t k : {std::int64_t{1}, calls / 3, calls * 2 / 3, calls * 9 / 10}) {
+    Recorder stop;
+    stop.stop_at = k;
+    Progress cancelling(stop.callback());
+    to.progress = &cancelling;
+    EXPECT_THROW(extract_tiled(*open_volume_source("field:gyroid:48", {}), to, out), Cancelled)
+        << k;
+    EXPECT_TRUE(names().empty()) << k << " left " << names().front();
+  }
+}
+
 }  // namespace
 }  // namespace isotile
