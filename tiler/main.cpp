@@ -744,7 +744,9 @@ int run_simplify(const SimplifyArgs& args) {
            fmt_seconds(t_simplify));
   progress("writing " + args.output);
   t0 = Clock::now();
-  write_mesh(out, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  write_mesh(
+      out, args.output,
+      {.format = format, .ascii = args.ascii, .write_normals = true, .progress = &g_progress});
   const double t_write = seconds_since(t0);
   const double t_done = seconds_since(t_total);
   if (!args.stats.empty()) {
@@ -1041,10 +1043,10 @@ extern "C" void on_signal(int sig) {
   std::raise(sig);
 }
 
-// The first SIGINT or SIGTERM cancels the run through g_progress (only a lock-free atomic store
-// here: async-signal-safe); the work stops at its next unit, its files are removed as the
-// exception unwinds, and main prints "isotile: cancelled" and exits 128 + the signal. A second one
-// ends the process at once (on_signal).
+// The first SIGINT or SIGTERM (extract, simplify, demo) cancels the run through g_progress (only
+// a lock-free atomic store here: async-signal-safe); the work stops at its next unit, its files
+// are removed as the exception unwinds, and main prints "isotile: cancelled" and exits 128 + the
+// signal. A second one ends the process at once (on_signal).
 volatile std::sig_atomic_t g_cancel_signal = 0;
 extern "C" void on_cancel_signal(int sig) {
   g_cancel_signal = sig;
@@ -1061,10 +1063,8 @@ int cancelled() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Under MPI each rank dies at the signal (mpirun forwards it to every rank): a rank cancelling
-  // alone would leave the others waiting in a collective.
-  std::signal(SIGINT, launched_by_mpi() ? on_signal : on_cancel_signal);
-  std::signal(SIGTERM, launched_by_mpi() ? on_signal : on_cancel_signal);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
   if (launched_by_mpi()) {
 #ifdef ISOTILE_HAVE_MPI
     try {
@@ -1292,6 +1292,13 @@ int main(int argc, char** argv) {
     if (rc == 0) flush_stdout();
     return rc;
   };
+  // The commands whose work reports through g_progress are cancelled by the first signal; the
+  // others end at it, as before. Under MPI each rank ends at the signal (mpirun forwards it to
+  // every rank): a rank cancelling alone would leave the others waiting in a collective.
+  if ((*extract_cmd || *simplify_cmd || *demo_cmd) && !launched_by_mpi()) {
+    std::signal(SIGINT, on_cancel_signal);
+    std::signal(SIGTERM, on_cancel_signal);
+  }
   const int rc = [&]() -> int {
     try {
       if (*extract_cmd) return finished(run_extract(ex));
