@@ -1,6 +1,7 @@
 #include "core/progress.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace isotile {
 
@@ -24,6 +25,9 @@ std::string_view stage_name(Stage stage) {
   return "?";
 }
 
+Progress::Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks)
+    : parent_(&parent), parent_stage_(stage), brick_(brick), bricks_(bricks > 0 ? bricks : 1) {}
+
 void Progress::set_brick(std::int64_t brick, std::int64_t bricks) {
   std::lock_guard lock(mutex_);
   brick_ = brick;
@@ -36,7 +40,20 @@ void Progress::begin(Stage stage, std::int64_t total) {
   stage_ = stage;
   total_ = total > 0 ? total : 1;
   done_ = 0;
+  if (parent_) ++child_stages_;
   report({stage_, brick_, bricks_, 0.0});
+}
+
+void Progress::finish() {
+  check();
+  std::lock_guard lock(mutex_);
+  if (!parent_) {
+    done_ = total_;
+    report({stage_, brick_, bricks_, 1.0});
+    return;
+  }
+  child_reported_ = 1;
+  parent_->report_root({parent_stage_, brick_, bricks_, 1.0});
 }
 
 void Progress::advance(std::int64_t units) {
@@ -47,9 +64,25 @@ void Progress::advance(std::int64_t units) {
 }
 
 void Progress::report(const ProgressUpdate& update) {
-  // Under mutex_: the callback is called one call at a time, and a false answer is seen by every
-  // thread before its next unit of work.
-  if (callback_ && !callback_(update)) cancel();
+  if (!parent_) return report_root(update);
+  // A child (under its own mutex_): its n-th stage fills [1 - 2^-(n-1), 1 - 2^-n) of the brick, so
+  // the brick's fraction grows through any number of stages and stays below 1 until finish().
+  const int n = std::max(child_stages_, 1);
+  const double lo = 1 - std::ldexp(1.0, -(n - 1)), width = std::ldexp(1.0, -n);
+  child_reported_ =
+      std::max(child_reported_, std::min(lo + width * update.fraction, 1 - width / 2));
+  parent_->report_root({parent_stage_, brick_, bricks_, child_reported_});
+  check();
+}
+
+void Progress::report_root(const ProgressUpdate& update) {
+  if (parent_) return parent_->report_root(update);
+  {
+    // Under callback_mutex_: the callback is called one call at a time (from any thread, children's
+    // included), and a false answer is seen by every thread before its next unit of work.
+    std::lock_guard lock(callback_mutex_);
+    if (callback_ && !callback_(update)) cancel();
+  }
   check();
 }
 

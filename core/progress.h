@@ -11,12 +11,24 @@
 // The callback returns false to cancel. The library then throws Cancelled out of the loop and out
 // of every thread working for it (TBB carries the exception to the caller), and whatever was being
 // written is removed (core/mesh/atomic_file.h): a cancelled run leaves nothing behind.
+//
+// Parallel loops report through for_units() below: the workers advance once per unit (a z-slice
+// of rows, a chunk of faces), never per cell, so the inner loops keep their speed; a worker checks
+// for cancel before each unit. Within one begin() of a stage the fraction only grows, 0 to 1.
+//
+// Nesting: work done for one brick of a larger run (the tiler) reports through a child Progress
+// (Progress(parent, stage, brick, bricks)) so that bricks in flight at once do not clobber each
+// other's stage: the child's own stages (read, count, extract of the core extraction inside the
+// brick) become a growing fraction below 1 of the parent's `stage` for that brick, and finish()
+// reports the brick done (fraction 1). Children share their parent's cancel.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <string_view>
 
 #include "core/errors.h"
@@ -46,6 +58,8 @@ class Progress {
  public:
   Progress() = default;  // nobody listens; cancel() still works
   explicit Progress(ProgressCallback callback) : callback_(std::move(callback)) {}
+  // Reports to `parent` as brick `brick` of `bricks` of its `stage` (see Nesting above).
+  Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks);
   Progress(const Progress&) = delete;
   Progress& operator=(const Progress&) = delete;
 
@@ -61,16 +75,27 @@ class Progress {
   void check() const {
     if (cancelled()) throw Cancelled();
   }
-  bool cancelled() const { return cancelled_.load(std::memory_order_relaxed); }
+  // A child's brick is done: tells the parent fraction 1 of its stage for the brick. Throws
+  // Cancelled when the run is cancelled. On a root Progress: advance() to the end of the stage.
+  void finish();
+  bool cancelled() const {
+    return cancelled_.load(std::memory_order_relaxed) || (parent_ && parent_->cancelled());
+  }
   // Cancels the run from outside the callback (another thread; a signal handler: the flag is a
   // lock-free atomic).
   void cancel() { cancelled_.store(true, std::memory_order_relaxed); }
 
  private:
-  void report(const ProgressUpdate& update);  // calls the callback under mutex_
+  void report(const ProgressUpdate& update);       // calls the callback (a child: the parent's)
+  void report_root(const ProgressUpdate& update);  // a root's callback, under callback_mutex_
 
   ProgressCallback callback_;
-  std::mutex mutex_;
+  Progress* parent_ = nullptr;  // a child's parent
+  Stage parent_stage_ = Stage::Extract;
+  int child_stages_ = 0;       // a child's begin() calls so far
+  double child_reported_ = 0;  // the highest fraction a child told its parent
+  std::mutex mutex_;           // the stage's state
+  std::mutex callback_mutex_;  // one callback at a time (taken after a child's or own mutex_)
   Stage stage_ = Stage::Read;
   std::int64_t total_ = 1, done_ = 0, brick_ = 0, bricks_ = 1;
   std::atomic<bool> cancelled_{false};
@@ -83,6 +108,42 @@ inline void progress_begin(Progress* p, Stage stage, std::int64_t total) {
 }
 inline void progress_advance(Progress* p, std::int64_t units = 1) {
   if (p) p->advance(units);
+}
+inline void progress_check(const Progress* p) {
+  if (p) p->check();
+}
+
+// A child Progress of `parent` (see Nesting above), or none when `parent` is null.
+class ChildProgress {
+ public:
+  ChildProgress(Progress* parent, Stage stage, std::int64_t brick, std::int64_t bricks) {
+    if (parent) child_.emplace(*parent, stage, brick, bricks);
+  }
+  Progress* get() { return child_ ? &*child_ : nullptr; }
+
+ private:
+  std::optional<Progress> child_;
+};
+
+// Wraps the body of a tbb::parallel_for over a blocked_range of items (rows): with a Progress,
+// each range is cut into pieces of at most `unit` items, each piece checked for cancel before
+// and advanced after (`unit` items: well under 0.1 s on one thread; a z-slice of rows). Without
+// one, the body runs on the whole range as before. The Progress's stage counts the items.
+template <class Body>
+auto for_units(Progress* p, std::int64_t unit, Body&& body) {
+  return [p, unit, &body](const auto& range) {
+    if (!p) return body(range);
+    using Range = std::decay_t<decltype(range)>;
+    using Value = std::decay_t<decltype(range.begin())>;
+    const auto step = static_cast<Value>(std::max<std::int64_t>(unit, 1));
+    for (Value lo = range.begin(); lo < range.end();) {
+      p->check();
+      const Value hi = range.end() - lo > step ? lo + step : range.end();
+      body(Range(lo, hi));
+      p->advance(static_cast<std::int64_t>(hi - lo));
+      lo = hi;
+    }
+  };
 }
 
 }  // namespace isotile

@@ -51,6 +51,7 @@ Mesh dc_extract_gl(const VolumeView& view, const DcGlOptions& o, McStats* stats,
   run.iso = o.dc.iso;
   run.memory = o.memory;
   run.max_brick_cells_z = o.max_brick_cells_z;
+  run.progress = o.dc.progress;
   // Device bytes per sample besides it: its code, its patch map, the pyramid. Vertex positions
   // are not known before classification: a slab whose vertices overflow a binding is halved.
   hp.bytes_per_sample = 2 + 4 + 8.0 / 7.0;

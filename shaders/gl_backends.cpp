@@ -86,6 +86,7 @@ McOptions mc_options(const ExtractOptions& o) {
   m.iso = o.iso;
   m.normals = o.normals;
   m.cells = o.cells;
+  m.progress = o.progress;
   return m;
 }
 

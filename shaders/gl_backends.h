@@ -11,6 +11,7 @@
 #include <cstdint>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile::gl {
@@ -31,6 +32,7 @@ struct McOptions {
   // Geometry-shader path, for tests: bytes of the transform-feedback capture buffer (0: sized from
   // memory, at most 2 GiB per binding). A small value forces the overflow-and-resume passes.
   std::uint64_t capture_bytes = 0;
+  Progress* progress = nullptr;  // Stage::Extract per slab; Cancelled between slabs
 };
 
 struct McStats {

@@ -65,6 +65,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   method.bind_tables();
   std::uint64_t vertex_base = 0;
   int slab_count = 0, draws = 0;
+  progress_begin(run.progress, isotile::Stage::Extract, static_cast<std::int64_t>(planned.size()));
   while (!slabs.empty()) {
     const Box3 cells = slabs.front();
     slabs.pop_front();
@@ -221,6 +222,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     if (method.normals) mesh.normals.resize(v0 + n_vertices - shared);
     vertex_base += n_vertices - shared;
     ++slab_count;
+    progress_advance(run.progress);  // a halved slab advances twice: the fraction stops at 1
   }
   glUseProgram(0);
   if (stats) {

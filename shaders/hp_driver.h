@@ -73,6 +73,7 @@ struct HpRun {
   double iso = 0;
   std::uint64_t memory = 0;            // device bytes to plan slabs for (0: from the driver)
   std::int64_t max_brick_cells_z = 0;  // for tests: a cap on a slab's cells along z
+  Progress* progress = nullptr;        // Stage::Extract per slab; Cancelled between slabs
 };
 
 Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMethod& method,

@@ -168,6 +168,7 @@ Mesh run(const VolumeView& view, const MacetGlOptions& options, McStats* stats, 
   mc.memory = options.memory;
   mc.max_brick_cells_z = options.max_brick_cells_z;
   mc.capture_bytes = options.capture_bytes;
+  mc.progress = o.progress;
   if (o.relax > 0) {
     // As macet(): the relaxed samples are doubles, uploaded as such.
     const detail::ScratchVector<double> samples =

@@ -86,6 +86,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   glEnable(GL_RASTERIZER_DISCARD);
   glBindVertexArray(vao);
 
+  progress_begin(o.progress, isotile::Stage::Extract, static_cast<std::int64_t>(slabs.size()));
   Soup soup;
   int passes = 0;
   std::vector<std::uint32_t> staging;
@@ -177,6 +178,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         first = resume;
         timer.lap(stats ? &stats->seconds_output : nullptr);
       }
+      progress_advance(o.progress);  // Stage::Extract, begun below the slabs' plan
     }
   } catch (...) {
     glDisable(GL_RASTERIZER_DISCARD);

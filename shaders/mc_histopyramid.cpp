@@ -39,6 +39,7 @@ Mesh histopyramid_mesh(const VolumeView& view, const McOptions& o, McStats* stat
   run.iso = o.iso;
   run.memory = o.memory;
   run.max_brick_cells_z = o.max_brick_cells_z;
+  run.progress = o.progress;
   HpMethod hp;
   hp.halo = method.halo;
   // Device bytes per sample besides it: its 16-bit code, the pyramid (8 bytes per 8 elements,

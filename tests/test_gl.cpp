@@ -100,6 +100,31 @@ TEST_P(GlPaths, SlabsEqualWholeVolume) {
   }
 }
 
+// Progress (core/progress.h): Stage::Extract once per slab after its begin; a cancel stops the
+// extraction between slabs with Cancelled, and the context still works afterwards.
+TEST_P(GlPaths, ReportsPerSlabAndStopsWhenCancelled) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::Torus, 41});
+  const double iso = field_default_iso(FieldKind::Torus);
+  int calls = 0;
+  Progress progress([&](const ProgressUpdate& u) {
+    EXPECT_EQ(u.stage, Stage::Extract);
+    ++calls;
+    return true;
+  });
+  gl::McStats stats;
+  const Mesh whole = run(GetParam(), vol.view(),
+                         {.iso = iso, .max_brick_cells_z = 4, .progress = &progress}, &stats);
+  EXPECT_EQ(calls, 1 + stats.bricks);
+  int seen = 0;
+  Progress stop([&](const ProgressUpdate&) { return ++seen < 3; });
+  EXPECT_THROW(run(GetParam(), vol.view(), {.iso = iso, .max_brick_cells_z = 4, .progress = &stop}),
+               Cancelled);
+  EXPECT_EQ(seen, 3);
+  EXPECT_EQ(run(GetParam(), vol.view(), {.iso = iso, .max_brick_cells_z = 4}).triangles,
+            whole.triangles);
+}
+
 // Brick mode (the tiler's contract, core/extract/marching_cubes.h): the GL output for a box of
 // cells from a view holding it plus the halo equals the CPU's brick output.
 TEST_P(GlPaths, BrickModeEqualsCpu) {

@@ -293,9 +293,10 @@ void BrickExtraction::keyed_vertex_index(const VolumeView& view, const Box3& cel
 }
 
 BrickRecords BrickExtraction::extract_part(const Box3& cells, const VolumeView& view,
-                                           QualityAccumulator& quality) {
+                                           QualityAccumulator& quality, Progress* progress) {
   ExtractOptions o = ex_;
   o.cells = cells;
+  o.progress = progress;
   auto t0 = Clock::now();
   const Mesh mesh = isotile::extract(view, o);
   stages_.extract += since(t0);

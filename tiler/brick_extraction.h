@@ -109,7 +109,9 @@ class BrickExtraction {
   // into `buffer`, extracted into its records, then written (BrickRecords::write).
   std::vector<Box3> parts(std::int64_t b, TiledResult& result);
   VolumeView read_part(const Box3& part, std::vector<char>& buffer);
-  BrickRecords extract_part(const Box3& part, const VolumeView& view, QualityAccumulator& quality);
+  // `progress`: told of the core extraction's progress (a child Progress for the brick).
+  BrickRecords extract_part(const Box3& part, const VolumeView& view, QualityAccumulator& quality,
+                            Progress* progress = nullptr);
   void write(const BrickRecords& records, const WriteAt& write);
   std::uint64_t written_faces() const { return written_faces_; }
   // Busy seconds per stage so far (read from the reader's clock).

@@ -62,6 +62,23 @@ extern "C" void on_signal(int sig) {
   std::raise(sig);
 }
 
+// The first SIGINT or SIGTERM (extract, simplify, demo) cancels the run through g_progress (only
+// a lock-free atomic store here: async-signal-safe); the work stops at its next unit, its files
+// are removed as the exception unwinds, and main prints "isotile: cancelled" and exits 128 + the
+// signal. A second one ends the process at once (on_signal).
+volatile std::sig_atomic_t g_cancel_signal = 0;
+extern "C" void on_cancel_signal(int sig) {
+  g_cancel_signal = sig;
+  g_progress.cancel();
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+}
+
+int cancelled() {
+  std::fprintf(stderr, "isotile: cancelled\n");
+  return 128 + (g_cancel_signal ? static_cast<int>(g_cancel_signal) : SIGINT);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -162,6 +179,13 @@ int main(int argc, char** argv) {
     if (rc == 0) flush_stdout();
     return rc;
   };
+  // The commands whose work reports through g_progress are cancelled by the first signal; the
+  // others end at it, as before. Under MPI each rank ends at the signal (mpirun forwards it to
+  // every rank): a rank cancelling alone would leave the others waiting in a collective.
+  if ((*extract_cmd || *simplify_cmd || *demo_cmd) && !launched_by_mpi()) {
+    std::signal(SIGINT, on_cancel_signal);
+    std::signal(SIGTERM, on_cancel_signal);
+  }
   const int rc = [&]() -> int {
     try {
       if (*extract_cmd) return finished(run_extract(ex));
@@ -185,6 +209,8 @@ int main(int argc, char** argv) {
     } catch (const isotile::AgreedError& e) {
       return fail(e.what(), true);
 #endif
+    } catch (const isotile::Cancelled&) {
+      return cancelled();
     } catch (const isotile::Error& e) {
       return fail(e.what(), false);
     } catch (const std::bad_alloc&) {

@@ -90,7 +90,8 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   PipelineResult result;
   if (options.iso_auto) {
     log("reading " + input.path + " once for --iso auto's histogram");
-    auto_iso = choose_isovalue(source_histogram(*source, to.memory), to.extract.iso, log);
+    auto_iso = choose_isovalue(source_histogram(*source, to.memory, options.progress),
+                               to.extract.iso, log);
     result.auto_iso = to.extract.iso;
   }
   log("extracting " + input.path + " (" + dims_text(source->dims) + " " +
@@ -258,7 +259,9 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
     view = *input.volume;
   } else {
     log("reading " + input.path);
-    volume = read_volume(input.path, input.raw);
+    RawOptions raw = input.raw;
+    raw.progress = options.progress;
+    volume = read_volume(input.path, raw);
     t_read = seconds_since(t0);
     // Only extract() and the repairs below read the samples; the rest of this run uses the
     // view's dims and frame, so its data pointer is cleared when the samples are released.
@@ -343,7 +346,10 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
       written = &*world;
     }
     write_mesh(*written, options.output,
-               {.format = format, .ascii = options.ascii, .write_normals = true});
+               {.format = format,
+                .ascii = options.ascii,
+                .write_normals = true,
+                .progress = options.progress});
     if (options.written) {
       const auto t_h = Clock::now();
       options.written(*written);

@@ -9,12 +9,15 @@
 
 namespace isotile {
 
-ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget) {
+ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget,
+                                Progress* progress) {
   const std::uint64_t sample = scalar_size(source.type);
   const std::uint64_t row = static_cast<std::uint64_t>(source.dims[0]) * sample;
   const std::uint64_t plane = row * static_cast<std::uint64_t>(source.dims[1]);
   // A quarter of the budget for the slab; otherwise 64 MiB, which keeps every thread busy.
-  const std::uint64_t slab_bytes = memory_budget > 0 ? memory_budget / 4 : std::uint64_t{64} << 20;
+  std::uint64_t slab_bytes = memory_budget > 0 ? memory_budget / 4 : std::uint64_t{64} << 20;
+  // The histogram is a sum of counts: the same for any slab size.
+  if (progress) slab_bytes = std::min(slab_bytes, std::uint64_t{16} << 20);
   // Sequential (gzip'd) sources give whole x-y slabs only.
   const bool rows = plane > slab_bytes && !source.sequential();
   const std::int64_t step =
@@ -22,6 +25,10 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
                  1, static_cast<std::int64_t>(slab_bytes / std::max<std::uint64_t>(row, 1)))
            : std::max<std::int64_t>(
                  1, static_cast<std::int64_t>(slab_bytes / std::max<std::uint64_t>(plane, 1)));
+  // Stage::Histogram counts the slabs read.
+  const std::int64_t y_parts = rows ? (source.dims[1] + step - 1) / step : 1;
+  progress_begin(progress, Stage::Histogram,
+                 rows ? source.dims[2] * y_parts : (source.dims[2] + step - 1) / step);
   source.rewind();
   ValueHistogram h;
   std::vector<char> buffer;
@@ -33,6 +40,7 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
         buffer.resize(static_cast<std::size_t>(box.extent(0) * box.extent(1)) * sample);
         source.read(box, buffer.data());
         merge(h, value_histogram(brick_view(source, box, buffer.data())));
+        progress_advance(progress);
       }
       ++z;
       continue;
@@ -41,6 +49,7 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
     buffer.resize(static_cast<std::size_t>(plane * static_cast<std::uint64_t>(box.extent(2))));
     source.read(box, buffer.data());
     merge(h, value_histogram(brick_view(source, box, buffer.data())));
+    progress_advance(progress);
     z = box.hi[2];
   }
   source.rewind();

@@ -6,6 +6,7 @@
 #include <optional>
 #include <utility>
 
+#include "core/progress.h"
 #include "core/volume/otsu_isovalue.h"
 #include "tiler/volume_source.h"
 
@@ -15,8 +16,10 @@ namespace isotile {
 // alone exceeds a quarter of `memory_budget`; 0: no budget), each slab's histogram merged into
 // the volume's (core/volume/otsu_isovalue.h). Reads the input once more than the extraction
 // does; the source is rewound before and after. Holds one slab and the histograms (1.5 MiB per
-// thread) at a time.
-ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget);
+// thread) at a time. `progress`: told of each slab (Stage::Histogram; slabs of at most 16 MiB
+// then, so that one takes well under 0.1 s); null: nobody listens.
+ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget,
+                                Progress* progress = nullptr);
 
 // InputError: no pair of samples straddles `iso` (every sample on one side), so there is no
 // surface; names the samples' range where known and the ways out (--iso auto, --allow-empty).

@@ -59,12 +59,10 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
           // A buffer is free again once the brick two before is done.
           return {b, bricks.read_for_count(b, buffers[static_cast<std::size_t>(b) % in_flight])};
         }) & tbb::make_filter<Read, void>(tbb::filter_mode::serial_in_order, [&](const Read& r) {
-          if (options.progress) {
-            options.progress->set_brick(r.brick, total);
-            options.progress->begin(Stage::Count, 1);
-          }
+          progress_check(options.progress);
           bricks.count(r.brick, r.view);
-          progress_advance(options.progress);
+          // Through a child: a brick done, without disturbing another brick's report.
+          if (options.progress) Progress(*options.progress, Stage::Count, r.brick, total).finish();
         }));
   }
   bricks.scan(result);
@@ -123,16 +121,16 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
             tbb::make_filter<Read, Done>(
                 tbb::filter_mode::serial_in_order,
                 [&](const Read& r) -> Done {
-                  return {r.part, std::make_shared<BrickRecords>(
-                                      bricks.extract_part(r.part->cells, r.view, quality))};
+                  // The core extraction reports within its brick (core/progress.h, Nesting)
+                  // while the writer below finishes the brick before.
+                  ChildProgress child(options.progress, Stage::Extract, r.part->brick, total);
+                  return {r.part, std::make_shared<BrickRecords>(bricks.extract_part(
+                                      r.part->cells, r.view, quality, child.get()))};
                 }) &
             tbb::make_filter<Done, void>(tbb::filter_mode::serial_in_order, [&](const Done& d) {
               bricks.write(*d.records, write);
-              if (d.part->last && options.progress) {
-                options.progress->set_brick(d.part->brick, total);
-                options.progress->begin(Stage::Extract, 1);
-                options.progress->advance();
-              }
+              if (d.part->last && options.progress)
+                Progress(*options.progress, Stage::Extract, d.part->brick, total).finish();
             }));
   }
   result.seconds_extract = since(t0);

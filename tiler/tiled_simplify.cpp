@@ -215,15 +215,11 @@ class TiledSimplification {
         part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
         part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
         if (part.extent(2) == 0) continue;
-        simplify_brick(b, part, result);
+        simplify_brick(b, part, result, bricks);
         ++result.bricks_extracted;
       }
       result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
-      if (opt_.progress) {
-        opt_.progress->set_brick(b, bricks);
-        opt_.progress->begin(Stage::Simplify, 1);
-        opt_.progress->advance();
-      }
+      if (opt_.progress) Progress(*opt_.progress, Stage::Simplify, b, bricks).finish();
     }
     result.seconds_extract = since(t0);
 
@@ -286,10 +282,13 @@ class TiledSimplification {
     return (p[a] - src_.origin[a]) / src_.spacing[a];
   }
 
-  void simplify_brick(std::int64_t b, const Box3& part, TiledResult& result) {
+  void simplify_brick(std::int64_t b, const Box3& part, TiledResult& result, std::int64_t bricks) {
+    // The extraction and the simplification report within the brick (core/progress.h).
+    ChildProgress child(opt_.progress, Stage::Simplify, b, bricks);
     const VolumeView view = reader_.read(grow(part, reader_.halo(), n_));
     ExtractOptions o = reader_.extract();
     o.cells = part;
+    o.progress = child.get();
     o.normals = false;  // the simplified mesh gets area-weighted normals
     Mesh mesh = extract(view, o);
     std::vector<std::uint64_t> keys = brick_vertex_keys(view, o.iso, reader_.layout(), part);
@@ -305,8 +304,10 @@ class TiledSimplification {
     result.triangles_extracted += piece.triangles.size();
     const auto target = static_cast<std::uint64_t>(
         std::llround(opt_.simplify * static_cast<double>(piece.triangles.size())));
-    const MeshPiece out = simplify_piece(std::move(piece), std::max<std::uint64_t>(target, 1),
-                                         sopt_, &result.simplify, /*boundary_allowance=*/true);
+    SimplifyOptions so = sopt_;
+    so.progress = child.get();
+    const MeshPiece out = simplify_piece(std::move(piece), std::max<std::uint64_t>(target, 1), so,
+                                         &result.simplify, /*boundary_allowance=*/true);
     spill(b, out);
   }
 

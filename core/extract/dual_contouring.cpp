@@ -300,26 +300,31 @@ class Extractor {
     Mesh mesh;
     if (cells_.empty()) return mesh;
     const int64_t rows = grid_.ny * grid_.nz, words = grid_.words;
+    // Progress, in rows of the view (a z-slice at a time): Count is the classification and the
+    // count, Extract the vertices and the faces.
+    Progress* const progress = options_.progress;
+    progress_begin(progress, Stage::Count, 2 * rows);
     grid_.bits.resize(static_cast<size_t>(rows * words));
-    classify<T>(view_, options_.iso, grid_);
+    classify<T>(view_, options_.iso, grid_, progress);
 
     // Count: mixed cells per cell row (kept: they index the vertices), quads per sample row.
     reserve_on_caller(mixed_, static_cast<size_t>(rows * words));
     mixed_.resize(static_cast<size_t>(rows * words));
     ScratchVector<uint32_t> vertex_count(rows), quad_count(rows);
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = r % grid_.ny, k = r / grid_.ny;
-        vertex_count[r] = mark_mixed(j, k, mixed_.data() + r * words);
-        uint32_t n = 0;
-        for (int64_t w = 0; w < words; ++w) {
-          const EdgeWord e = edge_word(j, k, w);
-          n += static_cast<uint32_t>(std::popcount(e.active[0]) + std::popcount(e.active[1]) +
-                                     std::popcount(e.active[2]));
-        }
-        quad_count[r] = n;
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, rows), for_units(progress, grid_.ny, [&](const auto& range) {
+          for (int64_t r = range.begin(); r != range.end(); ++r) {
+            const int64_t j = r % grid_.ny, k = r / grid_.ny;
+            vertex_count[r] = mark_mixed(j, k, mixed_.data() + r * words);
+            uint32_t n = 0;
+            for (int64_t w = 0; w < words; ++w) {
+              const EdgeWord e = edge_word(j, k, w);
+              n += static_cast<uint32_t>(std::popcount(e.active[0]) + std::popcount(e.active[1]) +
+                                         std::popcount(e.active[2]));
+            }
+            quad_count[r] = n;
+          }
+        }));
 
     // Scan.
     vertex_offset_.resize(rows + 1);
@@ -343,6 +348,7 @@ class Extractor {
     // Fill vertices, then faces: splitting a quad looks at its vertices' final positions. The
     // face array is allocated (std::vector zeroes it, a serial pass taking each page's first-touch
     // fault) while the vertices are placed.
+    progress_begin(progress, Stage::Extract, 2 * rows);
     if (options_.keep_quads)
       reserve_on_caller(mesh.quads, n_quads);
     else
@@ -355,18 +361,22 @@ class Extractor {
             mesh.triangles.resize(2 * n_quads);
         },
         [&] {
-          tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-            std::vector<dc::CellQef> qef;
-            std::vector<std::array<double, 3>> x;
-            std::vector<int64_t> cell_x;
-            for (int64_t r = range.begin(); r != range.end(); ++r)
-              if (vertex_count[r]) fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, cell_x, mesh);
-          });
+          tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                            for_units(progress, grid_.ny, [&](const auto& range) {
+                              std::vector<dc::CellQef> qef;
+                              std::vector<std::array<double, 3>> x;
+                              std::vector<int64_t> cell_x;
+                              for (int64_t r = range.begin(); r != range.end(); ++r)
+                                if (vertex_count[r])
+                                  fill_vertices(r % grid_.ny, r / grid_.ny, qef, x, cell_x, mesh);
+                            }));
         });
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r)
-        if (quad_count[r]) fill_faces(r % grid_.ny, r / grid_.ny, quad_offset[r], mesh);
-    });
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                      for_units(progress, grid_.ny, [&](const auto& range) {
+                        for (int64_t r = range.begin(); r != range.end(); ++r)
+                          if (quad_count[r])
+                            fill_faces(r % grid_.ny, r / grid_.ny, quad_offset[r], mesh);
+                      }));
     return mesh;
   }
 

@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -98,6 +99,9 @@ struct DualContouringOptions {
   DcHermite hermite = DcHermite::Central;
   DcVertices vertices = DcVertices::Patch;
   Box3 cells{};  // brick mode, in global cell indices; empty: every cell of the view
+  // Told of the work's progress (Stage::Count, then Stage::Extract; core/progress.h), a z-slice of
+  // rows at a time; null: nobody listens. Cancelling throws Cancelled.
+  Progress* progress = nullptr;
 };
 
 // Samples beyond `cells` that brick mode reads: 2 (vertex cells reach one cell below the box, and

@@ -16,7 +16,8 @@ namespace isotile {
 namespace {
 
 Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
-  return marching_cubes(view, {.iso = o.iso, .normals = o.normals, .cells = o.cells});
+  return marching_cubes(
+      view, {.iso = o.iso, .normals = o.normals, .cells = o.cells, .progress = o.progress});
 }
 
 Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
@@ -98,6 +99,7 @@ DualContouringOptions dual_contouring_options(const ExtractOptions& o) {
   dc.hermite = o.dc_hermite;
   dc.vertices = o.dc_vertices;
   dc.cells = o.cells;
+  dc.progress = o.progress;
   return dc;
 }
 
@@ -108,6 +110,7 @@ MacetOptions macet_options(const ExtractOptions& o) {
   m.quality = o.quality;
   m.relax = o.macet_relax;
   m.cells = o.cells;
+  m.progress = o.progress;
   return m;
 }
 

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/extract/scratch_vector.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 #if defined(__SSE4_1__)
@@ -118,12 +119,13 @@ uint64_t pack64(const T* src, const InsideTest<T>& inside) {
   return m;
 }
 
+// With `progress`: advances the current stage by one per row, a z-slice at a time.
 template <class T>
-void classify(const VolumeView& view, double iso, BitGrid& grid) {
+void classify(const VolumeView& view, double iso, BitGrid& grid, Progress* progress = nullptr) {
   const T* data = view.typed<T>();
   const InsideTest<T> inside(iso);
   const int64_t nx = grid.nx, words = grid.words, sx = view.strides[0];
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, grid.ny * grid.nz), [&](const auto& range) {
+  auto rows = [&](const auto& range) {
     for (int64_t r = range.begin(); r != range.end(); ++r) {
       const int64_t j = r % grid.ny, k = r / grid.ny;
       const T* src = data + view.offset(0, j, k);
@@ -141,7 +143,9 @@ void classify(const VolumeView& view, double iso, BitGrid& grid) {
         dst[w] = m;
       }
     }
-  });
+  };
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, grid.ny * grid.nz),
+                    for_units(progress, grid.ny, rows));
 }
 
 // Bits [lo, hi) of word w of a row.

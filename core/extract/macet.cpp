@@ -32,7 +32,11 @@ template <class T>
 class Extractor {
  public:
   Extractor(const VolumeView& view, const MacetOptions& options)
-      : view_(view), options_(options), field_(view, options.iso), table_(macet_case_table(true)) {
+      : view_(view),
+        options_(options),
+        field_(view, options.iso),
+        table_(macet_case_table(true)),
+        progress_(options.progress) {
     grid_.nx = view.dims[0];
     grid_.ny = view.dims[1];
     grid_.nz = view.dims[2];
@@ -43,15 +47,30 @@ class Extractor {
   Mesh run() {
     Mesh mesh;
     if (cells_.empty()) return mesh;
+    // Progress, in rows of the view (a z-slice at a time): Count is the classification and the
+    // two passes finding the grid vertices; Extract the push, the smoothing's four passes (its
+    // umbrella sums by z-slab) and the emission's one or two; Max's search reports its own stage
+    // in between (macet_search.h), so Extract begins again after it.
+    const int64_t view_rows = grid_.ny * grid_.nz;
+    const int64_t emit_rows = (cells_.extent(1) + 1) * (cells_.extent(2) + 1);
+    const bool whole = cells_.lo == Index3{0, 0, 0} &&
+                       cells_.hi == Index3{grid_.nx - 1, grid_.ny - 1, grid_.nz - 1};
+    progress_begin(progress_, Stage::Count, 3 * view_rows);
     grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
-    classify<T>(view_, options_.iso, grid_);
+    classify<T>(view_, options_.iso, grid_, progress_);
     // Smoothing and Max's search read the displacements around each vertex, so every grid vertex
     // of the view is displaced; the halo keeps the view small in brick mode.
     find_grid_vertices(Box3{{0, 0, 0}, view_.dims});
+    const bool max = options_.quality == MacetQuality::Max && options_.max_sweeps > 0;
+    const int64_t emit_units = (whole ? 1 : 2) * emit_rows;
+    progress_begin(progress_, Stage::Extract,
+                   4 * view_rows + std::max<int64_t>(grid_.nz - 1, 0) + (max ? 0 : emit_units));
     push_all();
     smooth_all();
-    if (options_.quality == MacetQuality::Max)
-      macet_local_search(field_, grid_, gv_, table_, options_.max_sweeps);
+    if (max) {
+      macet_local_search(field_, grid_, gv_, table_, options_.max_sweeps, progress_);
+      progress_begin(progress_, Stage::Extract, emit_units);
+    }
     emit(mesh);
     return mesh;
   }
@@ -82,30 +101,33 @@ class Extractor {
     gv_.prefix.resize(static_cast<size_t>(rows * words));
     ScratchVector<uint64_t> count(static_cast<size_t>(rows) + 1);
     count[0] = 0;
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = vbox.lo[1] + r % gv_.ny, k = vbox.lo[2] + r / gv_.ny;
-        uint64_t n = 0;
-        for (int64_t w = 0; w < words; ++w) {
-          const uint64_t m = touched_word(j, k, w) & range_bits(w, vbox.lo[0], vbox.hi[0]);
-          gv_.bits[static_cast<size_t>(r * words + w)] = m;
-          n += static_cast<uint64_t>(std::popcount(m));
-        }
-        count[static_cast<size_t>(r) + 1] = n;
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, rows), for_units(progress_, gv_.ny, [&](const auto& range) {
+          for (int64_t r = range.begin(); r != range.end(); ++r) {
+            const int64_t j = vbox.lo[1] + r % gv_.ny, k = vbox.lo[2] + r / gv_.ny;
+            uint64_t n = 0;
+            for (int64_t w = 0; w < words; ++w) {
+              const uint64_t m = touched_word(j, k, w) & range_bits(w, vbox.lo[0], vbox.hi[0]);
+              gv_.bits[static_cast<size_t>(r * words + w)] = m;
+              n += static_cast<uint64_t>(std::popcount(m));
+            }
+            count[static_cast<size_t>(r) + 1] = n;
+          }
+        }));
     for (int64_t r = 0; r < rows; ++r) count[r + 1] += count[r];
     if (count[rows] > std::numeric_limits<uint32_t>::max())
       throw CapacityError("too many grid vertices for an in-memory mesh");
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        uint32_t p = static_cast<uint32_t>(count[r]);
-        for (int64_t w = 0; w < words; ++w) {
-          gv_.prefix[static_cast<size_t>(r * words + w)] = p;
-          p += static_cast<uint32_t>(std::popcount(gv_.bits[static_cast<size_t>(r * words + w)]));
-        }
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                      for_units(progress_, gv_.ny, [&](const auto& range) {
+                        for (int64_t r = range.begin(); r != range.end(); ++r) {
+                          uint32_t p = static_cast<uint32_t>(count[r]);
+                          for (int64_t w = 0; w < words; ++w) {
+                            gv_.prefix[static_cast<size_t>(r * words + w)] = p;
+                            p += static_cast<uint32_t>(
+                                std::popcount(gv_.bits[static_cast<size_t>(r * words + w)]));
+                          }
+                        }
+                      }));
     // Every entry is written by push_all before anything reads it.
     gv_.disp.resize(count[rows]);
     gv_.value.resize(count[rows]);
@@ -162,17 +184,18 @@ class Extractor {
   void for_grid_vertices(F&& fn) const {
     const Box3& b = gv_.box;
     const int64_t rows = b.extent(1) * b.extent(2);
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = b.lo[1] + r % gv_.ny, k = b.lo[2] + r / gv_.ny;
-        for (int64_t w = b.lo[0] >> 6; w <= (b.hi[0] - 1) >> 6; ++w) {
-          const size_t word = static_cast<size_t>(r * gv_.words + w);
-          uint32_t idx = gv_.prefix[word];
-          for (uint64_t m = gv_.bits[word]; m; m &= m - 1, ++idx)
-            fn(w * 64 + std::countr_zero(m), j, k, idx);
-        }
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                      for_units(progress_, gv_.ny, [&](const auto& range) {
+                        for (int64_t r = range.begin(); r != range.end(); ++r) {
+                          const int64_t j = b.lo[1] + r % gv_.ny, k = b.lo[2] + r / gv_.ny;
+                          for (int64_t w = b.lo[0] >> 6; w <= (b.hi[0] - 1) >> 6; ++w) {
+                            const size_t word = static_cast<size_t>(r * gv_.words + w);
+                            uint32_t idx = gv_.prefix[word];
+                            for (uint64_t m = gv_.bits[word]; m; m &= m - 1, ++idx)
+                              fn(w * 64 + std::countr_zero(m), j, k, idx);
+                          }
+                        }
+                      }));
   }
 
   void push_all() {
@@ -203,13 +226,14 @@ class Extractor {
     ei.bits.resize(static_cast<size_t>(rows * words));
     ei.offset.resize(static_cast<size_t>(rows) + 1);
     ei.offset[0] = 0;
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        uint32_t n = 0;
-        row_edges_in(r % ny, r / ny, 0, grid_.nx - 1, ei.bits.data() + r * words, &n);
-        ei.offset[r + 1] = n;
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, rows), for_units(progress_, ny, [&](const auto& range) {
+          for (int64_t r = range.begin(); r != range.end(); ++r) {
+            uint32_t n = 0;
+            row_edges_in(r % ny, r / ny, 0, grid_.nx - 1, ei.bits.data() + r * words, &n);
+            ei.offset[r + 1] = n;
+          }
+        }));
     for (int64_t r = 0; r < rows; ++r) ei.offset[r + 1] += ei.offset[r];
     const size_t n_edges = ei.offset[rows];
     // Written in full by the next pass (sum and count included), so left uninitialised here.
@@ -217,19 +241,20 @@ class Extractor {
     ScratchVector<double> t(n_edges);
     ScratchVector<std::uint16_t> count(n_edges);
     auto for_edges = [&](auto&& fn) {
-      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-        for (int64_t r = range.begin(); r != range.end(); ++r) {
-          const int64_t j = r % ny, k = r / ny;
-          uint64_t idx = ei.offset[r];
-          const EdgeWord* e = ei.bits.data() + r * words;
-          for (int64_t w = 0; w < words; ++w)
-            for (uint64_t m = e[w].mask[0] | e[w].mask[1] | e[w].mask[2]; m; m &= m - 1) {
-              const int b = std::countr_zero(m);
-              for (int a = 0; a < 3; ++a)
-                if ((e[w].mask[a] >> b) & 1) fn(w * 64 + b, j, k, a, idx++);
+      tbb::parallel_for(
+          tbb::blocked_range<int64_t>(0, rows), for_units(progress_, ny, [&](const auto& range) {
+            for (int64_t r = range.begin(); r != range.end(); ++r) {
+              const int64_t j = r % ny, k = r / ny;
+              uint64_t idx = ei.offset[r];
+              const EdgeWord* e = ei.bits.data() + r * words;
+              for (int64_t w = 0; w < words; ++w)
+                for (uint64_t m = e[w].mask[0] | e[w].mask[1] | e[w].mask[2]; m; m &= m - 1) {
+                  const int b = std::countr_zero(m);
+                  for (int a = 0; a < 3; ++a)
+                    if ((e[w].mask[a] >> b) & 1) fn(w * 64 + b, j, k, a, idx++);
+                }
             }
-        }
-      });
+          }));
     };
     for_edges([&](int64_t i, int64_t j, int64_t k, int a, uint64_t idx) {
       int64_t q[3] = {i, j, k};
@@ -257,12 +282,13 @@ class Extractor {
     for (int phase = 0; phase < 2; ++phase) {
       const int64_t k0 = (phase + view_.box.lo[2]) & 1;
       const int64_t slabs = nz - 1 > k0 ? (nz - 1 - k0 + 1) / 2 : 0;
-      tbb::parallel_for(tbb::blocked_range<int64_t>(0, slabs), [&](const auto& range) {
-        for (int64_t m = range.begin(); m != range.end(); ++m)
-          for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j)
-            row_triangles_[static_cast<size_t>(k * ny + j) + 1] =
-                sum_cells(j, k, ei, x, sum, count);
-      });
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, slabs),
+                        for_units(progress_, 1, [&](const auto& range) {
+                          for (int64_t m = range.begin(); m != range.end(); ++m)
+                            for (int64_t j = 0, k = k0 + 2 * m; j + 1 < ny; ++j)
+                              row_triangles_[static_cast<size_t>(k * ny + j) + 1] =
+                                  sum_cells(j, k, ei, x, sum, count);
+                        }));
     }
     // Each move reads only its own displacement and the sums above: updated in place. A grid
     // vertex's crossed edges are found in the edge index's masks, ranked as edge_rank does:
@@ -426,15 +452,17 @@ class Extractor {
     std::vector<uint64_t> triangle_offset =
         whole ? std::move(row_triangles_) : std::vector<uint64_t>(static_cast<size_t>(rows) + 1, 0);
     if (!whole)
-      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-        for (int64_t r = range.begin(); r != range.end(); ++r) {
-          const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-          uint32_t n = 0;
-          row_edges_in(j, k, cells_.lo[0], cells_.hi[0], own_edges.data() + r * words, &n);
-          own_offset[r + 1] = n;
-          if (j < cells_.hi[1] && k < cells_.hi[2]) triangle_offset[r + 1] = count_triangles(j, k);
-        }
-      });
+      tbb::parallel_for(
+          tbb::blocked_range<int64_t>(0, rows), for_units(progress_, ny, [&](const auto& range) {
+            for (int64_t r = range.begin(); r != range.end(); ++r) {
+              const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+              uint32_t n = 0;
+              row_edges_in(j, k, cells_.lo[0], cells_.hi[0], own_edges.data() + r * words, &n);
+              own_offset[r + 1] = n;
+              if (j < cells_.hi[1] && k < cells_.hi[2])
+                triangle_offset[r + 1] = count_triangles(j, k);
+            }
+          }));
     for (int64_t r = 0; r < rows; ++r) {
       if (!whole) own_offset[r + 1] += own_offset[r];
       triangle_offset[r + 1] += triangle_offset[r];
@@ -445,19 +473,20 @@ class Extractor {
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
     size_mesh_arrays(mesh, n_vertices, n_triangles, options_.normals);
 
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        fill_vertices(j, k, edges + r * words, vertex_offset[r], mesh);
-        if (j < cells_.hi[1] && k < cells_.hi[2]) {
-          const EdgeWord* e[4] = {edges + r * words, edges + (r + 1) * words,
-                                  edges + (r + ny) * words, edges + (r + ny + 1) * words};
-          const uint64_t base[4] = {vertex_offset[r], vertex_offset[r + 1], vertex_offset[r + ny],
-                                    vertex_offset[r + ny + 1]};
-          fill_triangles(j, k, e, base, mesh.triangles.data() + triangle_offset[r]);
-        }
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, rows), for_units(progress_, ny, [&](const auto& range) {
+          for (int64_t r = range.begin(); r != range.end(); ++r) {
+            const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+            fill_vertices(j, k, edges + r * words, vertex_offset[r], mesh);
+            if (j < cells_.hi[1] && k < cells_.hi[2]) {
+              const EdgeWord* e[4] = {edges + r * words, edges + (r + 1) * words,
+                                      edges + (r + ny) * words, edges + (r + ny + 1) * words};
+              const uint64_t base[4] = {vertex_offset[r], vertex_offset[r + 1],
+                                        vertex_offset[r + ny], vertex_offset[r + ny + 1]};
+              fill_triangles(j, k, e, base, mesh.triangles.data() + triangle_offset[r]);
+            }
+          }
+        }));
   }
 
   void fill_vertices(int64_t j, int64_t k, const EdgeWord* e, uint64_t index, Mesh& mesh) const {
@@ -515,6 +544,7 @@ class Extractor {
   const MacetCaseTable& table_;
   BitGrid grid_;
   Box3 cells_;
+  Progress* progress_;  // options_.progress
   GridVertices gv_;
   EdgeIndex edge_index_;  // the view's crossed edges, from smooth_all
   std::vector<uint64_t>

@@ -24,6 +24,7 @@
 #pragma once
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -46,6 +47,9 @@ struct MacetOptions {
   // Brick mode, in global cell indices (empty: every cell of the view); the view must hold these
   // cells grown by macet_halo(options) samples on every side (less at the volume border).
   Box3 cells{};
+  // Told of the work's progress (Stage::Count, then Stage::Extract; core/progress.h), a z-slice of
+  // rows at a time; null: nobody listens. Cancelling throws Cancelled.
+  Progress* progress = nullptr;
 };
 
 // Samples beyond the cells that brick mode reads: 3 for Fast; for Max 6 plus how far its colour

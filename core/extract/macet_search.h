@@ -46,6 +46,7 @@
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
 #include "core/mesh/self_intersections.h"
+#include "core/progress.h"
 
 namespace isotile::detail {
 
@@ -179,9 +180,11 @@ inline bool guard_apart(const std::array<Vec3f, 3>& a, const GuardPlane& ga,
 template <class T>
 class LocalSearch {
  public:
+  // `progress`: advanced per row of grid vertices in every pass over them (see
+  // macet_local_search), a z-slice at a time.
   LocalSearch(const Field<T>& field, const BitGrid& grid, GridVertices& gv,
-              const MacetCaseTable& table, MacetSearchParams params)
-      : field_(field), grid_(grid), gv_(gv), table_(table), params_(params) {
+              const MacetCaseTable& table, MacetSearchParams params, Progress* progress = nullptr)
+      : field_(field), grid_(grid), gv_(gv), table_(table), params_(params), progress_(progress) {
     // 26 unit directions.
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
@@ -257,7 +260,7 @@ class LocalSearch {
     std::uint64_t every_third[kColourSpacing] = {};
     for (int bit = 0; bit < 64; ++bit) every_third[bit % kColourSpacing] |= std::uint64_t{1} << bit;
     const std::int64_t rows = b.extent(1) * b.extent(2);
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, rows), [&](const auto& range) {
+    auto body = [&](const auto& range) {
       for (std::int64_t r = range.begin(); r != range.end(); ++r) {
         const std::int64_t j = b.lo[1] + r % gv_.ny, k = b.lo[2] + r / gv_.ny;
         if (colour >= 0 && (residue(view.box.lo[1] + j) != cy || residue(view.box.lo[2] + k) != cz))
@@ -279,7 +282,9 @@ class LocalSearch {
           }
         }
       }
-    });
+    };
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, rows),
+                      for_units(progress_, gv_.ny, body));
   }
 
   void colour_step(int colour) {
@@ -818,13 +823,17 @@ class LocalSearch {
   std::vector<int> last_moved_, settled_at_;
   std::vector<std::int8_t> settled_reach_;
   int step_ = 0;
+  Progress* progress_ = nullptr;
 };
 
 template <class T>
 void macet_local_search(const Field<T>& field, const BitGrid& grid, GridVertices& gv,
-                        const MacetCaseTable& table, int sweeps) {
+                        const MacetCaseTable& table, int sweeps, Progress* progress = nullptr) {
   if (sweeps <= 0) return;
-  LocalSearch<T> search(field, grid, gv, table, MacetSearchParams{});
+  // Stage::MacetSearch counts rows of grid vertices: two passes to set up, one per colour step.
+  progress_begin(progress, Stage::MacetSearch,
+                 gv.box.extent(1) * gv.box.extent(2) * (2 + std::int64_t{sweeps} * kSearchColours));
+  LocalSearch<T> search(field, grid, gv, table, MacetSearchParams{}, progress);
   for (int s = 0; s < sweeps; ++s) search.sweep();
 }
 

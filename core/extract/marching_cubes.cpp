@@ -91,23 +91,27 @@ class Extractor {
   Mesh run(std::vector<uint64_t>* keys = nullptr) {
     Mesh mesh;
     if (cells_.empty()) return mesh;
-    grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
-    classify<T>(view_, options_.iso, grid_);
-
     // Point rows [lo, hi] in y and z carry the vertices; cell rows [lo, hi) the triangles. Row r
     // is point row (lo.y + r % ny, lo.z + r / ny).
     const int64_t ny = cells_.extent(1) + 1, rows = ny * (cells_.extent(2) + 1);
     const int64_t x0 = cells_.lo[0], x1 = cells_.hi[0];
+    // Progress: the classification's and the count's rows, then the fill's, a z-slice at a time.
+    Progress* const progress = options_.progress;
+    progress_begin(progress, Stage::Count, grid_.ny * grid_.nz + rows);
+
+    grid_.bits.resize(static_cast<size_t>(grid_.ny * grid_.nz * grid_.words));
+    classify<T>(view_, options_.iso, grid_, progress);
 
     // Count.
     ScratchVector<uint32_t> vertex_count(rows), triangle_count(rows);
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        vertex_count[r] = row_edge_count(grid_, j, k, x0, x1);
-        triangle_count[r] = has_cells(j, k) ? count_triangles(j, k) : 0;
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                      for_units(progress, ny, [&](const auto& range) {
+                        for (int64_t r = range.begin(); r != range.end(); ++r) {
+                          const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+                          vertex_count[r] = row_edge_count(grid_, j, k, x0, x1);
+                          triangle_count[r] = has_cells(j, k) ? count_triangles(j, k) : 0;
+                        }
+                      }));
 
     // Scan.
     ScratchVector<uint64_t> vertex_offset(rows + 1), triangle_offset(rows + 1);
@@ -120,65 +124,68 @@ class Extractor {
     if (n_vertices > std::numeric_limits<uint32_t>::max())
       throw CapacityError("the mesh would have " + std::to_string(n_vertices) +
                           " vertices, more than an in-memory mesh can index (2^32 - 1)");
+    progress_begin(progress, Stage::Extract, rows);
     if (keys) {
       keys->resize(n_vertices);
-      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-        RowEdges e(grid_.words);
-        for (int64_t r = range.begin(); r != range.end(); ++r) {
-          const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-          row_edges(grid_, j, k, x0, x1, e);
-          fill_keys(j, k, e, keys->data() + vertex_offset[r]);
-        }
-      });
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
+                        for_units(progress, ny, [&](const auto& range) {
+                          RowEdges e(grid_.words);
+                          for (int64_t r = range.begin(); r != range.end(); ++r) {
+                            const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+                            row_edges(grid_, j, k, x0, x1, e);
+                            fill_keys(j, k, e, keys->data() + vertex_offset[r]);
+                          }
+                        }));
       return mesh;
     }
     size_mesh_arrays(mesh, n_vertices, n_triangles, options_.normals);
 
     // Fill. Consecutive cell rows share two point rows, so the masks of rows (j+1, k) and
     // (j+1, k+1) computed for one cell row are reused as (j, k) and (j, k+1) for the next.
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows), [&](const auto& range) {
-      RowEdges store[4] = {RowEdges(grid_.words), RowEdges(grid_.words), RowEdges(grid_.words),
-                           RowEdges(grid_.words)};
-      // Point rows (j,k), (j+1,k), (j,k+1), (j+1,k+1), swapped by pointer.
-      RowEdges* e[4] = {&store[0], &store[1], &store[2], &store[3]};
-      int64_t upper_rows_of = -1;  // the row whose e[1], e[3] were computed last
-      for (int64_t r = range.begin(); r != range.end(); ++r) {
-        const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-        // A sample row of plane k + 1 is first read here, at the crossings only, as the +z ends
-        // of plane k's edges: a sparse walk the hardware prefetcher does not follow, so that row
-        // is fetched a few rows ahead (gyroid-256, float samples: this loop 22.5 -> 13.9 ms).
-        // (2 to 8 rows ahead gave the same times. A prefetch never faults.)
-        if (const int64_t ahead = r + 4; ahead < rows) {
-          const int64_t ka = cells_.lo[2] + ahead / ny + 1;
-          if (ka < view_.dims[2]) {
-            const char* row = reinterpret_cast<const char*>(
-                data_ + view_.offset(x0, cells_.lo[1] + ahead % ny, ka));
-            const size_t bytes = static_cast<size_t>(x1 - x0 + 1) * sizeof(T);
-            for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(row + b);
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, rows), for_units(progress, ny, [&](const auto& range) {
+          RowEdges store[4] = {RowEdges(grid_.words), RowEdges(grid_.words), RowEdges(grid_.words),
+                               RowEdges(grid_.words)};
+          // Point rows (j,k), (j+1,k), (j,k+1), (j+1,k+1), swapped by pointer.
+          RowEdges* e[4] = {&store[0], &store[1], &store[2], &store[3]};
+          int64_t upper_rows_of = -1;  // the row whose e[1], e[3] were computed last
+          for (int64_t r = range.begin(); r != range.end(); ++r) {
+            const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
+            // A sample row of plane k + 1 is first read here, at the crossings only, as the +z ends
+            // of plane k's edges: a sparse walk the hardware prefetcher does not follow, so that
+            // row is fetched a few rows ahead (gyroid-256, float samples: this loop 22.5 -> 13.9
+            // ms). (2 to 8 rows ahead gave the same times. A prefetch never faults.)
+            if (const int64_t ahead = r + 4; ahead < rows) {
+              const int64_t ka = cells_.lo[2] + ahead / ny + 1;
+              if (ka < view_.dims[2]) {
+                const char* row = reinterpret_cast<const char*>(
+                    data_ + view_.offset(x0, cells_.lo[1] + ahead % ny, ka));
+                const size_t bytes = static_cast<size_t>(x1 - x0 + 1) * sizeof(T);
+                for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(row + b);
+              }
+            }
+            const bool reuse = upper_rows_of == r - 1 && j > cells_.lo[1];
+            if (reuse) {
+              std::swap(e[0], e[1]);
+              std::swap(e[2], e[3]);
+            } else {
+              row_edges(grid_, j, k, x0, x1, *e[0]);
+            }
+            fill_vertices(j, k, *e[0], static_cast<uint32_t>(vertex_offset[r]), mesh);
+            upper_rows_of = -1;
+            if (triangle_count[r] == 0) continue;
+            if (!reuse) row_edges(grid_, j, k + 1, x0, x1, *e[2]);
+            row_edges(grid_, j + 1, k, x0, x1, *e[1]);
+            row_edges(grid_, j + 1, k + 1, x0, x1, *e[3]);
+            upper_rows_of = r;
+            const uint32_t base[4] = {static_cast<uint32_t>(vertex_offset[r]),
+                                      static_cast<uint32_t>(vertex_offset[r + 1]),
+                                      static_cast<uint32_t>(vertex_offset[r + ny]),
+                                      static_cast<uint32_t>(vertex_offset[r + ny + 1])};
+            const RowEdges* edges[4] = {e[0], e[1], e[2], e[3]};
+            fill_triangles(j, k, edges, base, mesh.triangles.data() + triangle_offset[r]);
           }
-        }
-        const bool reuse = upper_rows_of == r - 1 && j > cells_.lo[1];
-        if (reuse) {
-          std::swap(e[0], e[1]);
-          std::swap(e[2], e[3]);
-        } else {
-          row_edges(grid_, j, k, x0, x1, *e[0]);
-        }
-        fill_vertices(j, k, *e[0], static_cast<uint32_t>(vertex_offset[r]), mesh);
-        upper_rows_of = -1;
-        if (triangle_count[r] == 0) continue;
-        if (!reuse) row_edges(grid_, j, k + 1, x0, x1, *e[2]);
-        row_edges(grid_, j + 1, k, x0, x1, *e[1]);
-        row_edges(grid_, j + 1, k + 1, x0, x1, *e[3]);
-        upper_rows_of = r;
-        const uint32_t base[4] = {static_cast<uint32_t>(vertex_offset[r]),
-                                  static_cast<uint32_t>(vertex_offset[r + 1]),
-                                  static_cast<uint32_t>(vertex_offset[r + ny]),
-                                  static_cast<uint32_t>(vertex_offset[r + ny + 1])};
-        const RowEdges* edges[4] = {e[0], e[1], e[2], e[3]};
-        fill_triangles(j, k, edges, base, mesh.triangles.data() + triangle_offset[r]);
-      }
-    });
+        }));
     return mesh;
   }
 

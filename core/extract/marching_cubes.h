@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -31,6 +32,9 @@ struct MarchingCubesOptions {
   // faces, which its neighbours own). Gradients are one-sided only at the volume border, so a
   // vertex shared by two bricks is bit-identical in both.
   Box3 cells{};
+  // Told of the work's progress (Stage::Count, then Stage::Extract; core/progress.h), a z-slice of
+  // rows at a time; null: nobody listens. Cancelling throws Cancelled.
+  Progress* progress = nullptr;
 };
 
 // Samples beyond the cells that brick mode reads: 1 for positions, 2 with normals.

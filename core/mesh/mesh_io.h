@@ -17,6 +17,7 @@
 #include <string>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 
 namespace isotile {
 
@@ -29,6 +30,9 @@ struct MeshWriteOptions {
   std::optional<MeshFormat> format;  // default: from the extension
   bool ascii = false;                // PLY only: ASCII instead of binary little-endian
   bool write_normals = true;         // when the mesh has normals (PLY, OBJ)
+  // Told of the writing (Stage::Write, in vertices and faces, a chunk of 8192 at a time); null:
+  // nobody listens. Cancelling throws Cancelled and removes the partial file (AtomicFile).
+  Progress* progress = nullptr;
 };
 
 void write_mesh(const Mesh& mesh, const std::filesystem::path& path,

@@ -41,9 +41,10 @@ constexpr std::size_t kChunkItems = 8192;
 // Formats items [0, count) chunk by chunk on all threads and writes the chunks in order, so the
 // file is the same for any thread count while formatting runs in parallel with the writing.
 // format(begin, end, out) writes at most max_item_bytes per item from out and returns the end.
+// Each chunk written advances `progress` by its items (Stage::Write counts vertices and faces).
 template <class Format>
-void emit_chunks(AtomicFile& file, std::size_t count, std::size_t max_item_bytes,
-                 const Format& format) {
+void emit_chunks(AtomicFile& file, Progress* progress, std::size_t count,
+                 std::size_t max_item_bytes, const Format& format) {
   if (count == 0) return;
   const std::size_t chunks = (count + kChunkItems - 1) / kChunkItems;
   const std::size_t capacity = std::min(count, kChunkItems) * max_item_bytes;
@@ -51,6 +52,7 @@ void emit_chunks(AtomicFile& file, std::size_t count, std::size_t max_item_bytes
     auto buffer = std::make_unique_for_overwrite<char[]>(capacity);
     char* end = format(std::size_t{0}, count, buffer.get());
     file.write(buffer.get(), static_cast<std::size_t>(end - buffer.get()));
+    progress_advance(progress, static_cast<std::int64_t>(count));
     return;
   }
   // With at most `tokens` chunks between input and output, chunk i and chunk i + tokens are
@@ -83,11 +85,14 @@ void emit_chunks(AtomicFile& file, std::size_t count, std::size_t max_item_bytes
                 b.size = static_cast<std::size_t>(format(begin, end, b.data.get()) - b.data.get());
                 return i;
               }) &
-          tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order,
-                                              [&](std::size_t i) {
-                                                const Buffer& b = buffers[i % tokens];
-                                                file.write(b.data.get(), b.size);
-                                              }));
+          tbb::make_filter<std::size_t, void>(
+              tbb::filter_mode::serial_in_order, [&](std::size_t i) {
+                const Buffer& b = buffers[i % tokens];
+                file.write(b.data.get(), b.size);
+                progress_advance(progress,
+                                 static_cast<std::int64_t>(std::min(count, (i + 1) * kChunkItems) -
+                                                           i * kChunkItems));
+              }));
 }
 
 // Bounds that the buffers are sized by: a shortest float needs at most 15 characters
@@ -143,7 +148,8 @@ bool use_normals(const Mesh& mesh, const MeshWriteOptions& options) {
   return options.write_normals && !mesh.normals.empty();
 }
 
-void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options) {
+void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options,
+               Progress* progress) {
   const bool normals = use_normals(mesh, options);
   const std::string header =
       ply_header(mesh.positions.size(), mesh.triangles.size() + mesh.quads.size(), normals,
@@ -155,7 +161,7 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
   const auto& tris = mesh.triangles;
   const auto& quads = mesh.quads;
   if (options.ascii) {
-    emit_chunks(file, pos.size(), 6 * (kMaxFloatChars + 1),
+    emit_chunks(file, progress, pos.size(), 6 * (kMaxFloatChars + 1),
                 [&](std::size_t b, std::size_t e, char* p) {
                   for (std::size_t i = b; i < e; ++i) {
                     p = put_float(p, pos[i][0]);
@@ -173,7 +179,7 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
                   }
                   return p;
                 });
-    emit_chunks(file, tris.size(), 2 + 3 * (kMaxUintChars + 1),
+    emit_chunks(file, progress, tris.size(), 2 + 3 * (kMaxUintChars + 1),
                 [&](std::size_t b, std::size_t e, char* p) {
                   for (std::size_t i = b; i < e; ++i) {
                     *p++ = '3';
@@ -185,7 +191,7 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
                   }
                   return p;
                 });
-    emit_chunks(file, quads.size(), 2 + 4 * (kMaxUintChars + 1),
+    emit_chunks(file, progress, quads.size(), 2 + 4 * (kMaxUintChars + 1),
                 [&](std::size_t b, std::size_t e, char* p) {
                   for (std::size_t i = b; i < e; ++i) {
                     *p++ = '4';
@@ -203,9 +209,13 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
   if (!normals && std::endian::native == std::endian::little) {
     // Vec3f is exactly three packed floats, which is the PLY vertex record here.
     static_assert(sizeof(Vec3f) == 12);
-    file.write(pos.data(), pos.size() * sizeof(Vec3f));
+    for (std::size_t b = 0; b < pos.size(); b += 64 * kChunkItems) {
+      const std::size_t e = std::min(pos.size(), b + 64 * kChunkItems);
+      file.write(pos.data() + b, (e - b) * sizeof(Vec3f));
+      progress_advance(progress, static_cast<std::int64_t>(e - b));
+    }
   } else {
-    emit_chunks(file, pos.size(), 24, [&](std::size_t b, std::size_t e, char* p) {
+    emit_chunks(file, progress, pos.size(), 24, [&](std::size_t b, std::size_t e, char* p) {
       for (std::size_t i = b; i < e; ++i) {
         for (float c : pos[i]) p = put_le(p, c);
         if (normals) {
@@ -215,14 +225,14 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
       return p;
     });
   }
-  emit_chunks(file, tris.size(), 13, [&](std::size_t b, std::size_t e, char* p) {
+  emit_chunks(file, progress, tris.size(), 13, [&](std::size_t b, std::size_t e, char* p) {
     for (std::size_t i = b; i < e; ++i) {
       *p++ = 3;
       for (std::uint32_t v : tris[i]) p = put_le(p, v);
     }
     return p;
   });
-  emit_chunks(file, quads.size(), 17, [&](std::size_t b, std::size_t e, char* p) {
+  emit_chunks(file, progress, quads.size(), 17, [&](std::size_t b, std::size_t e, char* p) {
     for (std::size_t i = b; i < e; ++i) {
       *p++ = 4;
       for (std::uint32_t v : quads[i]) p = put_le(p, v);
@@ -231,13 +241,14 @@ void write_ply(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
   });
 }
 
-void write_obj(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options) {
+void write_obj(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& options,
+               Progress* progress) {
   const bool normals = use_normals(mesh, options);
   static const char kHeader[] = "# written by isotile\n";
   file.write(kHeader, sizeof(kHeader) - 1);
   const auto& pos = mesh.positions;
   const auto& nrm = mesh.normals;
-  emit_chunks(file, pos.size(), 2 * (3 + 3 * (kMaxFloatChars + 1)),
+  emit_chunks(file, progress, pos.size(), 2 * (3 + 3 * (kMaxFloatChars + 1)),
               [&](std::size_t b, std::size_t e, char* p) {
                 for (std::size_t i = b; i < e; ++i) {
                   *p++ = 'v';
@@ -259,7 +270,7 @@ void write_obj(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
               });
   auto faces = [&](const auto& list) {
     constexpr std::size_t corners = std::tuple_size_v<std::decay_t<decltype(list[0])>>;
-    emit_chunks(file, list.size(), 2 + corners * (2 * kMaxUintChars + 3),
+    emit_chunks(file, progress, list.size(), 2 + corners * (2 * kMaxUintChars + 3),
                 [&](std::size_t b, std::size_t e, char* p) {
                   for (std::size_t i = b; i < e; ++i) {
                     *p++ = 'f';
@@ -283,12 +294,12 @@ void write_obj(const Mesh& mesh, AtomicFile& file, const MeshWriteOptions& optio
   faces(mesh.quads);
 }
 
-void write_off(const Mesh& mesh, AtomicFile& file) {
+void write_off(const Mesh& mesh, AtomicFile& file, Progress* progress) {
   std::string header = "OFF\n" + std::to_string(mesh.positions.size()) + " " +
                        std::to_string(mesh.triangles.size() + mesh.quads.size()) + " 0\n";
   file.write(header.data(), header.size());
   const auto& pos = mesh.positions;
-  emit_chunks(file, pos.size(), 3 * (kMaxFloatChars + 1),
+  emit_chunks(file, progress, pos.size(), 3 * (kMaxFloatChars + 1),
               [&](std::size_t b, std::size_t e, char* p) {
                 for (std::size_t i = b; i < e; ++i) {
                   p = put_float(p, pos[i][0]);
@@ -301,7 +312,7 @@ void write_off(const Mesh& mesh, AtomicFile& file) {
                 return p;
               });
   auto faces = [&](const auto& list, char count) {
-    emit_chunks(file, list.size(), 2 + 4 * (kMaxUintChars + 1),
+    emit_chunks(file, progress, list.size(), 2 + 4 * (kMaxUintChars + 1),
                 [&](std::size_t b, std::size_t e, char* p) {
                   for (std::size_t i = b; i < e; ++i) {
                     *p++ = count;
@@ -358,7 +369,7 @@ std::string ply_header(std::uint64_t vertices, std::uint64_t faces, bool normals
 
 namespace {
 
-void write_stl(const Mesh& mesh, AtomicFile& file) {
+void write_stl(const Mesh& mesh, AtomicFile& file, Progress* progress) {
   const std::uint64_t count =
       std::uint64_t{mesh.triangles.size()} + 2 * std::uint64_t{mesh.quads.size()};
   char header[kStlHeaderBytes];
@@ -367,13 +378,13 @@ void write_stl(const Mesh& mesh, AtomicFile& file) {
   const auto& pos = mesh.positions;
   const auto& tris = mesh.triangles;
   const auto& quads = mesh.quads;
-  emit_chunks(file, tris.size(), 50, [&](std::size_t b, std::size_t e, char* p) {
+  emit_chunks(file, progress, tris.size(), 50, [&](std::size_t b, std::size_t e, char* p) {
     for (std::size_t i = b; i < e; ++i) {
       p = put_stl_triangle(p, pos[tris[i][0]], pos[tris[i][1]], pos[tris[i][2]]);
     }
     return p;
   });
-  emit_chunks(file, quads.size(), 100, [&](std::size_t b, std::size_t e, char* p) {
+  emit_chunks(file, progress, quads.size(), 100, [&](std::size_t b, std::size_t e, char* p) {
     for (std::size_t i = b; i < e; ++i) {
       const Quad& q = quads[i];
       p = put_stl_triangle(p, pos[q[0]], pos[q[1]], pos[q[2]]);
@@ -398,18 +409,23 @@ void write_mesh(const Mesh& mesh, const std::filesystem::path& path,
     }
   }
   AtomicFile file(path);
+  // In items: vertices (none in STL) and faces.
+  Progress* const progress = options.progress;
+  progress_begin(progress, Stage::Write,
+                 static_cast<std::int64_t>((format == MeshFormat::Stl ? 0 : mesh.positions.size()) +
+                                           mesh.triangles.size() + mesh.quads.size()));
   switch (format) {
     case MeshFormat::Ply:
-      write_ply(mesh, file, options);
+      write_ply(mesh, file, options, progress);
       break;
     case MeshFormat::Obj:
-      write_obj(mesh, file, options);
+      write_obj(mesh, file, options, progress);
       break;
     case MeshFormat::Stl:
-      write_stl(mesh, file);
+      write_stl(mesh, file, progress);
       break;
     case MeshFormat::Off:
-      write_off(mesh, file);
+      write_off(mesh, file, progress);
       break;
   }
   file.commit();

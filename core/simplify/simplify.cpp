@@ -411,9 +411,20 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     sims[r].emplace(std::move(reg), base);
   });
 
+  // Progress (Stage::Simplify, one begin per pass): the faces still to go before the target, as
+  // each round of collapses removes them (without a target: one per region collapsed), then one
+  // per region finished. Regions check for cancel within a round too (RegionSimplifier).
+  Progress* const progress = options.progress;
+  const std::uint64_t faces_in = in.triangles.size();
+  const std::uint64_t to_go = target == 0 ? nr : (faces_in > target ? faces_in - target : 0);
+  progress_begin(progress, Stage::Simplify, static_cast<std::int64_t>(to_go + nr));
+  std::uint64_t reported = 0;  // of to_go
   if (target == 0) {
-    tbb::parallel_for(std::size_t{0}, nr, std::size_t{1},
-                      [&](std::size_t r) { sims[r]->collapse(HUGE_VAL, ~std::uint64_t{0}); });
+    tbb::parallel_for(std::size_t{0}, nr, std::size_t{1}, [&](std::size_t r) {
+      sims[r]->collapse(HUGE_VAL, ~std::uint64_t{0}, progress);
+      progress_advance(progress);
+    });
+    reported = to_go;
   } else {
     std::vector<std::vector<double>> costs(nr);
     std::vector<std::uint64_t> quota(nr), made(nr);
@@ -422,6 +433,10 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     for (;;) {
       std::uint64_t live = 0;
       for (const auto& sim : sims) live += sim->faces();
+      if (progress && faces_in > live && faces_in - live > reported) {
+        progress->advance(static_cast<std::int64_t>(faces_in - live - reported));
+        reported = faces_in - live;
+      }
       if (live <= target) break;
       tbb::parallel_for(std::size_t{0}, nr, [&](std::size_t r) {
         costs[r].clear();
@@ -444,7 +459,7 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
         left -= quota[r];
       }
       tbb::parallel_for(std::size_t{0}, nr, std::size_t{1}, [&](std::size_t r) {
-        made[r] = quota[r] ? sims[r]->collapse(ceiling, quota[r]) : 0;
+        made[r] = quota[r] ? sims[r]->collapse(ceiling, quota[r], progress) : 0;
       });
       if (std::accumulate(made.begin(), made.end(), std::uint64_t{0}) > 0) {
         widen = 1;
@@ -455,11 +470,13 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     }
   }
 
+  // The rounds may stop short of the target (edges refused): their share counts as done.
+  if (progress && to_go > reported) progress->advance(static_cast<std::int64_t>(to_go - reported));
   std::vector<Region> out(nr);
-  progress_begin(options.progress, Stage::Simplify, static_cast<std::int64_t>(nr));
   tbb::parallel_for(std::size_t{0}, nr, std::size_t{1}, [&](std::size_t r) {
+    progress_check(progress);
     out[r] = sims[r]->finish();
-    progress_advance(options.progress);
+    progress_advance(progress);
   });
 
   // Back together. A vertex shared by regions was locked in each, so all give the same position;

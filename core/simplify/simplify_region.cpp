@@ -501,9 +501,11 @@ struct RegionSimplifier::Impl {
 
   // --- 1. collapses ----------------------------------------------------------------------------
 
-  std::uint64_t collapse(double max_cost, std::uint64_t max_collapses) {
+  std::uint64_t collapse(double max_cost, std::uint64_t max_collapses, const Progress* progress) {
     std::uint64_t made = 0;
-    while (made < max_collapses && !heap->empty() && heap->top_cost() <= max_cost) {
+    for (std::uint64_t taken = 0;
+         made < max_collapses && !heap->empty() && heap->top_cost() <= max_cost; ++taken) {
+      if ((taken & 1023) == 1023) progress_check(progress);
       const EH e(heap->top());
       heap->remove(e.idx());
       Candidate c;
@@ -804,8 +806,9 @@ std::uint64_t RegionSimplifier::faces() const {
 void RegionSimplifier::costs(std::vector<double>& out) const {
   impl_->heap->costs(out);
 }
-std::uint64_t RegionSimplifier::collapse(double max_cost, std::uint64_t max_collapses) {
-  return impl_->collapse(max_cost, max_collapses);
+std::uint64_t RegionSimplifier::collapse(double max_cost, std::uint64_t max_collapses,
+                                         const Progress* progress) {
+  return impl_->collapse(max_cost, max_collapses, progress);
 }
 Region RegionSimplifier::finish() {
   return impl_->finish();

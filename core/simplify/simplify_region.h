@@ -42,6 +42,7 @@
 #include <vector>
 
 #include "core/mesh/mesh.h"
+#include "core/progress.h"
 #include "core/simplify/quadric.h"
 #include "core/volume/volume.h"
 
@@ -92,7 +93,9 @@ class RegionSimplifier {
   void costs(std::vector<double>& out) const;
   // Collapses the cheapest edges while their key is at most `max_cost` and fewer than
   // `max_collapses` have been made in this call. Returns the number made.
-  std::uint64_t collapse(double max_cost, std::uint64_t max_collapses);
+  // `progress`: checked for cancel every 1024 edges taken off the heap (Cancelled).
+  std::uint64_t collapse(double max_cost, std::uint64_t max_collapses,
+                         const Progress* progress = nullptr);
   // Flips, relaxation and cleanup; then hands back the surviving vertices (with their caller
   // ids, moved positions and accumulated quadrics) and faces.
   Region finish();

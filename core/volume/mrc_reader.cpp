@@ -272,7 +272,7 @@ VolumeHeader read_mrc_header(const std::string& path) {
   return mrc_layout(path).header;
 }
 
-Volume read_mrc(const std::string& path) {
+Volume read_mrc(const std::string& path, Progress* progress) {
   const MrcLayout m = mrc_layout(path);
   const VolumeHeader& h = m.header;
   Volume volume(h.type, h.dims, h.spacing, h.origin);
@@ -303,7 +303,9 @@ Volume read_mrc(const std::string& path) {
   Index3 stride{1, h.dims[0], h.dims[0] * h.dims[1]};
   const std::int64_t sc = stride[m.axis[0]], sr = stride[m.axis[1]], ss = stride[m.axis[2]];
   auto* out = reinterpret_cast<unsigned char*>(volume.bytes());
+  progress_begin(progress, Stage::Read, m.n[2]);  // in sections
   for (std::int64_t s = 0; s < m.n[2]; ++s) {
+    if (s > 0) progress_advance(progress);
     if (m.gzip) {
       const std::size_t got = gz_read(path, gz.get(), buf.data(), buf.size());
       if (got != buf.size())
@@ -331,6 +333,7 @@ Volume read_mrc(const std::string& path) {
         }
       }
   }
+  progress_advance(progress);
   if (m.gzip) {
     // Reading on also makes zlib check the gzip trailer (CRC and length).
     char extra;

@@ -30,6 +30,8 @@ namespace {
 
 // Bounded so one failed read says something promptly and gzread's unsigned length cannot wrap.
 constexpr std::size_t kChunkBytes = std::size_t{64} << 20;
+// With a Progress: a unit of reading (well under 0.1 s read or inflated on one thread).
+constexpr std::size_t kProgressBytes = std::size_t{4} << 20;
 
 struct NameMatch {
   std::string dims[3];
@@ -111,14 +113,15 @@ struct FileCloser {
 };
 
 // Pipes and other non-regular files, whose size is not known in advance.
-void read_stream(const std::string& path, std::FILE* file, Volume& volume) {
+void read_stream(const std::string& path, std::FILE* file, Volume& volume, Progress* progress) {
   std::byte* out = volume.bytes();
   const std::size_t need = volume.byte_size();
   std::size_t done = 0;
   while (done < need) {
-    const std::size_t want = std::min(kChunkBytes, need - done);
+    const std::size_t want = std::min(progress ? kProgressBytes : kChunkBytes, need - done);
     const std::size_t got = std::fread(out + done, 1, want, file);
     done += got;
+    progress_advance(progress, static_cast<std::int64_t>(got));
     if (got < want) {
       if (std::ferror(file)) throw IoError("cannot read " + path + ": " + std::strerror(errno));
       throw InputError(size_mismatch(path, "file holds", done, volume.dims(), volume.type(), need));
@@ -148,15 +151,20 @@ void read_range(const std::string& path, int fd, std::byte* out, std::size_t at,
   }
 }
 
-void read_regular(const std::string& path, int fd, Volume& volume) {
+void read_regular(const std::string& path, int fd, Volume& volume, Progress* progress) {
   std::byte* out = volume.bytes();
   const std::size_t need = volume.byte_size();
-  const std::size_t slices = (need + kSliceBytes - 1) / kSliceBytes;
+  const std::size_t slice = progress ? kProgressBytes : kSliceBytes;
+  const std::size_t slices = (need + slice - 1) / slice;
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, slices, 1),
       [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s)
-          read_range(path, fd, out, s * kSliceBytes, std::min(need, (s + 1) * kSliceBytes));
+        for (std::size_t s = r.begin(); s != r.end(); ++s) {
+          progress_check(progress);
+          const std::size_t end = std::min(need, (s + 1) * slice);
+          read_range(path, fd, out, s * slice, end);
+          progress_advance(progress, static_cast<std::int64_t>(end - s * slice));
+        }
       },
       tbb::simple_partitioner());
 }
@@ -195,15 +203,17 @@ GzFilePtr open_gzip(const std::string& path) {
   return file;
 }
 
-void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
+void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume, Progress* progress) {
   std::byte* out = volume.bytes();
   const std::size_t need = volume.byte_size();
   std::size_t done = 0;
   while (done < need) {
-    const auto want = static_cast<unsigned>(std::min(kChunkBytes, need - done));
+    const auto want =
+        static_cast<unsigned>(std::min(progress ? kProgressBytes : kChunkBytes, need - done));
     const int got = gzread(file.get(), out + done, want);
     if (got < 0) throw_gz_error(path, file.get());
     done += static_cast<std::size_t>(got);
+    progress_advance(progress, got);
     if (static_cast<unsigned>(got) < want) {
       // zlib reports a stream cut off mid-way as Z_BUF_ERROR after returning what it had.
       int code = Z_OK;
@@ -238,15 +248,19 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume) {
 // Whole-buffer gzip decompression with libdeflate, about 3.5x faster than zlib's stream (bonsai:
 // 12 against 43 ms, docs/benchmarks.md), for files small enough that holding the compressed bytes
 // beside the volume for a moment costs little. Above this, zlib streams.
+// With a Progress, libdeflate (one call, no progress inside) takes only files it inflates in well
+// under 0.1 s; zlib streams larger ones, reporting every kProgressBytes.
 constexpr std::uint64_t kWholeGzipMaxBytes = std::uint64_t{1} << 30;
+constexpr std::uint64_t kWholeGzipMaxBytesWithProgress = std::uint64_t{8} << 20;
 
 // The gzip file `path`, opened for inflate_whole when it is a regular file of at most
 // kWholeGzipMaxBytes that starts with gzip's magic bytes; null otherwise (then zlib opens it and
 // judges it, as it did before this path existed).
 std::unique_ptr<std::FILE, FileCloser> open_whole_gzip(const std::string& path,
-                                                       const struct stat& st) {
+                                                       const struct stat& st, bool progress) {
   if (!S_ISREG(st.st_mode) || st.st_size < 2 ||
-      static_cast<std::uint64_t>(st.st_size) > kWholeGzipMaxBytes)
+      static_cast<std::uint64_t>(st.st_size) >
+          (progress ? kWholeGzipMaxBytesWithProgress : kWholeGzipMaxBytes))
     return nullptr;
   std::unique_ptr<std::FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
   unsigned char magic[2];
@@ -348,7 +362,7 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
   GzFilePtr gz_file;  // zlib's stream, opened unless libdeflate takes the file whole
   std::unique_ptr<std::FILE, FileCloser> whole_gz, plain_file;
   if (gzip) {
-    whole_gz = open_whole_gzip(path, st);
+    whole_gz = open_whole_gzip(path, st, options.progress != nullptr);
     if (!whole_gz) gz_file = open_gzip(path);
   } else {
     plain_file.reset(std::fopen(path.c_str(), "rb"));
@@ -365,16 +379,20 @@ Volume read_raw(const std::string& path, const RawOptions& options) {
 
   Volume volume(layout.type, layout.dims, options.spacing.value_or(Vec3d{1, 1, 1}),
                 options.origin.value_or(Vec3d{0, 0, 0}));
+  Progress* const progress = options.progress;
+  progress_begin(progress, Stage::Read, static_cast<std::int64_t>(need));  // in bytes
   if (gzip) {
-    if (!whole_gz || !inflate_whole(path, ::fileno(whole_gz.get()),
-                                    static_cast<std::size_t>(st.st_size), volume)) {
+    if (whole_gz && inflate_whole(path, ::fileno(whole_gz.get()),
+                                  static_cast<std::size_t>(st.st_size), volume)) {
+      progress_advance(progress, static_cast<std::int64_t>(need));
+    } else {
       if (!gz_file) gz_file = open_gzip(path);
-      read_gzip(path, gz_file, volume);
+      read_gzip(path, gz_file, volume, progress);
     }
   } else if (S_ISREG(st.st_mode)) {
-    read_regular(path, ::fileno(plain_file.get()), volume);
+    read_regular(path, ::fileno(plain_file.get()), volume, progress);
   } else {
-    read_stream(path, plain_file.get(), volume);
+    read_stream(path, plain_file.get(), volume, progress);
   }
   const bool native_big = std::endian::native == std::endian::big;
   if ((options.endian == Endian::Big) != native_big) byte_swap(volume);

@@ -369,12 +369,14 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
 
   reject_raw_only_options(input, raw, input_kind_name(kind));
   Volume volume;
-  if (kind == InputKind::Nrrd) {
+  // NRRD, VDB and ITK's libraries read in one call: reported at its start and its end only.
+  if (kind != InputKind::Mrc) progress_begin(raw.progress, Stage::Read, 1);
+  if (kind == InputKind::Mrc) {
+    volume = read_mrc(input, raw.progress);
+  } else if (kind == InputKind::Nrrd) {
     volume = read_nrrd(input);
   } else if (kind == InputKind::Vdb) {
     volume = read_vdb(input);
-  } else if (kind == InputKind::Mrc) {
-    volume = read_mrc(input);
   } else {
     verify_compressed(check_before_itk(input, kind));
     const ItkInput in = itk_input(input, kind, raw);
@@ -384,6 +386,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     read_itk_data(in, info, volume.bytes());
     check_finite(volume.view(), input);
   }
+  if (kind != InputKind::Mrc) progress_advance(raw.progress);
   Vec3d spacing = volume.spacing(), origin = volume.origin();
   std::optional<WorldFrame> world = volume.world();
   apply_overrides(raw, spacing, origin, world);

@@ -21,6 +21,7 @@
 #include <optional>
 #include <string>
 
+#include "core/progress.h"
 #include "core/volume/volume.h"
 
 namespace isotile {
@@ -34,6 +35,10 @@ struct RawOptions {
   std::optional<Vec3d> origin;
   Endian endian = Endian::Little;
   std::string series;  // DICOM: the SeriesInstanceUID to read where a directory holds several
+  // Told of the reading (Stage::Read, in bytes of samples; core/progress.h): raw files per 4 MiB
+  // read or inflated, MRC per section; NRRD, VDB and ITK's formats are read by their libraries in
+  // one call, reported at its start and end. Null: nobody listens.
+  Progress* progress = nullptr;
 };
 
 // What a raw file's name says, if it follows NAME_XxYxZ_TYPE.raw[.gz].
@@ -95,7 +100,7 @@ Volume read_nrrd(const std::string& path);
 Volume read_vdb(const std::string& path);
 // MRC2014 / CCP4 maps (core/volume/mrc_reader.cpp): header validated against the file size,
 // axis order (mapc, mapr, maps), start fields, cell and origin honoured.
-Volume read_mrc(const std::string& path);
+Volume read_mrc(const std::string& path, Progress* progress = nullptr);
 VolumeHeader read_mrc_header(const std::string& path);
 
 // An OpenVDB grid kept as its sparse tree and densified box by box (the out-of-core tiler reads

@@ -98,7 +98,9 @@ int run_simplify(const SimplifyArgs& args) {
            fmt_seconds(t_simplify));
   progress("writing " + args.output);
   t0 = Clock::now();
-  write_mesh(out, args.output, {.format = format, .ascii = args.ascii, .write_normals = true});
+  write_mesh(
+      out, args.output,
+      {.format = format, .ascii = args.ascii, .write_normals = true, .progress = &g_progress});
   const double t_write = seconds_since(t0);
   const double t_done = seconds_since(t_total);
   if (!args.stats.empty()) {

@@ -1,0 +1,125 @@
+// Ctrl-C: the first SIGINT (or SIGTERM) cancels the run through the library's Progress; the CLI
+// says "isotile: cancelled", exits 128 + the signal (130 for SIGINT) and leaves no output and no
+// temporary file. The signal is sent once stderr shows progress, so the run is inside a long loop.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct Cancelled {
+  int status = -1;
+  std::string err;
+  std::vector<std::string> left;  // names in the work directory afterwards
+};
+
+// Runs `isotile ARGS...` in `dir`, waits until its stderr holds `marker`, sends `sig` and
+// collects the exit status and stderr. Gives up (killing it) after 120 s.
+Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& args,
+                         const std::string& marker, int sig) {
+  int pipe_fd[2];
+  if (::pipe(pipe_fd) != 0) return {};
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::dup2(pipe_fd[1], 2);
+    ::close(pipe_fd[0]);
+    ::close(pipe_fd[1]);
+    if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    std::vector<char*> argv;
+    std::string cli = ISOTILE_CLI;
+    argv.push_back(cli.data());
+    std::vector<std::string> copy = args;
+    for (std::string& a : copy) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    ::execv(cli.c_str(), argv.data());
+    ::_exit(127);
+  }
+  ::close(pipe_fd[1]);
+  Cancelled r;
+  bool sent = false;
+  const auto t0 = Clock::now();
+  char buf[4096];
+  for (;;) {
+    pollfd p{pipe_fd[0], POLLIN, 0};
+    const int ready = ::poll(&p, 1, 100);
+    if (ready > 0) {
+      const ssize_t n = ::read(pipe_fd[0], buf, sizeof buf);
+      if (n <= 0) break;  // the process closed stderr: it ended
+      r.err.append(buf, static_cast<std::size_t>(n));
+    }
+    if (!sent && r.err.find(marker) != std::string::npos) {
+      ::kill(pid, sig);
+      sent = true;
+    }
+    if (Clock::now() - t0 > std::chrono::seconds(120)) {
+      ::kill(pid, SIGKILL);
+      break;
+    }
+  }
+  ::close(pipe_fd[0]);
+  ::waitpid(pid, &r.status, 0);
+  EXPECT_TRUE(sent) << "no progress line '" << marker << "' on stderr:\n" << r.err;
+  for (const auto& e : fs::directory_iterator(dir)) r.left.push_back(e.path().filename().string());
+  return r;
+}
+
+class CliCancel : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("isotile-cancel-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+void expect_cancelled(const Cancelled& r, int code) {
+  ASSERT_TRUE(WIFEXITED(r.status)) << "did not exit (signal " << WTERMSIG(r.status) << "):\n"
+                                   << r.err;
+  EXPECT_EQ(WEXITSTATUS(r.status), code) << r.err;
+  EXPECT_NE(r.err.find("isotile: cancelled\n"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("error"), std::string::npos) << r.err;
+  EXPECT_TRUE(r.left.empty()) << "left behind: " << r.left.front();
+}
+
+// Macet max on a 256^3 gyroid runs for seconds; SIGINT during its search.
+TEST_F(CliCancel, SigintDuringExtractionExits130AndLeavesNothing) {
+  const Cancelled r = run_and_signal(dir_,
+                                     {"extract", "field:gyroid:256", "--iso", "0", "--method",
+                                      "macet", "--quality", "max", "-o", "out.ply"},
+                                     "isotile: macet search: ", SIGINT);
+  expect_cancelled(r, 130);
+}
+
+// SIGTERM while the mesh is being written: the temporary file goes too.
+TEST_F(CliCancel, SigtermDuringTheWriteExits143AndLeavesNothing) {
+  const Cancelled r = run_and_signal(
+      dir_, {"extract", "field:gyroid:384", "--iso", "0", "--ascii", "-o", "out.ply"},
+      "isotile: write: 10%", SIGTERM);
+  expect_cancelled(r, 143);
+}
+
+// Out of core, brick by brick (27 bricks): cancelled within the passes over the bricks.
+TEST_F(CliCancel, SigintOutOfCoreExits130AndLeavesNothing) {
+  const Cancelled r = run_and_signal(dir_,
+                                     {"extract", "field:gyroid:384", "--iso", "0", "--method",
+                                      "macet", "--memory", "64MiB", "-o", "out.ply"},
+                                     "isotile: count: 1/", SIGINT);
+  expect_cancelled(r, 130);
+}
+
+}  // namespace
