@@ -1,10 +1,7 @@
 #include "gl_program.h"
 
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -247,45 +244,6 @@ void bind_case_tables(CaseTable which) {
   tables->bind(GL_UNIFORM_BUFFER, 0);
 }
 
-bool wide_samples(ScalarType type) {
-  return !(type == ScalarType::Int8 || type == ScalarType::UInt8 || type == ScalarType::Int16 ||
-           type == ScalarType::UInt16 || type == ScalarType::Float32);
-}
-
-std::string sample_defines(bool wide) {
-  return wide ? "#define SAMPLE_T double\n" : "#define SAMPLE_T float\n#define SAMPLE_IS_FLOAT\n";
-}
-
-Samples upload_samples(const VolumeView& view, const Box3& region) {
-  Samples out;
-  const bool exact_in_float = !wide_samples(view.type);
-  const Index3 d = {region.extent(0), region.extent(1), region.extent(2)};
-  const std::int64_t rows = d[1] * d[2];
-  auto convert = [&](auto tag) {
-    using Out = decltype(tag);
-    std::vector<Out> buf(static_cast<std::size_t>(d[0] * rows));
-    visit_scalar(view.type, [&](auto in_tag) {
-      using In = decltype(in_tag);
-      const In* src = view.typed<In>();
-      tbb::parallel_for(std::int64_t{0}, rows, [&](std::int64_t r) {
-        const std::int64_t j = region.lo[1] - view.box.lo[1] + r % d[1];
-        const std::int64_t k = region.lo[2] - view.box.lo[2] + r / d[1];
-        const std::int64_t i0 = region.lo[0] - view.box.lo[0];
-        Out* dst = buf.data() + r * d[0];
-        for (std::int64_t i = 0; i < d[0]; ++i)
-          dst[i] = static_cast<Out>(src[view.offset(i0 + i, j, k)]);
-      });
-    });
-    out.buffer = Buffer(buf.size() * sizeof(Out), buf.data());
-  };
-  if (exact_in_float)
-    convert(float{});
-  else
-    convert(double{});
-  out.defines = sample_defines(!exact_in_float);
-  return out;
-}
-
 void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   auto i3 = [&](const char* name, const Index3& v) {
     glProgramUniform3i(prog, glGetUniformLocation(prog, name), static_cast<GLint>(v[0]),
@@ -308,18 +266,6 @@ void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   d3("u_origin", u.origin);
   d3("u_spacing", u.spacing);
   check("setting the grid uniforms");
-}
-
-double StageTimer::now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-void StageTimer::lap(double* into) {
-  if (!into) return;
-  glFinish();
-  const double t = now();
-  *into += t - last_;
-  last_ = t;
 }
 
 }  // namespace isotile::gl

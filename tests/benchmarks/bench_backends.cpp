@@ -194,13 +194,19 @@ int main(int argc, char** argv) {
       stages.push_back({std::string(r.method) + " " + c.name, sg, sh});
     }
   }
-  // Where the GL time goes: one more run of each with glFinish between stages. Macet's grid-vertex
-  // passes (and Max's search) count as counting.
+  // Where the GL time goes: one more run of each, its stages from GL timer queries
+  // (shaders/stage_clock.h). Macet's grid-vertex passes are its prepare stage.
   std::printf("\nstages in ms (upload / count / output), one run each\n");
   std::printf("%-18s %26s %26s\n", "method volume", "gs", "hp");
+  auto count = [](const gl::GlTimes& t) {
+    return t[gl::GlStage::Prepare] + t[gl::GlStage::Classify] + t[gl::GlStage::Scan];
+  };
+  auto output = [](const gl::GlTimes& t) {
+    return t[gl::GlStage::Vertices] + t[gl::GlStage::Faces] + t[gl::GlStage::Readback];
+  };
   for (const auto& [name, sg, sh] : stages)
     std::printf("%-18s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
-                1e3 * sg.seconds_upload, 1e3 * sg.seconds_count, 1e3 * sg.seconds_output,
-                1e3 * sh.seconds_upload, 1e3 * sh.seconds_count, 1e3 * sh.seconds_output);
+                1e3 * sg.times[gl::GlStage::Upload], 1e3 * count(sg.times), 1e3 * output(sg.times),
+                1e3 * sh.times[gl::GlStage::Upload], 1e3 * count(sh.times), 1e3 * output(sh.times));
   return 0;
 }
