@@ -13,6 +13,7 @@
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
 #include "gl_context.h"
+#include "program_cache.h"
 
 namespace isotile::gl {
 
@@ -113,8 +114,7 @@ GLuint empty_vertex_array() {
 
 namespace {
 
-GLuint compile(const Stage& s, const std::string& defines) {
-  const std::string src = stage_source(s, defines);
+GLuint compile(const Stage& s, const std::string& src) {
   const GLuint sh = glCreateShader(s.type);
   const char* text = src.c_str();
   glShaderSource(sh, 1, &text, nullptr);
@@ -138,15 +138,38 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
   at_shutdown(release_programs);
+  // The on-disk cache's key (program_cache.h): every stage's full source and the varyings.
+  std::vector<std::string> sources;
+  std::string disk_key = "isotile program 1\n";
+  for (const Stage& s : stages) {
+    sources.push_back(stage_source(s, defines));
+    disk_key += "stage " + std::to_string(s.type) + " " + std::string(s.file) + "\n";
+    disk_key += sources.back();
+    disk_key += '\n';
+  }
+  for (const char* v : varyings) {
+    disk_key += "varying ";
+    disk_key += v;
+    disk_key += '\n';
+  }
+  if (const GLuint saved = load_program(disk_key)) {
+    check("loading a saved program");
+    cache.emplace(key, saved);
+    built_keys().push_back(key);
+    return saved;
+  }
+  count_compiled_program();
   const GLuint prog = glCreateProgram();
   std::vector<GLuint> shaders;
-  for (const Stage& s : stages) {
-    shaders.push_back(compile(s, defines));
+  for (std::size_t i = 0; i < stages.size(); ++i) {
+    shaders.push_back(compile(stages[i], sources[i]));
     glAttachShader(prog, shaders.back());
   }
   if (!varyings.empty())
     glTransformFeedbackVaryings(prog, static_cast<GLsizei>(varyings.size()), varyings.data(),
                                 GL_INTERLEAVED_ATTRIBS);
+  if (program_cache_enabled())
+    glProgramParameteri(prog, GL_PROGRAM_BINARY_RETRIEVABLE_HINT, GL_TRUE);
   glLinkProgram(prog);
   for (GLuint sh : shaders) glDeleteShader(sh);
   GLint ok = 0;
@@ -158,6 +181,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
     throw Error("linking " + std::string(stages.front().file) + " failed: " + log);
   }
   check("linking a program");
+  store_program(disk_key, prog);
   cache.emplace(key, prog);
   built_keys().push_back(key);
   return prog;

@@ -43,11 +43,12 @@ void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint6
     const StageClock::Mark start = clock ? clock->device_mark() : StageClock::Mark{};
     dispatch(k);
     const StageClock::Mark done = clock ? clock->device_mark() : StageClock::Mark{};
+    const StageClock::Mark before = clock ? StageClock::cpu_mark() : StageClock::Mark{};
     out.read(0, k * bytes_per_item, static_cast<char*>(dst) + first * bytes_per_item);
     if (out2) out2->read(0, k * bytes_per_item, static_cast<char*>(dst2) + first * bytes_per_item);
     if (clock) {
       clock->add(stage, start, done);
-      clock->add(GlStage::Readback, done, StageClock::cpu_mark());
+      clock->add_wait(GlStage::Readback, done, before, StageClock::cpu_mark());
     }
   }
 }
@@ -148,11 +149,12 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
 
     // (3) totals
     const StageClock::Mark scan_done = mark();
+    const StageClock::Mark totals_read = clock ? StageClock::cpu_mark() : StageClock::Mark{};
     std::uint32_t totals[2] = {};
     levels.read(std::size_t{pyr.offset[pyr.levels]} * 8, 8, totals);
     if (clock) {
       clock->add(GlStage::Scan, scan_start, scan_done);
-      clock->add(GlStage::Readback, scan_done, StageClock::cpu_mark());
+      clock->add_wait(GlStage::Readback, scan_done, totals_read, StageClock::cpu_mark());
     }
     const std::uint64_t n_vertices = totals[0], n_faces = totals[1];
     if (method.positions_on_device && n_vertices * 12 > max_binding) {

@@ -141,11 +141,12 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         ++passes;
         // The draw (classification and emission) and the capture's copy to the CPU.
         const StageClock::Mark drawn = clock ? clock->device_mark() : StageClock::Mark{};
+        const StageClock::Mark read_start = clock ? StageClock::cpu_mark() : StageClock::Mark{};
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
         if (clock) {
           clock->add(GlStage::Classify, draw_start, drawn);
-          clock->add(GlStage::Readback, drawn, StageClock::cpu_mark());
+          clock->add_wait(GlStage::Readback, drawn, read_start, StageClock::cpu_mark());
         }
         auto cell_of = [&](std::uint64_t t) { return staging[t * 3 * words + 1]; };
         const CaptureCut cut =

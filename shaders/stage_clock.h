@@ -51,6 +51,11 @@ class StageClock {
   static Mark cpu_mark();
   // Adds the time from `from` to `to` to stage `s` (resolved by collect()).
   void add(GlStage s, Mark from, Mark to);
+  // Adds the time of a copy to the CPU that waited for the device: from when the device finished
+  // (`done`, a device mark) or the copy began (`before`), whichever is later, until `after` (both
+  // CPU marks). A device mark outside [before, after] (drivers that record timestamps late, as
+  // llvmpipe may) falls back to the CPU's.
+  void add_wait(GlStage s, Mark done, Mark before, Mark after);
   // Adds plain seconds (measured otherwise) to stage `s`.
   void add_seconds(GlStage s, double seconds) { times_[s] += seconds; }
   void add_upload_bytes(std::uint64_t bytes) { times_.upload_bytes += bytes; }
@@ -63,6 +68,8 @@ class StageClock {
   struct Span {
     GlStage stage;
     Mark from, to;
+    Mark before{};  // add_wait(): `from` is clamped to [before, to]
+    bool clamp = false;
   };
   std::vector<unsigned> queries_;  // GLuint
   std::vector<Span> spans_;

@@ -51,6 +51,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #endif
+#include "tiler/gpu_report_json.h"
 #include "tiler/input_options.h"
 #include "tiler/mpi_launch.h"
 #include "tiler/render_command.h"
@@ -685,6 +686,7 @@ int run_extract(const ExtractArgs& args) {
                   {"measure", t_measure},
                   {"total", seconds_since(t_total)}};
   if (simplifying) j["seconds"]["simplify"] = t_simplify;
+  add_gpu_report(j, choice.gpu);  // seconds.gl, upload_gbps, gl_program_cache (docs/cli.md)
   j["peak_rss_mb"] = peak_rss_mb();
   write_text(args.stats, j.dump(2) + "\n");
   progress("done in " + fmt_seconds(seconds_since(t_total)));
