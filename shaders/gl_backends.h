@@ -37,6 +37,8 @@ struct McOptions {
 struct McStats {
   int bricks = 0;
   int capture_passes = 0;  // geometry-shader draws, resumed ones included
+  // HistoPyramid: slabs whose samples were uploaded while the slab before was being counted.
+  int early_uploads = 0;
   // Seconds per stage summed over the slabs, from GL timer queries (stage_clock.h; no glFinish),
   // and the bytes of samples uploaded.
   GlTimes times;

@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <deque>
 #include <limits>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "core/errors.h"
 #include "gl_context.h"
@@ -62,10 +64,15 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   Mesh mesh;
   const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
-  const std::vector<Box3> planned =
-      plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
-                 std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
-                 run.max_brick_cells_z);
+  std::vector<Box3> planned = plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
+                                         std::max(sample_bytes, method.largest_per_sample),
+                                         method.halo, budget, run.max_brick_cells_z);
+  // With several slabs, the next slab's samples are uploaded while this slab's pyramid is built
+  // (below), so two slabs' samples share the budget.
+  if (planned.size() > 1)
+    planned = plan_slabs(view, run.cells, 2 * sample_bytes + method.bytes_per_sample,
+                         std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
+                         run.max_brick_cells_z);
   std::deque<Box3> slabs(planned.begin(), planned.end());
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
   const std::uint64_t words = face_words(method.faces);
@@ -78,13 +85,20 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   StageClock* const clock = stats ? &clock_storage : nullptr;
   auto mark = [&] { return clock ? clock->device_mark() : StageClock::Mark{}; };
   std::uint64_t vertex_base = 0;
-  int slab_count = 0, draws = 0;
+  int slab_count = 0, draws = 0, early = 0;
+  // The next slab's region and samples, uploaded early (unused when that slab is split).
+  std::optional<std::pair<Box3, Samples>> next;
+  auto same_box = [](const Box3& a, const Box3& b) { return a.lo == b.lo && a.hi == b.hi; };
   while (!slabs.empty()) {
     const Box3 cells = slabs.front();
     slabs.pop_front();
     const Box3 elems = method.elements(cells);
     const Box3 region = slab_region(view, cells, method.halo);
-    const Samples samples = upload_samples(view, region, clock);
+    const bool uploaded = next && same_box(next->first, region);
+    early += uploaded;
+    const Samples samples =
+        uploaded ? std::move(next->second) : upload_samples(view, region, clock);
+    next.reset();
     const std::string pyramid = samples.defines + method.pyramid_defines;
     std::string base_defines = pyramid;  // appended, not concatenated: GCC 12's -Wrestrict
     base_defines += "#define BASE\n";
@@ -149,6 +163,12 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
 
     // (3) totals
     const StageClock::Mark scan_done = mark();
+    // The next slab's upload: its rows are copied into the staging buffers while the device
+    // builds this slab's pyramid, before the totals' read-back waits for it.
+    if (!slabs.empty()) {
+      const Box3 next_region = slab_region(view, slabs.front(), method.halo);
+      next.emplace(next_region, upload_samples(view, next_region, clock));
+    }
     const StageClock::Mark totals_read = clock ? StageClock::cpu_mark() : StageClock::Mark{};
     std::uint32_t totals[2] = {};
     levels.read(std::size_t{pyr.offset[pyr.levels]} * 8, 8, totals);
@@ -251,6 +271,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   if (stats) {
     stats->bricks = slab_count;
     stats->capture_passes = draws;
+    stats->early_uploads = early;
     stats->times = clock->collect();
   }
   return mesh;
