@@ -159,7 +159,7 @@ TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   const std::string in = "extract field:gyroid:40 -q --normals ";
   ASSERT_EQ(run(in + "--backend cpu -o cpu.ply --stats cpu.json").code, 0);
   const auto cpu_stats = nlohmann::json::parse(slurp(dir_ / "cpu.json"));
-  EXPECT_TRUE(cpu_stats["seconds"]["gl"].is_null());
+  EXPECT_FALSE(cpu_stats["seconds"].contains("gl"));
   EXPECT_TRUE(cpu_stats["upload_gbps"].is_null());
   EXPECT_TRUE(cpu_stats["gl_program_cache"].is_null());
   auto hp = [&](const std::string& name) {

@@ -1,6 +1,7 @@
 // The GL backends' report of one extraction (core's GpuReport) in `isotile extract --stats`
 // (docs/cli.md): `seconds.gl` (per stage, and the context's start-up), `upload_bytes`,
-// `upload_gbps` and `gl_program_cache`; null where the CPU made the mesh.
+// `upload_gbps` and `gl_program_cache`; where the CPU made the mesh, no `seconds.gl` and the
+// others null.
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -12,9 +13,8 @@ namespace isotile {
 
 inline void add_gpu_report(nlohmann::ordered_json& stats, const std::optional<GpuReport>& gpu) {
   using json = nlohmann::ordered_json;
-  if (!stats.contains("seconds")) stats["seconds"] = json::object();
   if (!gpu) {
-    stats["seconds"]["gl"] = nullptr;
+    // No seconds.gl: scripts read every entry of `seconds` as a number.
     stats["upload_bytes"] = nullptr;
     stats["upload_gbps"] = nullptr;
     stats["gl_program_cache"] = nullptr;
@@ -23,6 +23,7 @@ inline void add_gpu_report(nlohmann::ordered_json& stats, const std::optional<Gp
   json gl = json::object();
   for (const auto& [stage, seconds] : gpu->seconds) gl[stage] = seconds;
   gl["context"] = gpu->context_seconds;
+  if (!stats.contains("seconds")) stats["seconds"] = json::object();
   stats["seconds"]["gl"] = gl;
   stats["upload_bytes"] = gpu->upload_bytes;
   stats["upload_gbps"] =
