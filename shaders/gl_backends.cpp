@@ -11,6 +11,8 @@
 #include "gl_context.h"
 #include "gl_program.h"
 #include "macet_gl.h"
+#include "program_cache.h"
+#include "stage_clock.h"
 
 namespace isotile::gl {
 
@@ -90,26 +92,10 @@ McOptions mc_options(const ExtractOptions& o) {
   return m;
 }
 
-Mesh run_gs(const VolumeView& view, const ExtractOptions& o) {
-  return mc_geometry_shader(view, mc_options(o));
-}
-
-Mesh run_hp(const VolumeView& view, const ExtractOptions& o) {
-  return mc_histopyramid(view, mc_options(o));
-}
-
 DcGlOptions dc_gl_options(const ExtractOptions& o) {
   DcGlOptions d;
   d.dc = dual_contouring_options(o);
   return d;
-}
-
-Mesh run_dc_gs(const VolumeView& view, const ExtractOptions& o) {
-  return dc_geometry_shader(view, dc_gl_options(o));
-}
-
-Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o) {
-  return dc_histopyramid(view, dc_gl_options(o));
 }
 
 MacetGlOptions macet_gl_options(const ExtractOptions& o) {
@@ -118,12 +104,53 @@ MacetGlOptions macet_gl_options(const ExtractOptions& o) {
   return m;
 }
 
-Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet_geometry_shader(view, macet_gl_options(o));
+// Runs `run` (a GL extractor taking McStats*) and, when `report` is given, fills it: the stages'
+// device times, the upload, the program cache over this call, the context's start-up.
+template <class Run>
+Mesh reported(GpuReport* report, Run run) {
+  if (!report) return run(nullptr);
+  const ProgramCacheCounts before = program_cache_counts();
+  McStats stats;
+  Mesh mesh = run(&stats);
+  const ProgramCacheCounts after = program_cache_counts();
+  Scope scope;
+  report->seconds.clear();
+  for (int s = 0; s < kGlStageCount; ++s)
+    report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
+  report->upload_bytes = stats.times.upload_bytes;
+  report->upload_seconds = stats.times[GlStage::Upload];
+  report->context_seconds = device().startup_seconds;
+  report->programs_loaded = after.loaded - before.loaded;
+  report->programs_compiled = after.compiled - before.compiled;
+  report->programs_rejected = after.rejected - before.rejected;
+  std::string why;
+  report->program_cache_off = program_cache_enabled(&why) ? "" : why;
+  return mesh;
 }
 
-Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o) {
-  return macet_histopyramid(view, macet_gl_options(o));
+Mesh run_gs(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r, [&](McStats* s) { return mc_geometry_shader(view, mc_options(o), s); });
+}
+
+Mesh run_hp(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r, [&](McStats* s) { return mc_histopyramid(view, mc_options(o), s); });
+}
+
+Mesh run_dc_gs(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r, [&](McStats* s) { return dc_geometry_shader(view, dc_gl_options(o), s); });
+}
+
+Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r, [&](McStats* s) { return dc_histopyramid(view, dc_gl_options(o), s); });
+}
+
+Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r,
+                  [&](McStats* s) { return macet_geometry_shader(view, macet_gl_options(o), s); });
+}
+
+Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
+  return reported(r, [&](McStats* s) { return macet_histopyramid(view, macet_gl_options(o), s); });
 }
 
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`

@@ -13,6 +13,7 @@
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
 #include "core/volume/volume.h"
+#include "stage_clock.h"
 
 namespace isotile::gl {
 
@@ -38,10 +39,11 @@ struct McOptions {
 struct McStats {
   int bricks = 0;
   int capture_passes = 0;  // geometry-shader draws, resumed ones included
-  // Wall time per stage (glFinish between stages, only when stats are asked for): samples
-  // converted and uploaded; counting (HP: classify, pyramid, totals; GS: draws and captures);
-  // output (HP: vertex and triangle passes and read-back; GS: read-back and weld).
-  double seconds_upload = 0, seconds_count = 0, seconds_output = 0;
+  // HistoPyramid: slabs whose samples were uploaded while the slab before was being counted.
+  int early_uploads = 0;
+  // Seconds per stage summed over the slabs, from GL timer queries (stage_clock.h; no glFinish),
+  // and the bytes of samples uploaded.
+  GlTimes times;
 };
 
 // Throw InputError when no OpenGL 4.5 context can be created, CapacityError when the mesh needs

@@ -7,6 +7,7 @@
 #include <link.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -284,11 +285,13 @@ void describe(Context& c) {
   i.max_vertex_ssbo_blocks = get_int(GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS);
   i.max_geometry_ssbo_blocks = get_int(GL_MAX_GEOMETRY_SHADER_STORAGE_BLOCKS);
   i.max_3d_texture = get_int(GL_MAX_3D_TEXTURE_SIZE);
+  i.program_binary_formats = get_int(GL_NUM_PROGRAM_BINARY_FORMATS);
 }
 
 // Creates the context (current on this thread) or records why not. Caller holds g_mutex.
 void create() {
   if (g_context || !g_failure.empty()) return;
+  const auto start = std::chrono::steady_clock::now();
   const char* env = std::getenv("ISOTILE_GL");
   const std::string only = env ? env : "";
   if (only == "off") {
@@ -313,6 +316,8 @@ void create() {
       glBindFramebuffer(GL_FRAMEBUFFER, c->framebuffer);
       describe(*c);
       if (glGetError() == GL_NO_ERROR) {
+        c->info.startup_seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         g_context = std::move(c);
         return;
       }

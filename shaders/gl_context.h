@@ -32,6 +32,12 @@ struct DeviceInfo {
   std::int64_t max_vertex_ssbo_blocks = 0;    // GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS
   std::int64_t max_geometry_ssbo_blocks = 0;  // GL_MAX_GEOMETRY_SHADER_STORAGE_BLOCKS
   std::int64_t max_3d_texture = 0;            // GL_MAX_3D_TEXTURE_SIZE
+  // GL_NUM_PROGRAM_BINARY_FORMATS: 0 when programs cannot be saved (program_cache.h). Mesa
+  // reports 1 when its own shader cache is on and 0 when it is off (MESA_SHADER_CACHE_DISABLE).
+  std::int64_t program_binary_formats = 0;
+  // Wall seconds the context's start-up took (EGL or OSMesa, the driver, the loader), every way
+  // tried included.
+  double startup_seconds = 0;
 };
 
 // The context's description; creates the context on first call. Throws InputError naming why

@@ -1,10 +1,7 @@
 #include "gl_program.h"
 
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -16,6 +13,7 @@
 #include "core/extract/macet_table.h"
 #include "core/extract/marching_cubes_tables.h"
 #include "gl_context.h"
+#include "program_cache.h"
 
 namespace isotile::gl {
 
@@ -116,8 +114,7 @@ GLuint empty_vertex_array() {
 
 namespace {
 
-GLuint compile(const Stage& s, const std::string& defines) {
-  const std::string src = stage_source(s, defines);
+GLuint compile(const Stage& s, const std::string& src) {
   const GLuint sh = glCreateShader(s.type);
   const char* text = src.c_str();
   glShaderSource(sh, 1, &text, nullptr);
@@ -141,15 +138,38 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
   at_shutdown(release_programs);
+  // The on-disk cache's key (program_cache.h): every stage's full source and the varyings.
+  std::vector<std::string> sources;
+  std::string disk_key = "isotile program 1\n";
+  for (const Stage& s : stages) {
+    sources.push_back(stage_source(s, defines));
+    disk_key += "stage " + std::to_string(s.type) + " " + std::string(s.file) + "\n";
+    disk_key += sources.back();
+    disk_key += '\n';
+  }
+  for (const char* v : varyings) {
+    disk_key += "varying ";
+    disk_key += v;
+    disk_key += '\n';
+  }
+  if (const GLuint saved = load_program(disk_key)) {
+    check("loading a saved program");
+    cache.emplace(key, saved);
+    built_keys().push_back(key);
+    return saved;
+  }
+  count_compiled_program();
   const GLuint prog = glCreateProgram();
   std::vector<GLuint> shaders;
-  for (const Stage& s : stages) {
-    shaders.push_back(compile(s, defines));
+  for (std::size_t i = 0; i < stages.size(); ++i) {
+    shaders.push_back(compile(stages[i], sources[i]));
     glAttachShader(prog, shaders.back());
   }
   if (!varyings.empty())
     glTransformFeedbackVaryings(prog, static_cast<GLsizei>(varyings.size()), varyings.data(),
                                 GL_INTERLEAVED_ATTRIBS);
+  if (program_cache_enabled())
+    glProgramParameteri(prog, GL_PROGRAM_BINARY_RETRIEVABLE_HINT, GL_TRUE);
   glLinkProgram(prog);
   for (GLuint sh : shaders) glDeleteShader(sh);
   GLint ok = 0;
@@ -161,6 +181,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
     throw Error("linking " + std::string(stages.front().file) + " failed: " + log);
   }
   check("linking a program");
+  store_program(disk_key, prog);
   cache.emplace(key, prog);
   built_keys().push_back(key);
   return prog;
@@ -247,45 +268,6 @@ void bind_case_tables(CaseTable which) {
   tables->bind(GL_UNIFORM_BUFFER, 0);
 }
 
-bool wide_samples(ScalarType type) {
-  return !(type == ScalarType::Int8 || type == ScalarType::UInt8 || type == ScalarType::Int16 ||
-           type == ScalarType::UInt16 || type == ScalarType::Float32);
-}
-
-std::string sample_defines(bool wide) {
-  return wide ? "#define SAMPLE_T double\n" : "#define SAMPLE_T float\n#define SAMPLE_IS_FLOAT\n";
-}
-
-Samples upload_samples(const VolumeView& view, const Box3& region) {
-  Samples out;
-  const bool exact_in_float = !wide_samples(view.type);
-  const Index3 d = {region.extent(0), region.extent(1), region.extent(2)};
-  const std::int64_t rows = d[1] * d[2];
-  auto convert = [&](auto tag) {
-    using Out = decltype(tag);
-    std::vector<Out> buf(static_cast<std::size_t>(d[0] * rows));
-    visit_scalar(view.type, [&](auto in_tag) {
-      using In = decltype(in_tag);
-      const In* src = view.typed<In>();
-      tbb::parallel_for(std::int64_t{0}, rows, [&](std::int64_t r) {
-        const std::int64_t j = region.lo[1] - view.box.lo[1] + r % d[1];
-        const std::int64_t k = region.lo[2] - view.box.lo[2] + r / d[1];
-        const std::int64_t i0 = region.lo[0] - view.box.lo[0];
-        Out* dst = buf.data() + r * d[0];
-        for (std::int64_t i = 0; i < d[0]; ++i)
-          dst[i] = static_cast<Out>(src[view.offset(i0 + i, j, k)]);
-      });
-    });
-    out.buffer = Buffer(buf.size() * sizeof(Out), buf.data());
-  };
-  if (exact_in_float)
-    convert(float{});
-  else
-    convert(double{});
-  out.defines = sample_defines(!exact_in_float);
-  return out;
-}
-
 void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   auto i3 = [&](const char* name, const Index3& v) {
     glProgramUniform3i(prog, glGetUniformLocation(prog, name), static_cast<GLint>(v[0]),
@@ -308,18 +290,6 @@ void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   d3("u_origin", u.origin);
   d3("u_spacing", u.spacing);
   check("setting the grid uniforms");
-}
-
-double StageTimer::now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-void StageTimer::lap(double* into) {
-  if (!into) return;
-  glFinish();
-  const double t = now();
-  *into += t - last_;
-  last_ = t;
 }
 
 }  // namespace isotile::gl

@@ -104,19 +104,8 @@ CaptureCut cut_capture(std::uint64_t first, std::uint64_t end, std::uint64_t wri
 enum class CaseTable { MarchingCubes, Macet };
 void bind_case_tables(CaseTable which = CaseTable::MarchingCubes);
 
-// Samples of `view` in the global box `region` (inside view.box), x fastest, as float when every
-// value of the type converts exactly (8- and 16-bit integers, float32), else as double: the
-// shaders then see exactly the CPU's values. `defines` gets SAMPLE_T.
-struct Samples {
-  Buffer buffer;
-  std::string defines;
-};
-Samples upload_samples(const VolumeView& view, const Box3& region);
-
-// Whether samples of `type` are uploaded as double (32-bit integers, float64) rather than float.
-bool wide_samples(ScalarType type);
-// The defines of upload_samples() for float (`wide` false) or double samples.
-std::string sample_defines(bool wide);
+// A slab's samples on the device (sample_upload.h).
+struct Samples;
 
 // Sets the uniforms every MC shader reads (mc_common.glsl) on `prog`.
 struct GridUniforms {
@@ -175,15 +164,5 @@ Mesh histopyramid_mesh(const VolumeView& view, const McOptions& o, McStats* stat
                        const EdgeMethod& method);
 Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
                           const EdgeMethod& method);
-
-// Adds the seconds since the last lap to *into (after glFinish), when into is not null.
-class StageTimer {
- public:
-  void lap(double* into);
-
- private:
-  double last_ = now();
-  static double now();
-};
 
 }  // namespace isotile::gl

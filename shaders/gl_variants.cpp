@@ -6,6 +6,7 @@
 #include "dc_gl_shared.h"
 #include "macet_gl.h"
 #include "mesh_render.h"
+#include "sample_upload.h"
 
 namespace isotile::gl {
 
@@ -38,13 +39,13 @@ void add_pyramid(Variants& out, const std::string& what, const std::string& defi
 // the defines "samples + NORMALS + the method's", and Macet's prepare passes (macet_gl.cpp).
 void add_edge_methods(Variants& out) {
   for (const bool macet : {false, true})
-    for (const bool wide : {false, true})
+    for (const ScalarType type : kSampleTypes)
       for (const bool normals : {false, true}) {
-        std::string defines = sample_defines(wide);
+        std::string defines = sample_defines(type);
         if (normals) defines += "#define NORMALS\n";
         if (macet) defines += macet_defines();
-        const std::string what = std::string(macet ? "macet" : "mc") +
-                                 (wide ? ", double samples" : ", float samples") +
+        const std::string what = std::string(macet ? "macet" : "mc") + ", " +
+                                 std::string(scalar_name(type)) + " samples" +
                                  (normals ? ", normals:" : ":");
         add(out, what + " hp classify", {{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
         add_pyramid(out, what + " hp", defines);
@@ -65,7 +66,7 @@ void add_edge_methods(Variants& out) {
 
 // Dual Contouring (dc_histopyramid.cpp, dc_geometry_shader.cpp): every option dc_defines() reads.
 void add_dual_contouring(Variants& out) {
-  for (const bool wide : {false, true})
+  for (const ScalarType type : kSampleTypes)
     for (const DcVertices vertices : {DcVertices::Cell, DcVertices::Patch})
       for (const DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle, DcSolver::Qef})
         for (const DcHermite hermite : {DcHermite::Central, DcHermite::Eno})
@@ -77,9 +78,8 @@ void add_dual_contouring(Variants& out) {
               o.hermite = hermite;
               o.normals = normals;
               o.keep_quads = quads;
-              const std::string samples = sample_defines(wide);
-              const std::string what =
-                  std::string("dc") + (wide ? ", double samples" : ", float samples") + ":";
+              const std::string samples = sample_defines(type);
+              const std::string what = "dc, " + std::string(scalar_name(type)) + " samples:";
               add_pyramid(out, what + " hp", samples + dc_defines(o, DcPass::Pyramid));
               add(out, what + " classify", {{GL_COMPUTE_SHADER, "dc_hp_classify.comp"}},
                   samples + dc_defines(o, DcPass::Classify));
@@ -101,9 +101,9 @@ void add_benchmark_layouts(Variants& out) {
       "hp_bench_tex_classify.comp", "hp_bench_tex_find.comp"};
   static constexpr const char* kReduces[] = {"hp_bench_block_reduce.comp",
                                              "hp_bench_tex_reduce.comp"};
-  for (const bool wide : {false, true}) {
-    const std::string d = sample_defines(wide);
-    const std::string what = wide ? "bench, double samples: " : "bench, float samples: ";
+  for (const ScalarType type : kSampleTypes) {
+    const std::string d = sample_defines(type);
+    const std::string what = "bench, " + std::string(scalar_name(type)) + " samples: ";
     for (const char* file : kPasses) add(out, what + file, {{GL_COMPUTE_SHADER, file}}, d);
     for (const char* file : kReduces) {
       add(out, what + file, {{GL_COMPUTE_SHADER, file}}, d);

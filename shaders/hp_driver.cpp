@@ -5,10 +5,14 @@
 #include <algorithm>
 #include <deque>
 #include <limits>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "core/errors.h"
 #include "gl_context.h"
+#include "sample_upload.h"
+#include "stage_clock.h"
 
 namespace isotile::gl {
 
@@ -29,17 +33,25 @@ void offset_indices(Faces& faces, std::size_t first, std::uint32_t base) {
 }
 
 // Runs the current program `prog` over `n` items in chunks of at most `cap`, each chunk read back
-// from `out` (bytes_per_item each) to `dst`, and `out2` to `dst2` when given.
+// from `out` (bytes_per_item each) to `dst`, and `out2` to `dst2` when given. With a clock, the
+// passes count as `stage` and the copies as the read-back.
 void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint64_t bytes_per_item,
-                     const Buffer& out, void* dst, const Buffer* out2 = nullptr,
-                     void* dst2 = nullptr) {
+                     const Buffer& out, void* dst, StageClock* clock, GlStage stage,
+                     const Buffer* out2 = nullptr, void* dst2 = nullptr) {
   for (std::uint64_t first = 0; first < n; first += cap) {
     const std::uint64_t k = std::min(cap, n - first);
     set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
     set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(k));
+    const StageClock::Mark start = clock ? clock->device_mark() : StageClock::Mark{};
     dispatch(k);
+    const StageClock::Mark done = clock ? clock->device_mark() : StageClock::Mark{};
+    const StageClock::Mark before = clock ? StageClock::cpu_mark() : StageClock::Mark{};
     out.read(0, k * bytes_per_item, static_cast<char*>(dst) + first * bytes_per_item);
     if (out2) out2->read(0, k * bytes_per_item, static_cast<char*>(dst2) + first * bytes_per_item);
+    if (clock) {
+      clock->add(stage, start, done);
+      clock->add_wait(GlStage::Readback, done, before, StageClock::cpu_mark());
+    }
   }
 }
 
@@ -50,12 +62,17 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   Scope scope;
   const DeviceInfo& dev = device();
   Mesh mesh;
-  const double sample_bytes = wide_samples(view.type) ? 8 : 4;
+  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
-  const std::vector<Box3> planned =
-      plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
-                 std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
-                 run.max_brick_cells_z);
+  std::vector<Box3> planned = plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
+                                         std::max(sample_bytes, method.largest_per_sample),
+                                         method.halo, budget, run.max_brick_cells_z);
+  // With several slabs, the next slab's samples are uploaded while this slab's pyramid is built
+  // (below), so two slabs' samples share the budget.
+  if (planned.size() > 1)
+    planned = plan_slabs(view, run.cells, 2 * sample_bytes + method.bytes_per_sample,
+                         std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
+                         run.max_brick_cells_z);
   std::deque<Box3> slabs(planned.begin(), planned.end());
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
   const std::uint64_t words = face_words(method.faces);
@@ -63,16 +80,26 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   const std::uint64_t out_bytes = std::max<std::uint64_t>(1, std::min(max_binding, budget / 2));
 
   method.bind_tables();
+  // Timer queries only when the stages are asked for.
+  StageClock clock_storage;
+  StageClock* const clock = stats ? &clock_storage : nullptr;
+  auto mark = [&] { return clock ? clock->device_mark() : StageClock::Mark{}; };
   std::uint64_t vertex_base = 0;
-  int slab_count = 0, draws = 0;
+  int slab_count = 0, draws = 0, early = 0;
   progress_begin(run.progress, isotile::Stage::Extract, static_cast<std::int64_t>(planned.size()));
+  // The next slab's region and samples, uploaded early (unused when that slab is split).
+  std::optional<std::pair<Box3, Samples>> next;
+  auto same_box = [](const Box3& a, const Box3& b) { return a.lo == b.lo && a.hi == b.hi; };
   while (!slabs.empty()) {
     const Box3 cells = slabs.front();
     slabs.pop_front();
     const Box3 elems = method.elements(cells);
     const Box3 region = slab_region(view, cells, method.halo);
-    StageTimer timer;
-    const Samples samples = upload_samples(view, region);
+    const bool uploaded = next && same_box(next->first, region);
+    early += uploaded;
+    const Samples samples =
+        uploaded ? std::move(next->second) : upload_samples(view, region, clock);
+    next.reset();
     const std::string pyramid = samples.defines + method.pyramid_defines;
     std::string base_defines = pyramid;  // appended, not concatenated: GCC 12's -Wrestrict
     base_defines += "#define BASE\n";
@@ -92,12 +119,14 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
     levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
     if (method.patch_maps) maps.bind(GL_SHADER_STORAGE_BUFFER, 6);
-    timer.lap(stats ? &stats->seconds_upload : nullptr);
     // The method's own passes (Macet: its displaced grid vertices); kept until the slab is done.
+    const StageClock::Mark prepare_start = mark();
     const std::vector<Buffer> kept =
         method.prepare ? method.prepare(samples, grid, samples.defines + method.classify_defines)
                        : std::vector<Buffer>{};
     samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
+    const StageClock::Mark classify_start = mark();
+    if (clock && method.prepare) clock->add(GlStage::Prepare, prepare_start, classify_start);
 
     // (1) classify
     GLuint prog = program({{GL_COMPUTE_SHADER, method.classify_file}},
@@ -105,6 +134,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     uniforms(prog);
     glUseProgram(prog);
     dispatch((elements + 1) / 2);
+    const StageClock::Mark scan_start = mark();
+    if (clock) clock->add(GlStage::Classify, classify_start, scan_start);
 
     // (2) the count pyramid, level by level, then each node's vertex offset, top-down
     const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, base_defines);
@@ -132,8 +163,20 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     check("building the HistoPyramid");
 
     // (3) totals
+    const StageClock::Mark scan_done = mark();
+    // The next slab's upload: its rows are copied into the staging buffers while the device
+    // builds this slab's pyramid, before the totals' read-back waits for it.
+    if (!slabs.empty()) {
+      const Box3 next_region = slab_region(view, slabs.front(), method.halo);
+      next.emplace(next_region, upload_samples(view, next_region, clock));
+    }
+    const StageClock::Mark totals_read = clock ? StageClock::cpu_mark() : StageClock::Mark{};
     std::uint32_t totals[2] = {};
     levels.read(std::size_t{pyr.offset[pyr.levels]} * 8, 8, totals);
+    if (clock) {
+      clock->add(GlStage::Scan, scan_start, scan_done);
+      clock->add_wait(GlStage::Readback, scan_done, totals_read, StageClock::cpu_mark());
+    }
     const std::uint64_t n_vertices = totals[0], n_faces = totals[1];
     if (method.positions_on_device && n_vertices * 12 > max_binding) {
       if (cells.extent(2) > 1) {
@@ -152,18 +195,19 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // The vertices of the top layer of elements are listed again, first, by the next slab.
     std::uint64_t shared = 0;
     if (!slabs.empty() && n_vertices > 0) {
+      const StageClock::Mark prefix_start = mark();
       prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, pyramid);
       uniforms(prog);
       shared = n_vertices -
                vertices_before(prog, pyr,
                                static_cast<std::uint32_t>(elems.extent(0) * elems.extent(1) *
                                                           (elems.extent(2) - 1)));
+      if (clock) clock->add(GlStage::Scan, prefix_start, StageClock::cpu_mark());
     }
     if (vertex_base + n_vertices > std::numeric_limits<std::uint32_t>::max())
       throw CapacityError(
           "the mesh would have more than 2^32 - 1 vertices, more than an in-memory mesh can "
           "index");
-    timer.lap(stats ? &stats->seconds_count : nullptr);
 
     // (4) vertices, in chunks unless the face pass reads them all
     const std::size_t v0 = mesh.positions.size();
@@ -182,8 +226,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
       glUseProgram(prog);
       pos.bind(GL_SHADER_STORAGE_BUFFER, 3);
       nrm.bind(GL_SHADER_STORAGE_BUFFER, 4);
-      dispatch_chunks(prog, n_vertices, vcap, 12, pos, mesh.positions.data() + v0,
-                      method.normals ? &nrm : nullptr,
+      dispatch_chunks(prog, n_vertices, vcap, 12, pos, mesh.positions.data() + v0, clock,
+                      GlStage::Vertices, method.normals ? &nrm : nullptr,
                       method.normals ? mesh.normals.data() + v0 : nullptr);
     }
 
@@ -200,7 +244,9 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     const std::string faces = samples.defines + method.face_defines;
     if (n_faces > 0 && method.positions_on_device) pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
     if (n_faces > 0 && method.gs_faces) {
+      const StageClock::Mark faces_start = mark();
       draws += method.gs_faces(faces, uniforms, pyr, elements, n_faces, out);
+      if (clock) clock->add(GlStage::Faces, faces_start, StageClock::cpu_mark());
     } else if (n_faces > 0) {
       prog = program({{GL_COMPUTE_SHADER, method.face_file}}, faces);
       uniforms(prog);
@@ -210,14 +256,13 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
           std::max<std::uint64_t>(1, std::min(out_bytes / (words * 4), n_faces));
       const Buffer face_buffer(cap * words * 4);
       face_buffer.bind(GL_SHADER_STORAGE_BUFFER, 3);
-      dispatch_chunks(prog, n_faces, cap, words * 4, face_buffer, out);
+      dispatch_chunks(prog, n_faces, cap, words * 4, face_buffer, out, clock, GlStage::Faces);
     }
     if (quads)
       offset_indices(mesh.quads, f0, static_cast<std::uint32_t>(vertex_base));
     else
       offset_indices(mesh.triangles, f0, static_cast<std::uint32_t>(vertex_base));
     check("writing the HistoPyramid mesh");
-    timer.lap(stats ? &stats->seconds_output : nullptr);
     mesh.positions.resize(v0 + n_vertices - shared);
     if (method.normals) mesh.normals.resize(v0 + n_vertices - shared);
     vertex_base += n_vertices - shared;
@@ -228,6 +273,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   if (stats) {
     stats->bricks = slab_count;
     stats->capture_passes = draws;
+    stats->early_uploads = early;
+    stats->times = clock->collect();
   }
   return mesh;
 }

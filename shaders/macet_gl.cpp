@@ -14,6 +14,7 @@
 #include "core/extract/macet_table.h"
 #include "gl_context.h"
 #include "gl_program.h"
+#include "sample_upload.h"
 
 namespace isotile::gl {
 

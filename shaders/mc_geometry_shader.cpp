@@ -11,6 +11,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -21,6 +22,8 @@
 #include "gl_backends.h"
 #include "gl_context.h"
 #include "gl_program.h"
+#include "sample_upload.h"
+#include "stage_clock.h"
 
 namespace isotile::gl {
 
@@ -57,10 +60,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   for (int a = 0; a < 3; ++a)
     if (view.dims[a] < 2) return mesh;
   const int halo = method.halo;
-  const bool wide = !(view.type == ScalarType::Int8 || view.type == ScalarType::UInt8 ||
-                      view.type == ScalarType::Int16 || view.type == ScalarType::UInt16 ||
-                      view.type == ScalarType::Float32);
-  const double sample_bytes = wide ? 8 : 4;
+  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
   const std::uint64_t budget = memory_budget(o.memory);
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);
@@ -89,6 +89,9 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   progress_begin(o.progress, isotile::Stage::Extract, static_cast<std::int64_t>(slabs.size()));
   Soup soup;
   int passes = 0;
+  // Timer queries only when the stages are asked for.
+  StageClock clock_storage;
+  StageClock* const clock = stats ? &clock_storage : nullptr;
   std::vector<std::uint32_t> staging;
   try {
     for (const Box3& slab : slabs) {
@@ -99,17 +102,18 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       for (int a = 0; a < 3; ++a)
         if (slab.hi[a] == box.hi[a]) cells.hi[a] = std::min(box.hi[a] + 1, view.global_dims[a] - 1);
       const Box3 region = slab_region(view, cells, halo);
-      StageTimer timer;
-      const Samples samples = upload_samples(view, region);
-      timer.lap(stats ? &stats->seconds_upload : nullptr);
+      const Samples samples = upload_samples(view, region, clock);
       std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
       defines += method.defines;
       const GridUniforms grid{region, cells, view.global_dims, o.iso, view.origin, view.spacing};
       samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
       // The method's own compute passes (Macet: its displaced grid vertices), kept until the slab
       // is done.
+      const StageClock::Mark prepare_start = clock ? clock->device_mark() : StageClock::Mark{};
       const std::vector<Buffer> kept =
           method.prepare ? method.prepare(samples, grid, defines) : std::vector<Buffer>{};
+      if (clock && method.prepare)
+        clock->add(GlStage::Prepare, prepare_start, clock->device_mark());
       const GLuint prog =
           program({{GL_VERTEX_SHADER, "gs_mc.vert"}, {GL_GEOMETRY_SHADER, "gs_mc.geom"}}, defines,
                   varyings);
@@ -121,6 +125,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       std::uint64_t cap = std::min(limit, first_guess(cells));
       Buffer capture(cap * tri_bytes);
       for (std::int64_t first = 0; first < n_cells;) {
+        const StageClock::Mark draw_start = clock ? clock->device_mark() : StageClock::Mark{};
         glBindBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, capture.id(), 0,
                           static_cast<GLsizeiptr>(cap * tri_bytes));
         glBeginQuery(GL_PRIMITIVES_GENERATED, queries[0]);
@@ -135,9 +140,15 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         glGetQueryObjectui64v(queries[1], GL_QUERY_RESULT, &written);
         check("capturing triangles");
         ++passes;
-        timer.lap(stats ? &stats->seconds_count : nullptr);
+        // The draw (classification and emission) and the capture's copy to the CPU.
+        const StageClock::Mark drawn = clock ? clock->device_mark() : StageClock::Mark{};
+        const StageClock::Mark read_start = clock ? StageClock::cpu_mark() : StageClock::Mark{};
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
+        if (clock) {
+          clock->add(GlStage::Classify, draw_start, drawn);
+          clock->add_wait(GlStage::Readback, drawn, read_start, StageClock::cpu_mark());
+        }
         auto cell_of = [&](std::uint64_t t) { return staging[t * 3 * words + 1]; };
         const CaptureCut cut =
             cut_capture(static_cast<std::uint64_t>(first), static_cast<std::uint64_t>(n_cells),
@@ -176,7 +187,6 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
           if (o.normals) std::memcpy(soup.normals[base + c].data(), w + 5, 12);
         }
         first = resume;
-        timer.lap(stats ? &stats->seconds_output : nullptr);
       }
       progress_advance(o.progress);  // Stage::Extract, begun below the slabs' plan
     }
@@ -189,7 +199,8 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   glDeleteQueries(2, queries);
   glUseProgram(0);
 
-  StageTimer weld_timer;
+  // The weld runs on the CPU: counted, in wall seconds, as the face stage.
+  const auto weld_start = std::chrono::steady_clock::now();
   // Weld: corners sorted by (key, position in the soup); one vertex per distinct key whose lower
   // sample lies in the closed box, in key order. Every such crossed edge borders a drawn cell, so
   // these are exactly the CPU's vertices.
@@ -225,8 +236,10 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   for (std::size_t t = 0; t < n / 3; ++t)
     if (soup.in_box[t])
       mesh.triangles.push_back({vertex_of[3 * t], vertex_of[3 * t + 1], vertex_of[3 * t + 2]});
-  weld_timer.lap(stats ? &stats->seconds_output : nullptr);
   if (stats) {
+    stats->times = clock->collect();
+    stats->times[GlStage::Faces] +=
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - weld_start).count();
     stats->bricks = static_cast<int>(slabs.size());
     stats->capture_passes = passes;
   }

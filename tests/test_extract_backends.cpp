@@ -13,7 +13,7 @@
 namespace isotile {
 namespace {
 
-Mesh failing(const VolumeView&, const ExtractOptions&) {
+Mesh failing(const VolumeView&, const ExtractOptions&, GpuReport*) {
   throw Error("the device lost its context");
 }
 std::string runs_here(bool* hardware, bool) {

@@ -4,11 +4,14 @@
 // OpenGL 4.5 device; on CPU-only machines on Mesa's llvmpipe. Skips when no context can be made.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "core/errors.h"
@@ -19,6 +22,7 @@
 #include "gl_test_support.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/sample_upload.h"
 #include "test_support.h"
 
 namespace isotile {
@@ -83,6 +87,84 @@ TEST_P(GlPaths, EveryScalarTypeEqualsCpu) {
     const Mesh gl = run(GetParam(), v.view(), {.iso = iso, .normals = true});
     expect_same_mesh(gl, cpu, v.view(), std::string(scalar_name(t)).c_str());
   }
+}
+
+// Each type over its whole range (sign extension of packed 8- and 16-bit samples, 32-bit integers
+// beyond a float's exact range, doubles closer together than floats), from views whose rows start
+// in the middle of a 32-bit word (odd x extents and offsets), whole and as bricks.
+TEST_P(GlPaths, FullRangeOfEveryTypeEqualsCpu) {
+  REQUIRE_GL();
+  const Volume field = make_field_volume({FieldKind::Gyroid, 23});
+  const float* f = field.data<float>();
+  const auto [lo_it, hi_it] = std::minmax_element(f, f + field.sample_count());
+  for (ScalarType t :
+       {ScalarType::Int8, ScalarType::UInt8, ScalarType::Int16, ScalarType::UInt16,
+        ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64}) {
+    Volume v(t, field.dims(), field.spacing(), field.origin());
+    double iso = 0;
+    visit_scalar(t, [&](auto tag) {
+      using T = decltype(tag);
+      const double lo = t == ScalarType::Float64   ? 0.1
+                        : t == ScalarType::Float32 ? -3e38
+                                                   : double(std::numeric_limits<T>::lowest());
+      const double hi = t == ScalarType::Float64   ? 0.1 + 1e-12
+                        : t == ScalarType::Float32 ? 3e38
+                                                   : double(std::numeric_limits<T>::max());
+      for (std::int64_t i = 0; i < field.sample_count(); ++i) {
+        const double u = (f[i] - *lo_it) / double(*hi_it - *lo_it);
+        v.data<T>()[i] = static_cast<T>(std::is_integral_v<T> ? std::round(lo + u * (hi - lo))
+                                                              : lo + u * (hi - lo));
+      }
+      // The isovalue is one of the samples: ties at it everywhere along its level.
+      iso = double(v.data<T>()[field.sample_count() / 2 + 5]);
+    });
+    const std::string what(scalar_name(t));
+    const Mesh cpu = marching_cubes(v.view(), {.iso = iso, .normals = true});
+    ASSERT_GT(cpu.triangles.size(), 100u) << what;
+    expect_same_mesh(run(GetParam(), v.view(), {.iso = iso, .normals = true}), cpu, v.view(),
+                     what.c_str());
+    const Box3 cells{{3, 5, 1}, {16, 20, 12}};
+    const Box3 local{{1, 3, 0}, {19, 23, 15}};  // cells plus the halo of 2 and one
+    const VolumeView view = subview(v.view(), local);
+    const Mesh cpu_brick = marching_cubes(view, {.iso = iso, .normals = true, .cells = cells});
+    const Mesh gl_brick = run(
+        GetParam(), view, {.iso = iso, .normals = true, .cells = cells, .max_brick_cells_z = 4});
+    expect_same_mesh(gl_brick, cpu_brick, view, (what + " brick").c_str());
+  }
+}
+
+// The staging buffers (pinned, persistently mapped) are made once and reused by every slab and
+// run: with buffers far smaller than a slab, each slab's samples pass through all of them in turn,
+// and the mesh is unchanged. The stats count exactly the samples of the slabs' regions, each
+// uploaded once (the HistoPyramid's early uploads are used, not repeated).
+TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
+  REQUIRE_GL();
+  const Volume field = make_field_volume({FieldKind::Gyroid, 29});
+  const Volume v = convert(field, ScalarType::Int16, 40.0, 0.0);
+  const Mesh cpu = marching_cubes(v.view(), {.iso = 0.0, .normals = true});
+  gl::Scope scope;
+  gl::set_staging_bytes(29 * 29 * 2 * 3 + 6);  // three rows of 29 x 29 samples and a bit
+  const int before = gl::staging_buffers_created();
+  for (int r = 0; r < 3; ++r) {
+    gl::McStats stats;
+    const Mesh gl =
+        run(GetParam(), v.view(), {.iso = 0.0, .normals = true, .max_brick_cells_z = 5}, &stats);
+    expect_same_mesh(gl, cpu, v.view(), "small staging buffers");
+    EXPECT_EQ(stats.bricks, 6);
+    // The HistoPyramid uploads every slab but the first while the one before is counted.
+    EXPECT_EQ(stats.early_uploads, GetParam() == Path::Hp ? 5 : 0);
+    // Each slab's region: its cells' planes plus one more and the normals' halo of one each side,
+    // clipped to the volume.
+    std::uint64_t planes = 0;
+    for (std::int64_t z = 0; z < 28; z += 5) {
+      const std::int64_t hi = std::min<std::int64_t>(z + 5, 28);
+      planes += std::min<std::int64_t>(hi + 3, 29) - std::max<std::int64_t>(z - 1, 0);
+    }
+    EXPECT_EQ(stats.times.upload_bytes, planes * 29 * 29 * 2);
+    EXPECT_GT(stats.times[gl::GlStage::Upload], 0.0);
+  }
+  EXPECT_EQ(gl::staging_buffers_created() - before, gl::kStagingBuffers);
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);
 }
 
 // Slabs along z (as for a volume larger than the device's memory) give the whole-volume mesh.

@@ -12,6 +12,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "cli_support.h"
 
@@ -143,6 +145,143 @@ TEST_F(GlCli, MacetGlRunsWriteTheCpuFile) {
         EXPECT_TRUE(slurp(dir_ / "gl.ply") == cpu) << m << " " << b << memory;
       }
   }
+}
+
+// The program cache (shaders/program_cache.h) in a fresh XDG_CACHE_HOME: the first run compiles
+// and writes every program, the second loads every one and compiles none; an entry cut short, one
+// with a flipped byte and one whose binary format the driver does not know are each rejected and
+// compiled again, and the run after that loads everything again. Every run writes the CPU's file
+// byte for byte, and --stats reports the stages, the upload and the context's start-up.
+TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
+  REQUIRE_GL_CLI();
+  const fs::path xdg = dir_ / "xdg";
+  const std::string env = "XDG_CACHE_HOME='" + xdg.string() + "'";
+  const std::string in = "extract field:gyroid:40 -q --normals ";
+  ASSERT_EQ(run(in + "--backend cpu -o cpu.ply --stats cpu.json").code, 0);
+  const auto cpu_stats = nlohmann::json::parse(slurp(dir_ / "cpu.json"));
+  EXPECT_FALSE(cpu_stats["seconds"].contains("gl"));
+  EXPECT_TRUE(cpu_stats["upload_gbps"].is_null());
+  EXPECT_TRUE(cpu_stats["gl_program_cache"].is_null());
+  auto hp = [&](const std::string& name) {
+    const Result r = run(in + "--backend hp -o " + name + ".ply --stats " + name + ".json", env);
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.err, "") << name;
+    EXPECT_TRUE(slurp(dir_ / (name + ".ply")) == slurp(dir_ / "cpu.ply")) << name;
+    return nlohmann::json::parse(slurp(dir_ / (name + ".json")));
+  };
+  const auto first = hp("first");
+  const auto& c1 = first["gl_program_cache"];
+  if (c1["state"] == "off")
+    ISOTILE_SKIP(Gl, "the driver cannot save GL programs here: " << c1["off_because"]);
+  EXPECT_EQ(c1["state"], "miss");
+  const int programs = c1["compiled"].get<int>();
+  EXPECT_GE(programs, 5);
+  EXPECT_EQ(c1["loaded"], 0);
+  std::vector<fs::path> entries;
+  for (const auto& e : fs::directory_iterator(xdg / "isotile")) entries.push_back(e.path());
+  std::sort(entries.begin(), entries.end());
+  ASSERT_EQ(static_cast<int>(entries.size()), programs);  // no temporary file left
+  for (const fs::path& e : entries) EXPECT_EQ(e.extension(), ".bin") << e;
+  // The stages, the upload (40^3 float32 samples in one slab) and the context.
+  for (const char* stage :
+       {"upload", "prepare", "classify", "scan", "vertices", "faces", "readback", "context"})
+    EXPECT_GE(first["seconds"]["gl"][stage].get<double>(), 0.0) << stage;
+  EXPECT_GT(first["seconds"]["gl"]["classify"].get<double>(), 0.0);
+  EXPECT_GT(first["seconds"]["gl"]["context"].get<double>(), 0.0);
+  EXPECT_EQ(first["upload_bytes"], 40 * 40 * 40 * 4);
+  EXPECT_GT(first["upload_gbps"].get<double>(), 0.0);
+
+  const auto second = hp("second");
+  EXPECT_EQ(second["gl_program_cache"]["state"], "hit");
+  EXPECT_EQ(second["gl_program_cache"]["loaded"], programs);
+  EXPECT_EQ(second["gl_program_cache"]["compiled"], 0);
+
+  // Cut short; one byte of the binary flipped; a binary format the driver does not know.
+  fs::resize_file(entries[0], fs::file_size(entries[0]) / 2);
+  auto patch = [](const fs::path& p, std::size_t offset, char x) {
+    std::fstream f(p, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(static_cast<std::streamoff>(offset));
+    char c = 0;
+    f.get(c);
+    f.seekp(static_cast<std::streamoff>(offset));
+    f.put(static_cast<char>(c ^ x));
+  };
+  patch(entries[1], fs::file_size(entries[1]) - 1, 0x5a);
+  patch(entries[2], 8, 0x77);  // the header's format word
+  const auto third = hp("third");
+  EXPECT_EQ(third["gl_program_cache"]["state"], "partial");
+  EXPECT_EQ(third["gl_program_cache"]["rejected"], 3);
+  EXPECT_EQ(third["gl_program_cache"]["compiled"], 3);
+  EXPECT_EQ(third["gl_program_cache"]["loaded"], programs - 3);
+  const auto fourth = hp("fourth");
+  EXPECT_EQ(fourth["gl_program_cache"]["state"], "hit");
+  EXPECT_EQ(fourth["gl_program_cache"]["rejected"], 0);
+}
+
+// Several processes filling one empty cache at once (as MPI ranks do): each writes its entries
+// through a temporary file renamed over the entry, so all succeed, no temporary file is left and
+// a later run loads every entry.
+TEST_F(GlCli, ProgramCacheWrittenByProcessesAtOnce) {
+  REQUIRE_GL_CLI();
+  const fs::path xdg = dir_ / "xdg";
+  const std::string env = "XDG_CACHE_HOME='" + xdg.string() + "'";
+  const std::string in = "extract field:torus:30 -q --backend hp ";
+  // In the work directory (`cd` first, on its own: `cd && a &` would put only `a` there).
+  std::string cmd = "cd '";  // appended, not concatenated: GCC 12's -Wrestrict
+  cmd += dir_.string();
+  cmd += "' || exit 1; ";
+  for (int p = 0; p < 4; ++p) {
+    const std::string n = std::to_string(p);
+    cmd += "(";
+    cmd += env;
+    cmd += " '";
+    cmd += ISOTILE_CLI;
+    cmd += "' ";
+    cmd += in;
+    for (const std::string& part :
+         {std::string("-o p"), n, std::string(".ply || echo failed > fail"), n,
+          std::string(") & ")})
+      cmd += part;
+  }
+  cmd += "wait";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  for (const char* p : {"0", "1", "2", "3"}) {
+    EXPECT_FALSE(fs::exists(dir_ / (std::string("fail") + p))) << p;
+    EXPECT_TRUE(slurp(dir_ / (std::string("p") + p + ".ply")) == slurp(dir_ / "p0.ply")) << p;
+  }
+  const Result r = run(in + "-o last.ply --stats last.json", env);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(dir_ / "last.json"));
+  if (j["gl_program_cache"]["state"] == "off")
+    ISOTILE_SKIP(
+        Gl, "the driver cannot save GL programs here: " << j["gl_program_cache"]["off_because"]);
+  EXPECT_EQ(j["gl_program_cache"]["state"], "hit");
+  EXPECT_EQ(j["gl_program_cache"]["rejected"], 0);
+  for (const auto& e : fs::directory_iterator(xdg / "isotile"))
+    EXPECT_EQ(e.path().extension(), ".bin") << e.path();
+}
+
+// A cache folder that cannot be made is no error: one note, and the run compiles and succeeds.
+// (Mesa keeps its own shader cache elsewhere here, so that the driver can still save programs.)
+TEST_F(GlCli, UnwritableProgramCacheIsOneNote) {
+  REQUIRE_GL_CLI();
+  std::ofstream(dir_ / "not-a-folder") << "x";
+  fs::create_directories(dir_ / "mesa");
+  const std::string env = "XDG_CACHE_HOME='" + (dir_ / "not-a-folder").string() +
+                          "' MESA_SHADER_CACHE_DIR='" + (dir_ / "mesa").string() + "'";
+  ASSERT_EQ(run("extract field:gyroid:30 -q --backend cpu -o cpu.ply").code, 0);
+  const Result r = run("extract field:gyroid:30 -q --backend hp -o hp.ply --stats hp.json", env);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(slurp(dir_ / "hp.ply") == slurp(dir_ / "cpu.ply"));
+  const auto j = nlohmann::json::parse(slurp(dir_ / "hp.json"));
+  if (j["gl_program_cache"]["state"] == "off")
+    ISOTILE_SKIP(
+        Gl, "the driver cannot save GL programs here: " << j["gl_program_cache"]["off_because"]);
+  EXPECT_EQ(j["gl_program_cache"]["state"], "miss");
+  const std::string note = "isotile: note: the GL program cache ";
+  ASSERT_NE(r.err.find(note), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find(note, r.err.find(note) + 1), std::string::npos) << r.err;  // once
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }
 
 TEST_F(GlCli, GlInfoDescribesTheDevice) {

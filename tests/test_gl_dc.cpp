@@ -97,12 +97,14 @@ TEST_P(GlDc, FieldsEqualCpuForEveryVariant) {
   }
 }
 
-// Integer samples exactly at the isovalue (pinned ties move their crossings, isovalue_ties.h),
-// uploaded as float, and as doubles uploaded as double.
+// Samples exactly at the isovalue (pinned ties move their crossings, isovalue_ties.h), in every
+// sample type, each uploaded as stored and widened by the shaders.
 TEST_P(GlDc, TiesAndWideSamplesEqualCpu) {
   REQUIRE_GL();
   const Volume field = make_field_volume({FieldKind::Gyroid, 19});
-  for (ScalarType t : {ScalarType::UInt8, ScalarType::Float64}) {
+  for (ScalarType t :
+       {ScalarType::Int8, ScalarType::UInt8, ScalarType::Int16, ScalarType::UInt16,
+        ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64}) {
     Volume v(t, field.dims(), field.spacing(), field.origin());
     visit_scalar(t, [&](auto tag) {
       using T = decltype(tag);

@@ -66,13 +66,16 @@ TEST_P(GlMacet, ProceduralFieldsMatchCpu) {
     }
 }
 
-// Integer samples, many exactly at the isovalue: the ties (isovalue_ties.h) and the inside test
-// must agree with the CPU; 32-bit integers and doubles upload as double.
+// Every sample type, many samples exactly at the isovalue: the ties (isovalue_ties.h) and the
+// inside test must agree with the CPU; each type is uploaded as stored and widened by the shaders.
 TEST_P(GlMacet, IntegerSamplesWithTiesMatchCpu) {
   REQUIRE_GL();
   const Volume field = make_field_volume({FieldKind::Gyroid, 17});
-  for (ScalarType t : {ScalarType::UInt8, ScalarType::Int32}) {
-    const bool is_unsigned = t == ScalarType::UInt8;
+  for (ScalarType t :
+       {ScalarType::Int8, ScalarType::UInt8, ScalarType::Int16, ScalarType::UInt16,
+        ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64}) {
+    const bool is_unsigned =
+        t == ScalarType::UInt8 || t == ScalarType::UInt16 || t == ScalarType::UInt32;
     Volume v(t, field.dims(), field.spacing(), field.origin());
     visit_scalar(t, [&](auto tag) {
       using T = decltype(tag);

@@ -232,6 +232,7 @@ TEST_F(Glslang, EveryProgramVariantCompilesLinksAndWritesNoDoubleLaneByIndex) {
     }
   });
   for (const std::string& f : failures) ADD_FAILURE() << f;
+  std::printf("%zu program variants checked\n", variants.size());
   EXPECT_TRUE(failures.empty()) << failures.size() << " of " << variants.size()
                                 << " program variants fail";
 }

@@ -27,12 +27,23 @@ class MpiCli : public isotile::testing::CliTest {
  protected:
   void SetUp() override {
     CliTest::SetUp();
+    // The GL program cache and Mesa's shader cache of the ranks (GlBackendRunsOnEveryRank) beside
+    // the work directory (whose files the tests count), not in the home folder: ctest's
+    // ENVIRONMENT for these tests holds LSAN_OPTIONS.
+    cache_ = dir_.string() + "-xdg";
+    setenv("XDG_CACHE_HOME", cache_.c_str(), 1);
 #ifndef ISOTILE_MPIRUN
     ISOTILE_SKIP(Mpi, "isotile was built without MPI (libopenmpi-dev, ISOTILE_MPI)");
 #else
     if (!fs::exists(ISOTILE_MPIRUN)) ISOTILE_SKIP(Mpi, "no mpirun at " << ISOTILE_MPIRUN);
 #endif
   }
+
+  void TearDown() override {
+    fs::remove_all(cache_);
+    CliTest::TearDown();
+  }
+  fs::path cache_;
 
   // `isotile extract ARGS` on `ranks` ranks; `env` is passed to every rank. Shared memory between
   // the ranks of this one machine (ob1 and vader): without them OpenMPI first probes UCX, which

@@ -15,6 +15,7 @@
 #include "core/mesh/self_intersections.h"
 #include "core/volume/procedural_fields.h"
 #include "tiler/brick_plan.h"
+#include "tiler/gpu_report_json.h"
 #include "tiler/source_histogram.h"
 #include "tiler/volume_source.h"
 
@@ -415,6 +416,7 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
                     {"measure", t_measure},
                     {"total", seconds_since(t_total)}};
     if (simplifying) j["seconds"]["simplify"] = t_simplify;
+    add_gpu_report(j, choice.gpu);  // seconds.gl, upload_gbps, gl_program_cache (docs/cli.md)
     j["peak_rss_mb"] = peak_rss_mb();
   }
   if (options.keep_mesh) {

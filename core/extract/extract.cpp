@@ -15,16 +15,16 @@ namespace isotile {
 
 namespace {
 
-Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o) {
+Mesh cpu_marching_cubes(const VolumeView& view, const ExtractOptions& o, GpuReport*) {
   return marching_cubes(
       view, {.iso = o.iso, .normals = o.normals, .cells = o.cells, .progress = o.progress});
 }
 
-Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o) {
+Mesh cpu_dual_contouring(const VolumeView& view, const ExtractOptions& o, GpuReport*) {
   return dual_contouring(view, dual_contouring_options(o));
 }
 
-Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o) {
+Mesh cpu_macet(const VolumeView& view, const ExtractOptions& o, GpuReport*) {
   return macet(view, macet_options(o));
 }
 
@@ -223,12 +223,17 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
   const int m = static_cast<int>(options.method);
   BackendChoice choice = choose_backend(options);
   const Backend b = choice.backend;
+  GpuReport report;
+  GpuReport* const wanted = ran && b != Backend::Cpu ? &report : nullptr;
   if (options.backend != Backend::Auto || b == Backend::Cpu) {
+    Mesh mesh = entry(b).run[m](view, options, wanted);
+    if (wanted) choice.gpu = std::move(report);
     if (ran) *ran = std::move(choice);
-    return entry(b).run[m](view, options);
+    return mesh;
   }
   try {
-    Mesh mesh = entry(b).run[m](view, options);
+    Mesh mesh = entry(b).run[m](view, options, wanted);
+    if (wanted) choice.gpu = std::move(report);
     if (ran) *ran = std::move(choice);
     return mesh;
   } catch (const Error& e) {
@@ -237,7 +242,7 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
     if (ran)
       *ran = {Backend::Cpu, "auto: the CPU after the " + std::string(entry(b).name) +
                                 " backend failed: " + e.what()};
-    return entry(Backend::Cpu).run[m](view, options);
+    return entry(Backend::Cpu).run[m](view, options, nullptr);
   }
 }
 

@@ -8,8 +8,11 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "core/extract/dual_contouring.h"
@@ -82,9 +85,27 @@ Backend resolve_backend(const ExtractOptions& options);
 // resolve_backend() with the reason: "requested" for an explicit backend, else the Auto rule
 // that chose it. ISOTILE_AUTO_BACKEND=cpu|gs|hp overrides the rules (diagnosis and tests); an
 // override whose backend cannot run here gives the CPU, saying why.
+// What a GL backend reports about one extraction: plain data, so that core does not depend on GL
+// (the GL backends fill it; `isotile extract --stats` writes it, docs/cli.md).
+struct GpuReport {
+  // Seconds per stage, summed over the slabs, in the driver's order ("upload", "prepare",
+  // "classify", "scan", "vertices", "faces", "readback"), from GL timer queries.
+  std::vector<std::pair<std::string, double>> seconds;
+  std::uint64_t upload_bytes = 0;  // bytes of samples uploaded, as stored
+  double upload_seconds = 0;       // from the first byte handed to GL until resident, summed
+  double context_seconds = 0;      // the process's GL context start-up (EGL or OSMesa, driver)
+  // The on-disk program cache over this extraction: programs loaded from it, compiled, and
+  // entries rejected (corrupt or stale); `program_cache_off` says why it was not used ("" if used).
+  int programs_loaded = 0, programs_compiled = 0, programs_rejected = 0;
+  std::string program_cache_off;
+};
+
 struct BackendChoice {
+  BackendChoice() = default;
+  BackendChoice(Backend b, std::string why) : backend(b), reason(std::move(why)) {}
   Backend backend = Backend::Cpu;
   std::string reason;
+  std::optional<GpuReport> gpu;  // set by extract() when a GL backend made the mesh
 };
 BackendChoice choose_backend(const ExtractOptions& options);
 
@@ -98,7 +119,8 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
 // returns "" when the backend can run on this machine, setting *hardware when it runs on a real
 // GPU (Auto picks a GPU backend only then), else why it cannot; with `hardware_only` (Auto's
 // question) it may answer "cannot" cheaply for anything but a real GPU.
-using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&);
+// `report`, when not null, gets the backend's account (GL backends only; the CPU leaves it).
+using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&, GpuReport* report);
 using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
                       ProbeFn probe);

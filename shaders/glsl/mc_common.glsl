@@ -1,5 +1,6 @@
 // Shared by every Marching Cubes shader (prepended by gl_program.cpp after "#version 450" and
-// the variant's defines: SAMPLE_T is float or double, NORMALS when normals are wanted).
+// the variant's defines: SAMPLE_<TYPE> the samples' stored type (shaders/sample_upload.h),
+// SAMPLE_IS_FLOAT when a float holds every value of it, NORMALS when normals are wanted).
 //
 // Everything that decides a vertex follows core/extract/marching_cubes.cpp exactly: a sample is inside when
 // double(value) >= iso; a vertex on the edge from sample s along axis a sits at
@@ -7,7 +8,39 @@
 // rounded to float at the end; `precise` forbids fused multiply-adds the CPU does not do, so the
 // positions are the CPU's bit for bit where the device's double arithmetic is IEEE.
 
-layout(std430, binding = 0) readonly buffer Samples { SAMPLE_T samples[]; };
+// The samples as stored (shaders/sample_upload.cpp uploads the volume's bytes unconverted): 8- and
+// 16-bit integers packed into 32-bit words (little-endian, as on the host), widened here.
+#if defined(SAMPLE_U8) || defined(SAMPLE_I8) || defined(SAMPLE_U16) || defined(SAMPLE_I16)
+layout(std430, binding = 0) readonly buffer Samples { uint samples[]; };
+#elif defined(SAMPLE_F32)
+layout(std430, binding = 0) readonly buffer Samples { float samples[]; };
+#elif defined(SAMPLE_I32)
+layout(std430, binding = 0) readonly buffer Samples { int samples[]; };
+#elif defined(SAMPLE_U32)
+layout(std430, binding = 0) readonly buffer Samples { uint samples[]; };
+#else
+layout(std430, binding = 0) readonly buffer Samples { double samples[]; };
+#endif
+
+// Sample i of the uploaded region, widened exactly: to float where a float holds every value of
+// the type (SAMPLE_IS_FLOAT), else to double.
+#ifdef SAMPLE_IS_FLOAT
+float sample_value(uint i) {
+#if defined(SAMPLE_U8)
+  return float(bitfieldExtract(samples[i >> 2], int(i & 3u) * 8, 8));
+#elif defined(SAMPLE_I8)
+  return float(bitfieldExtract(int(samples[i >> 2]), int(i & 3u) * 8, 8));
+#elif defined(SAMPLE_U16)
+  return float(bitfieldExtract(samples[i >> 1], int(i & 1u) * 16, 16));
+#elif defined(SAMPLE_I16)
+  return float(bitfieldExtract(int(samples[i >> 1]), int(i & 1u) * 16, 16));
+#else
+  return samples[i];
+#endif
+}
+#else
+double sample_value(uint i) { return double(samples[i]); }
+#endif
 
 // The case tables of core/extract/marching_cubes_tables.h, uploaded from the same constexpr arrays.
 layout(std140, binding = 0) uniform Tables {
@@ -58,7 +91,7 @@ uint invocation() {
 double sample_at(ivec3 g) {
   uvec3 l = uvec3(clamp(g - u_region_lo, ivec3(0), u_region_dims - 1));
   uvec3 d = uvec3(u_region_dims);
-  return double(samples[l.x + d.x * (l.y + d.y * l.z)]);
+  return double(sample_value(l.x + d.x * (l.y + d.y * l.z)));
 }
 
 // double(v) >= iso; for float samples the same answer as v >= u_iso_float, which is cheaper.
@@ -66,7 +99,7 @@ bool inside(ivec3 g) {
 #ifdef SAMPLE_IS_FLOAT
   uvec3 l = uvec3(clamp(g - u_region_lo, ivec3(0), u_region_dims - 1));
   uvec3 d = uvec3(u_region_dims);
-  return samples[l.x + d.x * (l.y + d.y * l.z)] >= u_iso_float;
+  return sample_value(l.x + d.x * (l.y + d.y * l.z)) >= u_iso_float;
 #else
   return sample_at(g) >= u_iso;
 #endif

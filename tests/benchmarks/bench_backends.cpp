@@ -5,6 +5,7 @@
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
 //   cmake --build build-bench --target bench_backends
 //   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--methods mc,macet,dc]
+//       [--data DIR] [--gyroid512]
 //
 // Dual Contouring runs with the CLI's defaults (patch vertices, mass point, central Hermite data)
 // and, as a second row per volume, the paper's particle minimizer (10 steps).
@@ -12,7 +13,13 @@
 // Times are wall-clock medians of R runs (default 5) of the whole extraction call as a user sees
 // it: upload, passes, read-back, (GS) weld. Each GL path runs once before timing, so shader
 // compilation is not counted. --threads sets TBB's and llvmpipe's threads (LP_NUM_THREADS, read
-// at context creation). Real volumes from ../shared/data are skipped, with a message, when absent.
+// at context creation). The real volumes (engine, bonsai) are read from --data DIR, else from
+// $ISOTILE_GPU_DATA (a GPU machine does not see ../shared), else from ../shared/data; each is
+// skipped, with a message, when absent. --gyroid512 adds gyroid 512^3 float32 (512 MiB of samples;
+// minutes on llvmpipe). For Marching Cubes and Macet a second table gives, per volume, the GL
+// stages of one more run of each path from GL timer queries (shaders/stage_clock.h), the upload's
+// GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
+// triangles/s of the median whole-call times.
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -96,10 +103,31 @@ void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
 int main(int argc, char** argv) {
   int threads = 2, repeat = 5;
   std::string methods = "mc,macet,dc";
+  std::filesystem::path data = ISOTILE_SHARED_DATA;
+  if (const char* env = std::getenv("ISOTILE_GPU_DATA"); env && *env) data = env;
+  bool gyroid512 = false;
   for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
-    if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
-    if (std::strcmp(argv[i], "--methods") == 0 && i + 1 < argc) methods = argv[++i];
+    if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
+      threads = std::atoi(argv[++i]);
+    } else if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) {
+      repeat = std::atoi(argv[++i]);
+    } else if (std::strcmp(argv[i], "--methods") == 0 && i + 1 < argc) {
+      methods = argv[++i];
+    } else if (std::strcmp(argv[i], "--data") == 0 && i + 1 < argc) {
+      data = argv[++i];
+    } else if (std::strcmp(argv[i], "--gyroid512") == 0) {
+      gyroid512 = true;
+    } else {
+      std::fprintf(stderr,
+                   "bench_backends: unknown argument '%s' (--threads N, --repeat R, --methods "
+                   "LIST, --data DIR, --gyroid512)\n",
+                   argv[i]);
+      return 2;
+    }
+  }
+  if (threads < 1 || repeat < 1) {
+    std::fprintf(stderr, "bench_backends: --threads and --repeat must be at least 1\n");
+    return 2;
   }
   const bool run_mc = methods.find("mc") != std::string::npos;
   const bool run_macet = methods.find("macet") != std::string::npos;
@@ -116,13 +144,16 @@ int main(int argc, char** argv) {
               dev.platform.c_str(), dev.version.c_str(), threads, repeat);
 
   std::vector<Case> cases;
-  for (auto [kind, n] : {std::pair{FieldKind::Sphere, 128}, std::pair{FieldKind::Gyroid, 128},
-                         std::pair{FieldKind::Gyroid, 256}}) {
+  std::vector<std::pair<FieldKind, int>> fields = {
+      {FieldKind::Sphere, 128}, {FieldKind::Gyroid, 128}, {FieldKind::Gyroid, 256}};
+  if (gyroid512) fields.emplace_back(FieldKind::Gyroid, 512);
+  for (auto [kind, n] : fields) {
     const FieldSpec spec{kind, n};
     cases.push_back({std::string(field_name(kind)) + "-" + std::to_string(n),
                      std::make_shared<Volume>(make_field_volume(spec)), field_default_iso(kind)});
   }
-  const std::filesystem::path shared(ISOTILE_SHARED_DATA);
+  const std::filesystem::path& shared = data;
+  std::printf("volumes from %s\n", data.c_str());
   for (auto [file, name] : {std::pair{"engine_256x256x128_uint8.raw.gz", "engine"},
                             std::pair{"bonsai_256x256x256_uint8.raw.gz", "bonsai"}}) {
     if (std::filesystem::exists(shared / file))
@@ -168,6 +199,8 @@ int main(int argc, char** argv) {
   struct Stages {
     std::string name;
     gl::McStats gs, hp;
+    std::size_t triangles;
+    double cpu, gs_s, hp_s;  // median whole-call seconds
   };
   std::vector<Stages> stages;
   for (const Runner& r : runners) {
@@ -191,16 +224,33 @@ int main(int argc, char** argv) {
       gl::McStats sg, sh;
       r.gs(v, c.iso, &sg);
       r.hp(v, c.iso, &sh);
-      stages.push_back({std::string(r.method) + " " + c.name, sg, sh});
+      stages.push_back(
+          {std::string(r.method) + " " + c.name, sg, sh, cpu.triangles.size(), t_cpu, t_gs, t_hp});
     }
   }
-  // Where the GL time goes: one more run of each with glFinish between stages. Macet's grid-vertex
-  // passes (and Max's search) count as counting.
-  std::printf("\nstages in ms (upload / count / output), one run each\n");
-  std::printf("%-18s %26s %26s\n", "method volume", "gs", "hp");
-  for (const auto& [name, sg, sh] : stages)
-    std::printf("%-18s %8.1f / %6.1f / %6.1f %8.1f / %6.1f / %6.1f\n", name.c_str(),
-                1e3 * sg.seconds_upload, 1e3 * sg.seconds_count, 1e3 * sg.seconds_output,
-                1e3 * sh.seconds_upload, 1e3 * sh.seconds_count, 1e3 * sh.seconds_output);
+  // Where the GL time goes: one more run of each path, its stages from GL timer queries
+  // (shaders/stage_clock.h, no glFinish), summed over slabs; upload GB/s from the same run;
+  // triangles/s from the medians above.
+  std::printf(
+      "\nGL stages in ms (one run each: upload, prepare, classify, scan, vertices, faces, "
+      "readback), upload GB/s, Mtriangles/s (medians)\n");
+  std::printf("%-18s %-4s %8s %8s %8s %8s %8s %8s %8s %8s %10s\n", "method volume", "path",
+              "upload", "prepare", "classify", "scan", "vertices", "faces", "readback", "GB/s",
+              "Mtri/s");
+  auto row = [](const std::string& name, const char* path, const gl::McStats& st,
+                std::size_t triangles, double seconds) {
+    const gl::GlTimes& t = st.times;
+    const double up = t[gl::GlStage::Upload];
+    std::printf("%-18s %-4s", name.c_str(), path);
+    for (int i = 0; i < gl::kGlStageCount; ++i) std::printf(" %8.1f", 1e3 * t.seconds[i]);
+    std::printf(" %8.2f %10.1f\n", up > 0 ? static_cast<double>(t.upload_bytes) / up / 1e9 : 0.0,
+                static_cast<double>(triangles) / seconds / 1e6);
+  };
+  for (const Stages& st : stages) {
+    std::printf("%-18s %-4s%72s %10.1f\n", st.name.c_str(), "cpu", "",
+                static_cast<double>(st.triangles) / st.cpu / 1e6);
+    row(st.name, "gs", st.gs, st.triangles, st.gs_s);
+    row(st.name, "hp", st.hp, st.triangles, st.hp_s);
+  }
   return 0;
 }

@@ -38,6 +38,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/gl_program.h"
+#include "shaders/sample_upload.h"
 
 namespace {
 

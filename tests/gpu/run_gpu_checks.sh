@@ -9,16 +9,27 @@
 #   ../shared/tools/gpu_bundle.sh build-gpu/tiler/isotile build-gpu/tests/test_gl \
 #       build-gpu/tests/test_gl_macet build-gpu/tests/test_gl_dc build-gpu/tests/gl_double_check \
 #       build-gpu/tests/benchmarks/bench_backends
-#   then, on the GPU machine, with .gpu/ carried along:
-#   source .gpu/env.sh && bash tests/gpu/run_gpu_checks.sh [--quick]
+#   mkdir -p gpu-data && cp ../shared/data/bonsai_256x256x256_uint8.raw.gz \
+#       ../shared/data/engine_256x256x128_uint8.raw.gz gpu-data/   (the shared data does not
+#       travel to the GPU machine; gpu-data/ is an untracked folder of the working tree: do not
+#       commit it)
+#   then, on the GPU machine, with .gpu/ and gpu-data/ carried along:
+#   source .gpu/env.sh && ISOTILE_GPU_DATA=$PWD/gpu-data bash tests/gpu/run_gpu_checks.sh [--quick]
 #
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
-# check fails. --quick: the bricked runs on gyroid 192 in 16 MiB bricks (a smoke run, also on llvmpipe).
+# check fails. Measurements print as "gpu-measure: ..." lines (the data path's targets, issue 35:
+# upload GB/s on gyroid 256/512 and bonsai, the one-shot whole process of `extract
+# field:gyroid:512` on hp against cpu with a warm program cache, the context's start-up).
+# --quick: the bricked runs on gyroid 192 in 16 MiB bricks and the measurements on gyroid 128
+# (a smoke run, also on llvmpipe). The GL program cache goes to a fresh XDG_CACHE_HOME under the
+# output folder, so the first GL run is cold and every later one warm.
 set -uo pipefail
 size=1024 memory=8GiB
 [ "${1:-}" = --quick ] && size=192 memory=16MiB
 out=${TMPDIR:-/tmp}/isotile-gpu-checks
 rm -rf "$out" && mkdir -p "$out"
+export XDG_CACHE_HOME="$out/cache"
+data=${ISOTILE_GPU_DATA:-}
 failed=0
 report() {  # NAME STATUS DETAIL
   if [ "$2" = 0 ]; then echo "gpu-check: $1: pass ${3:-}"; else echo "gpu-check: $1: FAIL ${3:-}"; failed=$((failed + 1)); fi
@@ -66,10 +77,64 @@ done
 gl_double_check 4000000
 report "double / and sqrt as the CPU" $?
 
-# 5. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5).
-bench_backends --threads 16 | tee "$out/bench_backends.txt"
+# 5. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5), with
+# the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick.
+big=--gyroid512
+[ "$size" = 192 ] && big=
+bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends $?
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
+
+# 6. The data path (issue 35). Upload GB/s and the stages from --stats (seconds.gl), a run with a
+# warm program cache each: gyroid 256 and 512 float32, bonsai uint8 (from $ISOTILE_GPU_DATA).
+json_get() {  # FILE EXPR (python3 expression over j)
+  python3 -c "import json,sys; j=json.load(open(sys.argv[1])); print($2)" "$1"
+}
+inputs="field:gyroid:256 field:gyroid:512"
+[ "$size" = 192 ] && inputs="field:gyroid:128"
+if [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
+  inputs="$inputs $data/bonsai_256x256x256_uint8.raw.gz"
+else
+  echo "gpu-measure: bonsai skipped (set ISOTILE_GPU_DATA to a folder holding bonsai_256x256x256_uint8.raw.gz)"
+fi
+for in in $inputs; do
+  iso=; case "$in" in *bonsai*) iso="--iso 49.5" ;; esac
+  for run in warmup measured; do
+    isotile --threads 16 extract "$in" $iso -q --backend hp -o "$out/d.ply" --stats "$out/d.json"
+    rc=$?
+  done
+  report "hp $in runs" $rc
+  [ $rc = 0 ] && echo "gpu-measure: upload $(basename "$in"): $(json_get "$out/d.json" \
+    '"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items()) + "; program cache " + j["gl_program_cache"]["state"]')"
+done
+rm -f "$out/d.ply"
+
+# 7. One-shot whole process, warm program cache: `extract field:gyroid:512` on hp against cpu,
+# 5 processes each, interleaved, median wall seconds; and the context's start-up.
+one=field:gyroid:512
+[ "$size" = 192 ] && one=field:gyroid:128
+isotile --threads 16 extract $one -q --backend hp -o "$out/o.ply"  # the cache warm
+wall() {  # BACKEND: wall seconds of one process
+  local t0 t1
+  t0=$(date +%s.%N)
+  isotile --threads 16 extract $one -q --backend "$1" -o "$out/o-$1.ply" || return 1
+  t1=$(date +%s.%N)
+  python3 -c "print(f'{$t1 - $t0:.3f}')"
+}
+cpu_t=() hp_t=()
+for i in 1 2 3 4 5; do cpu_t+=("$(wall cpu)") hp_t+=("$(wall hp)"); done
+median() { printf '%s\n' "$@" | sort -g | sed -n 3p; }
+echo "gpu-measure: one-shot $one whole process (median of 5): cpu $(median "${cpu_t[@]}") s [${cpu_t[*]}], hp $(median "${hp_t[@]}") s [${hp_t[*]}]"
+cmp -s "$out/o-cpu.ply" "$out/o-hp.ply"
+report "one-shot $one hp same file as cpu" $?
+isotile --threads 16 extract $one -q --backend hp -o "$out/o.ply" --stats "$out/o.json"
+echo "gpu-measure: one-shot $one hp: context start-up $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["gl"]["context"]'), extract $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["extract"]'), total $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["total"]'), program cache $(json_get "$out/o.json" 'j["gl_program_cache"]["state"]')"
+rm -f "$out"/o*.ply
+# The same with the program cache cold: a fresh XDG_CACHE_HOME (Mesa's shader cache follows it
+# too, and so may the NVIDIA driver's own: then the driver's cache is cold as well).
+XDG_CACHE_HOME="$out/cold-cache" isotile --threads 16 extract $one -q --backend hp -o "$out/o.ply" --stats "$out/o.json"
+echo "gpu-measure: one-shot $one hp, isotile's program cache cold: total $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["total"]'), $(json_get "$out/o.json" 'j["gl_program_cache"]["compiled"]') programs compiled"
+rm -f "$out"/o*.ply
 
 echo "gpu-check: $failed failed"
 [ "$failed" = 0 ]

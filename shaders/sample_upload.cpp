@@ -1,0 +1,176 @@
+#include "sample_upload.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+
+#include "core/errors.h"
+#include "gl_context.h"
+#include "stage_clock.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// The pinned staging buffers, mapped once and kept until shutdown(). A fence per buffer marks
+// the device copy that still reads it.
+struct StagingBuffer {
+  GLuint id = 0;
+  std::byte* mapped = nullptr;
+  GLsync fence = nullptr;
+};
+std::array<StagingBuffer, kStagingBuffers>& staging() {
+  static std::array<StagingBuffer, kStagingBuffers> buffers;
+  return buffers;
+}
+int& created_count() {
+  static int n = 0;
+  return n;
+}
+std::size_t& staging_size() {
+  static std::size_t bytes = kDefaultStagingBytes;
+  return bytes;
+}
+
+void release_staging() {
+  for (StagingBuffer& s : staging()) {
+    if (s.fence) glDeleteSync(s.fence);
+    if (s.id) {
+      glUnmapNamedBuffer(s.id);
+      glDeleteBuffers(1, &s.id);
+    }
+    s = {};
+  }
+}
+
+StagingBuffer& staging_buffer(int i) {
+  StagingBuffer& s = staging()[static_cast<std::size_t>(i)];
+  if (s.id) return s;
+  at_shutdown(release_staging);
+  // Client storage: host memory the device reads by DMA (pinned), not device memory.
+  const GLbitfield flags =
+      GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT | GL_CLIENT_STORAGE_BIT;
+  glCreateBuffers(1, &s.id);
+  glNamedBufferStorage(s.id, static_cast<GLsizeiptr>(staging_size()), nullptr, flags);
+  s.mapped = static_cast<std::byte*>(
+      glMapNamedBufferRange(s.id, 0, static_cast<GLsizeiptr>(staging_size()),
+                            GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT));
+  if (!s.mapped) {
+    glDeleteBuffers(1, &s.id);
+    s = {};
+    check("mapping a staging buffer");
+    throw Error("OpenGL could not map a staging buffer for the samples");
+  }
+  ++created_count();
+  return s;
+}
+
+// Waits until the device no longer reads staging buffer `s` (its last copy has run).
+void wait_idle(StagingBuffer& s) {
+  if (!s.fence) return;
+  while (glClientWaitSync(s.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000) ==
+         GL_TIMEOUT_EXPIRED) {
+  }
+  glDeleteSync(s.fence);
+  s.fence = nullptr;
+}
+
+}  // namespace
+
+int staging_buffers_created() {
+  return created_count();
+}
+
+std::size_t staging_bytes() {
+  return staging_size();
+}
+
+void set_staging_bytes(std::size_t bytes) {
+  release_staging();
+  staging_size() = std::max<std::size_t>(bytes, 4);
+}
+
+std::size_t device_sample_bytes(ScalarType type) {
+  return scalar_size(type);
+}
+
+std::string sample_defines(ScalarType type) {
+  switch (type) {
+    case ScalarType::Int8:
+      return "#define SAMPLE_I8\n#define SAMPLE_IS_FLOAT\n";
+    case ScalarType::UInt8:
+      return "#define SAMPLE_U8\n#define SAMPLE_IS_FLOAT\n";
+    case ScalarType::Int16:
+      return "#define SAMPLE_I16\n#define SAMPLE_IS_FLOAT\n";
+    case ScalarType::UInt16:
+      return "#define SAMPLE_U16\n#define SAMPLE_IS_FLOAT\n";
+    case ScalarType::Int32:
+      return "#define SAMPLE_I32\n";
+    case ScalarType::UInt32:
+      return "#define SAMPLE_U32\n";
+    case ScalarType::Float32:
+      return "#define SAMPLE_F32\n#define SAMPLE_IS_FLOAT\n";
+    case ScalarType::Float64:
+      return "#define SAMPLE_F64\n";
+  }
+  return {};
+}
+
+Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* clock) {
+  Samples out;
+  const std::size_t size = scalar_size(view.type);
+  const Index3 d = {region.extent(0), region.extent(1), region.extent(2)};
+  const std::size_t row_bytes = static_cast<std::size_t>(d[0]) * size;
+  const std::int64_t rows = d[1] * d[2];
+  out.bytes = row_bytes * static_cast<std::size_t>(rows);
+  out.defines = sample_defines(view.type);
+  // Whole 32-bit words: the shaders read 8- and 16-bit samples a word at a time.
+  out.buffer = Buffer((out.bytes + 3) / 4 * 4);
+  if (out.bytes == 0) return out;
+  const std::size_t chunk_bytes = staging_size();
+  if (row_bytes > chunk_bytes)
+    throw CapacityError("one row of " + std::to_string(d[0]) +
+                        " samples exceeds the GL staging buffer");
+  const std::int64_t rows_per_chunk = static_cast<std::int64_t>(chunk_bytes / row_bytes);
+  const auto* src = static_cast<const std::byte*>(view.data);
+  const std::int64_t i0 = region.lo[0] - view.box.lo[0];
+  const bool contiguous_rows = view.strides[0] == 1;
+  StageClock::Mark handed{};
+  int next = 0;
+  for (std::int64_t first = 0; first < rows; first += rows_per_chunk) {
+    const std::int64_t n = std::min(rows_per_chunk, rows - first);
+    StagingBuffer& s = staging_buffer(next);
+    next = (next + 1) % kStagingBuffers;
+    wait_idle(s);
+    if (clock && first == 0) handed = StageClock::cpu_mark();
+    // Copy whole rows as stored; the widening is the shaders'.
+    tbb::parallel_for(std::int64_t{0}, n, [&](std::int64_t r) {
+      const std::int64_t row = first + r;
+      const std::int64_t j = region.lo[1] - view.box.lo[1] + row % d[1];
+      const std::int64_t k = region.lo[2] - view.box.lo[2] + row / d[1];
+      std::byte* dst = s.mapped + static_cast<std::size_t>(r) * row_bytes;
+      if (contiguous_rows) {
+        std::memcpy(dst, src + static_cast<std::size_t>(view.offset(i0, j, k)) * size, row_bytes);
+      } else {
+        for (std::int64_t i = 0; i < d[0]; ++i)
+          std::memcpy(dst + static_cast<std::size_t>(i) * size,
+                      src + static_cast<std::size_t>(view.offset(i0 + i, j, k)) * size, size);
+      }
+    });
+    // Coherent mapping: the writes are visible to the copy without a flush.
+    glCopyNamedBufferSubData(s.id, out.buffer.id(), 0,
+                             static_cast<GLintptr>(static_cast<std::size_t>(first) * row_bytes),
+                             static_cast<GLsizeiptr>(static_cast<std::size_t>(n) * row_bytes));
+    s.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+  }
+  check("uploading the samples");
+  if (clock) {
+    clock->add(GlStage::Upload, handed, clock->device_mark());
+    clock->add_upload_bytes(out.bytes);
+  }
+  return out;
+}
+
+}  // namespace isotile::gl
