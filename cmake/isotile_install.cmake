@@ -123,7 +123,7 @@ isotile_export_library(isotile_tiler NAME tiler
 if(TARGET isotile_gl)
   isotile_export_library(isotile_glad NAME glad INTERNAL)
   isotile_export_library(isotile_gl NAME gl
-    HEADERS shaders/gl_backends.h
+    HEADERS shaders/gl_backends.h shaders/stage_clock.h
     FIND_PACKAGES "OpenGL COMPONENTS EGL" PNG
     DEBIAN_DEPENDS libegl-dev libpng-dev)
 endif()

@@ -214,9 +214,16 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     }
     // The library's progress (its stage, the fraction of it) onto MeshLab's bar: the
     // extraction from 30% to 60%, the simplification from 60% to 90%.
+    // A run goes through several stages (count, extract, Macet's search), each from 0 to 1 and
+    // their number not known ahead: stage n fills [1 - 2^-(n-1), 1 - 2^-n) of the span, so
+    // the bar only moves forward.
     auto span = [&](double from, double width) {
-      return [&report, from, width](const ProgressUpdate& u) {
-        report(std::string(stage_name(u.stage)), from + width * u.fraction);
+      return [&report, from, width, stage = Stage::Read, n = 0](const ProgressUpdate& u) mutable {
+        if (n == 0 || u.stage != stage) ++n;
+        stage = u.stage;
+        const double base = 1 - std::ldexp(1.0, 1 - n);
+        report(std::string(stage_name(u.stage)),
+               from + width * (base + std::ldexp(1.0, -n) * u.fraction));
         return true;
       };
     };

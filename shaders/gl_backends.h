@@ -13,7 +13,7 @@
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
 #include "core/volume/volume.h"
-#include "stage_clock.h"
+#include "shaders/stage_clock.h"
 
 namespace isotile::gl {
 
