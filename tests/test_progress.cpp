@@ -63,9 +63,10 @@ void expect_monotonic_runs(const std::vector<ProgressUpdate>& updates, const std
     if (starts) {
       EXPECT_EQ(u.fraction, 0.0) << what << ": stage " << stage_name(u.stage) << " call " << i
                                  << " does not start at 0";
-      if (i > 0)
+      if (i > 0) {
         EXPECT_EQ(updates[i - 1].fraction, 1.0)
             << what << ": stage " << stage_name(updates[i - 1].stage) << " ended below 1";
+      }
     } else {
       EXPECT_GE(u.fraction, updates[i - 1].fraction)
           << what << ": stage " << stage_name(u.stage) << " went back at call " << i;
@@ -174,8 +175,12 @@ TEST(Progress, ChildReportsWithinItsBrick) {
     EXPECT_EQ(u.stage, Stage::Extract);
     EXPECT_EQ(u.brick, 3);
     EXPECT_EQ(u.bricks, 8);
-    if (i > 0) EXPECT_GE(u.fraction, rec.updates[i - 1].fraction) << i;
-    if (i + 1 < rec.updates.size()) EXPECT_LT(u.fraction, 1.0) << i;
+    if (i > 0) {
+      EXPECT_GE(u.fraction, rec.updates[i - 1].fraction) << i;
+    }
+    if (i + 1 < rec.updates.size()) {
+      EXPECT_LT(u.fraction, 1.0) << i;
+    }
   }
   EXPECT_EQ(rec.updates.back().fraction, 1.0);
 
@@ -240,7 +245,7 @@ TEST_F(ProgressFiles, WritingReportsPerChunkAndCancelLeavesNothing) {
   for (const char* name : {"m.ply", "m.stl", "m.obj", "m.off"}) {
     Recorder rec;
     Progress progress(rec.callback());
-    write_mesh(mesh, dir_ / name, {.progress = &progress});
+    write_mesh(mesh, dir_ / name, {.format = std::nullopt, .progress = &progress});
     EXPECT_GE(rec.count(Stage::Write), 10) << name;
     expect_monotonic_runs(rec.updates, name);
     fs::remove(dir_ / name);
@@ -248,7 +253,9 @@ TEST_F(ProgressFiles, WritingReportsPerChunkAndCancelLeavesNothing) {
     Recorder stop;
     stop.stop_at = 4;
     Progress cancelling(stop.callback());
-    EXPECT_THROW(write_mesh(mesh, dir_ / name, {.progress = &cancelling}), Cancelled) << name;
+    EXPECT_THROW(write_mesh(mesh, dir_ / name, {.format = std::nullopt, .progress = &cancelling}),
+                 Cancelled)
+        << name;
     EXPECT_TRUE(names().empty()) << name << " left " << names().front();
   }
 }
@@ -303,7 +310,9 @@ TEST_F(ProgressFiles, TiledExtractionCancelledLeavesNothing) {
   for (const auto& u : rec.updates) {
     EXPECT_EQ(u.bricks, r.plan.total());
     const auto key = std::pair(u.stage, u.brick);
-    if (last.count(key)) EXPECT_GE(u.fraction, last[key]);
+    if (last.count(key)) {
+      EXPECT_GE(u.fraction, last[key]);
+    }
     last[key] = u.fraction;
     done[key] += u.fraction == 1.0;
   }
