@@ -26,16 +26,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using Log = std::function<void(const std::string&)>;
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-std::string fmt_seconds(double s) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.3f s", s);
-  return buf;
-}
-
 // Gives the heap's free blocks back to the kernel. A process that keeps freed blocks for reuse
 // (the CLI: mallopt in tiler/cli) would otherwise hold them through the next stage.
 void return_freed_memory() {

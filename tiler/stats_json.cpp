@@ -1,11 +1,23 @@
 #include "tiler/stats_json.h"
 
+#include <cstdio>
+
 #include <sys/resource.h>
 #include <tbb/global_control.h>
 
 #include "core/mesh/surface_distance.h"
 
 namespace isotile {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::string fmt_seconds(double s) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f s", s);
+  return buf;
+}
 
 StatsJson quality_json(const QualityStats& q) {
   StatsJson j;

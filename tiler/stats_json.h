@@ -3,7 +3,9 @@
 // (the CLI, Python, the MeshLab plugin) reports the same keys with the same values.
 #pragma once
 
+#include <chrono>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "core/mesh/mesh.h"
 #include "core/mesh/mesh_quality.h"
@@ -32,6 +34,11 @@ StatsJson simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& 
 
 // The process's peak resident set so far, MB.
 double peak_rss_mb();
+
+// Seconds since `t0` on the steady clock, and such a duration as "1.234 s" (the stats' and the
+// progress lines' timings).
+double seconds_since(std::chrono::steady_clock::time_point t0);
+std::string fmt_seconds(double s);
 
 // Worker threads the run may use (TBB's current limit), the stats' "threads".
 int stats_threads();

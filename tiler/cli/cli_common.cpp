@@ -52,16 +52,6 @@ bool print_progress(const ProgressUpdate& u) {
 }  // namespace
 Progress g_progress{print_progress};
 
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-std::string fmt_seconds(double s) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.3f s", s);
-  return buf;
-}
-
 void InputArgs::add_to(CLI::App& app) {
   app.add_option("INPUT", input,
                  "Volume file by extension: NRRD (.nrrd, .nhdr), OpenVDB (.vdb), NIfTI (.nii, "

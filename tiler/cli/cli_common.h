@@ -13,6 +13,7 @@
 #include "core/volume/volume_io.h"
 #ifdef ISOTILE_HAVE_MPI
 #include "tiler/mpi_extract.h"
+#include "tiler/stats_json.h"
 #endif
 
 namespace isotile::cli {
@@ -33,9 +34,6 @@ extern bool g_distributed;
 
 // One progress line on stderr ("isotile: MESSAGE") unless --quiet.
 void progress(const std::string& message);
-
-double seconds_since(Clock::time_point t0);
-std::string fmt_seconds(double s);
 
 // Options describing how to read a raw input, shared by `extract` and `info`.
 struct InputArgs {
