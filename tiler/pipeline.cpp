@@ -54,12 +54,10 @@ std::string dims_text(const Index3& d) {
   return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
 
-// Out of core: brick by brick within options.memory, streamed into options.output.
-PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& options,
-                         const ExtractOptions& extract, MeshFormat format, const Log& log,
-                         Clock::time_point t_total) {
-  if (input.volume)
-    throw InputError("an out-of-core run (memory) reads its input from a file; drop memory");
+}  // namespace
+
+TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions& extract,
+                           MeshFormat format) {
   TiledOptions to;
   to.extract = extract;
   to.memory = parse_memory_size(options.memory);
@@ -74,6 +72,18 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
         "--check-intersections needs the whole mesh in memory; drop --memory, or run "
         "`isotile quality --check-intersections` on the output");
   to.progress = options.progress;
+  return to;
+}
+
+namespace {
+
+// Out of core: brick by brick within options.memory, streamed into options.output.
+PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& options,
+                         const ExtractOptions& extract, MeshFormat format, const Log& log,
+                         Clock::time_point t_total) {
+  if (input.volume)
+    throw InputError("an out-of-core run (memory) reads its input from a file; drop memory");
+  TiledOptions to = tiled_options(options, extract, format);
   auto source = open_volume_source(input.path, input.raw, to.memory);
   check_grid_geometry(source->spacing, source->origin, source->world, input.path);
   if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);

@@ -115,6 +115,12 @@ void check_pipeline_options(const PipelineOptions& options);
 StatsJson choose_isovalue(const ValueHistogram& histogram, double& iso,
                           const std::function<void(const std::string&)>& log);
 
+// The tiler's options of an out-of-core run of `options` (memory, format, simplify, progress,
+// quality measures when the stats are wanted); throws InputError for what a streamed run cannot
+// do (ASCII, --check-intersections).
+TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions& extract,
+                           MeshFormat format);
+
 // The statistics of an out-of-core run (single process or MPI).
 struct TiledStatsInput {
   std::string input, output;

@@ -121,20 +121,7 @@ int run_extract_distributed(const ExtractArgs& args, PipelineOptions o, Clock::t
         "threshold of the samples (`isotile info " +
         args.in.input + "` shows their range and histogram)");
   if (o.simplify < 1 && e.keep_quads) throw InputError("--simplify gives triangles; drop --quads");
-  TiledOptions to;
-  to.extract = e;
-  to.memory = parse_memory_size(args.memory);
-  to.allow_empty = args.allow_empty;
-  to.format = format;
-  to.simplify = args.simplify;
-  // The radius-ratio statistics cost a fifth of a streamed run; only --stats reports them.
-  to.quality = !args.stats.empty();
-  if (args.ascii) throw InputError("--memory writes binary PLY or STL; drop --ascii");
-  if (args.check_intersections)
-    throw InputError(
-        "--check-intersections needs the whole mesh in memory; drop --memory, or run "
-        "`isotile quality --check-intersections` on the output");
-  to.progress = &g_progress;
+  TiledOptions to = tiled_options(o, e, format);
   json auto_iso;
   // Every rank reads the whole input once for the histogram and finds the same value.
   if (o.iso_auto)
