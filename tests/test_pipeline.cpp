@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/errors.h"
@@ -16,6 +18,7 @@
 #include "core/volume/procedural_fields.h"
 #include "test_support.h"
 #include "tiler/pipeline.h"
+#include "tiler/source_histogram.h"
 
 namespace isotile {
 namespace {
@@ -134,6 +137,32 @@ TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
   const PipelineResult c = run_pipeline(input("field:sphere:48"), o);
   EXPECT_EQ(c.quality.triangles, c.mesh.triangles.size());
   EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
+}
+
+// No surface: the CLI's message, and its finding for a front end with other ways out.
+TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
+  const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+  const std::pair<double, double> range = value_range(read_volume(nucleon).view());
+  std::ostringstream finding;
+  finding << "the samples range from " << range.first << " to " << range.second << ", all below it";
+  for (const char* memory : {"", "256KiB"}) {
+    PipelineOptions o;
+    o.iso = 1000;
+    o.memory = memory;
+    if (*memory) o.output = (dir_ / "m.ply").string();
+    try {
+      run_pipeline(input(nucleon), o);
+      ADD_FAILURE() << "no error";
+    } catch (const NoSurfaceError& e) {
+      EXPECT_EQ(e.iso, 1000);
+      EXPECT_EQ(e.range, range);
+      EXPECT_EQ(e.finding, finding.str());
+      EXPECT_EQ(std::string(e.what()), "no surface at iso 1000: " + finding.str() +
+                                           "; choose an isovalue inside the range, or --iso "
+                                           "auto (or --allow-empty to write the empty mesh)");
+    }
+  }
+  EXPECT_TRUE(fs::is_empty(dir_));
 }
 
 TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {
