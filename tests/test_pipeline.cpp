@@ -139,6 +139,31 @@ TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
   EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
 }
 
+// The samples' range (options.range) comes back for a front end to show, from what the run read:
+// in core one pass or iso_auto's histogram, out of core the histogram.
+TEST_F(Pipeline, ReportsTheSamplesRange) {
+  const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+  const std::pair<double, double> range = value_range(read_volume(nucleon).view());
+  ASSERT_LT(range.first, range.second);
+  PipelineOptions o;
+  o.iso = 60.5;
+  EXPECT_FALSE(run_pipeline(input(nucleon), o).range.has_value());  // not asked for
+  o.range = true;
+  const PipelineResult in_core = run_pipeline(input(nucleon), o);
+  ASSERT_TRUE(in_core.range.has_value());
+  EXPECT_EQ(*in_core.range, range);
+  o.iso_auto = true;
+  EXPECT_EQ(run_pipeline(input(nucleon), o).range, range);
+  o.memory = "256KiB";
+  o.output = (dir_ / "m.ply").string();
+  const PipelineResult bricked_auto = run_pipeline(input(nucleon), o);
+  EXPECT_GT(bricked_auto.bricks, 1);
+  EXPECT_EQ(bricked_auto.range, range);
+  // Out of core without iso_auto: no second pass over the file for it.
+  o.iso_auto = false;
+  EXPECT_FALSE(run_pipeline(input(nucleon), o).range.has_value());
+}
+
 // No surface: the CLI's message, and its finding for a front end with other ways out.
 TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
   const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
