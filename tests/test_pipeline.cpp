@@ -15,7 +15,9 @@
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/mesh_io.h"
+#include "core/volume/itk_reader.h"
 #include "core/volume/procedural_fields.h"
+#include "skip_support.h"
 #include "test_support.h"
 #include "tiler/pipeline.h"
 #include "tiler/source_histogram.h"
@@ -162,6 +164,35 @@ TEST_F(Pipeline, ReportsTheSamplesRange) {
   // Out of core without iso_auto: no second pass over the file for it.
   o.iso_auto = false;
   EXPECT_FALSE(run_pipeline(input(nucleon), o).range.has_value());
+}
+
+// A DICOM series' UID and description come back from the headers the run read, in core and out
+// of core, for a front end that names the series (the MeshLab plugin's layer).
+TEST_F(Pipeline, ReportsTheDicomSeries) {
+  PipelineOptions o;
+  o.iso = 60.5;
+  const PipelineResult raw =
+      run_pipeline(input(std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz"), o);
+  EXPECT_TRUE(raw.series_uid.empty());  // not DICOM
+  EXPECT_TRUE(raw.series_description.empty());
+  const fs::path dicom = fs::path(ISOTILE_SHARED_DATA) / "dicom_uih_t1_head_slab/00000060.dcm";
+  if (!fs::exists(dicom)) ISOTILE_SKIP(SharedData, "no shared data at " << dicom);
+  if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK");
+  const VolumeHeader h = read_volume_header(dicom.string());
+  ASSERT_FALSE(h.series_description.empty());
+  ASSERT_FALSE(h.series_uid.empty());
+  PipelineOptions d;
+  d.iso = 300;
+  d.keep_mesh = false;
+  const PipelineResult whole = run_pipeline(input(dicom.string()), d);
+  EXPECT_EQ(whole.series_uid, h.series_uid);
+  EXPECT_EQ(whole.series_description, h.series_description);
+  d.memory = "64MiB";
+  d.output = (dir_ / "d.ply").string();
+  const PipelineResult bricked = run_pipeline(input(dicom.string()), d);
+  EXPECT_GT(bricked.bricks, 1);
+  EXPECT_EQ(bricked.series_uid, h.series_uid);
+  EXPECT_EQ(bricked.series_description, h.series_description);
 }
 
 // No surface: the CLI's message, and its finding for a front end with other ways out.

@@ -89,6 +89,8 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);
   StatsJson auto_iso;
   PipelineResult result;
+  result.series_uid = source->series_uid;
+  result.series_description = source->series_description;
   if (options.iso_auto) {
     log("reading " + input.path + " once for --iso auto's histogram");
     const ValueHistogram h = source_histogram(*source, to.memory, options.progress);
@@ -275,6 +277,8 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
         fmt_seconds(t_read));
 
   PipelineResult result;
+  result.series_uid = volume.series_uid();
+  result.series_description = volume.series_description();
   StatsJson auto_iso;
   if (options.iso_auto) {
     const ValueHistogram h = value_histogram(view);

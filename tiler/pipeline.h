@@ -100,6 +100,9 @@ struct PipelineResult {
   // The samples' lowest and highest value: set in core with options.range or iso_auto, out of
   // core with iso_auto (the histogram's bounds).
   std::optional<std::pair<double, double>> range;
+  // A DICOM series' UID and description, from the headers the run read (empty for other inputs
+  // and for input.volume), for a front end that names the series (the MeshLab plugin's layer).
+  std::string series_uid, series_description;
   Backend backend = Backend::Cpu;  // where it ran
   std::int64_t bricks = 1;
   std::uint64_t triangles = 0, vertices = 0;  // of the final mesh (quads count as two)
