@@ -150,7 +150,6 @@ class BarMapping {
       : report_(report), file_name_(std::move(file_name)), method_(std::move(method)) {}
 
   bool operator()(const ProgressUpdate& u) {
-    if (!report_) return true;
     const bool extraction =
         u.stage == Stage::Count || u.stage == Stage::Extract || u.stage == Stage::MacetSearch;
     if (n_ == 0 || u.stage != stage_) n_ = extraction ? n_ + 1 : 0;
@@ -242,7 +241,7 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
   const std::string method(method_name(options.extract.method));
   BarMapping bar(progress, fs::path(p.file).filename().string(), method);
   isotile::Progress listening([&](const ProgressUpdate& u) { return bar(u); });
-  options.progress = &listening;
+  if (progress) options.progress = &listening;  // else the library's loops skip the reports
 
   // Brick by brick the pipeline streams the mesh into a file, as the CLI's --memory does; it
   // goes in a private folder and MeshLab then holds the whole result.
