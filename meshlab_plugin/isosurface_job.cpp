@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -11,14 +12,11 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
-#include "core/mesh/mesh_frame.h"
 #include "core/mesh/mesh_io.h"
-#include "core/volume/otsu_isovalue.h"
-#include "core/volume/volume_io.h"
+#include "core/progress.h"
 #include "tiler/input_options.h"
+#include "tiler/pipeline.h"
 #include "tiler/source_histogram.h"
-#include "tiler/tiled_extract.h"
-#include "tiler/volume_source.h"
 
 namespace isotile::meshlab {
 
@@ -99,16 +97,16 @@ std::string file_stem(const std::string& file) {
   return name;
 }
 
-ExtractOptions extract_options(const IsosurfaceParams& p) {
-  ExtractOptions o;
+// The fields as the pipeline's options. The enum indices are checked here (scripts carry
+// indices, and the message lists the dialog's choices); the pipeline checks the rest (simplify,
+// macet_relax, the backend) with the CLI's messages.
+PipelineOptions pipeline_options(const IsosurfaceParams& p) {
+  PipelineOptions po;
+  ExtractOptions& o = po.extract;
   o.method = static_cast<Method>(checked_choice(p.method, kMethodNames, "method"));
   o.quality = checked_choice(p.macet_quality, kMacetQualityNames, "macet_quality") == 1
                   ? MacetQuality::Max
                   : MacetQuality::Fast;
-  if (!(p.macet_relax >= 0 && p.macet_relax < 0.5))
-    throw InputError("macet_relax must be in [0, 0.5), got " + std::to_string(p.macet_relax));
-  if (p.macet_relax > 0 && o.method != Method::Macet)
-    throw InputError("macet_relax applies to the Macet method only; set it to 0");
   o.macet_relax = p.macet_relax;
   const int solver = checked_choice(p.dc_solver, kDcSolverNames, "dc_solver");
   o.dc_solver = solver == 1   ? DcSolver::Particle
@@ -125,12 +123,79 @@ ExtractOptions extract_options(const IsosurfaceParams& p) {
               : backend == 2 ? Backend::GeometryShader
               : backend == 3 ? Backend::HistoPyramid
                              : Backend::Auto;
+  o.normals = p.normals;
+  // The dialog's way to the automatic isovalue is nan, which the CLI's message does not know.
   if (!p.iso_auto && !std::isfinite(p.iso))
     throw InputError("iso must be a finite number, or nan for the automatic isovalue");
-  o.iso = p.iso;
-  o.normals = p.normals;
-  return o;
+  po.iso_auto = p.iso_auto;
+  if (!p.iso_auto) po.iso = p.iso;
+  po.simplify = p.simplify;
+  po.memory = p.memory == "0" ? "" : p.memory;
+  po.world_frame = true;  // the mesh in the volume's world coordinates, as `isotile extract`
+  po.quality = true;      // the log's radius ratios
+  po.range = true;        // the log's range of the samples
+  return po;
 }
+
+// The library's progress (its stage, the brick, the fraction of the stage in that brick) onto
+// MeshLab's bar and status line: reading to 25%, the histogram of --iso auto brick by brick to
+// 30%, the extraction's stages (count, extract, Macet's search) from 30% to 60%, simplification
+// from 60% to 90%, the bricks' file after that. The extraction's stages are several, each from 0
+// to 1 and their number not known ahead: stage n fills [1 - 2^-(n-1), 1 - 2^-n) of the span.
+// Bricks in flight at once finish out of order, so the bar takes the highest value told so far:
+// it only moves forward.
+class BarMapping {
+ public:
+  BarMapping(const Progress& report, std::string file_name, std::string method)
+      : report_(report), file_name_(std::move(file_name)), method_(std::move(method)) {}
+
+  bool operator()(const ProgressUpdate& u) {
+    const bool extraction =
+        u.stage == Stage::Count || u.stage == Stage::Extract || u.stage == Stage::MacetSearch;
+    if (n_ == 0 || u.stage != stage_) n_ = extraction ? n_ + 1 : 0;
+    stage_ = u.stage;
+    const double done = std::clamp((static_cast<double>(u.brick) + u.fraction) /
+                                       static_cast<double>(std::max<std::int64_t>(u.bricks, 1)),
+                                   0.0, 1.0);
+    double from = 0.02, width = 0.23;
+    if (u.stage == Stage::Histogram) from = 0.25, width = 0.05;
+    if (extraction) {
+      from = 0.3 + 0.3 * (1 - std::ldexp(1.0, 1 - n_));
+      width = 0.3 * std::ldexp(1.0, -n_);
+    }
+    if (u.stage == Stage::Simplify) from = 0.6, width = 0.3;
+    if (u.stage == Stage::Write) from = 0.9, width = 0;
+    bar_ = std::max(bar_, from + width * done);
+    report_(label(u), bar_);
+    return true;
+  }
+
+ private:
+  std::string label(const ProgressUpdate& u) const {
+    const std::string bricks =
+        u.bricks > 1 ? " brick " + std::to_string(u.brick + 1) + "/" + std::to_string(u.bricks)
+                     : "";
+    switch (u.stage) {
+      case Stage::Read:
+        return "reading " + file_name_;
+      case Stage::Histogram:
+        return "reading the samples' histogram for the isovalue";
+      case Stage::Simplify:
+        return u.bricks > 1 ? "simplify" + bricks : "simplifying";
+      case Stage::Write:
+        return "writing";
+      default:
+        return u.bricks > 1 ? std::string(stage_name(u.stage)) + bricks
+                            : "extracting (" + method_ + ")";
+    }
+  }
+
+  const Progress& report_;
+  std::string file_name_, method_;
+  Stage stage_ = Stage::Read;
+  int n_ = 0;  // the extraction's stages so far
+  double bar_ = 0;
+};
 
 }  // namespace
 
@@ -157,9 +222,6 @@ std::string unique_name(const std::string& name,
 IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& temp_dir,
                                 const Progress& progress) {
   const auto t0 = Clock::now();
-  auto report = [&](const std::string& stage, double fraction) {
-    if (progress) progress(stage, fraction);
-  };
   if (p.file.empty())
     throw InputError(
         "no volume file chosen (the 'file' field is empty): choose one with its '...' button; "
@@ -170,131 +232,57 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     if (!fs::exists(p.file, ec) && p.file.find('%') == std::string::npos)
       throw IoError(p.file + ": no such file");
   }
-  if (!(p.simplify > 0 && p.simplify <= 1))
-    throw InputError("simplify is the fraction of faces kept, in (0, 1] (1: off); got " +
-                     std::to_string(p.simplify));
-  ExtractOptions o = extract_options(p);
-  const Backend backend = resolve_backend(o);  // InputError naming what is missing
-  RawOptions raw = parse_input_text(
+  PipelineOptions options = pipeline_options(p);
+  PipelineInput input;
+  input.path = p.file;
+  input.raw = parse_input_text(
       {.dims = p.dims, .type = p.type, .spacing = p.spacing, .origin = "", .endian = p.endian}, "");
-  raw.series = p.series;
-  const std::uint64_t memory =
-      p.memory.empty() || p.memory == "0" ? 0 : parse_memory_size(p.memory);
-  const std::string file_name = fs::path(p.file).filename().string();
+  input.raw.series = p.series;
+  const std::string method(method_name(options.extract.method));
+  BarMapping bar(progress, fs::path(p.file).filename().string(), method);
+  isotile::Progress listening([&](const ProgressUpdate& u) { return bar(u); });
+  if (progress) options.progress = &listening;  // else the library's loops skip the reports
+
+  // Brick by brick the pipeline streams the mesh into a file, as the CLI's --memory does; it
+  // goes in a private folder and MeshLab then holds the whole result.
+  std::optional<PrivateFolder> tmp;
+  fs::path mesh_file;
+  if (!options.memory.empty()) {
+    tmp.emplace(temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir));
+    mesh_file = tmp->path / "bricks.ply";
+    options.output = mesh_file.string();
+  }
+  PipelineResult run;
+  try {
+    run = run_pipeline(input, options);
+  } catch (const NoSurfaceError& e) {
+    // The library's finding (where the samples lie), with the ways out this dialog offers.
+    throw InputError("no surface at isovalue " + format_value(e.iso) + " in " + p.file + ": " +
+                     e.finding +
+                     "; set iso inside the range, or to nan for the automatic isovalue");
+  }
 
   IsosurfaceResult r;
-  r.backend = std::string(backend_name(backend));
-  // A DICOM series is named by its description (a file's name, "00000060.dcm", says nothing).
-  std::string series_description, series_uid;
-  if (p.file.rfind("field:", 0) != 0 && input_kind(p.file) == InputKind::Dicom) {
-    report("reading the DICOM series' headers", 0.01);
-    const VolumeHeader h = read_volume_header(p.file, raw);
-    series_description = h.series_description;
-    series_uid = h.series_uid;
-  }
-  // No surface: say where the samples lie, and the way out.
-  auto no_surface = [&]() {
-    std::string m = "no surface at isovalue " + format_value(o.iso) + " in " + p.file;
-    if (r.range)
-      m += ": the samples range from " + format_value(r.range->first) + " to " +
-           format_value(r.range->second) +
-           (o.iso > r.range->second ? ", all below it" : ", all at or above it");
-    throw InputError(m + "; set iso inside the range, or to nan for the automatic isovalue");
-  };
-  if (memory == 0) {
-    report("reading " + file_name, 0.02);
-    const Volume volume = read_volume(p.file, raw);
-    if (p.iso_auto) {
-      report("choosing the isovalue", 0.25);
-      const ValueHistogram h = value_histogram(volume.view());
-      r.range = std::pair(h.min, h.max);
-      o.iso = otsu_isovalue(h);
-    } else {
-      r.range = value_range(volume.view());
-    }
-    // The library's progress (its stage, the fraction of it) onto MeshLab's bar: the
-    // extraction from 30% to 60%, the simplification from 60% to 90%.
-    // A run goes through several stages (count, extract, Macet's search), each from 0 to 1 and
-    // their number not known ahead: stage n fills [1 - 2^-(n-1), 1 - 2^-n) of the span, so
-    // the bar only moves forward.
-    auto span = [&](double from, double width) {
-      return [&report, from, width, stage = Stage::Read, n = 0](const ProgressUpdate& u) mutable {
-        if (n == 0 || u.stage != stage) ++n;
-        stage = u.stage;
-        const double base = 1 - std::ldexp(1.0, 1 - n);
-        report(std::string(stage_name(u.stage)),
-               from + width * (base + std::ldexp(1.0, -n) * u.fraction));
-        return true;
-      };
-    };
-    report("extracting (" + std::string(method_name(o.method)) + ")", 0.3);
-    isotile::Progress extracting(span(0.3, 0.3));
-    o.progress = &extracting;
-    r.mesh = extract(volume.view(), o);
-    r.triangles_extracted = r.mesh.triangles.size();
-    if (r.mesh.triangles.empty()) no_surface();
-    if (p.simplify < 1) {
-      report("simplifying", 0.6);
-      isotile::Progress simplifying(span(0.6, 0.3));
-      SimplifyOptions so;
-      so.ratio = p.simplify;
-      so.progress = &simplifying;
-      r.mesh = simplify(r.mesh, so);
-    }
-    // Into the volume's world frame (its orientation), as `isotile extract` writes it.
-    apply_frame(mesh_frame(volume.view()), r.mesh);
-  } else {
-    // Brick by brick within the budget, through the tiler's streamed file: what the CLI's
-    // --memory does. MeshLab then holds the whole result.
-    const PrivateFolder tmp(temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir));
-    const fs::path mesh_file = tmp.path / "bricks.ply";
-    auto source = open_volume_source(p.file, raw, memory);
-    if (p.iso_auto) {
-      report("reading the samples' histogram for the isovalue", 0.02);
-      const ValueHistogram h = source_histogram(*source, memory);
-      r.range = std::pair(h.min, h.max);
-      o.iso = otsu_isovalue(h);
-    }
-    TiledOptions to;
-    to.frame = mesh_frame(source->origin, source->world);
-    to.extract = o;
-    to.memory = memory;
-    to.format = MeshFormat::Ply;
-    to.simplify = p.simplify;
-    isotile::Progress bricks([&](const ProgressUpdate& u) {
-      const double done = (static_cast<double>(u.brick) + u.fraction) /
-                          static_cast<double>(std::max<std::int64_t>(u.bricks, 1));
-      report(std::string(stage_name(u.stage)) + " brick " + std::to_string(u.brick + 1) + "/" +
-                 std::to_string(u.bricks),
-             0.05 + 0.85 * done);
-      return true;
-    });
-    to.progress = &bricks;
-    const TiledResult t = extract_tiled(*source, to, mesh_file);
-    r.bricks = t.plan.total();
-    r.triangles_extracted = p.simplify < 1 ? t.triangles_extracted : t.triangles;
-    if (t.faces == 0) {
-      if (!r.range) {
-        report("reading the samples' range", 0.9);
-        const ValueHistogram h = source_histogram(*source, memory);
-        r.range = std::pair(h.min, h.max);
-      }
-      no_surface();
-    }
-    report("loading the bricks' mesh", 0.9);
+  if (!mesh_file.empty()) {
+    if (progress) progress("loading the bricks' mesh", 0.9);
     r.mesh = read_mesh(mesh_file);
+  } else {
+    r.mesh = std::move(run.mesh);
   }
-  report("measuring the triangles", 0.95);
-  r.quality = triangle_quality(r.mesh);
-  r.iso = o.iso;
-  r.layer_name = layer_name(p.file, series_description, method_name(o.method), o.iso);
+  r.iso = run.iso;
+  r.range = run.range;
+  r.backend = std::string(backend_name(run.backend));
+  r.bricks = run.bricks;
+  r.triangles_extracted = run.triangles_extracted;
+  r.quality = run.quality;
+  r.layer_name = layer_name(p.file, run.series_description, method, run.iso);
   r.description = p.file;
-  if (!series_description.empty() || !series_uid.empty())
-    r.description += ", DICOM series '" + series_description + "' (" + series_uid + ")";
+  if (!run.series_description.empty() || !run.series_uid.empty())
+    r.description += ", DICOM series '" + run.series_description + "' (" + run.series_uid + ")";
   r.description += ", " + std::string(kMethodNames[p.method]);
-  if (o.method == Method::Macet)
+  if (options.extract.method == Method::Macet)
     r.description += std::string(" ") + kMacetQualityNames[p.macet_quality];
-  r.description += ", isovalue " + format_value(o.iso);
+  r.description += ", isovalue " + format_value(run.iso);
   r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
 }

@@ -1,8 +1,10 @@
 // What the MeshLab filters ask of the libraries, without Qt or MeshLab: the isosurface filter's
-// fields (as typed) turned into a read, an extraction (in core or brick by brick) and an optional
-// simplification; the simplify filter's fields turned into a simplification. The plugin only
+// fields (as typed) turned into a run of the library's pipeline (tiler/pipeline.h, what
+// `isotile extract` runs: the read, the extraction in core or brick by brick, the optional
+// simplification); the simplify filter's fields turned into a simplification. The plugin only
 // moves values and meshes between MeshLab and these functions, so that the work, the checks and
-// the messages are the CLI's.
+// the messages are the CLI's; what is MeshLab's own (the enum indices, the file field, the layer's
+// name, the bar, the advice in terms of the dialog's fields) stays here.
 #pragma once
 
 #include <cstdint>
@@ -55,8 +57,8 @@ struct IsosurfaceResult {
   std::string layer_name;   // layer_name(): no dots, which MeshLab would cut
   std::string description;  // for the log: the file, DICOM series, method, isovalue in full
   double iso = 0;           // the isovalue used (chosen, with iso_auto)
-  // The samples' lowest and highest value, where the run read them (always in core; brick by
-  // brick with iso_auto, or when there is no surface).
+  // The samples' lowest and highest value, where the run read them (PipelineResult::range:
+  // always in core; brick by brick with iso_auto).
   std::optional<std::pair<double, double>> range;
   std::string backend;  // where it ran ("cpu", "gs", "hp")
   std::int64_t bricks = 1;
@@ -81,10 +83,12 @@ std::string unique_name(const std::string& name,
                         const std::function<bool(const std::string&)>& taken);
 
 // Throws isotile::Error (InputError, IoError, CapacityError) with a message for the user: a bad
-// or missing file, a malformed field, a feature not available yet, a GPU backend without GL.
-// `temp_dir` receives a private folder of its own (mkdtemp: no other user can place a file or a
-// link at the name written) holding the brick-by-brick extraction's file; both are removed
-// before returning.
+// or missing file, a malformed field, a feature not available yet, a GPU backend without GL, no
+// surface at the isovalue. `temp_dir` receives a private folder of its own (mkdtemp: no other
+// user can place a file or a link at the name written) holding the brick-by-brick extraction's
+// file; both are removed before returning. `progress` hears the stage ("reading FILE",
+// "extracting (macet)", brick by brick "extract brick 3/8", "simplifying", "loading the bricks'
+// mesh") and a fraction of the whole run that only grows.
 IsosurfaceResult run_isosurface(const IsosurfaceParams& params, const std::string& temp_dir,
                                 const Progress& progress);
 

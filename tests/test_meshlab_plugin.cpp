@@ -308,6 +308,16 @@ TEST_F(MeshlabServer, BricksSimplificationAndTheSimplifyFilter) {
   const isotile::Mesh quarter = isotile::read_mesh(dir_ / "out.ply");
   EXPECT_NEAR(static_cast<double>(quarter.triangles.size()), 0.25 * full.triangles.size(),
               0.02 * 0.25 * full.triangles.size());
+  // It is `isotile extract --simplify`'s, in core and brick by brick (the same pipeline).
+  expect_same_mesh(quarter, cli(kNucleon + " --iso 60.5 --method macet --simplify 0.25"),
+                   "simplify");
+  r = run(
+      script({{"file", kNucleon}, {"iso", "60.5"}, {"simplify", "0.25"}, {"memory", "512KiB"}}));
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_EQ(r.log.find("1 brick(s)"), std::string::npos) << r.log;
+  expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"),
+                   cli(kNucleon + " --iso 60.5 --method macet --simplify 0.25 --memory 512KiB"),
+                   "simplify brick by brick");
   r = run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})));
   ASSERT_EQ(r.code, 0) << r.log;
   EXPECT_NE(r.log.find("simplified"), std::string::npos) << r.log;

@@ -7,15 +7,20 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/mesh_io.h"
+#include "core/volume/itk_reader.h"
 #include "core/volume/procedural_fields.h"
+#include "skip_support.h"
 #include "test_support.h"
 #include "tiler/pipeline.h"
+#include "tiler/source_histogram.h"
 
 namespace isotile {
 namespace {
@@ -134,6 +139,86 @@ TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
   const PipelineResult c = run_pipeline(input("field:sphere:48"), o);
   EXPECT_EQ(c.quality.triangles, c.mesh.triangles.size());
   EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
+}
+
+// The samples' range (options.range) comes back for a front end to show, from what the run read:
+// in core one pass or iso_auto's histogram, out of core the histogram.
+TEST_F(Pipeline, ReportsTheSamplesRange) {
+  const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+  const std::pair<double, double> range = value_range(read_volume(nucleon).view());
+  ASSERT_LT(range.first, range.second);
+  PipelineOptions o;
+  o.iso = 60.5;
+  EXPECT_FALSE(run_pipeline(input(nucleon), o).range.has_value());  // not asked for
+  o.range = true;
+  const PipelineResult in_core = run_pipeline(input(nucleon), o);
+  ASSERT_TRUE(in_core.range.has_value());
+  EXPECT_EQ(*in_core.range, range);
+  o.iso_auto = true;
+  EXPECT_EQ(run_pipeline(input(nucleon), o).range, range);
+  o.memory = "256KiB";
+  o.output = (dir_ / "m.ply").string();
+  const PipelineResult bricked_auto = run_pipeline(input(nucleon), o);
+  EXPECT_GT(bricked_auto.bricks, 1);
+  EXPECT_EQ(bricked_auto.range, range);
+  // Out of core without iso_auto: no second pass over the file for it.
+  o.iso_auto = false;
+  EXPECT_FALSE(run_pipeline(input(nucleon), o).range.has_value());
+}
+
+// A DICOM series' UID and description come back from the headers the run read, in core and out
+// of core, for a front end that names the series (the MeshLab plugin's layer).
+TEST_F(Pipeline, ReportsTheDicomSeries) {
+  PipelineOptions o;
+  o.iso = 60.5;
+  const PipelineResult raw =
+      run_pipeline(input(std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz"), o);
+  EXPECT_TRUE(raw.series_uid.empty());  // not DICOM
+  EXPECT_TRUE(raw.series_description.empty());
+  const fs::path dicom = fs::path(ISOTILE_SHARED_DATA) / "dicom_uih_t1_head_slab/00000060.dcm";
+  if (!fs::exists(dicom)) ISOTILE_SKIP(SharedData, "no shared data at " << dicom);
+  if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK");
+  const VolumeHeader h = read_volume_header(dicom.string());
+  ASSERT_FALSE(h.series_description.empty());
+  ASSERT_FALSE(h.series_uid.empty());
+  PipelineOptions d;
+  d.iso = 300;
+  d.keep_mesh = false;
+  const PipelineResult whole = run_pipeline(input(dicom.string()), d);
+  EXPECT_EQ(whole.series_uid, h.series_uid);
+  EXPECT_EQ(whole.series_description, h.series_description);
+  d.memory = "64MiB";
+  d.output = (dir_ / "d.ply").string();
+  const PipelineResult bricked = run_pipeline(input(dicom.string()), d);
+  EXPECT_GT(bricked.bricks, 1);
+  EXPECT_EQ(bricked.series_uid, h.series_uid);
+  EXPECT_EQ(bricked.series_description, h.series_description);
+}
+
+// No surface: the CLI's message, and its finding for a front end with other ways out.
+TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
+  const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";
+  const std::pair<double, double> range = value_range(read_volume(nucleon).view());
+  std::ostringstream finding;
+  finding << "the samples range from " << range.first << " to " << range.second << ", all below it";
+  for (const char* memory : {"", "256KiB"}) {
+    PipelineOptions o;
+    o.iso = 1000;
+    o.memory = memory;
+    if (*memory) o.output = (dir_ / "m.ply").string();
+    try {
+      run_pipeline(input(nucleon), o);
+      ADD_FAILURE() << "no error";
+    } catch (const NoSurfaceError& e) {
+      EXPECT_EQ(e.iso, 1000);
+      EXPECT_EQ(e.range, range);
+      EXPECT_EQ(e.finding, finding.str());
+      EXPECT_EQ(std::string(e.what()), "no surface at iso 1000: " + finding.str() +
+                                           "; choose an isovalue inside the range, or --iso "
+                                           "auto (or --allow-empty to write the empty mesh)");
+    }
+  }
+  EXPECT_TRUE(fs::is_empty(dir_));
 }
 
 TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {

@@ -89,11 +89,14 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);
   StatsJson auto_iso;
   PipelineResult result;
+  result.series_uid = source->series_uid;
+  result.series_description = source->series_description;
   if (options.iso_auto) {
     log("reading " + input.path + " once for --iso auto's histogram");
-    auto_iso = choose_isovalue(source_histogram(*source, to.memory, options.progress),
-                               to.extract.iso, log);
+    const ValueHistogram h = source_histogram(*source, to.memory, options.progress);
+    auto_iso = choose_isovalue(h, to.extract.iso, log);
     result.auto_iso = to.extract.iso;
+    result.range = std::pair(h.min, h.max);
   }
   log("extracting " + input.path + " (" + dims_text(source->dims) + " " +
       std::string(scalar_name(source->type)) + ") brick by brick within " + options.memory +
@@ -274,10 +277,16 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
         fmt_seconds(t_read));
 
   PipelineResult result;
+  result.series_uid = volume.series_uid();
+  result.series_description = volume.series_description();
   StatsJson auto_iso;
   if (options.iso_auto) {
-    auto_iso = choose_isovalue(value_histogram(view), eo.iso, log);
+    const ValueHistogram h = value_histogram(view);
+    auto_iso = choose_isovalue(h, eo.iso, log);
     result.auto_iso = eo.iso;
+    result.range = std::pair(h.min, h.max);
+  } else if (options.range) {
+    result.range = value_range(view);
   }
   log("extracting (" + std::string(method_name(eo.method)) + ", " +
       std::string(backend_name(backend)) + ", iso " + std::to_string(eo.iso) + ")");
@@ -286,7 +295,7 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
   const double t_extract = seconds_since(t0);
   // No face: found from the mesh, at no cost to a run that has one. The range is a cheap pass.
   if (mesh.triangles.empty() && mesh.quads.empty() && !options.allow_empty) {
-    const auto [lo, hi] = value_range(view);
+    const auto [lo, hi] = result.range ? *result.range : value_range(view);
     if (!(lo < eo.iso && eo.iso <= hi)) throw_no_surface(eo.iso, std::pair(lo, hi));
   }
   log("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +

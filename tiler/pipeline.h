@@ -24,6 +24,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "core/extract/extract.h"
 #include "core/mesh/mesh.h"
@@ -76,6 +77,11 @@ struct PipelineOptions {
   bool quality = false;
   // In core: hand the mesh back in PipelineResult::mesh (else it is dropped after the write).
   bool keep_mesh = true;
+  // Report the samples' lowest and highest value (PipelineResult::range), for a front end that
+  // shows them (the MeshLab plugin's log). In core one value_range() pass over the samples, or
+  // none where iso_auto's histogram has them; out of core only from iso_auto's histogram (another
+  // pass over the file would cost as much as the extraction's count): unset without iso_auto.
+  bool range = false;
   // Told of the run's progress (handed down to every stage); cancelling throws Cancelled and
   // leaves no output file. Null: nobody listens.
   Progress* progress = nullptr;
@@ -91,6 +97,12 @@ struct PipelineResult {
   Mesh mesh;  // in core with keep_mesh: the final mesh, in the frame chosen (as written)
   double iso = 0;
   std::optional<double> auto_iso;  // set when iso_auto chose it
+  // The samples' lowest and highest value: set in core with options.range or iso_auto, out of
+  // core with iso_auto (the histogram's bounds).
+  std::optional<std::pair<double, double>> range;
+  // A DICOM series' UID and description, from the headers the run read (empty for other inputs
+  // and for input.volume), for a front end that names the series (the MeshLab plugin's layer).
+  std::string series_uid, series_description;
   Backend backend = Backend::Cpu;  // where it ran
   std::int64_t bricks = 1;
   std::uint64_t triangles = 0, vertices = 0;  // of the final mesh (quads count as two)

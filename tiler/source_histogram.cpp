@@ -57,17 +57,20 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
 }
 
 void throw_no_surface(double iso, const std::optional<std::pair<double, double>>& range) {
-  std::ostringstream s;
-  s.precision(10);
-  s << "no surface at iso " << iso;
+  std::ostringstream f;
+  f.precision(10);
   if (range)
-    s << ": the samples range from " << range->first << " to " << range->second
+    f << "the samples range from " << range->first << " to " << range->second
       << (iso > range->second ? ", all below it" : ", all at or above it");
   else
-    s << ": every sample lies on one side of it (`isotile info` shows the range)";
-  s << "; choose an isovalue inside the range, or --iso auto (or --allow-empty to write the empty "
+    f << "every sample lies on one side of it";
+  std::ostringstream s;
+  s.precision(10);
+  s << "no surface at iso " << iso << ": " << f.str()
+    << (range ? "" : " (`isotile info` shows the range)")
+    << "; choose an isovalue inside the range, or --iso auto (or --allow-empty to write the empty "
        "mesh)";
-  throw InputError(s.str());
+  throw NoSurfaceError(s.str(), iso, range, f.str());
 }
 
 }  // namespace isotile

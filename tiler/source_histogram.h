@@ -4,8 +4,10 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <utility>
 
+#include "core/errors.h"
 #include "core/progress.h"
 #include "core/volume/otsu_isovalue.h"
 #include "tiler/volume_source.h"
@@ -21,7 +23,20 @@ namespace isotile {
 ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget,
                                 Progress* progress = nullptr);
 
-// InputError: no pair of samples straddles `iso` (every sample on one side), so there is no
+// What throw_no_surface throws: an InputError with the CLI's message, and its parts, so that a
+// front end with other ways out (the MeshLab plugin's fields) can word its own advice around
+// the library's finding instead of measuring the samples again.
+struct NoSurfaceError : InputError {
+  NoSurfaceError(std::string message, double iso_, std::optional<std::pair<double, double>> range_,
+                 std::string finding_)
+      : InputError(std::move(message)), iso(iso_), range(range_), finding(std::move(finding_)) {}
+  double iso;
+  std::optional<std::pair<double, double>> range;  // the samples' range, where known
+  // Where the samples lie: "the samples range from 0 to 255, all below it".
+  std::string finding;
+};
+
+// NoSurfaceError: no pair of samples straddles `iso` (every sample on one side), so there is no
 // surface; names the samples' range where known and the ways out (--iso auto, --allow-empty).
 [[noreturn]] void throw_no_surface(double iso,
                                    const std::optional<std::pair<double, double>>& range);

@@ -321,6 +321,8 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
     source->spacing = h.spacing;
     source->origin = h.origin;
     source->world = h.world;
+    source->series_uid = h.series_uid;
+    source->series_description = h.series_description;
     return source;
   }
   const bool nrrd = kind == InputKind::Nrrd;

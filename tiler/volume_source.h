@@ -49,6 +49,7 @@ class VolumeSource {
   virtual void read(const Box3& box, void* out) = 0;
 
   std::string name;
+  std::string series_uid, series_description;  // a DICOM series' (VolumeHeader's); else empty
 };
 
 // Opens any input read_volume() accepts. Spacing and origin in `raw` override the file's.

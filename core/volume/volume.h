@@ -16,6 +16,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "core/volume/scalar_type.h"
 
@@ -97,6 +98,14 @@ class Volume {
   void set_origin(const Vec3d& o) { origin_ = o; }
   const std::optional<WorldFrame>& world() const { return world_; }
   void set_world(const std::optional<WorldFrame>& w) { world_ = w; }
+  // A DICOM series' UID and description, as read_volume() found them in its headers (what
+  // VolumeHeader says); empty for every other input. Front ends name the series by them.
+  const std::string& series_uid() const { return series_uid_; }
+  const std::string& series_description() const { return series_description_; }
+  void set_series(std::string uid, std::string description) {
+    series_uid_ = std::move(uid);
+    series_description_ = std::move(description);
+  }
   std::int64_t sample_count() const { return dims_[0] * dims_[1] * dims_[2]; }
   std::size_t byte_size() const { return bytes_; }
   std::byte* bytes() { return data_.get(); }
@@ -118,6 +127,7 @@ class Volume {
   Vec3d spacing_{1, 1, 1};
   Vec3d origin_{0, 0, 0};
   std::optional<WorldFrame> world_;
+  std::string series_uid_, series_description_;
 };
 
 // Throws InputError naming `what` unless the grid's geometry makes a mesh: every spacing finite

@@ -383,6 +383,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     const ItkImageInfo info = read_itk_info(in);
     volume = Volume(info.type, info.dims, info.spacing, info.origin);
     volume.set_world(WorldFrame{info.origin, info.direction});
+    volume.set_series(info.series_uid, info.series_description);
     read_itk_data(in, info, volume.bytes());
     check_finite(volume.view(), input);
   }
