@@ -4,7 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
@@ -76,6 +79,41 @@ TEST_F(AutoBackend, AnOverrideThatCannotRunGivesTheCpu) {
       << c.reason;
   setenv("ISOTILE_AUTO_BACKEND", "gpu", 1);
   EXPECT_THROW(choose_backend(options_), InputError);
+}
+
+// The tiler's bricks each report; the run's report sums them by stage name (a stage a later part
+// adds is appended), sums the bytes, upload seconds and programs, and keeps the process's context
+// start-up and the cache's "off" reason once.
+TEST(GpuReports, BricksAddUp) {
+  GpuReport a;
+  a.seconds = {{"upload", 0.5}, {"classify", 1.0}};
+  a.upload_bytes = 100;
+  a.upload_seconds = 0.5;
+  a.context_seconds = 0.25;
+  a.programs_loaded = 3;
+  a.programs_compiled = 2;
+  GpuReport b;
+  b.seconds = {{"upload", 0.25}, {"classify", 2.0}, {"faces", 4.0}};
+  b.upload_bytes = 50;
+  b.upload_seconds = 0.25;
+  b.context_seconds = 0.25;
+  b.programs_rejected = 1;
+  b.program_cache_off = "read-only folder";
+  std::optional<GpuReport> total;
+  accumulate_gpu_report(total, a);
+  ASSERT_TRUE(total.has_value());
+  EXPECT_EQ(total->upload_bytes, 100u);
+  accumulate_gpu_report(total, b);
+  const std::vector<std::pair<std::string, double>> seconds = {
+      {"upload", 0.75}, {"classify", 3.0}, {"faces", 4.0}};
+  EXPECT_EQ(total->seconds, seconds);
+  EXPECT_EQ(total->upload_bytes, 150u);
+  EXPECT_EQ(total->upload_seconds, 0.75);
+  EXPECT_EQ(total->context_seconds, 0.25);
+  EXPECT_EQ(total->programs_loaded, 3);
+  EXPECT_EQ(total->programs_compiled, 2);
+  EXPECT_EQ(total->programs_rejected, 1);
+  EXPECT_EQ(total->program_cache_off, "read-only folder");
 }
 
 }  // namespace

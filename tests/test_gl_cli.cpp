@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -216,6 +217,35 @@ TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   const auto fourth = hp("fourth");
   EXPECT_EQ(fourth["gl_program_cache"]["state"], "hit");
   EXPECT_EQ(fourth["gl_program_cache"]["rejected"], 0);
+}
+
+// Out of core, --stats sums the bricks' GL reports: every stage, the bytes uploaded (each brick's
+// samples with their halo: more than the volume's) and the upload rate; the CPU's run has none.
+// With simplification the bricks go through the simplifying tiler, which reports them too.
+TEST_F(GlCli, OutOfCoreStatsSumTheBricksGlReports) {
+  REQUIRE_GL_CLI();
+  const std::string in = "extract field:gyroid:40 -q --memory 256KiB ";
+  ASSERT_EQ(run(in + "--backend cpu -o cpu.ply --stats cpu.json").code, 0);
+  const auto cpu = nlohmann::json::parse(slurp(dir_ / "cpu.json"));
+  EXPECT_GT(cpu["bricks"].get<int>(), 1);
+  EXPECT_FALSE(cpu["seconds"].contains("gl"));
+  EXPECT_TRUE(cpu["upload_bytes"].is_null());
+  EXPECT_TRUE(cpu["gl_program_cache"].is_null());
+  for (const std::string extra : {"", "--simplify 0.5 "}) {
+    const Result r = run(in + extra + "--backend hp -o hp.ply --stats hp.json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto hp = nlohmann::json::parse(slurp(dir_ / "hp.json"));
+    EXPECT_EQ(hp["backend"], "hp") << extra;
+    EXPECT_GT(hp["bricks"].get<int>(), 1) << extra;
+    for (const char* stage :
+         {"upload", "prepare", "classify", "scan", "vertices", "faces", "readback", "context"})
+      EXPECT_GE(hp["seconds"]["gl"][stage].get<double>(), 0.0) << stage << " " << extra;
+    EXPECT_GT(hp["seconds"]["gl"]["classify"].get<double>(), 0.0) << extra;
+    EXPECT_GT(hp["upload_bytes"].get<std::uint64_t>(), 40u * 40 * 40 * 4) << extra;
+    EXPECT_GT(hp["upload_gbps"].get<double>(), 0.0) << extra;
+    EXPECT_TRUE(hp["gl_program_cache"].is_object()) << extra;
+    if (extra.empty()) EXPECT_TRUE(slurp(dir_ / "hp.ply") == slurp(dir_ / "cpu.ply"));
+  }
 }
 
 // Several processes filling one empty cache at once (as MPI ranks do): each writes its entries

@@ -298,8 +298,10 @@ BrickRecords BrickExtraction::extract_part(const Box3& cells, const VolumeView& 
   o.cells = cells;
   o.progress = progress;
   auto t0 = Clock::now();
-  const Mesh mesh = isotile::extract(view, o);
+  BackendChoice ran;
+  const Mesh mesh = isotile::extract(view, o, &ran);
   stages_.extract += since(t0);
+  if (ran.gpu) accumulate_gpu_report(gpu_, *ran.gpu);
   t0 = Clock::now();
   std::vector<std::uint64_t> index(mesh.positions.size());
   std::vector<char> is_owned(mesh.positions.size());

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -116,6 +117,8 @@ class BrickExtraction {
   std::uint64_t written_faces() const { return written_faces_; }
   // Busy seconds per stage so far (read from the reader's clock).
   TiledResult::Stages stages() const;
+  // The GL backends' reports of the parts extracted so far, summed; unset where the CPU ran.
+  const std::optional<GpuReport>& gpu() const { return gpu_; }
 
  private:
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
@@ -156,6 +159,7 @@ class BrickExtraction {
   std::uint64_t written_faces_ = 0;
   bool overlap_ = false;
   TiledResult::Stages stages_;
+  std::optional<GpuReport> gpu_;
 };
 
 }  // namespace isotile

@@ -198,6 +198,7 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
     j["simplify_hausdorff_max"] = nullptr;
     j["seconds"]["seams"] = r.seconds_seams;
   }
+  add_gpu_report(j, r.gpu);  // seconds.gl, upload_gbps, gl_program_cache over the bricks
   j["peak_rss_mb"] = peak_rss_mb();
   return j;
 }

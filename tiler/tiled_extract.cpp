@@ -135,6 +135,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   }
   result.seconds_extract = since(t0);
   result.stages = bricks.stages();
+  result.gpu = bricks.gpu();
   if (bricks.written_faces() != result.faces)
     throw Error("tiled extraction wrote " + std::to_string(bricks.written_faces()) + " faces of " +
                 std::to_string(result.faces) + " counted");

@@ -76,6 +76,9 @@ struct TiledResult {
   // min, mean and degenerate are exact; q001, q01 and median come from a histogram of 2^16 bins
   // (within 1.6e-5).
   QualityStats quality;
+  // A GL backend's reports of its bricks, summed (upload, stages, program cache); unset where
+  // the CPU made the mesh.
+  std::optional<GpuReport> gpu;
 };
 
 // Throws InputError for a budget too small or a format without fixed-size records, and whatever

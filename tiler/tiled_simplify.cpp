@@ -290,7 +290,9 @@ class TiledSimplification {
     o.cells = part;
     o.progress = child.get();
     o.normals = false;  // the simplified mesh gets area-weighted normals
-    Mesh mesh = extract(view, o);
+    BackendChoice ran;
+    Mesh mesh = extract(view, o, &ran);
+    if (ran.gpu) accumulate_gpu_report(result.gpu, *ran.gpu);
     std::vector<std::uint64_t> keys = brick_vertex_keys(view, o.iso, reader_.layout(), part);
     if (keys.size() != mesh.positions.size())
       throw Error("brick contract broken: the extractor listed " +

@@ -219,6 +219,28 @@ int extract_halo(const ExtractOptions& options) {
   return 2;
 }
 
+void accumulate_gpu_report(std::optional<GpuReport>& total, const GpuReport& part) {
+  if (!total) {
+    total = part;
+    return;
+  }
+  for (const auto& [stage, seconds] : part.seconds) {
+    auto it = std::find_if(total->seconds.begin(), total->seconds.end(),
+                           [&](const auto& s) { return s.first == stage; });
+    if (it == total->seconds.end())
+      total->seconds.emplace_back(stage, seconds);
+    else
+      it->second += seconds;
+  }
+  total->upload_bytes += part.upload_bytes;
+  total->upload_seconds += part.upload_seconds;
+  total->context_seconds = std::max(total->context_seconds, part.context_seconds);
+  total->programs_loaded += part.programs_loaded;
+  total->programs_compiled += part.programs_compiled;
+  total->programs_rejected += part.programs_rejected;
+  if (total->program_cache_off.empty()) total->program_cache_off = part.program_cache_off;
+}
+
 Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoice* ran) {
   const int m = static_cast<int>(options.method);
   BackendChoice choice = choose_backend(options);

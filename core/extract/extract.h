@@ -100,6 +100,11 @@ struct GpuReport {
   std::string program_cache_off;
 };
 
+// Adds one extraction's report into the report of a run made of several (the tiler's bricks):
+// stage seconds by name, bytes, upload seconds and programs summed; the context start-up (one per
+// process, the same in every part) and the cache's "off" reason taken once.
+void accumulate_gpu_report(std::optional<GpuReport>& total, const GpuReport& part);
+
 struct BackendChoice {
   BackendChoice() = default;
   BackendChoice(Backend b, std::string why) : backend(b), reason(std::move(why)) {}

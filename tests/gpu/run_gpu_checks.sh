@@ -18,7 +18,8 @@
 #
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines (the data path's targets, issue 35:
-# upload GB/s on gyroid 256/512 and bonsai, the one-shot whole process of `extract
+# upload GB/s on gyroid 256/512 and bonsai, out of core on gyroid $size and a 4 GiB uint8 volume
+# made from bonsai, the one-shot whole process of `extract
 # field:gyroid:512` on hp against cpu with a warm program cache, the context's start-up).
 # --quick: the bricked runs on gyroid 192 in 16 MiB bricks and the measurements on gyroid 128
 # (a smoke run, also on llvmpipe). The GL program cache goes to a fresh XDG_CACHE_HOME under the
@@ -108,6 +109,46 @@ for in in $inputs; do
     '"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items()) + "; program cache " + j["gl_program_cache"]["state"]')"
 done
 rm -f "$out/d.ply"
+# Out of core: the bricked runs of step 2 (gyroid $size float32) and a 4 GiB uint8 volume (bonsai
+# repeated 8x8x4, made here from $ISOTILE_GPU_DATA), in bricks within 2 GiB: the bricks' uploads
+# summed (seconds.gl over the bricks).
+for b in hp gs; do
+  echo "gpu-measure: out of core gyroid $size $b: $(json_get "$out/$b.json" \
+    '"%d bricks, upload %.2f GB/s, %d bytes; stages ms " % (j["bricks"], j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())')"
+done
+big_u8="$out/bonsai-tiled_2048x2048x1024_uint8.raw"
+if [ "$size" != 192 ] && [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
+  # Each z-slice of bonsai repeated 8 times along x and y, the whole 4 times along z (no NumPy).
+  python3 - "$data/bonsai_256x256x256_uint8.raw.gz" "$big_u8" <<'PY'
+import gzip, sys
+v = gzip.open(sys.argv[1]).read()
+n = 256
+slices = []
+for z in range(n):
+    rows = [v[(z * n + y) * n:(z * n + y + 1) * n] * 8 for y in range(n)]
+    slices.append(b"".join(rows) * 8)
+with open(sys.argv[2], "wb") as f:
+    for _ in range(4):
+        for s in slices:
+            f.write(s)
+PY
+  for b in cpu hp; do
+    t0=$(date +%s.%N)
+    isotile --threads 16 extract "$big_u8" --iso 49.5 -q --memory 2GiB --backend "$b" \
+      -o "$out/big-$b.ply" --stats "$out/big-$b.json"
+    rc=$?
+    t1=$(date +%s.%N)
+    report "out of core 4 GiB uint8 $b runs" $rc
+    [ $rc = 0 ] && [ "$b" = hp ] && echo "gpu-measure: out of core 4 GiB uint8 hp: $(json_get "$out/big-$b.json" \
+      '"%d bricks, upload %.2f GB/s, %d bytes; stages ms " % (j["bricks"], j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())')"
+    echo "gpu-measure: out of core 4 GiB uint8 $b: whole process $(python3 -c "print(f'{$t1 - $t0:.2f}')") s, $(json_get "$out/big-$b.json" '"%d triangles" % j["triangles"]')"
+  done
+  cmp -s "$out/big-cpu.ply" "$out/big-hp.ply"
+  report "out of core 4 GiB uint8 hp same file as cpu" $?
+  rm -f "$big_u8" "$out"/big-*.ply
+else
+  echo "gpu-measure: out of core 4 GiB uint8 skipped (--quick, or no bonsai in ISOTILE_GPU_DATA)"
+fi
 
 # 7. One-shot whole process, warm program cache: `extract field:gyroid:512` on hp against cpu,
 # 5 processes each, interleaved, median wall seconds; and the context's start-up.
