@@ -12,16 +12,23 @@ arrays handed to NumPy (VTK's through vtk.util.numpy_support), and isotile's `va
 
 A second table times one thread in CPU time, which the load of a shared machine changes little.
 
-The binding's overhead: the module's marching_cubes() against the same library calls (value
-range, extract, values) timed inside C++ on the same array in this process
-(isotile._isotile._time_library_calls, no Python layer, no array wrapping), the fastest of
-2 x --repeats interleaved runs of each.
+The binding's overhead: the module's marching_cubes() against the same library calls (the
+samples' finite check and range in one pass, extract, values) timed inside C++ on the same array
+in this process (isotile._isotile._time_library_calls, no Python layer, no array wrapping), the
+fastest of 2 x --repeats interleaved runs of each. A breakdown table gives each of those calls
+(fastest run), extract() without normals, and what the module adds (Python layer, arrays).
+
+Cold: the first marching_cubes() of a fresh process (`import isotile` and reading the volume
+excluded: TBB's threads start, the library's code and buffers are first touched), beside
+scikit-image's first call in another fresh process.
 """
 import argparse
 import gzip
+import inspect
 import os
 import pathlib
 import statistics
+import subprocess
 import sys
 import time
 
@@ -41,21 +48,53 @@ def median_time(fn, repeats, clock=time.perf_counter):
     return statistics.median(times)
 
 
-def overhead(vol, level, threads, pairs):
+def overhead(vol, level, threads, pairs, normals=True):
     """Fastest of `pairs` interleaved runs of the module's marching_cubes() and of the same
     library calls timed inside C++ (the least disturbed run of each, which the load of a shared
-    machine changes least): (Python call, C++ calls, C++ extract() alone), seconds."""
-    py, cpp, ext = [], [], []
-    isotile.marching_cubes(vol, level, threads=threads)
+    machine changes least): (Python call, C++ calls, (checks, extract(), values) of the fastest
+    C++ run), seconds."""
+    py, cpp = [], []
+    isotile.marching_cubes(vol, level, threads=threads, normals=normals)
     for _ in range(pairs):
         t0 = time.perf_counter()
-        isotile.marching_cubes(vol, level, threads=threads)
+        isotile.marching_cubes(vol, level, threads=threads, normals=normals)
         py.append(time.perf_counter() - t0)
-        (all_calls, extract_only), = _isotile._time_library_calls(vol, level, "mc", True,
-                                                                  threads, 1)
-        cpp.append(all_calls)
-        ext.append(extract_only)
-    return min(py), min(cpp), min(ext)
+        steps, = _isotile._time_library_calls(vol, level, "mc", normals, threads, 1)
+        cpp.append((sum(steps[:3]), steps[:3]))
+    fastest = min(cpp)
+    return min(py), fastest[0], fastest[1]
+
+
+def cpu_steps(vol, level, repeats, normals=True):
+    """CPU seconds of (checks, extract(), values) at one thread, each the fastest of `repeats`."""
+    runs = _isotile._time_library_calls(vol, level, "mc", normals, 1, repeats)
+    return [min(r[3 + i] for r in runs) for i in range(3)]
+
+
+COLD = """
+import gzip, sys, time
+import numpy as np
+sys.path[:0] = {path!r}
+{load}
+level = {level!r}
+if {skimage!r}:
+    from skimage.measure import marching_cubes as run
+    t0 = time.perf_counter()
+    run(vol, level)
+else:
+    import isotile
+    t0 = time.perf_counter()
+    isotile.marching_cubes(vol, level, threads={threads})
+print(time.perf_counter() - t0)
+"""
+
+
+def cold_first_call(load, level, threads, skimage):
+    """Seconds of the first call in a fresh interpreter (the import and the volume's making
+    excluded)."""
+    code = COLD.format(path=sys.path, load=load, level=level, threads=threads, skimage=skimage)
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    return float(out.stdout.split()[-1])
 
 
 def gyroid(n=256):
@@ -104,15 +143,17 @@ def main():
     args = ap.parse_args()
     from skimage.measure import marching_cubes as sk_mc
 
+    # (name, samples, level, the code that makes them as `vol` in a fresh process)
     volumes = []
     bonsai = pathlib.Path(args.data) / "bonsai_256x256x256_uint8.raw.gz"
     if bonsai.exists():
         with gzip.open(bonsai, "rb") as f:
             volumes.append(("bonsai", np.frombuffer(f.read(), np.uint8).reshape(256, 256, 256),
-                            49.5))
+                            49.5, f"vol = np.frombuffer(gzip.open({str(bonsai)!r}).read(), "
+                            "np.uint8).reshape(256, 256, 256)"))
     else:
         print(f"bench_python: no {bonsai}; gyroid only", file=sys.stderr)
-    volumes.append(("gyroid", gyroid(), 0.0))
+    volumes.append(("gyroid", gyroid(), 0.0, inspect.getsource(gyroid) + "vol = gyroid()"))
     vtk_run = vtk_flying_edges(args.threads)
     t = args.threads
     print(f"threads {t}; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f} at the "
@@ -122,13 +163,17 @@ def main():
           "| C++ calls (min) | overhead (min vs min) | C++ extract() (min) | VTK Flying Edges "
           "| isotile Macet | isotile DC |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
-    for name, vol, level in volumes:
+    breakdown = []
+    for name, vol, level, _ in volumes:
         faces = len(isotile.marching_cubes(vol, level, threads=t)[1])
         sk = median_time(lambda: sk_mc(vol, level), 3)
         mc = median_time(lambda: isotile.marching_cubes(vol, level, threads=t), args.repeats)
         bare = median_time(lambda: isotile.marching_cubes(vol, level, threads=t, normals=False),
                            args.repeats)
-        py_min, cpp_all, cpp_extract = overhead(vol, level, t, 2 * args.repeats)
+        py_min, cpp_all, steps = overhead(vol, level, t, 2 * args.repeats)
+        bare_py, bare_cpp, bare_steps = overhead(vol, level, t, 2 * args.repeats, normals=False)
+        breakdown.append((name, py_min, cpp_all, steps, bare_py, bare_steps))
+        cpp_extract = steps[1]
         fe = (median_time(lambda: vtk_run[0](vol, level), args.repeats) if vtk_run else None)
         macet = median_time(lambda: isotile.marching_cubes(vol, level, method="macet", threads=t),
                             args.repeats)
@@ -140,20 +185,42 @@ def main():
               f"{(py_min / cpp_all - 1) * 100:+.1f}% | {ms(cpp_extract)} | "
               f"{ms(fe) if fe else 'n/a'} | {ms(macet)} | {ms(dc)} |")
 
+    print()
+    print(f"Where a call's time goes, threads {t}, fastest of {2 * args.repeats} runs (C++ timers "
+          "inside the library calls; the module: the Python call less those calls):")
+    print("| volume | checks + range | extract() | extract(), no normals | values | C++ calls "
+          "| module call | the module adds | module call, normals=False |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for name, py_min, cpp_all, steps, bare_py, bare_steps in breakdown:
+        ms = lambda s: f"{s * 1e3:.1f} ms"
+        print(f"| {name} | {ms(steps[0])} | {ms(steps[1])} | {ms(bare_steps[1])} | "
+              f"{ms(steps[2])} | {ms(cpp_all)} | {ms(py_min)} | {ms(py_min - cpp_all)} | "
+              f"{ms(bare_py)} |")
+
+    print()
+    print(f"Cold: the first call of a fresh process (import and volume excluded), threads {t}:")
+    print("| volume | scikit-image, first call | isotile MC, first call | speed-up |")
+    print("| --- | ---: | ---: | ---: |")
+    for name, vol, level, load in volumes:
+        sk = cold_first_call(load, level, t, True)
+        mc = cold_first_call(load, level, t, False)
+        print(f"| {name} | {sk * 1e3:.1f} ms | {mc * 1e3:.1f} ms | {sk / mc:.1f}x |")
 
     # The same work on one thread, in CPU time (time.process_time): what each side costs, whatever
     # else the machine is running (wall-clock times above grow with the load average).
     print()
     print("| volume | scikit-image, CPU s | isotile MC threads=1, CPU s | ratio | normals=False, CPU s "
-          "| ratio |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+          "| ratio | checks + range | extract() | values |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     cpu = time.process_time
-    for name, vol, level in volumes:
+    for name, vol, level, _ in volumes:
         sk = median_time(lambda: sk_mc(vol, level), 3, cpu)
         mc = median_time(lambda: isotile.marching_cubes(vol, level, threads=1), args.repeats, cpu)
         bare = median_time(lambda: isotile.marching_cubes(vol, level, threads=1, normals=False),
                            args.repeats, cpu)
-        print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x |")
+        steps = cpu_steps(vol, level, args.repeats)
+        print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x | "
+              + " | ".join(f"{x:.3f}" for x in steps) + " |")
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
