@@ -135,7 +135,6 @@ TEST(CellRanges, SameValuesAtAnyThreadCountForEveryMethodAndType) {
         ASSERT_GT(mesh.positions.size(), 10000u);  // several tasks of 4096
         const std::vector<float> one = ranges_at(1, view, mesh);
         EXPECT_EQ(ranges_at(2, view, mesh), one) << method_name(m) << " iso " << iso;
-        EXPECT_EQ(ranges_at(3, view, mesh), one) << method_name(m) << " iso " << iso;
         // Against every cell tried, for a sample of the vertices; not those whose distance to a
         // grid plane lies between brute_range's tolerance and the library's (1e-5 and 1e-4
         // voxels), where the two may count different cells.
@@ -171,7 +170,6 @@ void expect_fused_range_matches(const std::vector<T>& samples, Index3 dims) {
     const auto want = value_range(v);
     EXPECT_EQ(finite_range_at(1, v), want) << scalar_name(type);
     EXPECT_EQ(finite_range_at(2, v), want) << scalar_name(type);
-    EXPECT_EQ(finite_range_at(5, v), want) << scalar_name(type);
   }
 }
 
