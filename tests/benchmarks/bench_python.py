@@ -2,7 +2,7 @@
 """isotile's Python module against scikit-image and VTK, in one process (docs/python.md).
 
     PYTHONPATH=build/python /usr/bin/python3 tests/benchmarks/bench_python.py [--threads 2]
-        [--repeats 5] [--data ../shared/data]
+        [--repeats 5] [--data ../shared/data] [--baseline other-build/python]
 
 Volumes: bonsai 256^3 uint8 at 49.5 (from --data) and a gyroid 256^3 float32 at 0 made with
 NumPy. Every time is the median of --repeats runs (scikit-image: 3), wall clock, warm (one
@@ -21,9 +21,13 @@ fastest of 2 x --repeats interleaved runs of each. A breakdown table gives each 
 Cold: the first marching_cubes() of a fresh process (`import isotile` and reading the volume
 excluded: TBB's threads start, the library's code and buffers are first touched), beside
 scikit-image's first call in another fresh process.
+
+--baseline: another build's package (e.g. one of the commit before a change) timed beside this
+build's, call by call in this process, warm and cold.
 """
 import argparse
 import gzip
+import importlib.util
 import inspect
 import os
 import pathlib
@@ -89,12 +93,52 @@ print(time.perf_counter() - t0)
 """
 
 
-def cold_first_call(load, level, threads, skimage):
+def cold_first_call(load, level, threads, skimage, path=None):
     """Seconds of the first call in a fresh interpreter (the import and the volume's making
-    excluded)."""
-    code = COLD.format(path=sys.path, load=load, level=level, threads=threads, skimage=skimage)
+    excluded); `path`: a folder whose isotile package is imported instead."""
+    search = ([path] if path else []) + sys.path
+    code = COLD.format(path=search, load=load, level=level, threads=threads, skimage=skimage)
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     return float(out.stdout.split()[-1])
+
+
+def load_baseline(folder):
+    """The isotile package in `folder` (another build's <build>/python), as isotile_baseline."""
+    init = pathlib.Path(folder) / "isotile" / "__init__.py"
+    spec = importlib.util.spec_from_file_location("isotile_baseline", init,
+                                                  submodule_search_locations=[str(init.parent)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["isotile_baseline"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def baseline_table(base, folder, volumes, threads, repeats, sk_mc):
+    """Another build's marching_cubes beside this one's and scikit-image's, interleaved call by
+    call (the load of a shared machine falls on both alike): medians and fastest runs, and each
+    one's cold first call in a fresh process."""
+    print()
+    print(f"This build against the one in {folder}, threads {threads}, {2 * repeats} interleaved "
+          "calls each (median; fastest in brackets):")
+    print("| volume | scikit-image | baseline | speed-up | this build | speed-up "
+          "| baseline, cold | this build, cold |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for name, vol, level, load in volumes:
+        sk = median_time(lambda: sk_mc(vol, level), 3)
+        old, new = [], []
+        base.marching_cubes(vol, level, threads=threads)
+        isotile.marching_cubes(vol, level, threads=threads)
+        for _ in range(2 * repeats):
+            for module, out in ((base, old), (isotile, new)):
+                t0 = time.perf_counter()
+                module.marching_cubes(vol, level, threads=threads)
+                out.append(time.perf_counter() - t0)
+        cold_old = cold_first_call(load, level, threads, False, folder)
+        cold_new = cold_first_call(load, level, threads, False)
+        ms = lambda s: f"{s * 1e3:.1f} ms"
+        mo, mn = statistics.median(old), statistics.median(new)
+        print(f"| {name} | {ms(sk)} | {ms(mo)} ({ms(min(old))}) | {sk / mo:.1f}x | "
+              f"{ms(mn)} ({ms(min(new))}) | {sk / mn:.1f}x | {ms(cold_old)} | {ms(cold_new)} |")
 
 
 def gyroid(n=256):
@@ -140,8 +184,12 @@ def main():
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--data", default=str(pathlib.Path(__file__).resolve().parents[2].parent /
                                           "shared" / "data"))
+    ap.add_argument("--baseline", metavar="FOLDER",
+                    help="another build's <build>/python: its marching_cubes timed beside this "
+                         "one's (before/after a change), in this process")
     args = ap.parse_args()
     from skimage.measure import marching_cubes as sk_mc
+    base = load_baseline(args.baseline) if args.baseline else None
 
     # (name, samples, level, the code that makes them as `vol` in a fresh process)
     volumes = []
@@ -221,6 +269,8 @@ def main():
         steps = cpu_steps(vol, level, args.repeats)
         print(f"| {name} | {sk:.3f} | {mc:.3f} | {sk / mc:.1f}x | {bare:.3f} | {sk / bare:.1f}x | "
               + " | ".join(f"{x:.3f}" for x in steps) + " |")
+    if base:
+        baseline_table(base, args.baseline, volumes, t, args.repeats, sk_mc)
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
