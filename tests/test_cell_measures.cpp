@@ -214,6 +214,14 @@ TEST(FiniteValueRange, EqualsValueRangeForEveryTypeAndLayout) {
   std::vector<double> f64;
   fill(f64, -1e300, 1e300);
   expect_fused_range_matches(f64, dims);
+  // -0.0 and +0.0 both as the minimum: a +0.0 bound whatever the split of the rows.
+  std::vector<float> zeros(n, 1.0f);
+  for (std::size_t s = 0; s < n; s += 3) zeros[s] = (s / 3) % 2 ? -0.0f : 0.0f;
+  for (int threads : {1, 2}) {
+    const auto r = finite_range_at(threads, dense_view(zeros.data(), ScalarType::Float32, dims));
+    EXPECT_EQ(r.first, 0.0);
+    EXPECT_FALSE(std::signbit(r.first)) << threads << " threads";
+  }
   // Empty views give (0, 0), as value_range says.
   const VolumeView empty = dense_view(f32.data(), ScalarType::Float32, {0, 3, 3});
   EXPECT_EQ(finite_value_range(empty, "volume"), std::make_pair(0.0, 0.0));

@@ -173,7 +173,9 @@ std::pair<double, double> finite_value_range(const VolumeView& view, const std::
     check_finite(view, what);  // throws, counting them and naming the first
     return value_range(view);  // not reached: the scan and the check agree on what is finite
   }
-  return {s.lo, s.hi};
+  // + 0.0 turns a -0.0 bound into +0.0: which of the two zeros a lane meets first depends on
+  // where TBB split the rows, and the answer must not.
+  return {s.lo + 0.0, s.hi + 0.0};
 }
 
 }  // namespace isotile

@@ -15,7 +15,7 @@ namespace isotile {
 
 // check_finite(view, what) and then value_range(view): the same error (InputError naming how many
 // samples are NaN or Inf and where the first is) or the same minimum and maximum (0, 0 for an
-// empty view). Deterministic for any thread count.
+// empty view; a zero bound is +0.0). Deterministic for any thread count.
 std::pair<double, double> finite_value_range(const VolumeView& view, const std::string& what);
 
 }  // namespace isotile
