@@ -3,11 +3,14 @@
 // against brute force here, so that the sanitizer pass (which cannot load the Python module)
 // runs them too.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <set>
+#include <string>
 #include <vector>
 
 #include "core/errors.h"
@@ -15,8 +18,10 @@
 #include "core/extract/cell_ranges.h"
 #include "core/extract/extract.h"
 #include "core/mesh/field_distance.h"
+#include "core/volume/finite_range.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume.h"
+#include "core/volume/volume_io.h"
 
 namespace isotile {
 namespace {
@@ -96,6 +101,169 @@ TEST(CellRanges, StridedViewsAndThinVolumesAgreeWithDenseOnes) {
   const std::vector<float> values = vertex_cell_ranges(t, m);
   for (std::size_t v = 0; v < values.size(); ++v)
     EXPECT_EQ(values[v], static_cast<float>(brute_range(t, m.positions[v])));
+}
+
+// Whether p (grid frame of v) lies between 1e-6 and 2e-4 voxels from a grid plane.
+bool near_a_plane(const VolumeView& v, const Vec3f& p) {
+  for (int a = 0; a < 3; ++a) {
+    const double g = (p[a] - v.origin[a]) / v.spacing[a];
+    const double d = std::abs(g - std::round(g));
+    if (d > 1e-6 && d < 2e-4) return true;
+  }
+  return false;
+}
+
+// vertex_cell_ranges() run in an arena of `threads` threads.
+std::vector<float> ranges_at(int threads, const VolumeView& view, const Mesh& mesh) {
+  tbb::task_arena arena(threads);
+  return arena.execute([&] { return vertex_cell_ranges(view, mesh); });
+}
+
+TEST(CellRanges, SameValuesAtAnyThreadCountForEveryMethodAndType) {
+  // Vertices on edges, at grid points (an integer level on integer samples) and inside cells.
+  const Volume field = make_field_volume({FieldKind::Gyroid, 48});
+  std::vector<std::int16_t> shorts(static_cast<std::size_t>(field.view().sample_count()));
+  for (std::size_t s = 0; s < shorts.size(); ++s)
+    shorts[s] = static_cast<std::int16_t>(std::lround(field.view().typed<float>()[s] * 100));
+  const VolumeView views[] = {
+      field.view(), dense_view(shorts.data(), ScalarType::Int16, field.view().dims, {1, 2, 0.5})};
+  for (const VolumeView& view : views)
+    for (Method m : {Method::MarchingCubes, Method::Macet, Method::DualContouring})
+      for (double iso : {0.0, 0.25, 30.0}) {
+        if (view.type == ScalarType::Float32 && iso > 1) continue;
+        const Mesh mesh = mc(view, iso, m);
+        ASSERT_GT(mesh.positions.size(), 10000u);  // several tasks of 4096
+        const std::vector<float> one = ranges_at(1, view, mesh);
+        EXPECT_EQ(ranges_at(2, view, mesh), one) << method_name(m) << " iso " << iso;
+        // Against every cell tried, for a sample of the vertices; not those whose distance to a
+        // grid plane lies between brute_range's tolerance and the library's (1e-5 and 1e-4
+        // voxels), where the two may count different cells.
+        for (std::size_t v = 0; v < one.size(); v += 97)
+          if (!near_a_plane(view, mesh.positions[v])) {
+            EXPECT_EQ(one[v], static_cast<float>(brute_range(view, mesh.positions[v])))
+                << method_name(m) << " iso " << iso << " vertex " << v;
+          }
+      }
+}
+
+// finite_value_range() in an arena of `threads` threads.
+std::pair<double, double> finite_range_at(int threads, const VolumeView& view) {
+  tbb::task_arena arena(threads);
+  return arena.execute([&] { return finite_value_range(view, "volume"); });
+}
+
+template <class T>
+void expect_fused_range_matches(const std::vector<T>& samples, Index3 dims) {
+  const ScalarType type = scalar_type_of<T>();
+  const VolumeView dense = dense_view(samples.data(), type, dims);
+  // The same samples read every other x (a strided row) and a sub-box of them.
+  VolumeView strided = dense;
+  strided.dims[0] = (dims[0] + 1) / 2;
+  strided.strides[0] = 2;
+  strided.box.hi = strided.global_dims = strided.dims;
+  VolumeView inner = dense;
+  inner.data = samples.data() + dense.offset(1, 1, 1);
+  inner.dims = {dims[0] - 2, dims[1] - 2, dims[2] - 1};
+  inner.box.hi = inner.global_dims = inner.dims;
+  for (const VolumeView& v : {dense, strided, inner}) {
+    check_finite(v, "volume");  // these are finite
+    const auto want = value_range(v);
+    EXPECT_EQ(finite_range_at(1, v), want) << scalar_name(type);
+    EXPECT_EQ(finite_range_at(2, v), want) << scalar_name(type);
+  }
+}
+
+TEST(FiniteValueRange, EqualsValueRangeForEveryTypeAndLayout) {
+  std::mt19937 rng(11);
+  // Rows of 67 samples: whole SIMD lanes and a tail; the extremes placed at a tail, a lane and
+  // the first sample of some row.
+  const Index3 dims{67, 9, 8};
+  const auto n = static_cast<std::size_t>(dims[0] * dims[1] * dims[2]);
+  const auto fill = [&](auto& v, double lo, double hi) {
+    using T = typename std::decay_t<decltype(v)>::value_type;
+    std::uniform_real_distribution<double> d(lo, hi);
+    v.resize(n);
+    for (auto& s : v) s = static_cast<T>(d(rng));
+  };
+  std::vector<std::uint8_t> u8;
+  fill(u8, 10, 200);
+  u8[66] = 3;
+  u8[67 * 9 * 3 + 17] = 250;
+  expect_fused_range_matches(u8, dims);
+  std::vector<std::int8_t> i8;
+  fill(i8, -100, 100);
+  i8[n - 1] = -128;
+  expect_fused_range_matches(i8, dims);
+  std::vector<std::uint16_t> u16;
+  fill(u16, 100, 60000);
+  expect_fused_range_matches(u16, dims);
+  std::vector<std::int16_t> i16;
+  fill(i16, -30000, 30000);
+  expect_fused_range_matches(i16, dims);
+  std::vector<std::uint32_t> u32;
+  fill(u32, 0, 4e9);
+  expect_fused_range_matches(u32, dims);
+  std::vector<std::int32_t> i32;
+  fill(i32, -2e9, 2e9);
+  expect_fused_range_matches(i32, dims);
+  std::vector<float> f32;
+  fill(f32, -1, 1);
+  f32[67 * 2] = -7.5f;
+  f32[67 * 5 + 64] = 9.25f;
+  expect_fused_range_matches(f32, dims);
+  std::vector<double> f64;
+  fill(f64, -1e300, 1e300);
+  expect_fused_range_matches(f64, dims);
+  // -0.0 and +0.0 both as the minimum: a +0.0 bound whatever the split of the rows.
+  std::vector<float> zeros(n, 1.0f);
+  for (std::size_t s = 0; s < n; s += 3) zeros[s] = (s / 3) % 2 ? -0.0f : 0.0f;
+  for (int threads : {1, 2}) {
+    const auto r = finite_range_at(threads, dense_view(zeros.data(), ScalarType::Float32, dims));
+    EXPECT_EQ(r.first, 0.0);
+    EXPECT_FALSE(std::signbit(r.first)) << threads << " threads";
+  }
+  // Empty views give (0, 0), as value_range says.
+  const VolumeView empty = dense_view(f32.data(), ScalarType::Float32, {0, 3, 3});
+  EXPECT_EQ(finite_value_range(empty, "volume"), std::make_pair(0.0, 0.0));
+}
+
+// The message check_finite() gives for `v`.
+std::string check_finite_message(const VolumeView& v) {
+  try {
+    check_finite(v, "volume");
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(FiniteValueRange, RejectsNanAndInfAsCheckFiniteDoes) {
+  const Index3 dims{67, 5, 4};
+  const auto n = static_cast<std::size_t>(dims[0] * dims[1] * dims[2]);
+  for (const double bad :
+       {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+        -std::numeric_limits<double>::infinity()})
+    // In a lane, in a row's tail, and the very first sample (where the lanes start).
+    for (const std::size_t at :
+         {std::size_t{67 * 3 + 10}, std::size_t{67 * 7 + 66}, std::size_t{0}}) {
+      std::vector<float> f(n, 1.0f);
+      std::vector<double> d(n, 1.0);
+      f[at] = static_cast<float>(bad);
+      d[at] = bad;
+      for (const VolumeView& v : {dense_view(f.data(), ScalarType::Float32, dims),
+                                  dense_view(d.data(), ScalarType::Float64, dims)}) {
+        const std::string want = check_finite_message(v);
+        ASSERT_FALSE(want.empty());
+        for (int threads : {1, 2}) {
+          try {
+            finite_range_at(threads, v);
+            ADD_FAILURE() << "no error for " << bad << " at " << at;
+          } catch (const InputError& e) {
+            EXPECT_EQ(std::string(e.what()), want);
+          }
+        }
+      }
+    }
 }
 
 std::set<std::array<float, 9>> triangle_set(const Mesh& m, const std::vector<Tri>& tris) {

@@ -9,6 +9,31 @@
 namespace isotile {
 namespace {
 
+// The largest (max - min) of the cells from `corner` on: two along each axis whose bit is set in
+// P, else one; the ranges subtracted in double, starting from 0.
+template <class T, int P>
+inline double largest_cell_range(const T* corner, const Index3& stride) {
+  constexpr int n0 = (P & 1) ? 3 : 2, n1 = (P & 2) ? 3 : 2, n2 = (P & 4) ? 3 : 2;
+  T s[n2][n1][n0];
+  for (int k = 0; k < n2; ++k)
+    for (int j = 0; j < n1; ++j)
+      for (int i = 0; i < n0; ++i)
+        s[k][j][i] = corner[k * stride[2] + j * stride[1] + i * stride[0]];
+  double best = 0;
+  for (int k = 0; k + 1 < n2; ++k)
+    for (int j = 0; j + 1 < n1; ++j)
+      for (int i = 0; i + 1 < n0; ++i) {
+        T mn = s[k][j][i], mx = mn;
+        for (int c = 1; c < 8; ++c) {
+          const T x = s[k + (c >> 2)][j + ((c >> 1) & 1)][i + (c & 1)];
+          mn = std::min(mn, x);
+          mx = std::max(mx, x);
+        }
+        best = std::max(best, static_cast<double>(mx) - static_cast<double>(mn));
+      }
+  return best;
+}
+
 template <class T>
 std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
   const T* data = view.typed<T>();
@@ -35,26 +60,40 @@ std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
             lo[a] = std::clamp<std::int64_t>(lo[a], 0, last);
             hi[a] = std::clamp<std::int64_t>(hi[a], 0, last);
           }
-          // The samples of those cells, read once (at most 3 x 3 x 3), then each cell's range.
-          const std::int64_t n[3] = {hi[0] - lo[0] + 2, hi[1] - lo[1] + 2, hi[2] - lo[2] + 2};
-          T s[3][3][3];
-          for (std::int64_t k = 0; k < n[2]; ++k)
-            for (std::int64_t j = 0; j < n[1]; ++j) {
-              const T* row = data + view.offset(lo[0], lo[1] + j, lo[2] + k);
-              for (std::int64_t i = 0; i < n[0]; ++i) s[k][j][i] = row[i * view.strides[0]];
-            }
+          // Which axes hold two cells picks one of eight fixed-size loops (an MC vertex has two,
+          // on the two grid planes through its edge): unrolled, where loops whose trip counts
+          // change from vertex to vertex mispredicted several times per vertex.
+          const T* corner = data + view.offset(lo[0], lo[1], lo[2]);
+          const int pattern = static_cast<int>(hi[0] != lo[0]) |
+                              static_cast<int>(hi[1] != lo[1]) << 1 |
+                              static_cast<int>(hi[2] != lo[2]) << 2;
           double best = 0;
-          for (std::int64_t k = 0; k + 1 < n[2]; ++k)
-            for (std::int64_t j = 0; j + 1 < n[1]; ++j)
-              for (std::int64_t i = 0; i + 1 < n[0]; ++i) {
-                T mn = s[k][j][i], mx = mn;
-                for (int c = 1; c < 8; ++c) {
-                  const T x = s[k + (c >> 2)][j + ((c >> 1) & 1)][i + (c & 1)];
-                  mn = std::min(mn, x);
-                  mx = std::max(mx, x);
-                }
-                best = std::max(best, static_cast<double>(mx) - static_cast<double>(mn));
-              }
+          switch (pattern) {
+            case 0:
+              best = largest_cell_range<T, 0>(corner, view.strides);
+              break;
+            case 1:
+              best = largest_cell_range<T, 1>(corner, view.strides);
+              break;
+            case 2:
+              best = largest_cell_range<T, 2>(corner, view.strides);
+              break;
+            case 3:
+              best = largest_cell_range<T, 3>(corner, view.strides);
+              break;
+            case 4:
+              best = largest_cell_range<T, 4>(corner, view.strides);
+              break;
+            case 5:
+              best = largest_cell_range<T, 5>(corner, view.strides);
+              break;
+            case 6:
+              best = largest_cell_range<T, 6>(corner, view.strides);
+              break;
+            default:
+              best = largest_cell_range<T, 7>(corner, view.strides);
+              break;
+          }
           out[v] = static_cast<float>(best);
         }
       });

@@ -2,6 +2,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -85,6 +86,12 @@ class Extractor {
     grid_.nz = view.dims[2];
     grid_.words = (grid_.nx + 63) / 64;
     cells_ = local_cell_box(view, options.cells, marching_cubes_halo(options));
+    // The points whose gradient() takes a central difference along every axis.
+    for (int a = 0; a < 3; ++a) {
+      inner_.lo[a] = std::max<int64_t>(1, 1 - view.box.lo[a]);
+      inner_.hi[a] = std::min(view.dims[a] - 1, view.global_dims[a] - 1 - view.box.lo[a]);
+      if (!(view.spacing[a] > 0)) inner_.hi[a] = inner_.lo[a];  // gradient() says 0 there
+    }
   }
 
   // With `keys`, fills only the vertices' keys (the mesh stays empty).
@@ -155,11 +162,14 @@ class Extractor {
             // of plane k's edges: a sparse walk the hardware prefetcher does not follow, so that
             // row is fetched a few rows ahead (gyroid-256, float samples: this loop 22.5 -> 13.9
             // ms). (2 to 8 rows ahead gave the same times. A prefetch never faults.)
+            // With normals, the gradient at a +z end reads plane k + 2 the same way: fetched
+            // too (gyroid-256, float samples: half the time of the normals went to that load).
             if (const int64_t ahead = r + 4; ahead < rows) {
               const int64_t ka = cells_.lo[2] + ahead / ny + 1;
-              if (ka < view_.dims[2]) {
+              const int64_t planes = options_.normals ? 2 : 1;
+              for (int64_t kp = ka; kp < ka + planes && kp < view_.dims[2]; ++kp) {
                 const char* row = reinterpret_cast<const char*>(
-                    data_ + view_.offset(x0, cells_.lo[1] + ahead % ny, ka));
+                    data_ + view_.offset(x0, cells_.lo[1] + ahead % ny, kp));
                 const size_t bytes = static_cast<size_t>(x1 - x0 + 1) * sizeof(T);
                 for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(row + b);
               }
@@ -226,6 +236,17 @@ class Extractor {
   std::array<double, 3> gradient(int64_t i, int64_t j, int64_t k) const {
     const int64_t p[3] = {i, j, k};
     std::array<double, 3> g{};
+    // Most points have both neighbours along every axis: the same differences over the same
+    // 2 x spacing, without the border's index arithmetic (normals are a third of MC's time).
+    if (p[0] >= inner_.lo[0] && p[0] < inner_.hi[0] && p[1] >= inner_.lo[1] &&
+        p[1] < inner_.hi[1] && p[2] >= inner_.lo[2] && p[2] < inner_.hi[2]) {
+      const T* c = data_ + view_.offset(i, j, k);
+      for (int a = 0; a < 3; ++a)
+        g[a] =
+            (static_cast<double>(c[view_.strides[a]]) - static_cast<double>(c[-view_.strides[a]])) /
+            (2.0 * view_.spacing[a]);
+      return g;
+    }
     for (int a = 0; a < 3; ++a) {
       const int64_t global = view_.box.lo[a] + p[a];
       int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
@@ -321,6 +342,7 @@ class Extractor {
   const T* data_;
   BitGrid grid_;
   Box3 cells_;  // the cells to extract, in the view's own indices
+  Box3 inner_;  // points with both neighbours along every axis in the view and the volume
 };
 
 }  // namespace

@@ -9,10 +9,12 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdint>
+#include <ctime>
 #include <filesystem>
 #include <limits>
 #include <mutex>
@@ -30,6 +32,7 @@
 #include "core/mesh/mesh_topology.h"
 #include "core/mesh/self_intersections.h"
 #include "core/simplify/simplify.h"
+#include "core/volume/finite_range.h"
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
 #include "tiler/pipeline.h"
@@ -179,8 +182,7 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
   py::capsule owner = owner_of(result);  // frees the result on any exception below
   enum class Level { Ok, NaN, OutOfRange } level_check = Level::Ok;
   run_released(threads, [&] {
-    check_finite(whole_view, "volume");
-    const auto [lo, hi] = value_range(whole_view);
+    const auto [lo, hi] = finite_value_range(whole_view, "volume");
     // None: the middle of the data's range, as scikit-image takes it.
     options.iso = level ? *level : 0.5 * (lo + hi);
     if (std::isnan(options.iso)) {
@@ -301,35 +303,45 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
                         face_array(result->mesh.triangles, result->mesh.positions.size(), owner));
 }
 
-// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (check_finite,
-// value range, extract, values) timed inside C++ on the same view, without the Python layer or the
-// arrays' wrapping, so that the binding's overhead can be measured in the same process. Seconds per
-// run: (all the calls, extract() alone).
-std::vector<std::pair<double, double>> time_library_calls(const py::array& volume, double level,
-                                                          const std::string& method, bool normals,
-                                                          int threads, int repeats) {
+// For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (the samples'
+// check and range, extract, values) timed inside C++ on the same view, without the Python layer or
+// the arrays' wrapping, so that the binding's overhead can be measured in the same process, and
+// what each call costs. Per run, seconds of wall clock then of the process's CPU time (which the
+// load of a shared machine changes little): (checks, extract(), values) each.
+using StepTimes = std::array<double, 6>;
+std::vector<StepTimes> time_library_calls(const py::array& volume, double level,
+                                          const std::string& method, bool normals, int threads,
+                                          int repeats) {
   const VolumeView view = view_of(volume, {1, 1, 1}, "volume");
   ExtractOptions options;
   options.method = parse_method(method);
   options.backend = Backend::Cpu;
   options.iso = level;
   options.normals = normals;
-  std::vector<std::pair<double, double>> out;
+  std::vector<StepTimes> out;
   run_released(threads, [&] {
-    using Clock = std::chrono::steady_clock;
+    struct Now {
+      std::chrono::steady_clock::time_point wall = std::chrono::steady_clock::now();
+      std::clock_t cpu = std::clock();  // the process's CPU time, all threads
+    };
+    const auto wall = [](const Now& a, const Now& b) {
+      return std::chrono::duration<double>(b.wall - a.wall).count();
+    };
+    const auto cpu = [](const Now& a, const Now& b) {
+      return static_cast<double>(b.cpu - a.cpu) / CLOCKS_PER_SEC;
+    };
     for (int r = 0; r < repeats; ++r) {
-      const auto t0 = Clock::now();
-      check_finite(view, "volume");
-      const auto range = value_range(view);
-      const auto t1 = Clock::now();
+      const Now t0;
+      const auto range = finite_value_range(view, "volume");
+      const Now t1;
       Mesh mesh = extract(view, options);
-      const auto t2 = Clock::now();
+      const Now t2;
       const std::vector<float> values = vertex_cell_ranges(view, mesh);
-      const auto t3 = Clock::now();
+      const Now t3;
       if (mesh.triangles.empty() || values.size() != mesh.positions.size() || range.first > level)
         throw InputError("no surface");
-      out.emplace_back(std::chrono::duration<double>(t3 - t0).count(),
-                       std::chrono::duration<double>(t2 - t1).count());
+      out.push_back(
+          {wall(t0, t1), wall(t1, t2), wall(t2, t3), cpu(t0, t1), cpu(t1, t2), cpu(t2, t3)});
     }
     return 0;
   });
