@@ -215,6 +215,31 @@ void check_pipeline_options(const PipelineOptions& options) {
   choose_backend(eo);  // InputError when the method cannot run on the backend asked for
 }
 
+ExtractOptions pipeline_extract_options(const PipelineInput& input,
+                                        const PipelineOptions& options) {
+  check_pipeline_options(options);
+  ExtractOptions eo = options.extract;
+  eo.cells = {};
+  eo.progress = nullptr;
+  const std::optional<FieldSpec> field = parse_field_spec(input.path);
+  if (options.iso && !options.iso_auto) {
+    if (!std::isfinite(*options.iso))
+      throw InputError("--iso must be a finite number or 'auto', got '" +
+                       std::to_string(*options.iso) + "'");
+    eo.iso = *options.iso;
+  } else if (field && !options.iso_auto) {
+    eo.iso = field_default_iso(field->kind);
+  } else if (!options.iso_auto) {
+    throw InputError(
+        "--iso is required for a volume file: a number, or 'auto' for Otsu's "
+        "threshold of the samples (`isotile info " +
+        input.path + "` shows their range and histogram)");
+  }
+  if (options.simplify < 1 && eo.keep_quads)
+    throw InputError("--simplify gives triangles; drop --quads");
+  return eo;
+}
+
 PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& options) {
   const auto t_total = Clock::now();
   const Log log = [&](const std::string& line) {
@@ -230,29 +255,12 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_format_from_path(options.output);
   }
-  check_pipeline_options(options);
-  ExtractOptions eo = options.extract;
-  eo.cells = {};
+  ExtractOptions eo = pipeline_extract_options(input, options);
   eo.progress = options.progress;
   BackendChoice choice = choose_backend(eo);
   const Backend backend = choice.backend;
-
   const std::optional<FieldSpec> field = parse_field_spec(input.path);
-  if (options.iso && !options.iso_auto) {
-    if (!std::isfinite(*options.iso))
-      throw InputError("--iso must be a finite number or 'auto', got '" +
-                       std::to_string(*options.iso) + "'");
-    eo.iso = *options.iso;
-  } else if (field && !options.iso_auto) {
-    eo.iso = field_default_iso(field->kind);
-  } else if (!options.iso_auto) {
-    throw InputError(
-        "--iso is required for a volume file: a number, or 'auto' for Otsu's "
-        "threshold of the samples (`isotile info " +
-        input.path + "` shows their range and histogram)");
-  }
   const bool simplifying = options.simplify < 1;
-  if (simplifying && eo.keep_quads) throw InputError("--simplify gives triangles; drop --quads");
   if (tiled) return run_tiled(input, options, eo, format, log, t_total);
 
   // In core.

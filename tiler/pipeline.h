@@ -122,6 +122,12 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
 // that wants their errors before its own later ones. Throws InputError.
 void check_pipeline_options(const PipelineOptions& options);
 
+// The extraction options a run of `options` on `input` starts from, after the checks of
+// check_pipeline_options(): options.extract with the isovalue set (`iso`; else a procedural
+// field's own; with iso_auto left for the samples' histogram to choose) and no cells or progress.
+// The MPI path (tiler/mpi_extract.h) starts from the same. Throws InputError.
+ExtractOptions pipeline_extract_options(const PipelineInput& input, const PipelineOptions& options);
+
 // --iso auto's choice from `histogram`: the isovalue, said through `log` with the samples'
 // range; returns the stats' "iso_auto" object.
 StatsJson choose_isovalue(const ValueHistogram& histogram, double& iso,

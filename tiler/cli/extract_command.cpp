@@ -9,7 +9,6 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
-#include "core/volume/procedural_fields.h"
 #include "tiler/brick_plan.h"
 #include "tiler/pipeline.h"
 #include "tiler/render_command.h"
@@ -109,18 +108,7 @@ int run_extract_distributed(const ExtractArgs& args, PipelineOptions o, Clock::t
   // The pipeline's checks, in its order, before any rank reads.
   check_output(o.output, o.simplify >= 1);
   const MeshFormat format = mesh_format_from_path(o.output);
-  ExtractOptions& e = o.extract;
-  const std::optional<FieldSpec> field = parse_field_spec(args.in.input);
-  if (o.iso && !o.iso_auto)
-    e.iso = *o.iso;
-  else if (field && !o.iso_auto)
-    e.iso = field_default_iso(field->kind);
-  else if (!o.iso_auto)
-    throw InputError(
-        "--iso is required for a volume file: a number, or 'auto' for Otsu's "
-        "threshold of the samples (`isotile info " +
-        args.in.input + "` shows their range and histogram)");
-  if (o.simplify < 1 && e.keep_quads) throw InputError("--simplify gives triangles; drop --quads");
+  const ExtractOptions e = pipeline_extract_options({.path = args.in.input}, o);
   TiledOptions to = tiled_options(o, e, format);
   json auto_iso;
   // Every rank reads the whole input once for the histogram and finds the same value.
