@@ -166,6 +166,14 @@ std::string probe(bool* hardware, bool hardware_only) {
 
 }  // namespace
 
+ProgramCacheState program_cache_state() {
+  device();  // the driver's binary formats decide
+  ProgramCacheState s;
+  s.folder = program_cache_dir().string();
+  s.enabled = program_cache_enabled(&s.off_because);
+  return s;
+}
+
 void register_gl_backends() {
   register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe);
   register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe);

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
@@ -50,6 +51,16 @@ struct McStats {
 // more than 2^32 - 1 vertices or one x-y slab of the volume does not fit the device.
 Mesh mc_geometry_shader(const VolumeView& view, const McOptions& options, McStats* stats = nullptr);
 Mesh mc_histopyramid(const VolumeView& view, const McOptions& options, McStats* stats = nullptr);
+
+// The on-disk program cache (program_cache.h) as `isotile gl-info` shows it: its folder (empty
+// when neither XDG_CACHE_HOME nor HOME is set) and whether this process uses it, with the reason
+// when not. Creates the context (throws like device()).
+struct ProgramCacheState {
+  std::string folder;
+  bool enabled = false;
+  std::string off_because;
+};
+ProgramCacheState program_cache_state();
 
 // Fills the GeometryShader and HistoPyramid entries of core's backend table
 // (core/extract/extract.h). Call once at startup, before extract().

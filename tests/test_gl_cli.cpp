@@ -324,6 +324,22 @@ TEST_F(GlCli, GlInfoDescribesTheDevice) {
   EXPECT_EQ(j["backends"]["hp"].get<std::string>().rfind("available", 0), 0u);
   // auto takes a GPU path only on a real GPU.
   EXPECT_EQ(j["auto"] == "cpu", j["software"].get<bool>());
+  // Where the program cache is, or why it is off.
+  const fs::path xdg = dir_ / "xdg";
+  const Result c = run("gl-info --json", "XDG_CACHE_HOME='" + xdg.string() + "'");
+  ASSERT_EQ(c.code, 0) << c.err;
+  const auto cache = nlohmann::json::parse(c.out);
+  if (cache["program_binary_formats"].get<int>() > 0)
+    EXPECT_EQ(cache["program_cache"], (xdg / "isotile").string());
+  else
+    EXPECT_EQ(cache["program_cache"].get<std::string>().rfind("off: the driver cannot save", 0), 0u)
+        << cache["program_cache"];
+  const Result off = run("gl-info --json", "ISOTILE_PROGRAM_CACHE=off");
+  ASSERT_EQ(off.code, 0) << off.err;
+  EXPECT_EQ(nlohmann::json::parse(off.out)["program_cache"].get<std::string>().rfind(
+                "off: turned off by ISOTILE_PROGRAM_CACHE=off", 0),
+            0u)
+      << off.out;
 }
 
 TEST_F(GlCli, NoContextIsOneErrorLine) {

@@ -49,6 +49,12 @@ int run_gl_info(bool as_json) {
   j["max_vertex_shader_storage_blocks"] = d.max_vertex_ssbo_blocks;
   j["max_geometry_shader_storage_blocks"] = d.max_geometry_ssbo_blocks;
   j["max_3d_texture_size"] = d.max_3d_texture;
+  j["program_binary_formats"] = d.program_binary_formats;
+  const isotile::gl::ProgramCacheState cache = isotile::gl::program_cache_state();
+  j["program_cache"] = cache.enabled
+                           ? json(cache.folder)
+                           : json("off: " + cache.off_because +
+                                  (cache.folder.empty() ? "" : " (" + cache.folder + ")"));
   json backends = json::object();
   for (const BackendCaps& c : capabilities())
     backends[std::string(backend_name(c.backend))] =
