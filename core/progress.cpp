@@ -25,6 +25,10 @@ std::string_view stage_name(Stage stage) {
   return "?";
 }
 
+double stage_series_fraction(int n, double fraction) {
+  return 1 - std::ldexp(1.0, 1 - n) + std::ldexp(1.0, -n) * fraction;
+}
+
 Progress::Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks)
     : parent_(&parent), parent_stage_(stage), brick_(brick), bricks_(bricks > 0 ? bricks : 1) {}
 
@@ -65,12 +69,11 @@ void Progress::advance(std::int64_t units) {
 
 void Progress::report(const ProgressUpdate& update) {
   if (!parent_) return report_root(update);
-  // A child (under its own mutex_): its n-th stage fills [1 - 2^-(n-1), 1 - 2^-n) of the brick, so
-  // the brick's fraction grows through any number of stages and stays below 1 until finish().
+  // A child (under its own mutex_): its stages are a series (stage_series_fraction), so the
+  // brick's fraction grows through any number of them and stays below 1 until finish().
   const int n = std::max(child_stages_, 1);
-  const double lo = 1 - std::ldexp(1.0, -(n - 1)), width = std::ldexp(1.0, -n);
-  child_reported_ =
-      std::max(child_reported_, std::min(lo + width * update.fraction, 1 - width / 2));
+  child_reported_ = std::max(child_reported_, std::min(stage_series_fraction(n, update.fraction),
+                                                       1 - std::ldexp(1.0, -n) / 2));
   parent_->report_root({parent_stage_, brick_, bricks_, child_reported_});
   check();
 }

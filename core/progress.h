@@ -39,6 +39,11 @@ namespace isotile {
 enum class Stage { Read, Histogram, Count, Extract, MacetSearch, Simplify, Write };
 std::string_view stage_name(Stage stage);  // "read", "histogram", "count", "extract", ...
 
+// Stages whose number is not known ahead, mapped onto [0, 1) so that the sum only grows: stage n
+// (from 1) fills [1 - 2^-(n-1), 1 - 2^-n). `fraction` of stage n done gives this. A child Progress
+// (below) reports its brick's stages so; front ends map a run's stages onto a bar the same way.
+double stage_series_fraction(int n, double fraction);
+
 struct ProgressUpdate {
   Stage stage = Stage::Extract;
   std::int64_t brick = 0;  // 0-based brick of `bricks`; 0 of 1 outside the tiler

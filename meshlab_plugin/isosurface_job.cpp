@@ -141,7 +141,7 @@ PipelineOptions pipeline_options(const IsosurfaceParams& p) {
 // MeshLab's bar and status line: reading to 25%, the histogram of --iso auto brick by brick to
 // 30%, the extraction's stages (count, extract, Macet's search) from 30% to 60%, simplification
 // from 60% to 90%, the bricks' file after that. The extraction's stages are several, each from 0
-// to 1 and their number not known ahead: stage n fills [1 - 2^-(n-1), 1 - 2^-n) of the span.
+// to 1 and their number not known ahead: a series over the span (core's stage_series_fraction).
 // Bricks in flight at once finish out of order, so the bar takes the highest value told so far:
 // it only moves forward.
 class BarMapping {
@@ -159,13 +159,11 @@ class BarMapping {
                                    0.0, 1.0);
     double from = 0.02, width = 0.23;
     if (u.stage == Stage::Histogram) from = 0.25, width = 0.05;
-    if (extraction) {
-      from = 0.3 + 0.3 * (1 - std::ldexp(1.0, 1 - n_));
-      width = 0.3 * std::ldexp(1.0, -n_);
-    }
+    if (extraction) from = 0.3, width = 0.3;
     if (u.stage == Stage::Simplify) from = 0.6, width = 0.3;
     if (u.stage == Stage::Write) from = 0.9, width = 0;
-    bar_ = std::max(bar_, from + width * done);
+    // The extraction's stages are a series (their number is not known ahead).
+    bar_ = std::max(bar_, from + width * (extraction ? stage_series_fraction(n_, done) : done));
     report_(label(u), bar_);
     return true;
   }

@@ -245,19 +245,17 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
   const int m = static_cast<int>(options.method);
   BackendChoice choice = choose_backend(options);
   const Backend b = choice.backend;
-  GpuReport report;
-  GpuReport* const wanted = ran && b != Backend::Cpu ? &report : nullptr;
-  if (options.backend != Backend::Auto || b == Backend::Cpu) {
+  auto run = [&] {
+    GpuReport report;
+    GpuReport* const wanted = ran && b != Backend::Cpu ? &report : nullptr;
     Mesh mesh = entry(b).run[m](view, options, wanted);
     if (wanted) choice.gpu = std::move(report);
     if (ran) *ran = std::move(choice);
     return mesh;
-  }
+  };
+  if (options.backend != Backend::Auto || b == Backend::Cpu) return run();
   try {
-    Mesh mesh = entry(b).run[m](view, options, wanted);
-    if (wanted) choice.gpu = std::move(report);
-    if (ran) *ran = std::move(choice);
-    return mesh;
+    return run();
   } catch (const Error& e) {
     std::fprintf(stderr, "isotile: the %s backend failed (%s); extracting on the CPU instead\n",
                  std::string(entry(b).name).c_str(), e.what());

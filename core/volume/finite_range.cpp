@@ -95,13 +95,17 @@ Scan scan_rows(const VolumeView& view, std::int64_t row_begin, std::int64_t row_
   constexpr bool floating = std::is_floating_point_v<T>;
   const T* data = view.typed<T>();
   const std::int64_t n = view.dims[0], ny = view.dims[1], stride = view.strides[0];
-  // Every lane starts at one of the samples, which cannot move the bounds.
-  const T first = data[view.offset(0, row_begin % ny, row_begin / ny)];
-  T lo = first, hi = first, nonfinite = 0;
+  // Every bound starts past every sample (floating point: infinities). A NaN sample never becomes
+  // a bound: `v < lo ? v : lo` and SSE's min and max keep `lo` when v is NaN.
+  const T start_lo = floating ? std::numeric_limits<T>::infinity() : std::numeric_limits<T>::max();
+  const T start_hi =
+      floating ? -std::numeric_limits<T>::infinity() : std::numeric_limits<T>::lowest();
+  T lo = start_lo, hi = start_hi, nonfinite = 0;
   T lo_l[L], hi_l[L];
   FloatLanes<T> fl;
   for (int l = 0; l < L; ++l) {
-    lo_l[l] = hi_l[l] = fl.lo[l] = fl.hi[l] = first;
+    lo_l[l] = fl.lo[l] = start_lo;
+    hi_l[l] = fl.hi[l] = start_hi;
     fl.nonfinite[l] = 0;
   }
   for (std::int64_t r = row_begin; r != row_end; ++r) {
@@ -135,16 +139,15 @@ Scan scan_rows(const VolumeView& view, std::int64_t row_begin, std::int64_t row_
   Scan s;
   s.lo = static_cast<double>(lo);
   s.hi = static_cast<double>(hi);
-  // A NaN bound is caught here too: lanes never take a NaN sample, but `first` may be one.
-  if constexpr (floating) s.finite = nonfinite == T(0) && lo == lo && hi == hi;
+  if constexpr (floating) s.finite = nonfinite == T(0);
   return s;
 }
 
 template <class T>
 Scan typed_scan(const VolumeView& view) {
   const Index3& d = view.dims;
-  // Rows of x, in y-then-z order; min and max are order-independent (for the finite samples that
-  // this answers for), so the split TBB picks cannot change the result.
+  // Rows of x, in y-then-z order; min and max are order-independent (NaN samples are skipped), so
+  // the split TBB picks cannot change the result but for the sign of a zero bound (see below).
   const std::int64_t rows = d[1] * d[2];
   const std::int64_t grain = std::max<std::int64_t>(1, (std::int64_t{1} << 16) / d[0]);
   return tbb::parallel_reduce(
@@ -164,18 +167,33 @@ Scan typed_scan(const VolumeView& view) {
       });
 }
 
+Scan scan(const VolumeView& view) {
+  return visit_scalar(view.type, [&](auto tag) { return typed_scan<decltype(tag)>(view); });
+}
+
+// + 0.0 turns a -0.0 bound into +0.0: which of the two zeros a lane meets first depends on where
+// TBB split the rows, and the answer must not.
+std::pair<double, double> bounds(const Scan& s) {
+  return {s.lo + 0.0, s.hi + 0.0};
+}
+
 }  // namespace
+
+std::pair<double, double> value_range(const VolumeView& view) {
+  if (view.sample_count() <= 0) return {0.0, 0.0};
+  const Scan s = scan(view);
+  // Only an all-NaN volume leaves the bounds unset.
+  if (s.lo > s.hi)
+    return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  return bounds(s);
+}
 
 std::pair<double, double> finite_value_range(const VolumeView& view, const std::string& what) {
   if (view.sample_count() <= 0) return {0.0, 0.0};
-  const Scan s = visit_scalar(view.type, [&](auto tag) { return typed_scan<decltype(tag)>(view); });
-  if (!s.finite) {
-    check_finite(view, what);  // throws, counting them and naming the first
-    return value_range(view);  // not reached: the scan and the check agree on what is finite
-  }
-  // + 0.0 turns a -0.0 bound into +0.0: which of the two zeros a lane meets first depends on
-  // where TBB split the rows, and the answer must not.
-  return {s.lo + 0.0, s.hi + 0.0};
+  const Scan s = scan(view);
+  // Throws, counting the NaN and Inf samples and naming the first.
+  if (!s.finite) check_finite(view, what);
+  return bounds(s);
 }
 
 }  // namespace isotile

@@ -2,8 +2,8 @@
 //
 // An isosurface call with scikit-image's conventions needs both before it extracts: NaN and Inf
 // are rejected (check_finite) and the level is checked against, or taken from, the range
-// (value_range). Each alone reads every sample once; this reads them once for both, with the rows
-// of a contiguous x axis scanned in SIMD-friendly lanes.
+// (value_range). One scan answers both, the rows of a contiguous x axis read in SIMD-friendly
+// lanes; value_range() (core/volume/volume_io.h) is the same scan, defined in finite_range.cpp.
 #pragma once
 
 #include <string>

@@ -8,7 +8,6 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <limits>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -198,45 +197,6 @@ NonFinite count_non_finite(const VolumeView& view) {
       });
 }
 
-struct Range {
-  double lo = std::numeric_limits<double>::infinity();
-  double hi = -std::numeric_limits<double>::infinity();
-};
-
-template <class T>
-Range typed_range(const VolumeView& view) {
-  const T* data = view.typed<T>();
-  const Index3& d = view.dims;
-  // min and max are order-independent, so the split TBB picks cannot change the result.
-  return tbb::parallel_reduce(
-      tbb::blocked_range<std::int64_t>(0, d[2]), Range{},
-      [&](const tbb::blocked_range<std::int64_t>& r, Range acc) {
-        for (std::int64_t k = r.begin(); k != r.end(); ++k)
-          for (std::int64_t j = 0; j < d[1]; ++j) {
-            const T* row = data + view.offset(0, j, k);
-            T lo = row[0];
-            T hi = row[0];
-            for (std::int64_t i = 1; i < d[0]; ++i) {
-              const T v = row[i * view.strides[0]];
-              if constexpr (std::is_floating_point_v<T>) {
-                // A NaN must never stay a bound: comparisons with it are all false.
-                if (std::isnan(lo)) lo = hi = v;
-              }
-              if (v < lo) lo = v;
-              if (v > hi) hi = v;
-            }
-            if (static_cast<double>(lo) < acc.lo) acc.lo = static_cast<double>(lo);
-            if (static_cast<double>(hi) > acc.hi) acc.hi = static_cast<double>(hi);
-          }
-        return acc;
-      },
-      [](Range a, const Range& b) {
-        a.lo = std::min(a.lo, b.lo);
-        a.hi = std::max(a.hi, b.hi);
-        return a;
-      });
-}
-
 // --spacing and --origin replace what the file says; the origin moves the world frame too.
 void apply_overrides(const RawOptions& raw, Vec3d& spacing, Vec3d& origin,
                      std::optional<WorldFrame>& world) {
@@ -410,16 +370,6 @@ void check_finite(const VolumeView& view, const std::string& what) {
       what + ": " + std::to_string(bad.count) + (bad.count == 1 ? " sample is" : " samples are") +
       " NaN or Inf (first at x=" + std::to_string(g[0]) + ", y=" + std::to_string(g[1]) +
       ", z=" + std::to_string(g[2]) + "); isosurfaces need finite values");
-}
-
-std::pair<double, double> value_range(const VolumeView& view) {
-  if (view.sample_count() <= 0) return {0.0, 0.0};
-  const Range r =
-      visit_scalar(view.type, [&](auto tag) { return typed_range<decltype(tag)>(view); });
-  // Only an all-NaN volume leaves the bounds unset.
-  if (r.lo > r.hi)
-    return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
-  return {r.lo, r.hi};
 }
 
 // Through open_vdb, which the isotile program resolves to a module it loads on first use

@@ -136,7 +136,9 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
 // where the first one is (x, y, z). Integer volumes always pass.
 void check_finite(const VolumeView& view, const std::string& what);
 
-// Minimum and maximum sample value (0, 0 for an empty view).
+// Minimum and maximum sample value (0, 0 for an empty view; NaN samples are skipped, and an
+// all-NaN view gives NaN, NaN; a zero bound is +0.0). One parallel pass
+// (core/volume/finite_range.cpp).
 std::pair<double, double> value_range(const VolumeView& view);
 
 }  // namespace isotile
