@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "test_support.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -74,17 +76,9 @@ Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& ar
   return r;
 }
 
-class CliCancel : public ::testing::Test {
+class CliCancel : public isotile::testing::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("isotile-cancel-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
+  CliCancel() : TempDirTest("isotile-cancel-") {}
 };
 
 void expect_cancelled(const Cancelled& r, int code) {

@@ -22,6 +22,7 @@
 #include "core/simplify/simplify.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "test_support.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"
 
@@ -190,23 +191,15 @@ TEST(Progress, ChildReportsWithinItsBrick) {
   EXPECT_THROW(child.advance(), Cancelled);
 }
 
-class ProgressFiles : public ::testing::Test {
+class ProgressFiles : public isotile::testing::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("isotile-progress-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  ProgressFiles() : TempDirTest("isotile-progress-") {}
   // The names in the work directory (a cancelled write must leave none but the inputs).
   std::vector<std::string> names() const {
     std::vector<std::string> out;
     for (const auto& e : fs::directory_iterator(dir_)) out.push_back(e.path().filename().string());
     return out;
   }
-  fs::path dir_;
 };
 
 // 32 MiB of raw samples: read in 4 MiB units with a Progress, so at least 8 callbacks after the
