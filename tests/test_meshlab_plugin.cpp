@@ -73,6 +73,8 @@ class MeshlabServer : public isotile::testing::TempDirTest {
   ServerRun run(const std::string& mlx, const std::string& output = "out.ply",
                 const std::string& options = "") {
     std::ofstream(dir_ / "script.mlx") << mlx;
+    // No file of an earlier run may stand in for this one's.
+    if (!output.empty()) fs::remove(dir_ / output);
     const std::string cmd = "cd '" + dir_.string() + "' && xvfb-run -a '" +
                             (dir_ / "prefix/bin/meshlabserver").string() + "' -s script.mlx" +
                             (output.empty() ? "" : " -o " + output) + " " + options +
@@ -461,6 +463,10 @@ TEST_F(MeshlabServer, GlBackendsRunBesideMeshLabsOwnContext) {
     EXPECT_NE(r.log.find(where), std::string::npos) << r.log;
     expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"), cpu, backend);
   }
+  if (!gl)
+    ISOTILE_SKIP(Gl,
+                 "isotile gl-info found no OpenGL: only the clean failure of the GL "
+                 "backends was checked, not their meshes");
 }
 
 }  // namespace
