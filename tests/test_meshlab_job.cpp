@@ -24,6 +24,7 @@
 #include "core/volume/otsu_isovalue.h"
 #include "core/volume/volume_io.h"
 #include "skip_support.h"
+#include "test_support.h"
 #include "tiler/pipeline.h"
 
 namespace isotile::meshlab {
@@ -38,6 +39,13 @@ IsosurfaceParams nucleon() {
   return p;
 }
 
+// A folder of each test's own for the brick-by-brick runs' private folders (the shared temporary
+// folder may hold other runs' folders meanwhile), removed afterwards even when a test fails.
+class MeshlabJob : public isotile::testing::TempDirTest {
+ protected:
+  MeshlabJob() : TempDirTest("isotile-job-") {}
+};
+
 std::string message_of(const IsosurfaceParams& p) {
   try {
     run_isosurface(p, "", {});
@@ -47,7 +55,7 @@ std::string message_of(const IsosurfaceParams& p) {
   return "(no error)";
 }
 
-TEST(MeshlabJob, ExtractsNamesTheLayerAndReportsProgress) {
+TEST_F(MeshlabJob, ExtractsNamesTheLayerAndReportsProgress) {
   IsosurfaceParams p = nucleon();
   p.method = 1;
   double last = -1;
@@ -75,7 +83,7 @@ TEST(MeshlabJob, ExtractsNamesTheLayerAndReportsProgress) {
   EXPECT_EQ(r.quality.triangles, r.mesh.triangles.size());
 }
 
-TEST(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
+TEST_F(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
   EXPECT_EQ(layer_name("/data/ch2.nii.gz", "", "macet", 60.5), "ch2 macet iso60_5");
   EXPECT_EQ(layer_name("v_8x8x8_float32.raw", "", "mc", -0.25), "v_8x8x8_float32 mc iso-0_25");
   EXPECT_EQ(layer_name("/d/scan.v2.nrrd", "", "dc", 3), "scan_v2 dc iso3");
@@ -91,7 +99,7 @@ TEST(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
 
 // The file dialog's patterns cover every extension the readers know, and the shipped script
 // lists them as the filter declares them.
-TEST(MeshlabJob, FilePatternsCoverEveryFormat) {
+TEST_F(MeshlabJob, FilePatternsCoverEveryFormat) {
   auto matched = [](const std::string& name) {
     for (const char* pattern : kVolumeFilePatterns)
       if (std::string(pattern) != "*" && ::fnmatch(pattern, name.c_str(), 0) == 0) return true;
@@ -111,7 +119,7 @@ TEST(MeshlabJob, FilePatternsCoverEveryFormat) {
       << "the example should declare: " << declared;
 }
 
-TEST(MeshlabJob, NoSurfaceNamesTheRangeInCoreAndBrickByBrick) {
+TEST_F(MeshlabJob, NoSurfaceNamesTheRangeInCoreAndBrickByBrick) {
   const auto [lo, hi] = value_range(read_volume(kNucleon).view());
   const std::string range = "the samples range from " + std::to_string(static_cast<int>(lo)) +
                             " to " + std::to_string(static_cast<int>(hi));
@@ -127,21 +135,16 @@ TEST(MeshlabJob, NoSurfaceNamesTheRangeInCoreAndBrickByBrick) {
   EXPECT_NE(message_of(p).find(range + ", all at or above it"), std::string::npos) << message_of(p);
 }
 
-TEST(MeshlabJob, BricksAndSimplification) {
+TEST_F(MeshlabJob, BricksAndSimplification) {
   IsosurfaceParams p = nucleon();
   const IsosurfaceResult whole = run_isosurface(p, "", {});
   p.memory = "256KiB";
-  // A folder of this test's own (the shared one may hold other runs' folders meanwhile).
-  const std::filesystem::path temp =
-      std::filesystem::path(::testing::TempDir()) / ("isotile-job-" + std::to_string(::getpid()));
-  std::filesystem::create_directories(temp);
-  const IsosurfaceResult bricked = run_isosurface(p, temp.string(), {});
+  const IsosurfaceResult bricked = run_isosurface(p, dir_.string(), {});
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
   EXPECT_EQ(bricked.mesh.positions, whole.mesh.positions);
   // No intermediate file left.
-  EXPECT_TRUE(std::filesystem::is_empty(temp));
-  std::filesystem::remove_all(temp);
+  EXPECT_TRUE(std::filesystem::is_empty(dir_));
   p.memory = "0";
   p.simplify = 0.2;
   const IsosurfaceResult simplified = run_isosurface(p, "", {});
@@ -153,10 +156,8 @@ TEST(MeshlabJob, BricksAndSimplification) {
 // The layer is the mesh `isotile extract` writes for the same settings: the fields go through
 // the CLI's pipeline, simplification included, in core and brick by brick; the progress of a
 // bricked run only moves forward too.
-TEST(MeshlabJob, GivesTheCliPipelinesMeshForTheSameSettings) {
-  const std::filesystem::path temp =
-      std::filesystem::path(::testing::TempDir()) / ("isotile-same-" + std::to_string(::getpid()));
-  std::filesystem::create_directories(temp);
+TEST_F(MeshlabJob, GivesTheCliPipelinesMeshForTheSameSettings) {
+  const std::filesystem::path& temp = dir_;
   for (const std::string memory : {"0", "512KiB"}) {
     IsosurfaceParams p = nucleon();
     p.method = 1;
@@ -197,10 +198,9 @@ TEST(MeshlabJob, GivesTheCliPipelinesMeshForTheSameSettings) {
   }
   // Nothing of the bricked run left beside.
   EXPECT_TRUE(std::filesystem::is_empty(temp));
-  std::filesystem::remove_all(temp);
 }
 
-TEST(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
+TEST_F(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
   IsosurfaceParams p = nucleon();
   p.iso = std::nan("");  // ignored
   p.iso_auto = true;
@@ -212,20 +212,18 @@ TEST(MeshlabJob, IsoAutoIsTheLibrarysRuleInCoreAndBrickByBrick) {
   ASSERT_TRUE(whole.range.has_value());
   EXPECT_EQ(*whole.range, value_range(v.view()));
   p.memory = "256KiB";
-  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
+  const IsosurfaceResult bricked = run_isosurface(p, dir_.string(), {});
+  EXPECT_TRUE(std::filesystem::is_empty(dir_));  // the private folder went with its file
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.iso, whole.iso);
   EXPECT_EQ(bricked.range, whole.range);
   EXPECT_EQ(bricked.mesh.triangles, whole.mesh.triangles);
 }
 
-TEST(MeshlabJob, TheBrickFileLivesInAPrivateFolder) {
+TEST_F(MeshlabJob, TheBrickFileLivesInAPrivateFolder) {
   // A link another user could plant in the shared temporary folder, at the names the filter
   // once wrote (isotile-meshlab-PID-N.ply): never written through.
-  const std::filesystem::path dir =
-      std::filesystem::path(::testing::TempDir()) / ("isotile-job-" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
+  const std::filesystem::path& dir = dir_;
   const std::filesystem::path victim = dir / "victim.txt";
   { std::ofstream(victim) << "keep"; }
   for (int n = 0; n < 4; ++n)
@@ -246,10 +244,9 @@ TEST(MeshlabJob, TheBrickFileLivesInAPrivateFolder) {
     ++entries;
   }
   EXPECT_EQ(entries, 5);
-  std::filesystem::remove_all(dir);
 }
 
-TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
+TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
   struct Case {
     void (*edit)(IsosurfaceParams&);
     const char* says;
@@ -283,7 +280,7 @@ TEST(MeshlabJob, BadFieldsSayWhatIsWrong) {
   }
 }
 
-TEST(MeshlabJob, SimplifyFilterTargets) {
+TEST_F(MeshlabJob, SimplifyFilterTargets) {
   const IsosurfaceResult r = run_isosurface(nucleon(), "", {});
   const std::size_t n = r.mesh.triangles.size();
   SimplifyStats st;
@@ -298,7 +295,7 @@ TEST(MeshlabJob, SimplifyFilterTargets) {
 
 // A file of a DICOM series reads the series; the mesh comes in its world frame, in core and in
 // bricks alike.
-TEST(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
+TEST_F(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
   const std::filesystem::path file =
       std::filesystem::path(ISOTILE_SHARED_DATA) / "dicom_uih_t1_head_slab/00000060.dcm";
   if (!std::filesystem::exists(file)) ISOTILE_SKIP(SharedData, "no shared data at " << file);
@@ -327,7 +324,8 @@ TEST(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
   p.memory = "16MiB";
   EXPECT_NE(message_of(p).find("does not fit --memory"), std::string::npos);
   p.memory = "64MiB";
-  const IsosurfaceResult bricked = run_isosurface(p, ::testing::TempDir(), {});
+  const IsosurfaceResult bricked = run_isosurface(p, dir_.string(), {});
+  EXPECT_TRUE(std::filesystem::is_empty(dir_));
   EXPECT_GT(bricked.bricks, 1);
   EXPECT_EQ(bricked.mesh.positions, expected.positions);
   p.memory = "";

@@ -5,6 +5,7 @@
 // down, cancel leaving no file, and the errors before any output. The CLI's own tests check that
 // `isotile extract` over it kept its behaviour.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <filesystem>
 #include <sstream>
@@ -221,6 +222,8 @@ TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
   EXPECT_TRUE(fs::is_empty(dir_));
 }
 
+// The fifth call answers false. Bricks in flight at once may each have a call waiting for the
+// callback's lock when it does (core/progress.h: one call at a time): at most one more per thread.
 TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {
   int calls = 0;
   Progress progress([&](const ProgressUpdate&) { return ++calls < 5; });
@@ -229,7 +232,8 @@ TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {
   o.memory = "256KiB";
   o.progress = &progress;
   EXPECT_THROW(run_pipeline(input("field:gyroid:64"), o), Cancelled);
-  EXPECT_EQ(calls, 5);
+  EXPECT_GE(calls, 5);
+  EXPECT_LE(calls, 5 + tbb::this_task_arena::max_concurrency());
   EXPECT_TRUE(fs::is_empty(dir_));
 }
 

@@ -2,7 +2,7 @@
 # In-core stages of one CLI run: reading a raw file, writing binary PLY and the --stats measures
 # (quality and topology), as rates, for one binary or two side by side (before/after).
 #
-#   tests/benchmarks/bench_incore.sh VOLUME ISO [REPS] ISOTILE_A [ISOTILE_B]
+#   tests/benchmarks/bench_incore.sh VOLUME ISO REPS ISOTILE_A [ISOTILE_B]
 #   e.g. tests/benchmarks/bench_incore.sh /big/bonsai-tiled_2048x2048x1024_uint8.raw 49.5 2 \
 #          old/isotile build/tiler/isotile
 #
