@@ -105,6 +105,21 @@ class MpiCli : public isotile::testing::CliTest {
       EXPECT_EQ(extracted, j["bricks"].get<std::int64_t>());
       EXPECT_GE(j["load_imbalance"].get<double>(), 1.0);
       EXPECT_EQ(j["brick_seconds"]["extract"].size(), j["bricks"].get<std::size_t>());
+      // A GL backend's report adds up over the ranks as over one process's bricks: the same
+      // bytes uploaded, the same stages, a cache state (null, as in one process, for the CPU).
+      EXPECT_EQ(j["upload_bytes"], js["upload_bytes"]) << k << " ranks";
+      EXPECT_EQ(j["gl_program_cache"].is_null(), js["gl_program_cache"].is_null()) << k;
+      EXPECT_EQ(j["seconds"].contains("gl"), js["seconds"].contains("gl")) << k;
+      if (js["seconds"].contains("gl")) {
+        for (const auto& stage : js["seconds"]["gl"].items()) {
+          ASSERT_TRUE(j["seconds"]["gl"].contains(stage.key())) << stage.key();
+          EXPECT_GE(j["seconds"]["gl"][stage.key()].get<double>(), 0.0) << stage.key();
+        }
+        EXPECT_GT(j["upload_bytes"].get<std::uint64_t>(), 0u);
+        const json& cache = j["gl_program_cache"];
+        // Every rank loaded or compiled the programs its bricks needed.
+        EXPECT_GE(cache["loaded"].get<int>() + cache["compiled"].get<int>(), k) << cache;
+      }
     }
     EXPECT_EQ(stray_files({single, "single.json", "mpi1." + ext, "mpi2." + ext, "mpi3." + ext,
                            "mpi4." + ext, "mpi1.json", "mpi2.json", "mpi3.json", "mpi4.json",

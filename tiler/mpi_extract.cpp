@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "tiler/brick_extraction.h"
@@ -80,6 +82,39 @@ std::optional<InjectedFailure> injected_failure() {
   return InjectedFailure{std::atoll(s.substr(0, a).c_str()), s.substr(a + 1)};
 }
 
+// A rank's GL report (core's GpuReport, from the bricks its GL backend ran) as text for
+// Ranks::gather(), and back: JSON, whose numbers nlohmann writes in the shortest form that reads
+// back to the same double. "" for a rank whose bricks ran on the CPU or that ran none.
+std::string encode_gpu_report(const std::optional<GpuReport>& g) {
+  if (!g) return "";
+  nlohmann::ordered_json stages = nlohmann::ordered_json::array();
+  for (const auto& [stage, seconds] : g->seconds) stages.push_back({stage, seconds});
+  return nlohmann::ordered_json{{"seconds", stages},
+                                {"upload_bytes", g->upload_bytes},
+                                {"upload_seconds", g->upload_seconds},
+                                {"context_seconds", g->context_seconds},
+                                {"loaded", g->programs_loaded},
+                                {"compiled", g->programs_compiled},
+                                {"rejected", g->programs_rejected},
+                                {"cache_off", g->program_cache_off}}
+      .dump();
+}
+
+GpuReport decode_gpu_report(const std::string& text) {
+  const auto j = nlohmann::json::parse(text);
+  GpuReport g;
+  for (const auto& s : j.at("seconds"))
+    g.seconds.emplace_back(s.at(0).get<std::string>(), s.at(1).get<double>());
+  g.upload_bytes = j.at("upload_bytes").get<std::uint64_t>();
+  g.upload_seconds = j.at("upload_seconds").get<double>();
+  g.context_seconds = j.at("context_seconds").get<double>();
+  g.programs_loaded = j.at("loaded").get<int>();
+  g.programs_compiled = j.at("compiled").get<int>();
+  g.programs_rejected = j.at("rejected").get<int>();
+  g.program_cache_off = j.at("cache_off").get<std::string>();
+  return g;
+}
+
 class Ranks {
  public:
   Ranks() {
@@ -96,33 +131,42 @@ class Ranks {
     int bad = error.empty() ? 0 : 1, any = 0;
     MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
     if (!any) return;
-    const int len = static_cast<int>(std::min<std::size_t>(error.size(), 4096));
-    std::vector<int> lens(static_cast<std::size_t>(size_));
-    MPI_Gather(&len, 1, MPI_INT, lens.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-    std::vector<int> displs(static_cast<std::size_t>(size_));
-    std::exclusive_scan(lens.begin(), lens.end(), displs.begin(), 0);
-    std::string all(rank_ == 0 ? static_cast<std::size_t>(displs.back() + lens.back()) : 0, '\0');
-    MPI_Gatherv(error.data(), len, MPI_CHAR, all.data(), lens.data(), displs.data(), MPI_CHAR, 0,
-                MPI_COMM_WORLD);
+    const std::vector<std::string> errors = gather(error.substr(0, 4096));
     if (rank_ != 0) throw AgreedError("");
     int first = -1, failed = 0;
     bool alike = true;
     for (int r = 0; r < size_; ++r) {
-      if (lens[r] == 0) {
+      if (errors[r].empty()) {
         alike = false;
         continue;
       }
       ++failed;
       if (first < 0)
         first = r;
-      else if (all.compare(displs[r], lens[r], all, displs[first], lens[first]) != 0)
+      else if (errors[r] != errors[first])
         alike = false;
     }
-    const std::string message = all.substr(displs[first], lens[first]);
+    const std::string& message = errors[first];
     if (alike) throw AgreedError(message);
     throw AgreedError(
         "rank " + std::to_string(first) + " of " + std::to_string(size_) + ", " + message +
         (failed > 1 ? " (" + std::to_string(failed - 1) + " more ranks failed)" : ""));
+  }
+
+  // Every rank's `text` on rank 0, in rank order (other ranks get an empty list).
+  std::vector<std::string> gather(const std::string& text) const {
+    const int len = static_cast<int>(text.size());
+    std::vector<int> lens(static_cast<std::size_t>(size_));
+    MPI_Gather(&len, 1, MPI_INT, lens.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+    std::vector<int> displs(static_cast<std::size_t>(size_));
+    std::exclusive_scan(lens.begin(), lens.end(), displs.begin(), 0);
+    std::string all(rank_ == 0 ? static_cast<std::size_t>(displs.back() + lens.back()) : 0, '\0');
+    MPI_Gatherv(text.data(), len, MPI_CHAR, all.data(), lens.data(), displs.data(), MPI_CHAR, 0,
+                MPI_COMM_WORLD);
+    std::vector<std::string> out;
+    if (rank_ == 0)
+      for (int r = 0; r < size_; ++r) out.push_back(all.substr(displs[r], lens[r]));
+    return out;
   }
 
   // Runs `fn` and agrees on its outcome.
@@ -440,6 +484,14 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     if (me == 0) file->commit();
   });
   result.seconds_extract = since(t0);
+
+  // The GL backends' reports of every rank, added on rank 0 in rank order as a single process
+  // adds its bricks' (the context's start-up: the slowest rank's).
+  {
+    const std::vector<std::string> reports = mpi.gather(encode_gpu_report(bricks->gpu()));
+    for (const std::string& r : reports)
+      if (!r.empty()) accumulate_gpu_report(result.gpu, decode_gpu_report(r));
+  }
 
   // The whole mesh's statistics on rank 0.
   std::uint64_t largest = result.largest_brick_bytes;
