@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -45,7 +46,8 @@ class StageClock {
   StageClock(const StageClock&) = delete;
   StageClock& operator=(const StageClock&) = delete;
 
-  // When the commands issued so far have completed on the device (a GL_TIMESTAMP query).
+  // When the commands issued so far have completed on the device (a GL_TIMESTAMP query; its
+  // query object is reused after collect()).
   Mark device_mark();
   // Now on the GL clock, as the CPU sees it (no wait).
   static Mark cpu_mark();
@@ -71,7 +73,9 @@ class StageClock {
     Mark before{};  // add_wait(): `from` is clamped to [before, to]
     bool clamp = false;
   };
-  std::vector<unsigned> queries_;  // GLuint
+  std::vector<unsigned> queries_;  // GLuint; generated in batches, reused after collect()
+  std::size_t used_ = 0;           // queries_[0, used_) hold this round's marks
+  bool flush_marks_ = false;       // software rasterisers: flush after each mark (device_mark())
   std::vector<Span> spans_;
   GlTimes times_;
 };
