@@ -109,7 +109,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
       // The method's own compute passes (Macet: its displaced grid vertices), kept until the slab
       // is done.
-      const StageClock::Mark prepare_start = clock ? clock->device_mark() : StageClock::Mark{};
+      const StageClock::Mark prepare_start = device_mark(clock);
       const std::vector<Buffer> kept =
           method.prepare ? method.prepare(samples, grid, defines) : std::vector<Buffer>{};
       if (clock && method.prepare)
@@ -125,7 +125,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       std::uint64_t cap = std::min(limit, first_guess(cells));
       Buffer capture(cap * tri_bytes);
       for (std::int64_t first = 0; first < n_cells;) {
-        const StageClock::Mark draw_start = clock ? clock->device_mark() : StageClock::Mark{};
+        const StageClock::Mark draw_start = device_mark(clock);
         glBindBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, capture.id(), 0,
                           static_cast<GLsizeiptr>(cap * tri_bytes));
         glBeginQuery(GL_PRIMITIVES_GENERATED, queries[0]);
@@ -141,8 +141,8 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         check("capturing triangles");
         ++passes;
         // The draw (classification and emission) and the capture's copy to the CPU.
-        const StageClock::Mark drawn = clock ? clock->device_mark() : StageClock::Mark{};
-        const StageClock::Mark read_start = clock ? StageClock::cpu_mark() : StageClock::Mark{};
+        const StageClock::Mark drawn = device_mark(clock);
+        const StageClock::Mark read_start = cpu_mark(clock);
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
         if (clock) {

@@ -80,4 +80,13 @@ class StageClock {
   GlTimes times_;
 };
 
+// The marks of an optional clock: a default Mark without one (the stages not asked for), so that
+// the drivers mark unconditionally and add spans only `if (clock)`.
+inline StageClock::Mark device_mark(StageClock* clock) {
+  return clock ? clock->device_mark() : StageClock::Mark{};
+}
+inline StageClock::Mark cpu_mark(StageClock* clock) {
+  return clock ? StageClock::cpu_mark() : StageClock::Mark{};
+}
+
 }  // namespace isotile::gl
