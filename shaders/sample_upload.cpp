@@ -83,10 +83,6 @@ int staging_buffers_created() {
   return created_count();
 }
 
-std::size_t staging_bytes() {
-  return staging_size();
-}
-
 void set_staging_bytes(std::size_t bytes) {
   release_staging();
   staging_size() = std::max<std::size_t>(bytes, 4);

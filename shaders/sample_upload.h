@@ -45,10 +45,10 @@ inline constexpr ScalarType kSampleTypes[] = {
     ScalarType::Int8,  ScalarType::UInt8,  ScalarType::Int16,   ScalarType::UInt16,
     ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64};
 
-// The staging buffers: kStagingBuffers of staging_bytes() each, created on first use.
+// The staging buffers: kStagingBuffers of kDefaultStagingBytes each (unless a test sets another
+// size), created on first use.
 inline constexpr std::size_t kDefaultStagingBytes = std::size_t{32} << 20;
 inline constexpr int kStagingBuffers = 3;
-std::size_t staging_bytes();
 // For tests: staging buffers of `bytes` each (at least one row of a slab must fit) from the next
 // upload on; the current ones are released (inside a gl::Scope).
 void set_staging_bytes(std::size_t bytes);

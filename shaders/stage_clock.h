@@ -58,8 +58,6 @@ class StageClock {
   // CPU marks). A device mark outside [before, after] (drivers that record timestamps late, as
   // llvmpipe may) falls back to the CPU's.
   void add_wait(GlStage s, Mark done, Mark before, Mark after);
-  // Adds plain seconds (measured otherwise) to stage `s`.
-  void add_seconds(GlStage s, double seconds) { times_[s] += seconds; }
   void add_upload_bytes(std::uint64_t bytes) { times_.upload_bytes += bytes; }
   // Reads every query (waiting for the device where it has not finished) and returns the sums so
   // far; the clock can go on being used.
