@@ -62,7 +62,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   Scope scope;
   const DeviceInfo& dev = device();
   Mesh mesh;
-  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
+  // The samples are on the device as stored (sample_upload.h).
+  const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
   std::vector<Box3> planned = plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
                                          std::max(sample_bytes, method.largest_per_sample),

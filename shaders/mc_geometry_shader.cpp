@@ -60,7 +60,8 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   for (int a = 0; a < 3; ++a)
     if (view.dims[a] < 2) return mesh;
   const int halo = method.halo;
-  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
+  // The samples are on the device as stored (sample_upload.h).
+  const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(o.memory);
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);

@@ -88,10 +88,6 @@ void set_staging_bytes(std::size_t bytes) {
   staging_size() = std::max<std::size_t>(bytes, 4);
 }
 
-std::size_t device_sample_bytes(ScalarType type) {
-  return scalar_size(type);
-}
-
 std::string sample_defines(ScalarType type) {
   switch (type) {
     case ScalarType::Int8:

@@ -32,9 +32,6 @@ struct Samples {
 // clock, the upload is timed from the first byte handed to GL to the last one resident.
 Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* clock = nullptr);
 
-// Bytes per sample on the device (the stored size: 1, 2, 4 or 8).
-std::size_t device_sample_bytes(ScalarType type);
-
 // The defines of upload_samples() for samples of `type`: SAMPLE_<TYPE> (the buffer's layout and
 // the widening fetch) and, for the types a float holds exactly (8- and 16-bit integers, float32),
 // SAMPLE_IS_FLOAT (the inside test in float).
