@@ -42,10 +42,10 @@ void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint6
     const std::uint64_t k = std::min(cap, n - first);
     set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
     set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(k));
-    const StageClock::Mark start = clock ? clock->device_mark() : StageClock::Mark{};
+    const StageClock::Mark start = device_mark(clock);
     dispatch(k);
-    const StageClock::Mark done = clock ? clock->device_mark() : StageClock::Mark{};
-    const StageClock::Mark before = clock ? StageClock::cpu_mark() : StageClock::Mark{};
+    const StageClock::Mark done = device_mark(clock);
+    const StageClock::Mark before = cpu_mark(clock);
     out.read(0, k * bytes_per_item, static_cast<char*>(dst) + first * bytes_per_item);
     if (out2) out2->read(0, k * bytes_per_item, static_cast<char*>(dst2) + first * bytes_per_item);
     if (clock) {
@@ -62,7 +62,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   Scope scope;
   const DeviceInfo& dev = device();
   Mesh mesh;
-  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
+  // The samples are on the device as stored (sample_upload.h).
+  const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
   std::vector<Box3> planned = plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
                                          std::max(sample_bytes, method.largest_per_sample),
@@ -83,7 +84,6 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   // Timer queries only when the stages are asked for.
   StageClock clock_storage;
   StageClock* const clock = stats ? &clock_storage : nullptr;
-  auto mark = [&] { return clock ? clock->device_mark() : StageClock::Mark{}; };
   std::uint64_t vertex_base = 0;
   int slab_count = 0, draws = 0, early = 0;
   progress_begin(run.progress, isotile::Stage::Extract, static_cast<std::int64_t>(planned.size()));
@@ -120,12 +120,12 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
     if (method.patch_maps) maps.bind(GL_SHADER_STORAGE_BUFFER, 6);
     // The method's own passes (Macet: its displaced grid vertices); kept until the slab is done.
-    const StageClock::Mark prepare_start = mark();
+    const StageClock::Mark prepare_start = device_mark(clock);
     const std::vector<Buffer> kept =
         method.prepare ? method.prepare(samples, grid, samples.defines + method.classify_defines)
                        : std::vector<Buffer>{};
     samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
-    const StageClock::Mark classify_start = mark();
+    const StageClock::Mark classify_start = device_mark(clock);
     if (clock && method.prepare) clock->add(GlStage::Prepare, prepare_start, classify_start);
 
     // (1) classify
@@ -134,7 +134,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     uniforms(prog);
     glUseProgram(prog);
     dispatch((elements + 1) / 2);
-    const StageClock::Mark scan_start = mark();
+    const StageClock::Mark scan_start = device_mark(clock);
     if (clock) clock->add(GlStage::Classify, classify_start, scan_start);
 
     // (2) the count pyramid, level by level, then each node's vertex offset, top-down
@@ -163,14 +163,14 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     check("building the HistoPyramid");
 
     // (3) totals
-    const StageClock::Mark scan_done = mark();
+    const StageClock::Mark scan_done = device_mark(clock);
     // The next slab's upload: its rows are copied into the staging buffers while the device
     // builds this slab's pyramid, before the totals' read-back waits for it.
     if (!slabs.empty()) {
       const Box3 next_region = slab_region(view, slabs.front(), method.halo);
       next.emplace(next_region, upload_samples(view, next_region, clock));
     }
-    const StageClock::Mark totals_read = clock ? StageClock::cpu_mark() : StageClock::Mark{};
+    const StageClock::Mark totals_read = cpu_mark(clock);
     std::uint32_t totals[2] = {};
     levels.read(std::size_t{pyr.offset[pyr.levels]} * 8, 8, totals);
     if (clock) {
@@ -195,7 +195,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // The vertices of the top layer of elements are listed again, first, by the next slab.
     std::uint64_t shared = 0;
     if (!slabs.empty() && n_vertices > 0) {
-      const StageClock::Mark prefix_start = mark();
+      const StageClock::Mark prefix_start = device_mark(clock);
       prog = program({{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, pyramid);
       uniforms(prog);
       shared = n_vertices -
@@ -244,7 +244,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     const std::string faces = samples.defines + method.face_defines;
     if (n_faces > 0 && method.positions_on_device) pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
     if (n_faces > 0 && method.gs_faces) {
-      const StageClock::Mark faces_start = mark();
+      const StageClock::Mark faces_start = device_mark(clock);
       draws += method.gs_faces(faces, uniforms, pyr, elements, n_faces, out);
       if (clock) clock->add(GlStage::Faces, faces_start, StageClock::cpu_mark());
     } else if (n_faces > 0) {

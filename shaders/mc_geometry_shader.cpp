@@ -60,7 +60,8 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   for (int a = 0; a < 3; ++a)
     if (view.dims[a] < 2) return mesh;
   const int halo = method.halo;
-  const double sample_bytes = static_cast<double>(device_sample_bytes(view.type));
+  // The samples are on the device as stored (sample_upload.h).
+  const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(o.memory);
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);
@@ -109,7 +110,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
       // The method's own compute passes (Macet: its displaced grid vertices), kept until the slab
       // is done.
-      const StageClock::Mark prepare_start = clock ? clock->device_mark() : StageClock::Mark{};
+      const StageClock::Mark prepare_start = device_mark(clock);
       const std::vector<Buffer> kept =
           method.prepare ? method.prepare(samples, grid, defines) : std::vector<Buffer>{};
       if (clock && method.prepare)
@@ -125,7 +126,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
       std::uint64_t cap = std::min(limit, first_guess(cells));
       Buffer capture(cap * tri_bytes);
       for (std::int64_t first = 0; first < n_cells;) {
-        const StageClock::Mark draw_start = clock ? clock->device_mark() : StageClock::Mark{};
+        const StageClock::Mark draw_start = device_mark(clock);
         glBindBufferRange(GL_TRANSFORM_FEEDBACK_BUFFER, 0, capture.id(), 0,
                           static_cast<GLsizeiptr>(cap * tri_bytes));
         glBeginQuery(GL_PRIMITIVES_GENERATED, queries[0]);
@@ -141,8 +142,8 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         check("capturing triangles");
         ++passes;
         // The draw (classification and emission) and the capture's copy to the CPU.
-        const StageClock::Mark drawn = clock ? clock->device_mark() : StageClock::Mark{};
-        const StageClock::Mark read_start = clock ? StageClock::cpu_mark() : StageClock::Mark{};
+        const StageClock::Mark drawn = device_mark(clock);
+        const StageClock::Mark read_start = cpu_mark(clock);
         staging.resize(written * 3 * words);
         capture.read(0, written * tri_bytes, staging.data());
         if (clock) {
@@ -237,9 +238,11 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
     if (soup.in_box[t])
       mesh.triangles.push_back({vertex_of[3 * t], vertex_of[3 * t + 1], vertex_of[3 * t + 2]});
   if (stats) {
-    stats->times = clock->collect();
-    stats->times[GlStage::Faces] +=
+    // Taken before collect(), which reads the timer queries: that wait is no part of the weld.
+    const double weld_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - weld_start).count();
+    stats->times = clock->collect();
+    stats->times[GlStage::Faces] += weld_seconds;
     stats->bricks = static_cast<int>(slabs.size());
     stats->capture_passes = passes;
   }

@@ -188,7 +188,6 @@ void store_program(const std::string& key, GLuint prog) {
     fs::remove(tmp, ignored);
     return note_unwritable(dir, ec.message());
   }
-  ++counts().written;
 }
 
 void count_compiled_program() {

@@ -28,7 +28,6 @@ struct ProgramCacheCounts {
   int loaded = 0;    // programs taken from the cache
   int compiled = 0;  // programs compiled (cache missing, off, unsupported, or entry rejected)
   int rejected = 0;  // entries found but not used (corrupt, truncated, stale)
-  int written = 0;   // entries written
 };
 ProgramCacheCounts program_cache_counts();
 

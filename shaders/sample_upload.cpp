@@ -83,17 +83,9 @@ int staging_buffers_created() {
   return created_count();
 }
 
-std::size_t staging_bytes() {
-  return staging_size();
-}
-
 void set_staging_bytes(std::size_t bytes) {
   release_staging();
   staging_size() = std::max<std::size_t>(bytes, 4);
-}
-
-std::size_t device_sample_bytes(ScalarType type) {
-  return scalar_size(type);
 }
 
 std::string sample_defines(ScalarType type) {

@@ -32,9 +32,6 @@ struct Samples {
 // clock, the upload is timed from the first byte handed to GL to the last one resident.
 Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* clock = nullptr);
 
-// Bytes per sample on the device (the stored size: 1, 2, 4 or 8).
-std::size_t device_sample_bytes(ScalarType type);
-
 // The defines of upload_samples() for samples of `type`: SAMPLE_<TYPE> (the buffer's layout and
 // the widening fetch) and, for the types a float holds exactly (8- and 16-bit integers, float32),
 // SAMPLE_IS_FLOAT (the inside test in float).
@@ -45,10 +42,10 @@ inline constexpr ScalarType kSampleTypes[] = {
     ScalarType::Int8,  ScalarType::UInt8,  ScalarType::Int16,   ScalarType::UInt16,
     ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64};
 
-// The staging buffers: kStagingBuffers of staging_bytes() each, created on first use.
+// The staging buffers: kStagingBuffers of kDefaultStagingBytes each (unless a test sets another
+// size), created on first use.
 inline constexpr std::size_t kDefaultStagingBytes = std::size_t{32} << 20;
 inline constexpr int kStagingBuffers = 3;
-std::size_t staging_bytes();
 // For tests: staging buffers of `bytes` each (at least one row of a slab must fit) from the next
 // upload on; the current ones are released (inside a gl::Scope).
 void set_staging_bytes(std::size_t bytes);

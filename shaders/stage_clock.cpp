@@ -4,6 +4,8 @@
 
 #include <algorithm>
 
+#include "gl_context.h"
+
 namespace isotile::gl {
 
 const char* gl_stage_name(GlStage s) {
@@ -17,15 +19,21 @@ StageClock::~StageClock() {
 }
 
 StageClock::Mark StageClock::device_mark() {
-  GLuint q = 0;
-  glGenQueries(1, &q);
-  glQueryCounter(q, GL_TIMESTAMP);
-  // Submitted now, not at the driver's next flush: llvmpipe records a timestamp when the
-  // commands before it are flushed, so without this a mark would read as a later stage's end.
-  // A flush does not wait for the device.
-  glFlush();
-  queries_.push_back(q);
-  return {true, static_cast<std::int64_t>(queries_.size() - 1)};
+  if (used_ == queries_.size()) {
+    // Query objects in batches, reused by every round of marks until the clock goes: no
+    // glGenQueries per mark. The first batch also decides the flush below.
+    if (queries_.empty()) flush_marks_ = device().software;
+    const std::size_t more = std::max<std::size_t>(32, queries_.size());
+    queries_.resize(used_ + more);
+    glGenQueries(static_cast<GLsizei>(more), queries_.data() + used_);
+  }
+  glQueryCounter(queries_[used_], GL_TIMESTAMP);
+  // The GL records a timestamp once the commands before it have completed, in stream order, so
+  // a hardware driver needs no flush here (one would cost a submission per mark, several per
+  // slab). llvmpipe records it only when the commands before it are flushed: without a flush a
+  // mark would read as a later stage's end. A flush does not wait for the device.
+  if (flush_marks_) glFlush();
+  return {true, static_cast<std::int64_t>(used_++)};
 }
 
 StageClock::Mark StageClock::cpu_mark() {
@@ -58,8 +66,7 @@ const GlTimes& StageClock::collect() {
     if (ns > 0) times_[s.stage] += static_cast<double>(ns) * 1e-9;
   }
   spans_.clear();
-  if (!queries_.empty()) glDeleteQueries(static_cast<GLsizei>(queries_.size()), queries_.data());
-  queries_.clear();
+  used_ = 0;  // the query objects are kept for the next round's marks
   return times_;
 }
 

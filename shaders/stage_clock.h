@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -45,7 +46,8 @@ class StageClock {
   StageClock(const StageClock&) = delete;
   StageClock& operator=(const StageClock&) = delete;
 
-  // When the commands issued so far have completed on the device (a GL_TIMESTAMP query).
+  // When the commands issued so far have completed on the device (a GL_TIMESTAMP query; its
+  // query object is reused after collect()).
   Mark device_mark();
   // Now on the GL clock, as the CPU sees it (no wait).
   static Mark cpu_mark();
@@ -56,8 +58,6 @@ class StageClock {
   // CPU marks). A device mark outside [before, after] (drivers that record timestamps late, as
   // llvmpipe may) falls back to the CPU's.
   void add_wait(GlStage s, Mark done, Mark before, Mark after);
-  // Adds plain seconds (measured otherwise) to stage `s`.
-  void add_seconds(GlStage s, double seconds) { times_[s] += seconds; }
   void add_upload_bytes(std::uint64_t bytes) { times_.upload_bytes += bytes; }
   // Reads every query (waiting for the device where it has not finished) and returns the sums so
   // far; the clock can go on being used.
@@ -71,9 +71,20 @@ class StageClock {
     Mark before{};  // add_wait(): `from` is clamped to [before, to]
     bool clamp = false;
   };
-  std::vector<unsigned> queries_;  // GLuint
+  std::vector<unsigned> queries_;  // GLuint; generated in batches, reused after collect()
+  std::size_t used_ = 0;           // queries_[0, used_) hold this round's marks
+  bool flush_marks_ = false;       // software rasterisers: flush after each mark (device_mark())
   std::vector<Span> spans_;
   GlTimes times_;
 };
+
+// The marks of an optional clock: a default Mark without one (the stages not asked for), so that
+// the drivers mark unconditionally and add spans only `if (clock)`.
+inline StageClock::Mark device_mark(StageClock* clock) {
+  return clock ? clock->device_mark() : StageClock::Mark{};
+}
+inline StageClock::Mark cpu_mark(StageClock* clock) {
+  return clock ? StageClock::cpu_mark() : StageClock::Mark{};
+}
 
 }  // namespace isotile::gl

@@ -91,6 +91,11 @@ if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row say
 json_get() {  # FILE EXPR (python3 expression over j)
   python3 -c "import json,sys; j=json.load(open(sys.argv[1])); print($2)" "$1"
 }
+gl_stages() {  # FILE [bricks]: "[N bricks, upload ]G GB/s, B bytes; stages ms NAME MS, ..."
+  local head=
+  [ -n "${2:-}" ] && head='"%d bricks, upload " % j["bricks"] + '
+  json_get "$1" "$head"'"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())'
+}
 inputs="field:gyroid:256 field:gyroid:512"
 [ "$size" = 192 ] && inputs="field:gyroid:128"
 if [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
@@ -105,16 +110,14 @@ for in in $inputs; do
     rc=$?
   done
   report "hp $in runs" $rc
-  [ $rc = 0 ] && echo "gpu-measure: upload $(basename "$in"): $(json_get "$out/d.json" \
-    '"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items()) + "; program cache " + j["gl_program_cache"]["state"]')"
+  [ $rc = 0 ] && echo "gpu-measure: upload $(basename "$in"): $(gl_stages "$out/d.json"); program cache $(json_get "$out/d.json" 'j["gl_program_cache"]["state"]')"
 done
 rm -f "$out/d.ply"
 # Out of core: the bricked runs of step 2 (gyroid $size float32) and a 4 GiB uint8 volume (bonsai
 # repeated 8x8x4, made here from $ISOTILE_GPU_DATA), in bricks within 2 GiB: the bricks' uploads
 # summed (seconds.gl over the bricks).
 for b in hp gs; do
-  echo "gpu-measure: out of core gyroid $size $b: $(json_get "$out/$b.json" \
-    '"%d bricks, upload %.2f GB/s, %d bytes; stages ms " % (j["bricks"], j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())')"
+  echo "gpu-measure: out of core gyroid $size $b: $(gl_stages "$out/$b.json" bricks)"
 done
 big_u8="$out/bonsai-tiled_2048x2048x1024_uint8.raw"
 if [ "$size" != 192 ] && [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
@@ -139,8 +142,7 @@ PY
     rc=$?
     t1=$(date +%s.%N)
     report "out of core 4 GiB uint8 $b runs" $rc
-    [ $rc = 0 ] && [ "$b" = hp ] && echo "gpu-measure: out of core 4 GiB uint8 hp: $(json_get "$out/big-$b.json" \
-      '"%d bricks, upload %.2f GB/s, %d bytes; stages ms " % (j["bricks"], j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())')"
+    [ $rc = 0 ] && [ "$b" = hp ] && echo "gpu-measure: out of core 4 GiB uint8 hp: $(gl_stages "$out/big-$b.json" bricks)"
     echo "gpu-measure: out of core 4 GiB uint8 $b: whole process $(python3 -c "print(f'{$t1 - $t0:.2f}')") s, $(json_get "$out/big-$b.json" '"%d triangles" % j["triangles"]')"
   done
   cmp -s "$out/big-cpu.ply" "$out/big-hp.ply"
