@@ -179,9 +179,11 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
   j["largest_brick_bytes"] = r.largest_brick_bytes;
   j["seconds"] = {
       {"count", r.seconds_count}, {"extract", r.seconds_extract}, {"total", in.seconds_total}};
-  const TiledResult::Stages& st = r.stages;
-  j["seconds"]["stages"] = {{"read", st.read},   {"count", st.count},     {"extract", st.extract},
-                            {"index", st.index}, {"records", st.records}, {"write", st.write}};
+  if (r.stages) {
+    const TiledResult::Stages& st = *r.stages;
+    j["seconds"]["stages"] = {{"read", st.read},   {"count", st.count},     {"extract", st.extract},
+                              {"index", st.index}, {"records", st.records}, {"write", st.write}};
+  }
   if (in.simplify < 1) {
     j["simplify"] = in.simplify;
     j["triangles_before"] = r.triangles_extracted;
