@@ -105,6 +105,13 @@ class MpiCli : public isotile::testing::CliTest {
       EXPECT_EQ(extracted, j["bricks"].get<std::int64_t>());
       EXPECT_GE(j["load_imbalance"].get<double>(), 1.0);
       EXPECT_EQ(j["brick_seconds"]["extract"].size(), j["bricks"].get<std::size_t>());
+      // The stages' busy seconds, summed over the ranks: the same stages, and the bricks took
+      // time to extract and to write.
+      ASSERT_TRUE(j["seconds"].contains("stages")) << k;
+      for (const auto& stage : js["seconds"]["stages"].items())
+        EXPECT_GE(j["seconds"]["stages"].value(stage.key(), -1.0), 0.0) << stage.key();
+      EXPECT_GT(j["seconds"]["stages"]["extract"].get<double>(), 0.0) << k;
+      EXPECT_GT(j["seconds"]["stages"]["write"].get<double>(), 0.0) << k;
       // A GL backend's report adds up over the ranks as over one process's bricks: the same
       // bytes uploaded, the same stages, a cache state (null, as in one process, for the CPU).
       EXPECT_EQ(j["upload_bytes"], js["upload_bytes"]) << k << " ranks";

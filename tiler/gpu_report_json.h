@@ -14,7 +14,8 @@ namespace isotile {
 inline void add_gpu_report(nlohmann::ordered_json& stats, const std::optional<GpuReport>& gpu) {
   using json = nlohmann::ordered_json;
   if (!gpu) {
-    // No seconds.gl: scripts read every entry of `seconds` as a number.
+    // No seconds.gl (rather than null): scripts read the entries of `seconds` as numbers, or as
+    // an object of numbers (`stages`, `gl`) where present.
     stats["upload_bytes"] = nullptr;
     stats["upload_gbps"] = nullptr;
     stats["gl_program_cache"] = nullptr;

@@ -493,6 +493,16 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
       if (!r.empty()) accumulate_gpu_report(result.gpu, decode_gpu_report(r));
   }
 
+  // The stages' busy seconds, summed over the ranks as one process sums them over its bricks.
+  {
+    const TiledResult::Stages s = bricks->stages();
+    const double mine_stages[6] = {s.read, s.count, s.extract, s.index, s.records, s.write};
+    double all[6] = {};
+    MPI_Reduce(mine_stages, all, 6, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+    if (me == 0)
+      result.stages = TiledResult::Stages{all[0], all[1], all[2], all[3], all[4], all[5]};
+  }
+
   // The whole mesh's statistics on rank 0.
   std::uint64_t largest = result.largest_brick_bytes;
   MPI_Reduce(&largest, &result.largest_brick_bytes, 1, MPI_UINT64_T, MPI_MAX, 0, MPI_COMM_WORLD);

@@ -168,7 +168,10 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
   j["vertices"] = r.vertices;
   j.update(quality_json(r.quality));
   // Topology needs every edge's faces at once; a streamed run does not hold them.
-  for (const char* key : {"boundary_edges", "nonmanifold_edges", "euler", "closed", "watertight"})
+  // null, as for a mesh with nothing to measure, rather than left out: the keys of an in-core run.
+  for (const char* key :
+       {"boundary_edges", "border_boundary_edges", "nonmanifold_edges", "nonmanifold_vertices",
+        "inconsistently_oriented_edges", "euler", "components", "closed", "watertight"})
     j[key] = nullptr;
   j["bricks"] = r.plan.total();
   j["brick_cells"] = r.plan.brick;
@@ -179,9 +182,11 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
   j["largest_brick_bytes"] = r.largest_brick_bytes;
   j["seconds"] = {
       {"count", r.seconds_count}, {"extract", r.seconds_extract}, {"total", in.seconds_total}};
-  const TiledResult::Stages& st = r.stages;
-  j["seconds"]["stages"] = {{"read", st.read},   {"count", st.count},     {"extract", st.extract},
-                            {"index", st.index}, {"records", st.records}, {"write", st.write}};
+  if (r.stages) {
+    const TiledResult::Stages& st = *r.stages;
+    j["seconds"]["stages"] = {{"read", st.read},   {"count", st.count},     {"extract", st.extract},
+                              {"index", st.index}, {"records", st.records}, {"write", st.write}};
+  }
   if (in.simplify < 1) {
     j["simplify"] = in.simplify;
     j["triangles_before"] = r.triangles_extracted;

@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string_view>
 
 #include "core/extract/extract.h"
@@ -63,9 +64,11 @@ struct TiledResult {
   // Where the passes' time goes: busy seconds of each stage summed over the bricks (reading the
   // samples, counting a brick, extracting it, turning its keys into final indices, formatting its
   // records, writing them). Stages that overlap in time add up to more than the wall time.
+  // Unset where they were not timed (the simplifying tiler's bricks).
   struct Stages {
     double read = 0, count = 0, extract = 0, index = 0, records = 0, write = 0;
-  } stages;
+  };
+  std::optional<Stages> stages;
   // With simplification: faces as extracted (triangles), the simplifier's counts, the seam
   // cells (a grid shifted by half a brick) and the time of the seam pass.
   std::uint64_t triangles_extracted = 0;
