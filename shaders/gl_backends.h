@@ -40,7 +40,8 @@ struct McOptions {
 struct McStats {
   int bricks = 0;
   int capture_passes = 0;  // geometry-shader draws, resumed ones included
-  // HistoPyramid: slabs whose samples were uploaded while the slab before was being counted.
+  // Slabs whose samples were uploaded while the slab before was being counted (HistoPyramid) or
+  // drawn (geometry shader).
   int early_uploads = 0;
   // Seconds per stage summed over the slabs, from GL timer queries (stage_clock.h; no glFinish),
   // and the bytes of samples uploaded.

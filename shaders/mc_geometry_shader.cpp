@@ -15,6 +15,7 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -66,9 +67,24 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);
   if (box.empty()) return mesh;
-  const std::vector<Box3> slabs = plan_slabs(view, box, sample_bytes + method.bytes_per_sample,
-                                             std::max(sample_bytes, method.largest_per_sample),
-                                             halo, budget / 2, o.max_brick_cells_z);
+  std::vector<Box3> slabs = plan_slabs(view, box, sample_bytes + method.bytes_per_sample,
+                                       std::max(sample_bytes, method.largest_per_sample), halo,
+                                       budget / 2, o.max_brick_cells_z);
+  // With several slabs, the next slab's samples are uploaded while this slab's first draw runs
+  // (below), so two slabs' samples share that half of the budget.
+  if (slabs.size() > 1)
+    slabs = plan_slabs(view, box, 2 * sample_bytes + method.bytes_per_sample,
+                       std::max(sample_bytes, method.largest_per_sample), halo, budget / 2,
+                       o.max_brick_cells_z);
+  // In brick mode the vertices on the box's upper faces are listed although no cell of the box
+  // uses some of them: a slab there draws one more layer of cells, whose corners are welded too
+  // and whose triangles are dropped.
+  auto drawn_cells = [&](const Box3& slab) {
+    Box3 cells = slab;
+    for (int a = 0; a < 3; ++a)
+      if (slab.hi[a] == box.hi[a]) cells.hi[a] = std::min(box.hi[a] + 1, view.global_dims[a] - 1);
+    return cells;
+  };
 
   // Captured per corner: key, cell, position (and normal): 32-bit words.
   const std::size_t words = o.normals ? 8 : 5;
@@ -94,16 +110,16 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   StageClock clock_storage;
   StageClock* const clock = stats ? &clock_storage : nullptr;
   std::vector<std::uint32_t> staging;
+  // The next slab's samples, uploaded while this slab's first draw runs.
+  std::optional<Samples> next;
+  int early = 0;
   try {
-    for (const Box3& slab : slabs) {
-      // In brick mode the vertices on the box's upper faces are listed although no cell of the
-      // box uses some of them: draw one more layer of cells there, weld its corners too, and
-      // drop its triangles.
-      Box3 cells = slab;
-      for (int a = 0; a < 3; ++a)
-        if (slab.hi[a] == box.hi[a]) cells.hi[a] = std::min(box.hi[a] + 1, view.global_dims[a] - 1);
+    for (std::size_t s = 0; s < slabs.size(); ++s) {
+      const Box3 cells = drawn_cells(slabs[s]);
       const Box3 region = slab_region(view, cells, halo);
-      const Samples samples = upload_samples(view, region, clock);
+      early += next.has_value();
+      const Samples samples = next ? std::move(*next) : upload_samples(view, region, clock);
+      next.reset();
       std::string defines = samples.defines + (o.normals ? "#define NORMALS\n" : "");
       defines += method.defines;
       const GridUniforms grid{region, cells, view.global_dims, o.iso, view.origin, view.spacing};
@@ -136,6 +152,10 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
         glEndTransformFeedback();
         glEndQuery(GL_TRANSFORM_FEEDBACK_PRIMITIVES_WRITTEN);
         glEndQuery(GL_PRIMITIVES_GENERATED);
+        // The next slab's rows are copied into the staging buffers while the device draws, before
+        // the queries' results wait for it.
+        if (!next && s + 1 < slabs.size())
+          next = upload_samples(view, slab_region(view, drawn_cells(slabs[s + 1]), halo), clock);
         GLuint64 generated = 0, written = 0;
         glGetQueryObjectui64v(queries[0], GL_QUERY_RESULT, &generated);
         glGetQueryObjectui64v(queries[1], GL_QUERY_RESULT, &written);
@@ -245,6 +265,7 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
     stats->times[GlStage::Faces] += weld_seconds;
     stats->bricks = static_cast<int>(slabs.size());
     stats->capture_passes = passes;
+    stats->early_uploads = early;
   }
   return mesh;
 }
