@@ -31,7 +31,10 @@ for arg in "$@"; do
               "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
               "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DISOTILE_PYTHON=OFF
               -DISOTILE_MESHLAB_SOURCE=) ;;
-    --tsan) tsan=1; build_dir=build-tsan; extra+=(-DISOTILE_TSAN=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo) ;;
+    # Without the Python module, as --sanitize: an instrumented module cannot load into Debian's
+    # python3 (libtsan cannot take its static TLS block in a process that did not start with it).
+    --tsan) tsan=1; build_dir=build-tsan
+      extra+=(-DISOTILE_TSAN=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DISOTILE_PYTHON=OFF) ;;
     --no-install) install=0 ;;
     *) echo "setup.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
