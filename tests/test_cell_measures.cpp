@@ -188,47 +188,37 @@ void expect_fused_range_matches(const std::vector<T>& samples, Index3 dims) {
   }
 }
 
+// `n` samples drawn uniformly from [lo, hi).
+template <class T>
+std::vector<T> random_samples(std::mt19937& rng, std::size_t n, double lo, double hi) {
+  std::uniform_real_distribution<double> d(lo, hi);
+  std::vector<T> v(n);
+  for (auto& s : v) s = static_cast<T>(d(rng));
+  return v;
+}
+
 TEST(FiniteValueRange, BothRangesEqualAPlainLoopForEveryTypeAndLayout) {
   std::mt19937 rng(11);
   // Rows of 67 samples: whole SIMD lanes and a tail; the extremes placed at a tail, a lane and
   // the first sample of some row.
   const Index3 dims{67, 9, 8};
   const auto n = static_cast<std::size_t>(dims[0] * dims[1] * dims[2]);
-  const auto fill = [&](auto& v, double lo, double hi) {
-    using T = typename std::decay_t<decltype(v)>::value_type;
-    std::uniform_real_distribution<double> d(lo, hi);
-    v.resize(n);
-    for (auto& s : v) s = static_cast<T>(d(rng));
-  };
-  std::vector<std::uint8_t> u8;
-  fill(u8, 10, 200);
+  auto u8 = random_samples<std::uint8_t>(rng, n, 10, 200);
   u8[66] = 3;
   u8[67 * 9 * 3 + 17] = 250;
   expect_fused_range_matches(u8, dims);
-  std::vector<std::int8_t> i8;
-  fill(i8, -100, 100);
+  auto i8 = random_samples<std::int8_t>(rng, n, -100, 100);
   i8[n - 1] = -128;
   expect_fused_range_matches(i8, dims);
-  std::vector<std::uint16_t> u16;
-  fill(u16, 100, 60000);
-  expect_fused_range_matches(u16, dims);
-  std::vector<std::int16_t> i16;
-  fill(i16, -30000, 30000);
-  expect_fused_range_matches(i16, dims);
-  std::vector<std::uint32_t> u32;
-  fill(u32, 0, 4e9);
-  expect_fused_range_matches(u32, dims);
-  std::vector<std::int32_t> i32;
-  fill(i32, -2e9, 2e9);
-  expect_fused_range_matches(i32, dims);
-  std::vector<float> f32;
-  fill(f32, -1, 1);
+  expect_fused_range_matches(random_samples<std::uint16_t>(rng, n, 100, 60000), dims);
+  expect_fused_range_matches(random_samples<std::int16_t>(rng, n, -30000, 30000), dims);
+  expect_fused_range_matches(random_samples<std::uint32_t>(rng, n, 0, 4e9), dims);
+  expect_fused_range_matches(random_samples<std::int32_t>(rng, n, -2e9, 2e9), dims);
+  auto f32 = random_samples<float>(rng, n, -1, 1);
   f32[67 * 2] = -7.5f;
   f32[67 * 5 + 64] = 9.25f;
   expect_fused_range_matches(f32, dims);
-  std::vector<double> f64;
-  fill(f64, -1e300, 1e300);
-  expect_fused_range_matches(f64, dims);
+  expect_fused_range_matches(random_samples<double>(rng, n, -1e300, 1e300), dims);
   // -0.0 and +0.0 both as the minimum: a +0.0 bound whatever the split of the rows.
   std::vector<float> zeros(n, 1.0f);
   for (std::size_t s = 0; s < n; s += 3) zeros[s] = (s / 3) % 2 ? -0.0f : 0.0f;

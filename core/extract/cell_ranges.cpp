@@ -62,7 +62,9 @@ std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
           }
           // Which axes hold two cells picks one of eight fixed-size loops (an MC vertex has two,
           // on the two grid planes through its edge): unrolled, where loops whose trip counts
-          // change from vertex to vertex mispredicted several times per vertex.
+          // change from vertex to vertex mispredicted several times per vertex. A switch, where
+          // each loop is inlined: a table of the eight instantiations called through a pointer
+          // took a fifth longer (bonsai, one thread: 19.3 against 15.9 ms).
           const T* corner = data + view.offset(lo[0], lo[1], lo[2]);
           const int pattern = static_cast<int>(hi[0] != lo[0]) |
                               static_cast<int>(hi[1] != lo[1]) << 1 |

@@ -5,12 +5,9 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <type_traits>
-
-#if defined(__SSE2__)
-#include <immintrin.h>
-#endif
 
 #include "core/volume/volume_io.h"
 
@@ -23,71 +20,14 @@ struct Scan {
   bool finite = true;
 };
 
-// Lanes of two SSE registers' samples, each with its own minimum and maximum, so that the loop
-// runs on packed min/max without reordering any one comparison chain. The compiler does that
-// itself for integers; for floating point it may not (it would be a reduction it must not
-// reorder), so those lanes are written with SSE2, whose min and max are the same comparisons
-// (v < lo ? v : lo). The lanes run on over every row of a task and are folded once at its end.
+// kLanes samples of T: two SSE registers' worth, held as two GCC vectors (one register each; a
+// single 32-byte vector compiled to slower code here), each lane with its own minimum and maximum,
+// so that the loop runs on packed min/max for every sample type without reordering any one
+// comparison chain (the compiler would not vectorise a floating-point reduction it must not
+// reorder). `v < lo ? v : lo` on vectors compiles to SSE's min, whose NaN handling is that
+// expression's. The lanes run on over every row of a task and are folded once at its end.
 template <class T>
 inline constexpr int kLanes = static_cast<int>(32 / sizeof(T));
-
-// Lanes of float or double: lo, hi, and the running sum of v - v, which is 0 while every sample
-// is finite and NaN from the first NaN or Inf on.
-template <class T>
-struct FloatLanes {
-  T lo[kLanes<T>], hi[kLanes<T>], nonfinite[kLanes<T>];
-};
-
-#if defined(__SSE2__)
-template <class T>
-void float_lanes(const T* row, std::int64_t& i, std::int64_t n, FloatLanes<T>& out) {
-  if constexpr (std::is_same_v<T, float>) {
-    __m128 lo0 = _mm_loadu_ps(out.lo), lo1 = _mm_loadu_ps(out.lo + 4);
-    __m128 hi0 = _mm_loadu_ps(out.hi), hi1 = _mm_loadu_ps(out.hi + 4);
-    __m128 nf0 = _mm_loadu_ps(out.nonfinite), nf1 = _mm_loadu_ps(out.nonfinite + 4);
-    for (; i + 8 <= n; i += 8) {
-      const __m128 a = _mm_loadu_ps(row + i), b = _mm_loadu_ps(row + i + 4);
-      lo0 = _mm_min_ps(a, lo0);
-      lo1 = _mm_min_ps(b, lo1);
-      hi0 = _mm_max_ps(a, hi0);
-      hi1 = _mm_max_ps(b, hi1);
-      nf0 = _mm_add_ps(nf0, _mm_sub_ps(a, a));
-      nf1 = _mm_add_ps(nf1, _mm_sub_ps(b, b));
-    }
-    _mm_storeu_ps(out.lo, lo0), _mm_storeu_ps(out.lo + 4, lo1);
-    _mm_storeu_ps(out.hi, hi0), _mm_storeu_ps(out.hi + 4, hi1);
-    _mm_storeu_ps(out.nonfinite, nf0), _mm_storeu_ps(out.nonfinite + 4, nf1);
-  } else {
-    __m128d lo0 = _mm_loadu_pd(out.lo), lo1 = _mm_loadu_pd(out.lo + 2);
-    __m128d hi0 = _mm_loadu_pd(out.hi), hi1 = _mm_loadu_pd(out.hi + 2);
-    __m128d nf0 = _mm_loadu_pd(out.nonfinite), nf1 = _mm_loadu_pd(out.nonfinite + 2);
-    for (; i + 4 <= n; i += 4) {
-      const __m128d a = _mm_loadu_pd(row + i), b = _mm_loadu_pd(row + i + 2);
-      lo0 = _mm_min_pd(a, lo0);
-      lo1 = _mm_min_pd(b, lo1);
-      hi0 = _mm_max_pd(a, hi0);
-      hi1 = _mm_max_pd(b, hi1);
-      nf0 = _mm_add_pd(nf0, _mm_sub_pd(a, a));
-      nf1 = _mm_add_pd(nf1, _mm_sub_pd(b, b));
-    }
-    _mm_storeu_pd(out.lo, lo0), _mm_storeu_pd(out.lo + 2, lo1);
-    _mm_storeu_pd(out.hi, hi0), _mm_storeu_pd(out.hi + 2, hi1);
-    _mm_storeu_pd(out.nonfinite, nf0), _mm_storeu_pd(out.nonfinite + 2, nf1);
-  }
-}
-#else
-template <class T>
-void float_lanes(const T* row, std::int64_t& i, std::int64_t n, FloatLanes<T>& out) {
-  constexpr int L = kLanes<T>;
-  for (; i + L <= n; i += L)
-    for (int l = 0; l < L; ++l) {
-      const T v = row[i + l];
-      out.lo[l] = v < out.lo[l] ? v : out.lo[l];
-      out.hi[l] = v > out.hi[l] ? v : out.hi[l];
-      out.nonfinite[l] += v - v;
-    }
-}
-#endif
 
 template <class T>
 Scan scan_rows(const VolumeView& view, std::int64_t row_begin, std::int64_t row_end) {
@@ -100,29 +40,27 @@ Scan scan_rows(const VolumeView& view, std::int64_t row_begin, std::int64_t row_
   const T start_lo = floating ? std::numeric_limits<T>::infinity() : std::numeric_limits<T>::max();
   const T start_hi =
       floating ? -std::numeric_limits<T>::infinity() : std::numeric_limits<T>::lowest();
-  T lo = start_lo, hi = start_hi, nonfinite = 0;
-  T lo_l[L], hi_l[L];
-  FloatLanes<T> fl;
-  for (int l = 0; l < L; ++l) {
-    lo_l[l] = fl.lo[l] = start_lo;
-    hi_l[l] = fl.hi[l] = start_hi;
-    fl.nonfinite[l] = 0;
+  typedef T Lanes __attribute__((vector_size(16)));
+  constexpr int W = 16 / static_cast<int>(sizeof(T));
+  Lanes lo_l[2], hi_l[2], nonfinite_l[2];
+  for (int h = 0; h < 2; ++h) {
+    lo_l[h] = Lanes{} + start_lo;
+    hi_l[h] = Lanes{} + start_hi;
+    nonfinite_l[h] = Lanes{};
   }
+  T lo = start_lo, hi = start_hi, nonfinite = 0;
   for (std::int64_t r = row_begin; r != row_end; ++r) {
     const T* row = data + view.offset(0, r % ny, r / ny);
     std::int64_t i = 0;
-    if (stride == 1) {
-      if constexpr (floating) {
-        float_lanes(row, i, n, fl);
-      } else {
-        for (; i + L <= n; i += L)
-          for (int l = 0; l < L; ++l) {
-            const T v = row[i + l];
-            lo_l[l] = v < lo_l[l] ? v : lo_l[l];
-            hi_l[l] = v > hi_l[l] ? v : hi_l[l];
-          }
-      }
-    }
+    if (stride == 1)
+      for (; i + L <= n; i += L)
+        for (int h = 0; h < 2; ++h) {
+          Lanes v;
+          std::memcpy(&v, row + i + h * W, sizeof v);
+          lo_l[h] = v < lo_l[h] ? v : lo_l[h];
+          hi_l[h] = v > hi_l[h] ? v : hi_l[h];
+          if constexpr (floating) nonfinite_l[h] += v - v;
+        }
     for (; i < n; ++i) {
       const T v = row[i * stride];
       lo = v < lo ? v : lo;
@@ -130,12 +68,12 @@ Scan scan_rows(const VolumeView& view, std::int64_t row_begin, std::int64_t row_
       if constexpr (floating) nonfinite += v - v;
     }
   }
-  for (int l = 0; l < L; ++l) {
-    const T l_lo = floating ? fl.lo[l] : lo_l[l], l_hi = floating ? fl.hi[l] : hi_l[l];
-    lo = l_lo < lo ? l_lo : lo;
-    hi = l_hi > hi ? l_hi : hi;
-    if constexpr (floating) nonfinite += fl.nonfinite[l];
-  }
+  for (int h = 0; h < 2; ++h)
+    for (int l = 0; l < W; ++l) {
+      lo = lo_l[h][l] < lo ? lo_l[h][l] : lo;
+      hi = hi_l[h][l] > hi ? hi_l[h][l] : hi;
+      if constexpr (floating) nonfinite += nonfinite_l[h][l];
+    }
   Scan s;
   s.lo = static_cast<double>(lo);
   s.hi = static_cast<double>(hi);
