@@ -81,6 +81,19 @@ std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double b
   return slabs;
 }
 
+std::vector<Box3> plan_overlapped_slabs(const VolumeView& view, const Box3& cells,
+                                        double sample_bytes, double method_bytes,
+                                        double largest_per_sample, int halo, std::uint64_t budget,
+                                        std::int64_t max_cells_z) {
+  const double largest = std::max(sample_bytes, largest_per_sample);
+  std::vector<Box3> slabs =
+      plan_slabs(view, cells, sample_bytes + method_bytes, largest, halo, budget, max_cells_z);
+  if (slabs.size() > 1)
+    slabs = plan_slabs(view, cells, 2 * sample_bytes + method_bytes, largest, halo, budget,
+                       max_cells_z);
+  return slabs;
+}
+
 namespace {
 
 McOptions mc_options(const ExtractOptions& o) {

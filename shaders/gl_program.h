@@ -137,6 +137,14 @@ std::vector<Box3> plan_slabs(const VolumeView& view, const Box3& cells, double b
                              double largest_per_sample, int halo, std::uint64_t budget,
                              std::int64_t max_cells_z);
 
+// plan_slabs() for a driver that uploads the next slab's samples (`sample_bytes` each) while it
+// works on this one, its own buffers taking `method_bytes` per sample: with several slabs, two
+// slabs' samples share the budget (planned again so), one slab holds only its own.
+std::vector<Box3> plan_overlapped_slabs(const VolumeView& view, const Box3& cells,
+                                        double sample_bytes, double method_bytes,
+                                        double largest_per_sample, int halo, std::uint64_t budget,
+                                        std::int64_t max_cells_z);
+
 // The global samples a slab of cells needs: its cells' corners and the far ends of the edges of
 // its closed box, plus `halo` samples around (gradients), clipped to the view.
 Box3 slab_region(const VolumeView& view, const Box3& cells, int halo);

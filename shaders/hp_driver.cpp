@@ -65,15 +65,10 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   // The samples are on the device as stored (sample_upload.h).
   const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
-  std::vector<Box3> planned = plan_slabs(view, run.cells, sample_bytes + method.bytes_per_sample,
-                                         std::max(sample_bytes, method.largest_per_sample),
-                                         method.halo, budget, run.max_brick_cells_z);
-  // With several slabs, the next slab's samples are uploaded while this slab's pyramid is built
-  // (below), so two slabs' samples share the budget.
-  if (planned.size() > 1)
-    planned = plan_slabs(view, run.cells, 2 * sample_bytes + method.bytes_per_sample,
-                         std::max(sample_bytes, method.largest_per_sample), method.halo, budget,
-                         run.max_brick_cells_z);
+  // The next slab's samples are uploaded while this slab's pyramid is built (below).
+  const std::vector<Box3> planned =
+      plan_overlapped_slabs(view, run.cells, sample_bytes, method.bytes_per_sample,
+                            method.largest_per_sample, method.halo, budget, run.max_brick_cells_z);
   std::deque<Box3> slabs(planned.begin(), planned.end());
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
   const std::uint64_t words = face_words(method.faces);

@@ -67,15 +67,10 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
   // Half the budget for the samples, half for the capture.
   const Box3 box = cells_to_extract(view, o.cells);
   if (box.empty()) return mesh;
-  std::vector<Box3> slabs = plan_slabs(view, box, sample_bytes + method.bytes_per_sample,
-                                       std::max(sample_bytes, method.largest_per_sample), halo,
-                                       budget / 2, o.max_brick_cells_z);
-  // With several slabs, the next slab's samples are uploaded while this slab's first draw runs
-  // (below), so two slabs' samples share that half of the budget.
-  if (slabs.size() > 1)
-    slabs = plan_slabs(view, box, 2 * sample_bytes + method.bytes_per_sample,
-                       std::max(sample_bytes, method.largest_per_sample), halo, budget / 2,
-                       o.max_brick_cells_z);
+  // The next slab's samples are uploaded while this slab's first draw runs (below).
+  const std::vector<Box3> slabs =
+      plan_overlapped_slabs(view, box, sample_bytes, method.bytes_per_sample,
+                            method.largest_per_sample, halo, budget / 2, o.max_brick_cells_z);
   // In brick mode the vertices on the box's upper faces are listed although no cell of the box
   // uses some of them: a slab there draws one more layer of cells, whose corners are welded too
   // and whose triangles are dropped.
