@@ -32,7 +32,8 @@ using std::uint64_t;
 // inside_bits.h's EdgeWord per 64 points); `point` holds, for each point with a crossed edge, the
 // rank of its first one (times 4) and its x and y bits: the triangles look each edge up once per
 // cell around it (about four times), and one load replaces edge_rank()'s three masked popcounts
-// (the whole extraction, one thread: bonsai 28.3 -> 25.9 ms, gyroid 256^3 55.4 -> 50.9 ms).
+// (the whole extraction, one thread, fastest of 120 runs: bonsai 28.3 -> 25.9 ms, gyroid 256^3
+// 50.4 -> 47.7 ms).
 struct RowEdges {
   std::vector<EdgeWord> bits;
   std::vector<uint64_t> point;  // stale where a point has no crossed edge; 64 bits: no size limit
