@@ -1,5 +1,5 @@
-// The HistoPyramid's count pyramid in three layouts, side by side in one run on the same volumes
-// (docs/gl.md, "HistoPyramid layout: measured"):
+// The HistoPyramid's count pyramid in three layouts, and a second output design, side by side in
+// one run on the same volumes (docs/gl.md, "HistoPyramid layout: measured"):
 //   linear  the production layout (shaders/mc_histopyramid.cpp): elements in (z, y, x) order, a
 //           node sums eight consecutive nodes of the level below;
 //   block   storage buffers in 2x2x2 blocks per level ("Morton per level"): node p of level l at
@@ -8,15 +8,20 @@
 //           brick to a power-of-two cube);
 //   texture one 3D integer texture per level (R16UI codes, RG32UI counts; GL mipmaps halve with
 //           floor, a chain would need the brick padded to powers of two), imageStore / texelFetch.
+//   compact the linear-8 pyramid with the other output design: no descent; a down-sweep gives
+//           every level-1 node its vertices and triangles before it, then one invocation per
+//           element writes its own outputs (a stream compaction).
 // Timed per layout: "build" = classification + every reduction level (what the issue calls the
-// pyramid construction), then "descend" = one invocation per vertex and one per triangle
-// descending to its element (the traversal of the output passes, without computing positions).
+// pyramid construction; compact: its down-sweep too), then "descend" = one invocation per vertex
+// and one per triangle descending to its element (the traversal of the output passes, without
+// computing positions; compact: "scatter", one invocation per element writing its outputs).
 // Every layout must give the CPU's vertex and triangle counts, and its descents the same multiset
 // of elements (sum of element indices per kind); the linear descent must also come out in element
-// order. "hp" is the production path's whole extraction, for scale.
+// order, and the compact scatter give the same arrays. "hp" is the production path's whole
+// extraction, for scale.
 //
 //   cmake --build build-gl --target bench_hp_layouts -j2
-//   build-gl/tests/benchmarks/bench_hp_layouts [--threads N] [--repeat R]
+//   build-gl/tests/benchmarks/bench_hp_layouts [--threads N] [--repeat R] [--data DIR]
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -132,53 +137,120 @@ void descend(GLuint prog, const std::uint32_t totals[2], Result& r, Timing& t) {
   }
 }
 
-Result run_linear(const Setup& s, Timing& t) {
-  const std::uint64_t elements = volume_of(s.d);
+// The production layout's count pyramid (linear-8): levels of nodes summing eight consecutive
+// nodes of the level below, all in one buffer. Shared by the linear and the compact runs.
+struct LinearPyramid {
   int levels = 0;
-  std::vector<std::uint32_t> count(kMaxLevels, 0), offset(kMaxLevels, 0);
-  count[0] = static_cast<std::uint32_t>(elements);
-  std::uint64_t nodes = 0, n = elements;
-  do {
-    n = (n + 7) / 8;
-    ++levels;
-    count[levels] = static_cast<std::uint32_t>(n);
-    offset[levels] = static_cast<std::uint32_t>(nodes);
-    nodes += n;
-  } while (n > 1);
+  std::vector<std::uint32_t> count = std::vector<std::uint32_t>(kMaxLevels, 0);
+  std::vector<std::uint32_t> offset = std::vector<std::uint32_t>(kMaxLevels, 0);
+  std::uint64_t nodes = 0;
+  Buffer codes, pyr;
+
+  explicit LinearPyramid(std::uint64_t elements) {
+    count[0] = static_cast<std::uint32_t>(elements);
+    std::uint64_t n = elements;
+    do {
+      n = (n + 7) / 8;
+      ++levels;
+      count[levels] = static_cast<std::uint32_t>(n);
+      offset[levels] = static_cast<std::uint32_t>(nodes);
+      nodes += n;
+    } while (n > 1);
+  }
+
+  void set_uniforms(GLuint prog) const {
+    set_i(prog, "u_levels", levels);
+    set_uv(prog, "u_level_offset", offset);
+    set_uv(prog, "u_level_count", count);
+  }
+};
+
+// Classification and every reduction level into `p` (codes at binding 1, pyramid at 2); the
+// totals read back into `r`.
+void build_linear(const Setup& s, LinearPyramid& p, Result& r) {
   const std::string& defines = s.samples.defines;
   const GLuint classify = program({{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
   const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, with_base(defines));
   const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
-  const GLuint find = program({{GL_COMPUTE_SHADER, "hp_bench_linear_find.comp"}}, defines);
-  for (GLuint p : {classify, base, upper, find}) set_grid_uniforms(p, s.grid);
-
-  glFinish();
-  const double t0 = now();
-  const Buffer codes(((elements + 1) / 2) * 4);
-  const Buffer pyr(nodes * 8);
-  codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
-  pyr.bind(GL_SHADER_STORAGE_BUFFER, 2);
+  for (GLuint prog : {classify, base, upper}) set_grid_uniforms(prog, s.grid);
+  const std::uint64_t elements = p.count[0];
+  p.codes = Buffer(((elements + 1) / 2) * 4);
+  p.pyr = Buffer(p.nodes * 8);
+  p.codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
+  p.pyr.bind(GL_SHADER_STORAGE_BUFFER, 2);
   glUseProgram(classify);
   dispatch((elements + 1) / 2);
-  for (int l = 1; l <= levels; ++l) {
+  for (int l = 1; l <= p.levels; ++l) {
     const GLuint prog = l == 1 ? base : upper;
-    set_u(prog, "u_count", count[l]);
-    set_u(prog, "u_src_count", count[l - 1]);
-    set_u(prog, "u_src_offset", l >= 2 ? offset[l - 1] : 0);
-    set_u(prog, "u_dst_offset", offset[l]);
+    set_u(prog, "u_count", p.count[l]);
+    set_u(prog, "u_src_count", p.count[l - 1]);
+    set_u(prog, "u_src_offset", l >= 2 ? p.offset[l - 1] : 0);
+    set_u(prog, "u_dst_offset", p.offset[l]);
     glUseProgram(prog);
-    dispatch(count[l]);
+    dispatch(p.count[l]);
   }
   check("building the linear pyramid");
-  Result r;
-  pyr.read(std::size_t{offset[levels]} * 8, 8, r.totals);
-  t.build = now() - t0;
+  p.pyr.read(std::size_t{p.offset[p.levels]} * 8, 8, r.totals);
+}
 
-  set_i(find, "u_levels", levels);
-  set_uv(find, "u_level_offset", offset);
-  set_uv(find, "u_level_count", count);
+Result run_linear(const Setup& s, Timing& t) {
+  LinearPyramid p(volume_of(s.d));
+  const GLuint find =
+      program({{GL_COMPUTE_SHADER, "hp_bench_linear_find.comp"}}, s.samples.defines);
+  set_grid_uniforms(find, s.grid);
+  glFinish();
+  const double t0 = now();
+  Result r;
+  build_linear(s, p, r);
+  t.build = now() - t0;
+  p.set_uniforms(find);
   descend(find, r.totals, r, t);
   check("the linear layout");
+  return r;
+}
+
+// The compact output design on the linear pyramid: the build adds a down-sweep of both kinds'
+// offsets to level 1; then one invocation per element writes its outputs' element index (no
+// descent). Timed as build and "descend" like the others.
+Result run_compact(const Setup& s, Timing& t) {
+  LinearPyramid p(volume_of(s.d));
+  const std::string& defines = s.samples.defines;
+  const GLuint sweep = program({{GL_COMPUTE_SHADER, "hp_bench_compact_sweep.comp"}}, defines);
+  const GLuint scatter = program({{GL_COMPUTE_SHADER, "hp_bench_compact_scatter.comp"}}, defines);
+  for (GLuint prog : {sweep, scatter}) {
+    set_grid_uniforms(prog, s.grid);
+    p.set_uniforms(prog);
+  }
+  glFinish();
+  const double t0 = now();
+  Result r;
+  build_linear(s, p, r);
+  const Buffer offsets(p.nodes * 8);
+  offsets.bind(GL_SHADER_STORAGE_BUFFER, 6);
+  glUseProgram(sweep);
+  for (int l = p.levels; l >= 1; --l) {
+    set_i(sweep, "u_level", l);
+    dispatch(p.count[l]);
+  }
+  glFinish();
+  check("the compact down-sweep");
+  t.build = now() - t0;
+
+  const double t1 = now();
+  const Buffer vertices(std::max<std::uint64_t>(r.totals[0], 1) * 4);
+  const Buffer triangles(std::max<std::uint64_t>(r.totals[1], 1) * 4);
+  vertices.bind(GL_SHADER_STORAGE_BUFFER, 3);
+  triangles.bind(GL_SHADER_STORAGE_BUFFER, 4);
+  glUseProgram(scatter);
+  dispatch(p.count[0]);
+  glFinish();
+  check("the compact scatter");
+  t.descend = now() - t1;
+  const Buffer* out[2] = {&vertices, &triangles};
+  for (int which = 0; which < 2; ++which) {
+    r.elements[which].resize(r.totals[which]);
+    out[which]->read(0, std::size_t{r.totals[which]} * 4, r.elements[which].data());
+  }
   return r;
 }
 
@@ -326,9 +398,14 @@ std::uint64_t sum_of(const std::vector<std::uint32_t>& v) {
 
 int main(int argc, char** argv) {
   int threads = 2, repeat = 5;
+  // engine from --data DIR, else $ISOTILE_GPU_DATA (a GPU machine does not see ../shared), else
+  // ../shared/data.
+  std::filesystem::path data = ISOTILE_SHARED_DATA;
+  if (const char* env = std::getenv("ISOTILE_GPU_DATA"); env && *env) data = env;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (std::strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) repeat = std::atoi(argv[++i]);
+    if (std::strcmp(argv[i], "--data") == 0 && i + 1 < argc) data = argv[++i];
   }
   repeat = std::max(repeat, 1);
   setenv("LP_NUM_THREADS", std::to_string(threads).c_str(), 1);
@@ -348,18 +425,17 @@ int main(int argc, char** argv) {
     cases.push_back({std::string(field_name(kind)) + "-" + std::to_string(n),
                      std::make_shared<Volume>(make_field_volume(spec)), field_default_iso(kind)});
   }
-  const std::filesystem::path shared(ISOTILE_SHARED_DATA);
-  const auto engine = shared / "engine_256x256x128_uint8.raw.gz";
+  const auto engine = data / "engine_256x256x128_uint8.raw.gz";
   if (std::filesystem::exists(engine))
     cases.push_back({"engine", std::make_shared<Volume>(read_volume(engine.string())), 49.5});
   else
     std::printf("skipping engine: %s not found\n", engine.c_str());
 
-  std::printf("%-11s %9s %9s | %21s | %21s | %21s | %8s\n", "", "", "", "linear-8 (production)",
-              "2x2x2 blocks", "3D textures", "");
-  std::printf("%-11s %9s %9s | %10s %10s | %10s %10s | %10s %10s | %8s\n", "volume", "vertices",
-              "triangles", "build ms", "descend", "build ms", "descend", "build ms", "descend",
-              "hp ms");
+  std::printf("%-11s %9s %9s | %21s | %21s | %21s | %21s | %8s\n", "", "", "",
+              "linear-8 (production)", "2x2x2 blocks", "3D textures", "compact (linear-8)", "");
+  std::printf("%-11s %9s %9s | %10s %10s | %10s %10s | %10s %10s | %10s %10s | %8s\n", "volume",
+              "vertices", "triangles", "build ms", "descend", "build ms", "descend", "build ms",
+              "descend", "build ms", "scatter", "hp ms");
   for (const Case& c : cases) {
     const VolumeView v = c.volume->view();
     const Mesh cpu = marching_cubes(v, {.iso = c.iso});
@@ -374,15 +450,16 @@ int main(int argc, char** argv) {
     s.samples.buffer.bind(GL_SHADER_STORAGE_BUFFER, 0);
 
     using Runner = Result (*)(const Setup&, Timing&);
-    const Runner runners[3] = {run_linear, run_block, run_texture};
-    std::vector<double> build[3], desc[3], hp;
-    Result ref[3];
-    for (int i = 0; i < 3; ++i) {  // once untimed: compiles the shaders, gives the results
+    constexpr int kRunners = 4;
+    const Runner runners[kRunners] = {run_linear, run_block, run_texture, run_compact};
+    std::vector<double> build[kRunners], desc[kRunners], hp;
+    Result ref[kRunners];
+    for (int i = 0; i < kRunners; ++i) {  // once untimed: compiles the shaders, gives the results
       Timing t;
       ref[i] = runners[i](s, t);
     }
     for (int r = 0; r < repeat; ++r) {
-      for (int i = 0; i < 3; ++i) {  // interleaved, so that load changes hit every layout alike
+      for (int i = 0; i < kRunners; ++i) {  // interleaved: load changes hit every layout alike
         Timing t;
         runners[i](s, t);
         build[i].push_back(t.build);
@@ -396,8 +473,9 @@ int main(int argc, char** argv) {
       bind_case_tables();
     }
 
-    // Same counts as the CPU, the same elements from every descent, element order for linear.
-    for (int i = 0; i < 3; ++i) {
+    // Same counts as the CPU, the same elements from every descent, element order for linear,
+    // and the compact scatter's arrays equal to the linear descent's, output by output.
+    for (int i = 0; i < kRunners; ++i) {
       if (ref[i].totals[0] != cpu.positions.size() || ref[i].totals[1] != cpu.triangles.size())
         fail(c.name + ": layout " + std::to_string(i) + " counts " +
              std::to_string(ref[i].totals[0]) + " / " + std::to_string(ref[i].totals[1]) +
@@ -407,17 +485,22 @@ int main(int argc, char** argv) {
         if (sum_of(ref[i].elements[which]) != sum_of(ref[0].elements[which]))
           fail(c.name + ": layout " + std::to_string(i) + " descends to other elements");
     }
-    for (int which = 0; which < 2; ++which)
+    for (int which = 0; which < 2; ++which) {
       if (!std::is_sorted(ref[0].elements[which].begin(), ref[0].elements[which].end()))
         fail(c.name + ": the linear descent is not in element order");
+      if (ref[3].elements[which] != ref[0].elements[which])
+        fail(c.name + ": the compact scatter puts outputs elsewhere than the linear descent");
+    }
 
     auto med = [](std::vector<double> t) {
       std::sort(t.begin(), t.end());
       return 1e3 * t[t.size() / 2];
     };
-    std::printf("%-11s %9zu %9zu | %10.1f %10.1f | %10.1f %10.1f | %10.1f %10.1f | %8.1f\n",
-                c.name.c_str(), cpu.positions.size(), cpu.triangles.size(), med(build[0]),
-                med(desc[0]), med(build[1]), med(desc[1]), med(build[2]), med(desc[2]), med(hp));
+    std::printf(
+        "%-11s %9zu %9zu | %10.1f %10.1f | %10.1f %10.1f | %10.1f %10.1f | %10.1f %10.1f | %8.1f\n",
+        c.name.c_str(), cpu.positions.size(), cpu.triangles.size(), med(build[0]), med(desc[0]),
+        med(build[1]), med(desc[1]), med(build[2]), med(desc[2]), med(build[3]), med(desc[3]),
+        med(hp));
     std::fflush(stdout);
   }
   return 0;
