@@ -5,10 +5,10 @@
 #   cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DISOTILE_ITK=OFF \
 #       -DISOTILE_MESHLAB=OFF -DISOTILE_MPI=OFF -DISOTILE_BUILD_BENCHMARKS=ON
 #   cmake --build build-gpu --target isotile test_gl test_gl_macet test_gl_dc gl_double_check \
-#       bench_backends
+#       bench_backends bench_hp_layouts
 #   ../shared/tools/gpu_bundle.sh build-gpu/tiler/isotile build-gpu/tests/test_gl \
 #       build-gpu/tests/test_gl_macet build-gpu/tests/test_gl_dc build-gpu/tests/gl_double_check \
-#       build-gpu/tests/benchmarks/bench_backends
+#       build-gpu/tests/benchmarks/bench_backends build-gpu/tests/benchmarks/bench_hp_layouts
 #   mkdir -p gpu-data && cp ../shared/data/bonsai_256x256x256_uint8.raw.gz \
 #       ../shared/data/engine_256x256x128_uint8.raw.gz gpu-data/   (the shared data does not
 #       travel to the GPU machine; gpu-data/ is an untracked folder of the working tree: do not
@@ -85,6 +85,12 @@ big=--gyroid512
 bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends $?
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
+# The pyramid's layouts and the compact output design (docs/gl.md, "A second output design"): it
+# stops with FAILED when a layout's counts or outputs differ from the CPU's or the linear's.
+repeat=5
+[ "$size" = 192 ] && repeat=1  # --quick: llvmpipe's texture descents take minutes
+bench_hp_layouts --threads 16 --repeat $repeat ${data:+--data "$data"}
+report bench_hp_layouts $?
 
 # 6. The data path (issue 35). Upload GB/s and the stages from --stats (seconds.gl), a run with a
 # warm program cache each: gyroid 256 and 512 float32, bonsai uint8 (from $ISOTILE_GPU_DATA).
