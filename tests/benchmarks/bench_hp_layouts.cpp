@@ -43,6 +43,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/gl_program.h"
+#include "shaders/hp_pyramid.h"
 #include "shaders/sample_upload.h"
 
 namespace {
@@ -137,32 +138,13 @@ void descend(GLuint prog, const std::uint32_t totals[2], Result& r, Timing& t) {
   }
 }
 
-// The production layout's count pyramid (linear-8): levels of nodes summing eight consecutive
-// nodes of the level below, all in one buffer. Shared by the linear and the compact runs.
+// The production layout's count pyramid (linear-8, shaders/hp_pyramid.h's levels): nodes summing
+// eight consecutive nodes of the level below, all in one buffer. Shared by the linear and the
+// compact runs.
 struct LinearPyramid {
-  int levels = 0;
-  std::vector<std::uint32_t> count = std::vector<std::uint32_t>(kMaxLevels, 0);
-  std::vector<std::uint32_t> offset = std::vector<std::uint32_t>(kMaxLevels, 0);
-  std::uint64_t nodes = 0;
+  Pyramid shape;
   Buffer codes, pyr;
-
-  explicit LinearPyramid(std::uint64_t elements) {
-    count[0] = static_cast<std::uint32_t>(elements);
-    std::uint64_t n = elements;
-    do {
-      n = (n + 7) / 8;
-      ++levels;
-      count[levels] = static_cast<std::uint32_t>(n);
-      offset[levels] = static_cast<std::uint32_t>(nodes);
-      nodes += n;
-    } while (n > 1);
-  }
-
-  void set_uniforms(GLuint prog) const {
-    set_i(prog, "u_levels", levels);
-    set_uv(prog, "u_level_offset", offset);
-    set_uv(prog, "u_level_count", count);
-  }
+  explicit LinearPyramid(std::uint64_t elements) : shape(elements) {}
 };
 
 // Classification and every reduction level into `p` (codes at binding 1, pyramid at 2); the
@@ -173,24 +155,24 @@ void build_linear(const Setup& s, LinearPyramid& p, Result& r) {
   const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, with_base(defines));
   const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
   for (GLuint prog : {classify, base, upper}) set_grid_uniforms(prog, s.grid);
-  const std::uint64_t elements = p.count[0];
+  const std::uint64_t elements = p.shape.count[0];
   p.codes = Buffer(((elements + 1) / 2) * 4);
-  p.pyr = Buffer(p.nodes * 8);
+  p.pyr = Buffer(p.shape.nodes * 8);
   p.codes.bind(GL_SHADER_STORAGE_BUFFER, 1);
   p.pyr.bind(GL_SHADER_STORAGE_BUFFER, 2);
   glUseProgram(classify);
   dispatch((elements + 1) / 2);
-  for (int l = 1; l <= p.levels; ++l) {
+  for (int l = 1; l <= p.shape.levels; ++l) {
     const GLuint prog = l == 1 ? base : upper;
-    set_u(prog, "u_count", p.count[l]);
-    set_u(prog, "u_src_count", p.count[l - 1]);
-    set_u(prog, "u_src_offset", l >= 2 ? p.offset[l - 1] : 0);
-    set_u(prog, "u_dst_offset", p.offset[l]);
+    set_u(prog, "u_count", p.shape.count[l]);
+    set_u(prog, "u_src_count", p.shape.count[l - 1]);
+    set_u(prog, "u_src_offset", l >= 2 ? p.shape.offset[l - 1] : 0);
+    set_u(prog, "u_dst_offset", p.shape.offset[l]);
     glUseProgram(prog);
-    dispatch(p.count[l]);
+    dispatch(p.shape.count[l]);
   }
   check("building the linear pyramid");
-  p.pyr.read(std::size_t{p.offset[p.levels]} * 8, 8, r.totals);
+  p.pyr.read(std::size_t{p.shape.offset[p.shape.levels]} * 8, 8, r.totals);
 }
 
 Result run_linear(const Setup& s, Timing& t) {
@@ -203,7 +185,7 @@ Result run_linear(const Setup& s, Timing& t) {
   Result r;
   build_linear(s, p, r);
   t.build = now() - t0;
-  p.set_uniforms(find);
+  p.shape.set_uniforms(find);
   descend(find, r.totals, r, t);
   check("the linear layout");
   return r;
@@ -219,18 +201,18 @@ Result run_compact(const Setup& s, Timing& t) {
   const GLuint scatter = program({{GL_COMPUTE_SHADER, "hp_bench_compact_scatter.comp"}}, defines);
   for (GLuint prog : {sweep, scatter}) {
     set_grid_uniforms(prog, s.grid);
-    p.set_uniforms(prog);
+    p.shape.set_uniforms(prog);
   }
   glFinish();
   const double t0 = now();
   Result r;
   build_linear(s, p, r);
-  const Buffer offsets(p.nodes * 8);
+  const Buffer offsets(p.shape.nodes * 8);
   offsets.bind(GL_SHADER_STORAGE_BUFFER, 6);
   glUseProgram(sweep);
-  for (int l = p.levels; l >= 1; --l) {
+  for (int l = p.shape.levels; l >= 1; --l) {
     set_i(sweep, "u_level", l);
-    dispatch(p.count[l]);
+    dispatch(p.shape.count[l]);
   }
   glFinish();
   check("the compact down-sweep");
@@ -242,7 +224,7 @@ Result run_compact(const Setup& s, Timing& t) {
   vertices.bind(GL_SHADER_STORAGE_BUFFER, 3);
   triangles.bind(GL_SHADER_STORAGE_BUFFER, 4);
   glUseProgram(scatter);
-  dispatch(p.count[0]);
+  dispatch(p.shape.count[0]);
   glFinish();
   check("the compact scatter");
   t.descend = now() - t1;
