@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -28,19 +29,18 @@ using std::uint64_t;
 // The crossed edges of one row of grid points: the edge from (i, j, k) to (i+1, j, k),
 // (i, j+1, k) and (i, j, k+1) is owned by point (i, j, k). Vertices are numbered in key order, by
 // point and then axis, so a vertex's rank in the row is the number of crossed edges of earlier
-// points plus those of lower axes at its own point. `bits` holds the masks (core/extract/
-// inside_bits.h's EdgeWord per 64 points); `point` holds, for each point with a crossed edge, the
-// rank of its first one (times 4) and its x and y bits: the triangles look each edge up once per
-// cell around it (about four times), and one load replaces edge_rank()'s three masked popcounts
-// (the whole extraction, one thread, fastest of 120 runs: bonsai 28.3 -> 25.9 ms, gyroid 256^3
-// 50.4 -> 47.7 ms).
+// points plus those of lower axes at its own point. `masks` holds the crossed edges per axis, per
+// 64 points (as edge_masks() below gives them); `point` holds, for each point with a crossed edge,
+// the rank of its first one (times 4) and its x and y bits: the triangles look each edge up once
+// per cell around it (about four times), and one load replaces edge_rank()'s three masked
+// popcounts (the whole extraction, one thread, fastest of 120 runs: bonsai 28.3 -> 25.9 ms,
+// gyroid 256^3 50.4 -> 47.7 ms).
 struct RowEdges {
-  std::vector<EdgeWord> bits;
+  std::vector<std::array<uint64_t, 3>> masks;
   std::vector<uint64_t> point;  // stale where a point has no crossed edge; 64 bits: no size limit
-  uint32_t count = 0;
 
   explicit RowEdges(int64_t n_words)
-      : bits(static_cast<size_t>(n_words)), point(static_cast<size_t>(n_words) * 64) {}
+      : masks(static_cast<size_t>(n_words)), point(static_cast<size_t>(n_words) * 64) {}
 
   // Rank of the edge of axis a at x index i among this row's vertices.
   uint32_t local_index(int a, int64_t i) const {
@@ -69,7 +69,7 @@ void edge_masks(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1, 
 void row_edges(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1, RowEdges& out) {
   uint32_t total = 0;
   edge_masks(g, j, k, x0, x1, [&](int64_t w, uint64_t mx, uint64_t my, uint64_t mz) {
-    out.bits[w] = {{mx, my, mz}, total};
+    out.masks[w] = {mx, my, mz};
     uint64_t* point = out.point.data() + w * 64;
     for (uint64_t m = mx | my | mz; m; m &= m - 1) {
       const int b = std::countr_zero(m);
@@ -79,7 +79,6 @@ void row_edges(const BitGrid& g, int64_t j, int64_t k, int64_t x0, int64_t x1, R
       total += x + y + static_cast<uint32_t>((mz >> b) & 1);
     }
   });
-  out.count = total;
 }
 
 // Number of crossed edges owned by the row; the count pass needs nothing more.
@@ -151,11 +150,9 @@ class Extractor {
       keys->resize(n_vertices);
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, rows),
                         for_units(progress, ny, [&](const auto& range) {
-                          RowEdges e(grid_.words);
                           for (int64_t r = range.begin(); r != range.end(); ++r) {
                             const int64_t j = cells_.lo[1] + r % ny, k = cells_.lo[2] + r / ny;
-                            row_edges(grid_, j, k, x0, x1, e);
-                            fill_keys(j, k, e, keys->data() + vertex_offset[r]);
+                            fill_keys(j, k, keys->data() + vertex_offset[r]);
                           }
                         }));
       return mesh;
@@ -279,7 +276,7 @@ class Extractor {
     const double iso = options_.iso;
     uint32_t index = base;
     for (int64_t w = cells_.lo[0] >> 6; w <= cells_.hi[0] >> 6; ++w) {
-      const uint64_t* mask = e.bits[w].mask;
+      const auto& mask = e.masks[static_cast<size_t>(w)];
       for (uint64_t m = mask[0] | mask[1] | mask[2]; m; m &= m - 1) {
         const int b = std::countr_zero(m);
         const int64_t i = w * 64 + b;
@@ -312,19 +309,21 @@ class Extractor {
     }
   }
 
-  void fill_keys(int64_t j, int64_t k, const RowEdges& e, uint64_t* out) const {
+  // The keys need the masks only: straight from edge_masks(), no ranks.
+  void fill_keys(int64_t j, int64_t k, uint64_t* out) const {
     const Index3& n = view_.global_dims;
     const uint64_t row = static_cast<uint64_t>(
         n[0] * ((view_.box.lo[1] + j) + n[1] * (view_.box.lo[2] + k)) + view_.box.lo[0]);
-    for (int64_t w = cells_.lo[0] >> 6; w <= cells_.hi[0] >> 6; ++w) {
-      const uint64_t* mask = e.bits[w].mask;
-      for (uint64_t m = mask[0] | mask[1] | mask[2]; m; m &= m - 1) {
-        const int b = std::countr_zero(m);
-        const uint64_t lin = row + static_cast<uint64_t>(w * 64 + b);
-        for (int a = 0; a < 3; ++a)
-          if ((mask[a] >> b) & 1) *out++ = lin * 3 + static_cast<uint64_t>(a);
-      }
-    }
+    edge_masks(grid_, j, k, cells_.lo[0], cells_.hi[0],
+               [&](int64_t w, uint64_t mx, uint64_t my, uint64_t mz) {
+                 const uint64_t mask[3] = {mx, my, mz};
+                 for (uint64_t m = mx | my | mz; m; m &= m - 1) {
+                   const int b = std::countr_zero(m);
+                   const uint64_t lin = row + static_cast<uint64_t>(w * 64 + b);
+                   for (int a = 0; a < 3; ++a)
+                     if ((mask[a] >> b) & 1) *out++ = lin * 3 + static_cast<uint64_t>(a);
+                 }
+               });
   }
 
   void fill_triangles(int64_t j, int64_t k, const RowEdges* const edges[4], const uint32_t base[4],
