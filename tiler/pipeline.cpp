@@ -167,12 +167,10 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
   j["triangles"] = r.triangles;
   j["vertices"] = r.vertices;
   j.update(quality_json(r.quality));
-  // Topology needs every edge's faces at once; a streamed run does not hold them.
-  // null, as for a mesh with nothing to measure, rather than left out: the keys of an in-core run.
-  for (const char* key :
-       {"boundary_edges", "border_boundary_edges", "nonmanifold_edges", "nonmanifold_vertices",
-        "inconsistently_oriented_edges", "euler", "components", "closed", "watertight"})
-    j[key] = nullptr;
+  // Topology needs every edge's faces at once; a streamed run does not hold them. Its keys are
+  // those of an in-core run (topology_json's), null rather than left out.
+  const StatsJson in_core = topology_json(TopologyStats{}, false);
+  for (const auto& item : in_core.items()) j[item.key()] = nullptr;
   j["bricks"] = r.plan.total();
   j["brick_cells"] = r.plan.brick;
   j["brick_grid"] = r.plan.count;
