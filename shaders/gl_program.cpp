@@ -14,6 +14,7 @@
 #include "core/extract/marching_cubes_tables.h"
 #include "gl_context.h"
 #include "program_cache.h"
+#include "read_back.h"
 
 namespace isotile::gl {
 
@@ -213,9 +214,7 @@ void Buffer::bind(GLenum target, GLuint index) const {
 }
 
 void Buffer::read(std::size_t offset, std::size_t bytes, void* out) const {
-  if (bytes == 0) return;
-  glGetNamedBufferSubData(id_, static_cast<GLintptr>(offset), static_cast<GLsizeiptr>(bytes), out);
-  check("reading a buffer back");
+  read_back(id_, offset, bytes, out);
 }
 
 void dispatch(std::uint64_t n) {

@@ -65,6 +65,7 @@ class Buffer {
   GLuint id() const { return id_; }
   std::size_t bytes() const { return bytes_; }
   void bind(GLenum target, GLuint index) const;
+  // Through pinned buffers when large (read_back.h).
   void read(std::size_t offset, std::size_t bytes, void* out) const;
 
  private:

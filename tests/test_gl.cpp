@@ -22,6 +22,8 @@
 #include "gl_test_support.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/gl_program.h"
+#include "shaders/read_back.h"
 #include "shaders/sample_upload.h"
 #include "test_support.h"
 
@@ -166,6 +168,66 @@ TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
   }
   EXPECT_EQ(gl::staging_buffers_created() - before, gl::kStagingBuffers);
   gl::set_staging_bytes(gl::kDefaultStagingBytes);
+}
+
+// The mesh's arrays come back through the pinned read-back buffers (read_back.h): with pieces far
+// smaller than the arrays (an odd size, so pieces end inside a vertex), every piece passes through
+// the few buffers in turn, the buffers are made once for all slabs and runs, and the mesh is the
+// CPU's. The same with every read straight through glGetNamedBufferSubData, and with the device's
+// own choice.
+TEST_P(GlPaths, MeshReadBackThroughPinnedBuffers) {
+  REQUIRE_GL();
+  const Volume v = make_field_volume({FieldKind::Gyroid, 48});
+  const double iso = field_default_iso(FieldKind::Gyroid);
+  const Mesh cpu = marching_cubes(v.view(), {.iso = iso, .normals = true});
+  // The slabs' arrays must be large enough for the pinned path (kPinnedReadMinBytes).
+  ASSERT_GT(cpu.triangles.size() * sizeof(Tri) / 2, gl::kPinnedReadMinBytes);
+  gl::Scope scope;
+  for (const std::size_t piece : {std::size_t{10'007}, std::size_t{0}}) {
+    gl::set_read_back_bytes(piece);
+    const int before = gl::read_back_buffers_created();
+    for (int r = 0; r < 2; ++r) {
+      gl::McStats stats;
+      const Mesh gl =
+          run(GetParam(), v.view(), {.iso = iso, .normals = true, .max_brick_cells_z = 24}, &stats);
+      EXPECT_EQ(stats.bricks, 2);
+      expect_same_mesh(gl, cpu, v.view(), piece ? "pinned pieces" : "direct reads");
+    }
+    EXPECT_EQ(gl::read_back_buffers_created() - before, piece ? gl::kReadBackBuffers : 0);
+  }
+  // By default a software rasteriser reads straight through GL, a hardware device through the
+  // pinned buffers.
+  gl::use_default_read_back();
+  const int before = gl::read_back_buffers_created();
+  expect_same_mesh(run(GetParam(), v.view(), {.iso = iso, .normals = true}), cpu, v.view(),
+                   "the device's choice");
+  EXPECT_EQ(gl::read_back_buffers_created() - before,
+            gl::device().software ? 0 : gl::kReadBackBuffers);
+}
+
+// read_back() itself, on bytes it can check: any offset and length, pieces of any size, a read
+// smaller than kPinnedReadMinBytes straight through GL.
+TEST(GlReadBack, GivesTheBuffersBytes) {
+  REQUIRE_GL();
+  gl::Scope scope;
+  std::vector<unsigned char> pattern(1'000'003);
+  for (std::size_t i = 0; i < pattern.size(); ++i)
+    pattern[i] = static_cast<unsigned char>((i * 2654435761u) >> 13);
+  const gl::Buffer buffer(pattern.size(), pattern.data());
+  struct Read {
+    std::size_t offset, bytes;
+  };
+  for (const std::size_t piece : {gl::kDefaultReadBackBytes, std::size_t{65'537}, std::size_t{0}}) {
+    gl::set_read_back_bytes(piece);
+    for (const Read r : {Read{0, pattern.size()}, Read{12'345, 700'001}, Read{999'000, 1'003},
+                         Read{3, gl::kPinnedReadMinBytes}}) {
+      std::vector<unsigned char> out(r.bytes, 0xAB);
+      buffer.read(r.offset, r.bytes, out.data());
+      EXPECT_TRUE(std::equal(out.begin(), out.end(), pattern.begin() + r.offset))
+          << "piece " << piece << ", offset " << r.offset << ", " << r.bytes << " bytes";
+    }
+  }
+  gl::use_default_read_back();
 }
 
 // Slabs along z (as for a volume larger than the device's memory) give the whole-volume mesh.

@@ -19,7 +19,8 @@
 // minutes on llvmpipe). For Marching Cubes and Macet a second table gives, per volume, the GL
 // stages of one more run of each path from GL timer queries (shaders/stage_clock.h), the upload's
 // GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
-// triangles/s of the median whole-call times.
+// triangles/s of the median whole-call times. Before the volumes, a table of the read-back's
+// GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h).
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -41,7 +42,9 @@
 #include "shaders/dc_gl.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/gl_program.h"
 #include "shaders/macet_gl.h"
+#include "shaders/read_back.h"
 
 namespace {
 
@@ -96,6 +99,48 @@ void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
                   1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu, t_hp / t_cpu,
                   same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
     }
+}
+
+// The way out by itself (shaders/read_back.h): a device buffer of the mesh arrays' size read into
+// host memory already touched (as the mesh's arrays are), straight through
+// glGetNamedBufferSubData and through the pinned buffers in pieces of a few sizes; best of
+// `repeat` reads, each checked against the bytes put in.
+void bench_read_back(int repeat) {
+  const std::size_t pieces[] = {0, std::size_t{2} << 20, gl::kDefaultReadBackBytes,
+                                std::size_t{32} << 20};
+  std::printf(
+      "\nread-back GB/s (best of %d): direct = glGetNamedBufferSubData into pageable "
+      "memory, pinned N = %d persistently mapped buffers of N MiB\n",
+      repeat, gl::kReadBackBuffers);
+  std::printf("%-10s %10s", "MiB", "direct");
+  for (std::size_t p : pieces)
+    if (p) std::printf("   pinned %2zu", p >> 20);
+  std::printf("  %s\n", "same bytes");
+  gl::Scope scope;
+  for (const std::size_t mib : {std::size_t{16}, std::size_t{64}, std::size_t{256}}) {
+    const std::size_t bytes = mib << 20;
+    std::vector<unsigned char> in(bytes), out(bytes, 0);
+    for (std::size_t i = 0; i < bytes; ++i) in[i] = static_cast<unsigned char>(i * 131 + (i >> 20));
+    const gl::Buffer device(bytes, in.data());
+    bool all_same = true;
+    std::printf("%-10zu", mib);
+    for (const std::size_t piece : pieces) {
+      gl::set_read_back_bytes(piece);
+      double best = 1e30;
+      for (int r = 0; r < repeat + 1; ++r) {  // the first read makes the pinned buffers
+        std::fill(out.begin(), out.end(), 0);
+        const auto t0 = std::chrono::steady_clock::now();
+        device.read(0, bytes, out.data());
+        const double t =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (r > 0) best = std::min(best, t);
+        all_same = all_same && out == in;
+      }
+      std::printf(piece ? " %11.2f" : " %10.2f", static_cast<double>(bytes) / best / 1e9);
+    }
+    std::printf("  %s\n", all_same ? "yes" : "NO");
+  }
+  gl::use_default_read_back();
 }
 
 }  // namespace
@@ -163,6 +208,7 @@ int main(int argc, char** argv) {
       std::printf("skipping %s: %s not found\n", name, (shared / file).c_str());
   }
 
+  bench_read_back(repeat);
   if (run_dc) bench_dual_contouring(cases, repeat);
   // Each method's rows: the CPU extractor and the two GL paths, same options.
   struct Runner {

@@ -18,7 +18,8 @@
 #
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines (the data path's targets, issue 35:
-# upload GB/s on gyroid 256/512 and bonsai, out of core on gyroid $size and a 4 GiB uint8 volume
+# upload GB/s on gyroid 256/512 and bonsai, the read-back's GB/s straight and pinned (issue 36),
+# out of core on gyroid $size and a 4 GiB uint8 volume
 # made from bonsai, the one-shot whole process of `extract
 # field:gyroid:512` on hp against cpu with a warm program cache, the context's start-up).
 # --quick: the bricked runs on gyroid 192 in 16 MiB bricks and the measurements on gyroid 128
@@ -85,6 +86,8 @@ big=--gyroid512
 bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends $?
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
+# The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
+grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 # The pyramid's layouts and the compact output design (docs/gl.md, "A second output design"): it
 # stops with FAILED when a layout's counts or outputs differ from the CPU's or the linear's.
 repeat=5

@@ -1,0 +1,145 @@
+#include "read_back.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+#include <optional>
+
+#include "core/errors.h"
+#include "gl_context.h"
+#include "gl_program.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// A pinned buffer, mapped once and kept until shutdown(). Its fence marks the device copy into it
+// that the CPU has not yet waited for.
+struct PinnedBuffer {
+  GLuint id = 0;
+  const std::byte* mapped = nullptr;
+  GLsync fence = nullptr;
+};
+std::array<PinnedBuffer, kReadBackBuffers>& pinned() {
+  static std::array<PinnedBuffer, kReadBackBuffers> buffers;
+  return buffers;
+}
+int& created_count() {
+  static int n = 0;
+  return n;
+}
+// Set by set_read_back_bytes(); unset, the device decides (piece_size()).
+std::optional<std::size_t>& forced_size() {
+  static std::optional<std::size_t> bytes;
+  return bytes;
+}
+// On a software rasteriser a buffer is host memory already: the pinned buffers would add a copy
+// (llvmpipe: 3.9-7.5 GB/s through them against 7.2-13.3 GB/s straight, bench_backends' table).
+std::size_t piece_size() {
+  if (forced_size()) return *forced_size();
+  return device().software ? 0 : kDefaultReadBackBytes;
+}
+
+void release_read_back() {
+  for (PinnedBuffer& b : pinned()) {
+    if (b.fence) glDeleteSync(b.fence);
+    if (b.id) {
+      glUnmapNamedBuffer(b.id);
+      glDeleteBuffers(1, &b.id);
+    }
+    b = {};
+  }
+}
+
+PinnedBuffer& pinned_buffer(int i) {
+  PinnedBuffer& b = pinned()[static_cast<std::size_t>(i)];
+  if (b.id) return b;
+  at_shutdown(release_read_back);
+  // Client storage with read access: host memory the device writes by DMA, which the CPU reads
+  // cached.
+  const GLbitfield flags =
+      GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT | GL_CLIENT_STORAGE_BIT;
+  glCreateBuffers(1, &b.id);
+  glNamedBufferStorage(b.id, static_cast<GLsizeiptr>(piece_size()), nullptr, flags);
+  b.mapped = static_cast<const std::byte*>(
+      glMapNamedBufferRange(b.id, 0, static_cast<GLsizeiptr>(piece_size()),
+                            GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT));
+  if (!b.mapped) {
+    glDeleteBuffers(1, &b.id);
+    b = {};
+    check("mapping a read-back buffer");
+    throw Error("OpenGL could not map a buffer to read the mesh back through");
+  }
+  ++created_count();
+  return b;
+}
+
+// Waits until the device copy into `b` has landed; with a coherent mapping its bytes are then
+// visible to the CPU.
+void wait_landed(PinnedBuffer& b) {
+  if (!b.fence) return;
+  while (glClientWaitSync(b.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000) ==
+         GL_TIMEOUT_EXPIRED) {
+  }
+  glDeleteSync(b.fence);
+  b.fence = nullptr;
+}
+
+// One thread copies a few GB/s; the mesh's arrays are tens to hundreds of MB.
+void parallel_copy(std::byte* dst, const std::byte* src, std::size_t bytes) {
+  constexpr std::size_t kBlock = std::size_t{1} << 20;
+  const std::size_t blocks = (bytes + kBlock - 1) / kBlock;
+  tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t i) {
+    const std::size_t begin = i * kBlock;
+    std::memcpy(dst + begin, src + begin, std::min(kBlock, bytes - begin));
+  });
+}
+
+}  // namespace
+
+int read_back_buffers_created() {
+  return created_count();
+}
+
+void set_read_back_bytes(std::size_t bytes) {
+  release_read_back();
+  forced_size() = bytes;
+}
+
+void use_default_read_back() {
+  release_read_back();
+  forced_size().reset();
+}
+
+void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out) {
+  if (bytes == 0) return;
+  const std::size_t piece = piece_size();
+  if (piece == 0 || bytes < kPinnedReadMinBytes) {
+    glGetNamedBufferSubData(id, static_cast<GLintptr>(offset), static_cast<GLsizeiptr>(bytes), out);
+    check("reading a buffer back");
+    return;
+  }
+  const std::size_t pieces = (bytes + piece - 1) / piece;
+  auto length = [&](std::size_t p) { return std::min(piece, bytes - p * piece); };
+  auto issue = [&](std::size_t p) {
+    PinnedBuffer& b = pinned_buffer(static_cast<int>(p % kReadBackBuffers));
+    wait_landed(b);  // only after an earlier read was cut short by an error
+    glCopyNamedBufferSubData(id, b.id, static_cast<GLintptr>(offset + p * piece), 0,
+                             static_cast<GLsizeiptr>(length(p)));
+    b.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+  };
+  // Every buffer busy from the start; each piece copied out frees its buffer for the next one.
+  for (std::size_t p = 0; p < std::min<std::size_t>(pieces, kReadBackBuffers); ++p) issue(p);
+  check("copying a buffer for reading back");
+  for (std::size_t p = 0; p < pieces; ++p) {
+    PinnedBuffer& b = pinned()[p % kReadBackBuffers];
+    wait_landed(b);
+    parallel_copy(static_cast<std::byte*>(out) + p * piece, b.mapped, length(p));
+    if (p + kReadBackBuffers < pieces) issue(p + kReadBackBuffers);
+  }
+  check("reading a buffer back");
+}
+
+}  // namespace isotile::gl
