@@ -340,6 +340,29 @@ TEST(GlGeometryShader, CaptureOverflowResumes) {
   }
 }
 
+// HistoPyramid output passes larger than their buffers (half the memory budget) run chunk by
+// chunk, each read back before the next; those that fit run both passes before the mesh's
+// arrays are sized. Random samples make a dense surface (several triangles per cell), so small
+// budgets need several chunks per slab; every budget gives the CPU's mesh.
+TEST(GlHistoPyramid, ChunkedOutputPassesEqualCpu) {
+  REQUIRE_GL();
+  Volume vol(ScalarType::UInt8, {37, 29, 23}, {1, 1, 1}, {0, 0, 0});
+  std::uint32_t state = 12345;
+  for (std::int64_t i = 0; i < vol.sample_count(); ++i) {
+    state = state * 1664525u + 1013904223u;
+    vol.data<std::uint8_t>()[i] = static_cast<std::uint8_t>(state >> 24);
+  }
+  const Mesh cpu = marching_cubes(vol.view(), {.iso = 127.5, .normals = true});
+  ASSERT_GT(cpu.triangles.size(), 20000u);
+  for (const std::uint64_t memory :
+       {std::uint64_t{96} << 10, std::uint64_t{400} << 10, std::uint64_t{0}}) {
+    gl::McStats stats;
+    const Mesh gl =
+        gl::mc_histopyramid(vol.view(), {.iso = 127.5, .normals = true, .memory = memory}, &stats);
+    expect_same_mesh(gl, cpu, vol.view(), ("memory " + std::to_string(memory)).c_str());
+  }
+}
+
 TEST(GlBackends, RegisteredInTheTable) {
   REQUIRE_GL();
   gl::register_gl_backends();
