@@ -261,7 +261,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // Where each pass fits one chunk (most slabs), both are dispatched before the CPU sizes the
     // mesh's arrays, so that the device runs them while the CPU zeroes the arrays and takes their
     // pages' first-touch faults (gyroid 256^3's 23 MB of positions and triangles: 11 ms in a
-    // fresh process here); the reads follow.
+    // fresh process on a 2-core VM); the reads follow.
     const bool ahead = n_vertices <= vcap && n_faces <= fcap && !method.gs_faces;
     Chunk vertex_chunk, face_chunk;
     if (ahead && n_vertices > 0) {
