@@ -217,6 +217,42 @@ void Buffer::read(std::size_t offset, std::size_t bytes, void* out) const {
   read_back(id_, offset, bytes, out);
 }
 
+void MappedBuffer::create(std::size_t bytes, GLbitfield access, const char* what) {
+  const GLbitfield map = access | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+  glCreateBuffers(1, &id);
+  glNamedBufferStorage(id, static_cast<GLsizeiptr>(bytes), nullptr, map | GL_CLIENT_STORAGE_BIT);
+  mapped =
+      static_cast<std::byte*>(glMapNamedBufferRange(id, 0, static_cast<GLsizeiptr>(bytes), map));
+  if (!mapped) {
+    glDeleteBuffers(1, &id);
+    *this = {};
+    check((std::string("mapping ") + what).c_str());
+    throw Error(std::string("OpenGL could not map ") + what);
+  }
+}
+
+void MappedBuffer::release() {
+  if (fence) glDeleteSync(fence);
+  if (id) {
+    glUnmapNamedBuffer(id);
+    glDeleteBuffers(1, &id);
+  }
+  *this = {};
+}
+
+void MappedBuffer::fence_commands() {
+  if (fence) glDeleteSync(fence);
+  fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+}
+
+void MappedBuffer::wait() {
+  if (!fence) return;
+  while (glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000) == GL_TIMEOUT_EXPIRED) {
+  }
+  glDeleteSync(fence);
+  fence = nullptr;
+}
+
 void dispatch(std::uint64_t n) {
   if (n == 0) return;
   const std::uint64_t groups = (n + 255) / 256;

@@ -5,6 +5,7 @@
 
 #include <glad/gl.h>
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -71,6 +72,26 @@ class Buffer {
  private:
   GLuint id_ = 0;
   std::size_t bytes_ = 0;
+};
+
+// A buffer of host memory that the device reaches by DMA (client storage: pinned), mapped
+// persistently and coherently for the context's life, with a fence for the last device command
+// that uses it: the staging of the samples' upload (sample_upload.cpp) and of the mesh's
+// read-back (read_back.cpp). Plain data; create() and release() with the context current.
+struct MappedBuffer {
+  GLuint id = 0;
+  std::byte* mapped = nullptr;
+  GLsync fence = nullptr;
+
+  // Storage of `bytes` mapped with `access` (GL_MAP_WRITE_BIT or GL_MAP_READ_BIT); throws Error
+  // "OpenGL could not map <what>" when the driver cannot.
+  void create(std::size_t bytes, GLbitfield access, const char* what);
+  // Unmaps and deletes it (and its fence); empty again.
+  void release();
+  // Fences the commands issued so far (the copy that uses the buffer).
+  void fence_commands();
+  // Waits until the fenced commands have completed (none: returns at once).
+  void wait();
 };
 
 // Runs the current compute program (local size 256 in x) over n invocations; the shaders compute

@@ -15,15 +15,10 @@ namespace isotile::gl {
 
 namespace {
 
-// A pinned buffer, mapped once and kept until shutdown(). Its fence marks the device copy into it
-// that the CPU has not yet waited for.
-struct PinnedBuffer {
-  GLuint id = 0;
-  const std::byte* mapped = nullptr;
-  GLsync fence = nullptr;
-};
-std::array<PinnedBuffer, kReadBackBuffers>& pinned() {
-  static std::array<PinnedBuffer, kReadBackBuffers> buffers;
+// The pinned buffers, mapped once and kept until shutdown(). A buffer's fence marks the device
+// copy into it that the CPU has not yet waited for.
+std::array<MappedBuffer, kReadBackBuffers>& pinned() {
+  static std::array<MappedBuffer, kReadBackBuffers> buffers;
   return buffers;
 }
 int& created_count() {
@@ -43,48 +38,17 @@ std::size_t piece_size() {
 }
 
 void release_read_back() {
-  for (PinnedBuffer& b : pinned()) {
-    if (b.fence) glDeleteSync(b.fence);
-    if (b.id) {
-      glUnmapNamedBuffer(b.id);
-      glDeleteBuffers(1, &b.id);
-    }
-    b = {};
-  }
+  for (MappedBuffer& b : pinned()) b.release();
 }
 
-PinnedBuffer& pinned_buffer(int i) {
-  PinnedBuffer& b = pinned()[static_cast<std::size_t>(i)];
+MappedBuffer& pinned_buffer(int i) {
+  MappedBuffer& b = pinned()[static_cast<std::size_t>(i)];
   if (b.id) return b;
   at_shutdown(release_read_back);
-  // Client storage with read access: host memory the device writes by DMA, which the CPU reads
-  // cached.
-  const GLbitfield flags =
-      GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT | GL_CLIENT_STORAGE_BIT;
-  glCreateBuffers(1, &b.id);
-  glNamedBufferStorage(b.id, static_cast<GLsizeiptr>(piece_size()), nullptr, flags);
-  b.mapped = static_cast<const std::byte*>(
-      glMapNamedBufferRange(b.id, 0, static_cast<GLsizeiptr>(piece_size()),
-                            GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT));
-  if (!b.mapped) {
-    glDeleteBuffers(1, &b.id);
-    b = {};
-    check("mapping a read-back buffer");
-    throw Error("OpenGL could not map a buffer to read the mesh back through");
-  }
+  // Read access: the device writes it by DMA, the CPU reads it cached.
+  b.create(piece_size(), GL_MAP_READ_BIT, "a buffer to read the mesh back through");
   ++created_count();
   return b;
-}
-
-// Waits until the device copy into `b` has landed; with a coherent mapping its bytes are then
-// visible to the CPU.
-void wait_landed(PinnedBuffer& b) {
-  if (!b.fence) return;
-  while (glClientWaitSync(b.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000) ==
-         GL_TIMEOUT_EXPIRED) {
-  }
-  glDeleteSync(b.fence);
-  b.fence = nullptr;
 }
 
 // One thread copies a few GB/s; the mesh's arrays are tens to hundreds of MB.
@@ -124,18 +88,18 @@ void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out) {
   const std::size_t pieces = (bytes + piece - 1) / piece;
   auto length = [&](std::size_t p) { return std::min(piece, bytes - p * piece); };
   auto issue = [&](std::size_t p) {
-    PinnedBuffer& b = pinned_buffer(static_cast<int>(p % kReadBackBuffers));
-    wait_landed(b);  // only after an earlier read was cut short by an error
+    MappedBuffer& b = pinned_buffer(static_cast<int>(p % kReadBackBuffers));
+    b.wait();  // only after an earlier read was cut short by an error
     glCopyNamedBufferSubData(id, b.id, static_cast<GLintptr>(offset + p * piece), 0,
                              static_cast<GLsizeiptr>(length(p)));
-    b.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+    b.fence_commands();
   };
   // Every buffer busy from the start; each piece copied out frees its buffer for the next one.
   for (std::size_t p = 0; p < std::min<std::size_t>(pieces, kReadBackBuffers); ++p) issue(p);
   check("copying a buffer for reading back");
   for (std::size_t p = 0; p < pieces; ++p) {
-    PinnedBuffer& b = pinned()[p % kReadBackBuffers];
-    wait_landed(b);
+    MappedBuffer& b = pinned()[p % kReadBackBuffers];
+    b.wait();  // landed; with a coherent mapping its bytes are visible to the CPU
     parallel_copy(static_cast<std::byte*>(out) + p * piece, b.mapped, length(p));
     if (p + kReadBackBuffers < pieces) issue(p + kReadBackBuffers);
   }

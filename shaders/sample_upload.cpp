@@ -14,15 +14,10 @@ namespace isotile::gl {
 
 namespace {
 
-// The pinned staging buffers, mapped once and kept until shutdown(). A fence per buffer marks
-// the device copy that still reads it.
-struct StagingBuffer {
-  GLuint id = 0;
-  std::byte* mapped = nullptr;
-  GLsync fence = nullptr;
-};
-std::array<StagingBuffer, kStagingBuffers>& staging() {
-  static std::array<StagingBuffer, kStagingBuffers> buffers;
+// The pinned staging buffers, mapped once and kept until shutdown(). A buffer's fence marks the
+// device copy that still reads it.
+std::array<MappedBuffer, kStagingBuffers>& staging() {
+  static std::array<MappedBuffer, kStagingBuffers> buffers;
   return buffers;
 }
 int& created_count() {
@@ -35,46 +30,16 @@ std::size_t& staging_size() {
 }
 
 void release_staging() {
-  for (StagingBuffer& s : staging()) {
-    if (s.fence) glDeleteSync(s.fence);
-    if (s.id) {
-      glUnmapNamedBuffer(s.id);
-      glDeleteBuffers(1, &s.id);
-    }
-    s = {};
-  }
+  for (MappedBuffer& s : staging()) s.release();
 }
 
-StagingBuffer& staging_buffer(int i) {
-  StagingBuffer& s = staging()[static_cast<std::size_t>(i)];
+MappedBuffer& staging_buffer(int i) {
+  MappedBuffer& s = staging()[static_cast<std::size_t>(i)];
   if (s.id) return s;
   at_shutdown(release_staging);
-  // Client storage: host memory the device reads by DMA (pinned), not device memory.
-  const GLbitfield flags =
-      GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT | GL_CLIENT_STORAGE_BIT;
-  glCreateBuffers(1, &s.id);
-  glNamedBufferStorage(s.id, static_cast<GLsizeiptr>(staging_size()), nullptr, flags);
-  s.mapped = static_cast<std::byte*>(
-      glMapNamedBufferRange(s.id, 0, static_cast<GLsizeiptr>(staging_size()),
-                            GL_MAP_WRITE_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT));
-  if (!s.mapped) {
-    glDeleteBuffers(1, &s.id);
-    s = {};
-    check("mapping a staging buffer");
-    throw Error("OpenGL could not map a staging buffer for the samples");
-  }
+  s.create(staging_size(), GL_MAP_WRITE_BIT, "a staging buffer for the samples");
   ++created_count();
   return s;
-}
-
-// Waits until the device no longer reads staging buffer `s` (its last copy has run).
-void wait_idle(StagingBuffer& s) {
-  if (!s.fence) return;
-  while (glClientWaitSync(s.fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000) ==
-         GL_TIMEOUT_EXPIRED) {
-  }
-  glDeleteSync(s.fence);
-  s.fence = nullptr;
 }
 
 }  // namespace
@@ -133,9 +98,9 @@ Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* c
   int next = 0;
   for (std::int64_t first = 0; first < rows; first += rows_per_chunk) {
     const std::int64_t n = std::min(rows_per_chunk, rows - first);
-    StagingBuffer& s = staging_buffer(next);
+    MappedBuffer& s = staging_buffer(next);
     next = (next + 1) % kStagingBuffers;
-    wait_idle(s);
+    s.wait();  // until the device no longer reads it
     if (clock && first == 0) handed = StageClock::cpu_mark();
     // Copy whole rows as stored; the widening is the shaders'.
     tbb::parallel_for(std::int64_t{0}, n, [&](std::int64_t r) {
@@ -155,7 +120,7 @@ Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* c
     glCopyNamedBufferSubData(s.id, out.buffer.id(), 0,
                              static_cast<GLintptr>(static_cast<std::size_t>(first) * row_bytes),
                              static_cast<GLsizeiptr>(static_cast<std::size_t>(n) * row_bytes));
-    s.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+    s.fence_commands();
   }
   check("uploading the samples");
   if (clock) {
