@@ -43,6 +43,9 @@ struct McStats {
   // Slabs whose samples were uploaded while the slab before was being counted (HistoPyramid) or
   // drawn (geometry shader).
   int early_uploads = 0;
+  // HistoPyramid: dispatches of the vertex and face passes (one each per slab where they fit
+  // their buffers).
+  int output_chunks = 0;
   // Seconds per stage summed over the slabs, from GL timer queries (stage_clock.h; no glFinish),
   // and the bytes of samples uploaded.
   GlTimes times;

@@ -40,7 +40,9 @@ struct Chunk {
   StageClock::Mark start{}, done{};  // around the dispatch, on the device
 };
 
-Chunk dispatch_chunk(GLuint prog, std::uint64_t first, std::uint64_t k, StageClock* clock) {
+Chunk dispatch_chunk(GLuint prog, std::uint64_t first, std::uint64_t k, StageClock* clock,
+                     int& chunks) {
+  ++chunks;
   set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
   set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(k));
   Chunk c{first, k, device_mark(clock), {}};
@@ -67,11 +69,11 @@ void read_chunk(const Chunk& c, std::uint64_t bytes_per_item, const Buffer& out,
 // Runs the current program `prog` over `n` items in chunks of at most `cap`, each read back
 // before the next is dispatched (read_chunk()).
 void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint64_t bytes_per_item,
-                     const Buffer& out, void* dst, StageClock* clock, GlStage stage,
+                     const Buffer& out, void* dst, StageClock* clock, int& chunks, GlStage stage,
                      const Buffer* out2 = nullptr, void* dst2 = nullptr) {
   for (std::uint64_t first = 0; first < n; first += cap)
-    read_chunk(dispatch_chunk(prog, first, std::min(cap, n - first), clock), bytes_per_item, out,
-               dst, clock, stage, out2, dst2);
+    read_chunk(dispatch_chunk(prog, first, std::min(cap, n - first), clock, chunks), bytes_per_item,
+               out, dst, clock, stage, out2, dst2);
 }
 
 }  // namespace
@@ -99,7 +101,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   StageClock clock_storage;
   StageClock* const clock = stats ? &clock_storage : nullptr;
   std::uint64_t vertex_base = 0;
-  int slab_count = 0, draws = 0, early = 0;
+  int slab_count = 0, draws = 0, early = 0, chunks = 0;
   progress_begin(run.progress, isotile::Stage::Extract, static_cast<std::int64_t>(planned.size()));
   // The next slab's region and samples, uploaded early (unused when that slab is split).
   std::optional<std::pair<Box3, Samples>> next;
@@ -266,11 +268,11 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     Chunk vertex_chunk, face_chunk;
     if (ahead && n_vertices > 0) {
       use_vertex_pass();
-      vertex_chunk = dispatch_chunk(vertex_prog, 0, n_vertices, clock);
+      vertex_chunk = dispatch_chunk(vertex_prog, 0, n_vertices, clock, chunks);
     }
     if (ahead && face_pass) {
       use_face_pass();
-      face_chunk = dispatch_chunk(face_prog, 0, n_faces, clock);
+      face_chunk = dispatch_chunk(face_prog, 0, n_faces, clock, chunks);
     }
     const bool quads = method.faces == HpFaces::Quads;
     const std::size_t v0 = mesh.positions.size();
@@ -299,7 +301,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
       if (n_vertices > 0) {
         use_vertex_pass();
         dispatch_chunks(vertex_prog, n_vertices, vcap, 12, pos, mesh.positions.data() + v0, clock,
-                        GlStage::Vertices, method.normals ? &nrm : nullptr,
+                        chunks, GlStage::Vertices, method.normals ? &nrm : nullptr,
                         method.normals ? mesh.normals.data() + v0 : nullptr);
       }
       if (n_faces > 0 && method.gs_faces) {
@@ -309,7 +311,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
         if (clock) clock->add(GlStage::Faces, faces_start, StageClock::cpu_mark());
       } else if (face_pass) {
         use_face_pass();
-        dispatch_chunks(face_prog, n_faces, fcap, words * 4, face_buffer, out, clock,
+        dispatch_chunks(face_prog, n_faces, fcap, words * 4, face_buffer, out, clock, chunks,
                         GlStage::Faces);
       }
     }
@@ -329,6 +331,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     stats->bricks = slab_count;
     stats->capture_passes = draws;
     stats->early_uploads = early;
+    stats->output_chunks = chunks;
     stats->times = clock->collect();
   }
   return mesh;
