@@ -20,7 +20,8 @@
 // stages of one more run of each path from GL timer queries (shaders/stage_clock.h), the upload's
 // GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
 // triangles/s of the median whole-call times. Before the volumes, a table of the read-back's
-// GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h).
+// GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h); `--methods none`
+// prints only that table.
 #include <tbb/global_control.h>
 
 #include <algorithm>
