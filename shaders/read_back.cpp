@@ -7,7 +7,6 @@
 #include <cstring>
 #include <optional>
 
-#include "core/errors.h"
 #include "gl_context.h"
 #include "gl_program.h"
 
