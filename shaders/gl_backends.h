@@ -46,6 +46,8 @@ struct McStats {
   // HistoPyramid: dispatches of the vertex and face passes (one each per slab where they fit
   // their buffers).
   int output_chunks = 0;
+  // HistoPyramid: dispatches building the count pyramid and its vertex offsets (hp_pyramid.h).
+  int pyramid_passes = 0;
   // Seconds per stage summed over the slabs, from GL timer queries (stage_clock.h; no glFinish),
   // and the bytes of samples uploaded.
   GlTimes times;

@@ -29,9 +29,16 @@ std::string with_base(const std::string& defines) {
 
 // The count pyramid's passes (mc_histopyramid.cpp, dc_histopyramid.cpp) over `defines`.
 void add_pyramid(Variants& out, const std::string& what, const std::string& defines) {
-  add(out, what + " reduce (base)", {{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, with_base(defines));
-  add(out, what + " reduce", {{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
-  add(out, what + " down-sweep", {{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, defines);
+  // One level per pass (a software device's) and several (hp_pyramid.h).
+  for (const int per_pass : {1, kMaxLevelsPerPass}) {
+    const std::string levels = per_pass == 1 ? ", one level per pass" : "";
+    add(out, what + " reduce (base)" + levels, {{GL_COMPUTE_SHADER, "hp_reduce.comp"}},
+        pyramid_pass_defines(defines, per_pass, true));
+    add(out, what + " reduce" + levels, {{GL_COMPUTE_SHADER, "hp_reduce.comp"}},
+        pyramid_pass_defines(defines, per_pass));
+    add(out, what + " down-sweep" + levels, {{GL_COMPUTE_SHADER, "hp_downsweep.comp"}},
+        pyramid_pass_defines(defines, per_pass));
+  }
   add(out, what + " prefix", {{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, defines);
 }
 

@@ -101,7 +101,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   StageClock clock_storage;
   StageClock* const clock = stats ? &clock_storage : nullptr;
   std::uint64_t vertex_base = 0;
-  int slab_count = 0, draws = 0, early = 0, chunks = 0;
+  int slab_count = 0, draws = 0, early = 0, chunks = 0, pyramid_passes = 0;
   progress_begin(run.progress, isotile::Stage::Extract, static_cast<std::int64_t>(planned.size()));
   // The next slab's region and samples, uploaded early (unused when that slab is split).
   std::optional<std::pair<Box3, Samples>> next;
@@ -117,8 +117,6 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
         uploaded ? std::move(next->second) : upload_samples(view, region, clock);
     next.reset();
     const std::string pyramid = samples.defines + method.pyramid_defines;
-    std::string base_defines = pyramid;  // appended, not concatenated: GCC 12's -Wrestrict
-    base_defines += "#define BASE\n";
     const GridUniforms grid{region, cells, view.global_dims, run.iso, view.origin, view.spacing};
     auto uniforms = [&](GLuint prog) {
       set_grid_uniforms(prog, grid);
@@ -153,29 +151,12 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     const StageClock::Mark scan_start = device_mark(clock);
     if (clock) clock->add(GlStage::Classify, classify_start, scan_start);
 
-    // (2) the count pyramid, level by level, then each node's vertex offset, top-down
-    const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, base_defines);
-    const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, pyramid);
-    for (int l = 1; l <= pyr.levels; ++l) {
-      prog = l == 1 ? base : upper;
-      uniforms(prog);
-      set_uniform_u(prog, "u_count", pyr.count[l]);
-      set_uniform_u(prog, "u_src_count", pyr.count[l - 1]);
-      set_uniform_u(prog, "u_src_offset", l >= 2 ? pyr.offset[l - 1] : 0);
-      set_uniform_u(prog, "u_dst_offset", pyr.offset[l]);
-      glUseProgram(prog);
-      dispatch(pyr.count[l]);
-    }
+    // (2) the count pyramid, several levels per pass (hp_pyramid.h), then each node's vertex
+    // offset, top-down
+    pyramid_passes += reduce_levels(pyr, pyramid);
     const Buffer offsets(pyr.nodes * 4);
     offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
-    prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, pyramid);
-    uniforms(prog);
-    pyr.set_uniforms(prog);
-    glUseProgram(prog);
-    for (int l = pyr.levels; l >= 1; --l) {
-      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_level"), l);
-      dispatch(pyr.count[l]);
-    }
+    pyramid_passes += sweep_offsets(pyr, pyramid, offsets);
     check("building the HistoPyramid");
 
     // (3) totals
@@ -332,6 +313,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     stats->capture_passes = draws;
     stats->early_uploads = early;
     stats->output_chunks = chunks;
+    stats->pyramid_passes = pyramid_passes;
     stats->times = clock->collect();
   }
   return mesh;

@@ -6,12 +6,17 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 
 #include "gl_program.h"
 
 namespace isotile::gl {
 
 inline constexpr int kMaxPyramidLevels = 16;
+// Levels one dispatch of hp_reduce.comp or hp_downsweep.comp writes at most: a workgroup's 256
+// invocations compute 256 nodes of the lowest level it writes, and pass them through shared
+// memory to their 32 parents and 4 grandparents.
+inline constexpr int kMaxLevelsPerPass = 3;
 
 inline void set_uniform_u(GLuint prog, const char* name, std::uint32_t v) {
   glProgramUniform1ui(prog, glGetUniformLocation(prog, name), v);
@@ -43,6 +48,27 @@ struct Pyramid {
                          count.data());
   }
 };
+
+// Pyramid levels per dispatch on the current device: one on a software rasteriser, where the
+// shared memory and barriers that carry a pass's sums (and offsets) from level to level cost
+// more than the dispatches they save (llvmpipe: docs/gl.md), else kMaxLevelsPerPass.
+int default_levels_per_pass();
+
+// Levels 1..L of `pyr`'s count pyramid from the element codes (bound at 1; the pyramid at 2),
+// `per_pass` levels per dispatch (1..kMaxLevelsPerPass; 0: default_levels_per_pass()), with
+// hp_reduce.comp built from `defines` (the samples' and the method's pyramid defines). Returns
+// the number of dispatches.
+int reduce_levels(const Pyramid& pyr, const std::string& defines, int per_pass = 0);
+
+// The vertex offset of every node of levels 1..L (bound at 5; the pyramid at 2), top-down, the
+// top node's being zero, `per_pass` levels per dispatch as above, with hp_downsweep.comp built
+// from `defines`. Returns the number of dispatches.
+int sweep_offsets(const Pyramid& pyr, const std::string& defines, const Buffer& offsets,
+                  int per_pass = 0);
+
+// The defines of hp_reduce.comp (with BASE: the level above the elements) and
+// hp_downsweep.comp for `per_pass` levels per dispatch.
+std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base = false);
 
 // What hp_prefix.comp (`prog`, its other uniforms already set) counts before `element`: the
 // vertices of the elements before it, with the pyramid bound as for the output passes. Both

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -23,6 +24,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/gl_program.h"
+#include "shaders/hp_pyramid.h"
 #include "shaders/read_back.h"
 #include "shaders/sample_upload.h"
 #include "test_support.h"
@@ -361,11 +363,79 @@ TEST(GlHistoPyramid, ChunkedOutputPassesEqualCpu) {
         gl::mc_histopyramid(vol.view(), {.iso = 127.5, .normals = true, .memory = memory}, &stats);
     expect_same_mesh(gl, cpu, vol.view(), ("memory " + std::to_string(memory)).c_str());
     // One vertex and one face dispatch per slab where they fit, more where they do not.
-    if (memory)
+    if (memory) {
       EXPECT_GT(stats.output_chunks, 2 * stats.bricks) << memory;
-    else
+    } else {
       EXPECT_EQ(stats.output_chunks, 2 * stats.bricks);
+      // One slab of 37 x 29 x 23 elements: five pyramid levels, built and swept in 5 + 4
+      // passes at one level per pass, 2 + 2 at three (hp_pyramid.h).
+      ASSERT_EQ(stats.bricks, 1);
+      EXPECT_EQ(gl::Pyramid(vol.sample_count()).levels, 5);
+      EXPECT_EQ(stats.pyramid_passes, gl::default_levels_per_pass() == 1 ? 9 : 4);
+    }
   }
+}
+
+// The count pyramid and its vertex offsets (hp_pyramid.h) from random element codes, against
+// sums made here: every level and every offset, word for word, for 1, 2 and 3 levels per
+// dispatch, with element counts that end inside a workgroup's 512 nodes and pyramids of 1 to 7
+// levels (one level per pass is a software device's default, without the shaders' shared memory
+// and barriers). DC_CODES counts need no case table: vertices in bits 11-13, one face per bit
+// 8-10.
+TEST(GlHistoPyramid, PyramidLevelsAndOffsetsEqualSumsOnTheCpu) {
+  REQUIRE_GL();
+  gl::Scope scope;
+  std::string defines = gl::sample_defines(ScalarType::Float32);
+  defines += "#define DC_CODES\n";
+  std::uint32_t state = 987654321u;
+  for (const std::uint64_t elements : {1u, 8u, 9u, 511u, 513u, 4097u, 33'000u, 300'001u}) {
+    // One more code than elements, which the passes must not count (an odd count's last word).
+    std::vector<std::uint16_t> codes(elements + 1, 0x3f00);
+    for (std::uint64_t e = 0; e < elements; ++e) {
+      state = state * 1664525u + 1013904223u;
+      // Mostly empty elements, as in a volume; a few with up to 7 vertices and 3 faces.
+      codes[e] = (state >> 28) < 3 ? static_cast<std::uint16_t>(state & 0x3f00u) : 0;
+    }
+    const gl::Pyramid pyr(elements);
+    // Expected: (vertices, faces) per node, level by level; offsets top-down.
+    std::vector<std::uint32_t> want(pyr.nodes * 3, 0);
+    auto node = [&](int l, std::uint64_t p) { return &want[2 * (pyr.offset[l] + p)]; };
+    for (int l = 1; l <= pyr.levels; ++l)
+      for (std::uint64_t q = 0; q < pyr.count[l - 1]; ++q) {
+        std::uint32_t* dst = node(l, q / 8);
+        if (l == 1) {
+          dst[0] += (codes[q] >> 11) & 7u;
+          dst[1] += static_cast<std::uint32_t>(std::popcount(codes[q] >> 8 & 7u));
+        } else {
+          dst[0] += node(l - 1, q)[0];
+          dst[1] += node(l - 1, q)[1];
+        }
+      }
+    std::uint32_t* offset = want.data() + pyr.nodes * 2;
+    for (int l = pyr.levels - 1; l >= 1; --l)
+      for (std::uint64_t p = 0; p < pyr.count[l]; ++p) {
+        std::uint32_t sum = offset[pyr.offset[l + 1] + p / 8];
+        for (std::uint64_t q = p & ~std::uint64_t{7}; q < p; ++q) sum += node(l, q)[0];
+        offset[pyr.offset[l] + p] = sum;
+      }
+    ASSERT_GT(node(pyr.levels, 0)[0], 0u) << elements;  // some vertices at all
+    for (int per_pass = 1; per_pass <= gl::kMaxLevelsPerPass; ++per_pass) {
+      const gl::Buffer code_buffer(codes.size() * 2, codes.data());
+      const gl::Buffer levels(pyr.nodes * 8), offsets(pyr.nodes * 4);
+      code_buffer.bind(GL_SHADER_STORAGE_BUFFER, 1);
+      levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
+      offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+      const int reduce_passes = gl::reduce_levels(pyr, defines, per_pass);
+      const int sweep_passes = gl::sweep_offsets(pyr, defines, offsets, per_pass);
+      EXPECT_EQ(reduce_passes, (pyr.levels + per_pass - 1) / per_pass);
+      EXPECT_EQ(sweep_passes, (pyr.levels - 1 + per_pass - 1) / per_pass);
+      std::vector<std::uint32_t> got(pyr.nodes * 3, 0xdeadbeefu);
+      levels.read(0, pyr.nodes * 8, got.data());
+      offsets.read(0, pyr.nodes * 4, got.data() + pyr.nodes * 2);
+      EXPECT_EQ(got, want) << elements << " elements, " << per_pass << " levels per pass";
+    }
+  }
+  EXPECT_THROW(gl::reduce_levels(gl::Pyramid(8), defines, 4), Error);
 }
 
 TEST(GlBackends, RegisteredInTheTable) {

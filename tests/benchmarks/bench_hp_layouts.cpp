@@ -19,6 +19,9 @@
 // of elements (sum of element indices per kind); the linear descent must also come out in element
 // order, and the compact scatter give the same arrays. "hp" is the production path's whole
 // extraction, for scale.
+// A second table times the production build (classification, reduction, the vertex offsets'
+// down-sweep, the totals) with 1, 2 and 3 pyramid levels per dispatch (hp_pyramid.h), after
+// checking that all three give the same pyramid and offsets, word for word.
 //
 //   cmake --build build-gl --target bench_hp_layouts -j2
 //   build-gl/tests/benchmarks/bench_hp_layouts [--threads N] [--repeat R] [--data DIR]
@@ -147,14 +150,13 @@ struct LinearPyramid {
   explicit LinearPyramid(std::uint64_t elements) : shape(elements) {}
 };
 
-// Classification and every reduction level into `p` (codes at binding 1, pyramid at 2); the
+// Classification and every reduction level into `p` (codes at binding 1, pyramid at 2),
+// `per_pass` levels per dispatch as in production (hp_pyramid.h; 0: the device's default); the
 // totals read back into `r`.
-void build_linear(const Setup& s, LinearPyramid& p, Result& r) {
+void build_linear(const Setup& s, LinearPyramid& p, Result& r, int per_pass = 0) {
   const std::string& defines = s.samples.defines;
   const GLuint classify = program({{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
-  const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, with_base(defines));
-  const GLuint upper = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, defines);
-  for (GLuint prog : {classify, base, upper}) set_grid_uniforms(prog, s.grid);
+  set_grid_uniforms(classify, s.grid);
   const std::uint64_t elements = p.shape.count[0];
   p.codes = Buffer(((elements + 1) / 2) * 4);
   p.pyr = Buffer(p.shape.nodes * 8);
@@ -162,17 +164,29 @@ void build_linear(const Setup& s, LinearPyramid& p, Result& r) {
   p.pyr.bind(GL_SHADER_STORAGE_BUFFER, 2);
   glUseProgram(classify);
   dispatch((elements + 1) / 2);
-  for (int l = 1; l <= p.shape.levels; ++l) {
-    const GLuint prog = l == 1 ? base : upper;
-    set_u(prog, "u_count", p.shape.count[l]);
-    set_u(prog, "u_src_count", p.shape.count[l - 1]);
-    set_u(prog, "u_src_offset", l >= 2 ? p.shape.offset[l - 1] : 0);
-    set_u(prog, "u_dst_offset", p.shape.offset[l]);
-    glUseProgram(prog);
-    dispatch(p.shape.count[l]);
-  }
+  reduce_levels(p.shape, defines, per_pass);
   check("building the linear pyramid");
   p.pyr.read(std::size_t{p.shape.offset[p.shape.levels]} * 8, 8, r.totals);
+}
+
+// The production build (classification, reduction, the vertex offsets' down-sweep, the totals)
+// with `per_pass` levels per dispatch, timed; `bytes` gets the pyramid's and the offsets' bytes.
+double time_build(const Setup& s, int per_pass, std::vector<std::uint32_t>& bytes) {
+  LinearPyramid p(volume_of(s.d));
+  glFinish();
+  const double t0 = now();
+  Result r;
+  build_linear(s, p, r, per_pass);
+  const Buffer offsets(p.shape.nodes * 4);
+  offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+  sweep_offsets(p.shape, s.samples.defines, offsets, per_pass);
+  glFinish();
+  check("the down-sweep");
+  const double t = now() - t0;
+  bytes.resize(p.shape.nodes * 3);
+  p.pyr.read(0, p.shape.nodes * 8, bytes.data());
+  offsets.read(0, p.shape.nodes * 4, bytes.data() + p.shape.nodes * 2);
+  return t;
 }
 
 Result run_linear(const Setup& s, Timing& t) {
@@ -418,6 +432,7 @@ int main(int argc, char** argv) {
   std::printf("%-11s %9s %9s | %10s %10s | %10s %10s | %10s %10s | %10s %10s | %8s\n", "volume",
               "vertices", "triangles", "build ms", "descend", "build ms", "descend", "build ms",
               "descend", "build ms", "scatter", "hp ms");
+  std::vector<std::string> pass_rows;  // the second table, printed after the first
   for (const Case& c : cases) {
     const VolumeView v = c.volume->view();
     const Mesh cpu = marching_cubes(v, {.iso = c.iso});
@@ -478,6 +493,29 @@ int main(int argc, char** argv) {
       std::sort(t.begin(), t.end());
       return 1e3 * t[t.size() / 2];
     };
+    // The production build with 1, 2 and 3 levels per dispatch: the same pyramid and offsets,
+    // and how long each takes.
+    {
+      std::vector<std::uint32_t> first, bytes;
+      std::vector<double> times[kMaxLevelsPerPass];
+      for (int k = 1; k <= kMaxLevelsPerPass; ++k) {
+        time_build(s, k, bytes);  // untimed: compiles, and gives the words to compare
+        if (k == 1) first = bytes;
+        if (bytes != first)
+          fail(c.name + ": " + std::to_string(k) +
+               " levels per pass build another pyramid or other offsets than one");
+      }
+      for (int r = 0; r < repeat; ++r)
+        for (int k = 1; k <= kMaxLevelsPerPass; ++k)
+          times[k - 1].push_back(time_build(s, k, bytes));
+      const Pyramid shape(volume_of(s.d));
+      char row[160];
+      std::snprintf(row, sizeof row, "%-11s %6d | %10.1f %10.1f %10.1f | %8d %8d %8d\n",
+                    c.name.c_str(), shape.levels, med(times[0]), med(times[1]), med(times[2]),
+                    2 * shape.levels - 1, (shape.levels + 1) / 2 + shape.levels / 2,
+                    (shape.levels + 2) / 3 + (shape.levels + 1) / 3);
+      pass_rows.push_back(row);
+    }
     std::printf(
         "%-11s %9zu %9zu | %10.1f %10.1f | %10.1f %10.1f | %10.1f %10.1f | %10.1f %10.1f | %8.1f\n",
         c.name.c_str(), cpu.positions.size(), cpu.triangles.size(), med(build[0]), med(desc[0]),
@@ -485,5 +523,10 @@ int main(int argc, char** argv) {
         med(hp));
     std::fflush(stdout);
   }
+  // Dispatches: the reduction ceil(L / k), the down-sweep of levels L-1..1 ceil((L - 1) / k).
+  std::printf("\nproduction build (classify, reduce, down-sweep, totals) by levels per pass, ms\n");
+  std::printf("%-11s %6s | %10s %10s %10s | %26s\n", "volume", "levels", "1 per pass", "2 per pass",
+              "3 per pass", "reduce + sweep passes");
+  for (const std::string& row : pass_rows) std::fputs(row.c_str(), stdout);
   return 0;
 }

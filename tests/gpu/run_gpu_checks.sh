@@ -18,7 +18,8 @@
 #
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
-# through pinned buffers (issue 36), and the data path's targets (issue 35): upload GB/s on gyroid
+# through pinned buffers and the pyramid's build at 1, 2 and 3 levels per dispatch (issue 36),
+# and the data path's targets (issue 35): upload GB/s on gyroid
 # 256/512 and bonsai, out of core on gyroid $size and a 4 GiB uint8 volume made from bonsai, the
 # one-shot whole process of `extract field:gyroid:512` on hp against cpu with a warm program
 # cache, the context's start-up.
@@ -92,8 +93,10 @@ grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 # stops with FAILED when a layout's counts or outputs differ from the CPU's or the linear's.
 repeat=5
 [ "$size" = 192 ] && repeat=1  # --quick: llvmpipe's texture descents take minutes
-bench_hp_layouts --threads 16 --repeat $repeat ${data:+--data "$data"}
-report bench_hp_layouts $?
+bench_hp_layouts --threads 16 --repeat $repeat ${data:+--data "$data"} | tee "$out/bench_hp_layouts.txt"
+report bench_hp_layouts "${PIPESTATUS[0]}"
+# The pyramid built with 1, 2 and 3 levels per dispatch (shaders/hp_pyramid.h): which to keep.
+grep -A4 '^production build' "$out/bench_hp_layouts.txt" | sed 's/^/gpu-measure: /'
 
 # 6. The data path (issue 35). Upload GB/s and the stages from --stats (seconds.gl), a run with a
 # warm program cache each: gyroid 256 and 512 float32, bonsai uint8 (from $ISOTILE_GPU_DATA).

@@ -1,0 +1,86 @@
+#include "hp_pyramid.h"
+
+#include <algorithm>
+#include <string>
+
+#include "core/errors.h"
+#include "gl_context.h"
+
+namespace isotile::gl {
+
+namespace {
+
+// One invocation per node of `level`, in workgroups of 256 (each covers 32 and 4 of the nodes
+// of the two levels above).
+std::uint64_t invocations_over(const Pyramid& pyr, int level) {
+  return (std::uint64_t{pyr.count[level]} + 255) / 256 * 256;
+}
+
+int checked(int per_pass) {
+  if (per_pass == 0) return default_levels_per_pass();
+  if (per_pass < 1 || per_pass > kMaxLevelsPerPass)
+    throw Error("levels per HistoPyramid pass must be 1 to " + std::to_string(kMaxLevelsPerPass));
+  return per_pass;
+}
+
+}  // namespace
+
+int default_levels_per_pass() {
+  // Measured on llvmpipe (bench_backends' scan stage, docs/gl.md): three levels per pass, whose
+  // shader holds barriers, took 2.3-2.8x as long as one level per pass without them.
+  return device().software ? 1 : kMaxLevelsPerPass;
+}
+
+std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base) {
+  std::string d = defines;  // appended, not concatenated: GCC 12's -Wrestrict
+  if (base) d += "#define BASE\n";
+  if (checked(per_pass) == 1) d += "#define ONE_LEVEL_PER_PASS\n";
+  return d;
+}
+
+int reduce_levels(const Pyramid& pyr, const std::string& defines, int per_pass) {
+  per_pass = checked(per_pass);
+  const GLuint base = program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}},
+                              pyramid_pass_defines(defines, per_pass, true));
+  const GLuint upper =
+      program({{GL_COMPUTE_SHADER, "hp_reduce.comp"}}, pyramid_pass_defines(defines, per_pass));
+  int passes = 0;
+  // Bottom-up: each pass reads level `src` and writes the `steps` levels above it.
+  for (int src = 0; src < pyr.levels; src += per_pass) {
+    const int steps = std::min(per_pass, pyr.levels - src);
+    const GLuint prog = src == 0 ? base : upper;
+    pyr.set_uniforms(prog);
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_src_level"), src);
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_steps"), steps);
+    glUseProgram(prog);
+    dispatch(invocations_over(pyr, src + 1));
+    ++passes;
+  }
+  return passes;
+}
+
+int sweep_offsets(const Pyramid& pyr, const std::string& defines, const Buffer& offsets,
+                  int per_pass) {
+  per_pass = checked(per_pass);
+  const GLuint prog =
+      program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, pyramid_pass_defines(defines, per_pass));
+  // The top node has no vertices before it; a clear is ordered before the dispatches that read
+  // it like any other command.
+  const std::uint32_t zero = 0;
+  glClearNamedBufferSubData(offsets.id(), GL_R32UI, std::size_t{pyr.offset[pyr.levels]} * 4, 4,
+                            GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+  pyr.set_uniforms(prog);
+  glUseProgram(prog);
+  int passes = 0;
+  // Top-down: each pass writes the `steps` levels below level `top`, whose offsets are known.
+  for (int top = pyr.levels; top > 1; top -= per_pass) {
+    const int steps = std::min(per_pass, top - 1);
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_bottom"), top - steps);
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_steps"), steps);
+    dispatch(invocations_over(pyr, top - steps));
+    ++passes;
+  }
+  return passes;
+}
+
+}  // namespace isotile::gl
