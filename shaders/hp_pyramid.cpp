@@ -1,6 +1,7 @@
 #include "hp_pyramid.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <string>
 
 #include "core/errors.h"
@@ -26,6 +27,15 @@ int checked(int per_pass) {
 }  // namespace
 
 int default_levels_per_pass() {
+  // ISOTILE_HP_LEVELS_PER_PASS overrides the device's choice (a GPU's A/B, and the tests that run
+  // the hardware devices' passes on llvmpipe).
+  if (const char* env = std::getenv("ISOTILE_HP_LEVELS_PER_PASS"); env && *env) {
+    const std::string v = env;
+    if (v.size() != 1 || v[0] < '1' || v[0] > '0' + kMaxLevelsPerPass)
+      throw InputError("ISOTILE_HP_LEVELS_PER_PASS is '" + v + "': it must be 1 to " +
+                       std::to_string(kMaxLevelsPerPass));
+    return v[0] - '0';
+  }
   // Measured on llvmpipe (bench_backends' scan stage, docs/gl.md): three levels per pass, whose
   // shader holds barriers, took 2.3-2.8x as long as one level per pass without them.
   return device().software ? 1 : kMaxLevelsPerPass;
