@@ -48,6 +48,15 @@ for t in test_gl test_gl_macet test_gl_dc; do
   grep -m 5 -E 'Failure|error' "$out/$t.log"
   report "$t" $rc
 done
+# The HistoPyramid extractions again with one pyramid level per dispatch (a software device's
+# passes, without shared memory and barriers; the GPU's default is three, shaders/hp_pyramid.h).
+for t in test_gl test_gl_macet test_gl_dc; do
+  ISOTILE_HP_LEVELS_PER_PASS=1 "$t" --gtest_brief=1 --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
+    >"$out/$t-one-level.log" 2>&1
+  rc=$?
+  grep -m 5 -E 'Failure|error' "$out/$t-one-level.log"
+  report "$t hp, one pyramid level per pass" $rc
+done
 
 # 2. Bricked runs at 16 threads on both GL paths: exit 0 (no crash at exit, glibc's heap checks
 # on), and the CPU's file byte for byte.
