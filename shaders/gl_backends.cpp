@@ -120,7 +120,11 @@ MacetGlOptions macet_gl_options(const ExtractOptions& o) {
 // Runs `run` (a GL extractor taking McStats*) and, when `report` is given, fills it: the stages'
 // device times, the upload, the program cache over this call, the context's start-up.
 template <class Run>
-Mesh reported(GpuReport* report, Run run) {
+Mesh reported(const char* backend, GpuReport* report, Run run) {
+  // The context that start_context() was making when the probe said yes may have failed: the
+  // error the probe would have given (resolve_backend()).
+  if (std::string why; !available(&why))
+    throw InputError("backend '" + std::string(backend) + "': " + why);
   if (!report) return run(nullptr);
   const ProgramCacheCounts before = program_cache_counts();
   McStats stats;
@@ -142,28 +146,30 @@ Mesh reported(GpuReport* report, Run run) {
 }
 
 Mesh run_gs(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r, [&](McStats* s) { return mc_geometry_shader(view, mc_options(o), s); });
+  return reported("gs", r, [&](McStats* s) { return mc_geometry_shader(view, mc_options(o), s); });
 }
 
 Mesh run_hp(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r, [&](McStats* s) { return mc_histopyramid(view, mc_options(o), s); });
+  return reported("hp", r, [&](McStats* s) { return mc_histopyramid(view, mc_options(o), s); });
 }
 
 Mesh run_dc_gs(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r, [&](McStats* s) { return dc_geometry_shader(view, dc_gl_options(o), s); });
+  return reported("gs", r,
+                  [&](McStats* s) { return dc_geometry_shader(view, dc_gl_options(o), s); });
 }
 
 Mesh run_dc_hp(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r, [&](McStats* s) { return dc_histopyramid(view, dc_gl_options(o), s); });
+  return reported("hp", r, [&](McStats* s) { return dc_histopyramid(view, dc_gl_options(o), s); });
 }
 
 Mesh run_gs_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r,
+  return reported("gs", r,
                   [&](McStats* s) { return macet_geometry_shader(view, macet_gl_options(o), s); });
 }
 
 Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
-  return reported(r, [&](McStats* s) { return macet_histopyramid(view, macet_gl_options(o), s); });
+  return reported("hp", r,
+                  [&](McStats* s) { return macet_histopyramid(view, macet_gl_options(o), s); });
 }
 
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
@@ -171,6 +177,10 @@ Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r)
 // told apart without making a context (starting llvmpipe costs about 0.3 s).
 std::string probe(bool* hardware, bool hardware_only) {
   if (hardware_only && !hardware_device_present()) return "no GPU (hardware EGL device) found";
+  // Asked for by name once start_context() began making the context (start_backend()): yes
+  // without waiting for it, so that the caller reads its volume meanwhile; reported() gives the
+  // failure if there is one.
+  if (!hardware_only && context_started()) return {};
   std::string why;
   if (!available(&why)) return why;
   *hardware = !device().software;
@@ -188,8 +198,9 @@ ProgramCacheState program_cache_state() {
 }
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe);
-  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe);
+  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe,
+                   start_context);
+  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context);
 }
 
 }  // namespace isotile::gl

@@ -7,12 +7,14 @@
 #include <link.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include "core/errors.h"
@@ -100,6 +102,10 @@ std::unique_ptr<Context> g_context;  // set once created; lives until shutdown()
 std::vector<void (*)()> g_releases;  // at_shutdown()
 std::string g_failure;               // set once creation failed
 thread_local int t_depth = 0;
+// start_context(): true from its call to shutdown(); its thread is joined by shutdown(), or at
+// exit by its destructor, before the objects above go.
+std::atomic<bool> g_started{false};
+std::jthread g_starter;
 
 bool has_word(const char* list, std::string_view word) {
   if (!list) return false;
@@ -360,6 +366,29 @@ bool hardware_device_present() {
   return count_hardware_devices() > 0;
 }
 
+void start_context() {
+  std::lock_guard lock(g_mutex);
+  if (g_context || !g_failure.empty() || g_started) return;
+  if (const char* env = std::getenv("ISOTILE_GL"); env && std::string_view(env) == "off") {
+    create();  // records the failure: nothing to wait for
+    return;
+  }
+  g_started = true;
+  g_starter = std::jthread([] {
+    std::lock_guard held(g_mutex);  // taken once the caller's lock is released
+    try {
+      create();
+    } catch (const std::exception& e) {  // nothing may leave a thread
+      g_failure = std::string("no usable OpenGL 4.5 context: ") + e.what();
+    }
+    if (g_context && t_depth == 0) g_context->release_thread();
+  });
+}
+
+bool context_started() {
+  return g_started;
+}
+
 const DeviceInfo& device() {
   Scope scope;
   return g_context->info;
@@ -398,7 +427,9 @@ void at_shutdown(void (*release)()) {
 }
 
 void shutdown() {
+  if (g_starter.joinable()) g_starter.join();  // its context is ended below like any other
   std::lock_guard lock(g_mutex);
+  g_started = false;
   if (!g_context) return;
   Context& c = *g_context;
   if (t_depth == 0 && c.make_current()) {

@@ -47,6 +47,15 @@ const DeviceInfo& device();
 // True when a context can be (or was) created; never throws. `why` gets the reason when not.
 bool available(std::string* why = nullptr);
 
+// Makes the context on a thread of its own, so that the caller can go on (read its volume)
+// meanwhile: the first Scope, device() or available() waits for it. Does nothing when the context
+// exists, failed, or is being made; with ISOTILE_GL=off it fails at once, in the caller.
+void start_context();
+
+// Whether start_context() has begun making the context (since the last shutdown()), whatever
+// came of it; takes no lock.
+bool context_started();
+
 // True when EGL lists a hardware device (a GPU) that the context would use; cheap (no context is
 // made), so that `--backend auto` on a machine without a GPU does not pay for starting llvmpipe.
 bool hardware_device_present();

@@ -458,6 +458,27 @@ TEST(GlBackends, RegisteredInTheTable) {
     }
 }
 
+// The context made on a thread of its own (start_context(), what `--backend gs|hp` does while the
+// volume is read): the first extraction waits for it and gives the CPU's mesh; starting again
+// while it exists does nothing; shutdown() ends it, and a later start makes a new one.
+TEST(GlContext, StartedOnAThreadOfItsOwn) {
+  REQUIRE_GL();
+  const Volume vol = make_field_volume({FieldKind::Gyroid, 24});
+  const Mesh cpu = marching_cubes(vol.view(), {.iso = 0.0});
+  for (int round = 0; round < 2; ++round) {
+    gl::shutdown();
+    EXPECT_FALSE(gl::context_alive());
+    EXPECT_FALSE(gl::context_started());
+    gl::start_context();
+    gl::start_context();  // already being made: nothing more
+    EXPECT_TRUE(gl::context_started());
+    expect_same_mesh(gl::mc_histopyramid(vol.view(), {.iso = 0.0}), cpu, vol.view(), "started");
+    EXPECT_TRUE(gl::context_alive());
+    gl::start_context();  // exists: nothing
+    expect_same_mesh(gl::mc_geometry_shader(vol.view(), {.iso = 0.0}), cpu, vol.view(), "again");
+  }
+}
+
 TEST(GlContext, DescribesTheDevice) {
   REQUIRE_GL();
   const gl::DeviceInfo& d = gl::device();

@@ -358,6 +358,23 @@ TEST_F(GlCli, NoContextIsOneErrorLine) {
         << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
   }
+  // A context that fails while the volume is read (it is made on a thread of its own from the
+  // start, gl::start_context()): the same one line, in core and out of core, and no file.
+  for (const char* b : {"gs", "hp"})
+    for (const char* memory : {"", " --memory 1MiB"}) {
+      const Result r =
+          run(std::string("extract field:sphere:40 -q --backend ") + b + memory + " -o m.ply",
+              "ISOTILE_GL=nowhere");
+      EXPECT_EQ(r.code, 1) << b << memory;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+      EXPECT_EQ(
+          r.err.rfind(std::string("isotile: error: backend '") + b +
+                          "': no usable OpenGL 4.5 context (ISOTILE_GL='nowhere' names no way",
+                      0),
+          0u)
+          << r.err;
+      EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
+    }
   const Result a = run("extract field:sphere:16 -q -o m.ply --stats s.json", "ISOTILE_GL=off");
   ASSERT_EQ(a.code, 0) << a.err;
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "s.json"))["backend"], "cpu");

@@ -258,6 +258,9 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_format_from_path(options.output);
   }
+  // A GL backend asked for by name makes its context while the volume is read (or the bricks
+  // counted) instead of before.
+  start_backend(options.extract.backend);
   ExtractOptions eo = pipeline_extract_options(input, options);
   eo.progress = options.progress;
   BackendChoice choice = choose_backend(eo);

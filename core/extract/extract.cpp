@@ -37,6 +37,7 @@ struct BackendEntry {
   std::string_view missing;
   // Set by register_backend(): whether it can run here (see extract.h).
   ProbeFn probe = nullptr;
+  StartFn start = nullptr;  // start_backend()
 };
 
 // The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
@@ -124,13 +125,19 @@ std::string_view backend_name(Backend b) {
 }
 
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe) {
+                      ProbeFn probe, StartFn start) {
   for (auto& e : kBackends)
     if (e.backend == backend) {
       e.run = run;
       e.missing = "";
       e.probe = probe;
+      e.start = start;
     }
+}
+
+void start_backend(Backend backend) {
+  if (backend == Backend::Auto) return;
+  if (const auto& e = entry(backend); e.start) e.start();
 }
 
 std::vector<BackendCaps> capabilities() {

@@ -125,9 +125,20 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
 // GPU (Auto picks a GPU backend only then), else why it cannot; with `hardware_only` (Auto's
 // question) it may answer "cannot" cheaply for anything but a real GPU.
 // `report`, when not null, gets the backend's account (GL backends only; the CPU leaves it).
+// `start`, when not null, begins in the background what the backend needs before its first
+// extract() and takes long (start_backend()).
 using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&, GpuReport* report);
 using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
+using StartFn = void (*)();
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe);
+                      ProbeFn probe, StartFn start = nullptr);
+
+// For a backend asked for by name (not Auto, which must probe first): starts in the background
+// what it needs before its first extract() and takes long, so that it overlaps the caller's
+// reading of the volume (the GL backends: their context, tenths of a second on a GPU). From then
+// on the backend's probe answers that it can run without waiting; if it cannot, every extract()
+// on it throws the InputError the probe would have. Does nothing for Auto, the CPU and backends
+// without such work.
+void start_backend(Backend backend);
 
 }  // namespace isotile

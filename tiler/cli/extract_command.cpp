@@ -79,6 +79,9 @@ PipelineOptions pipeline_options(const ExtractArgs& args) {
   e.macet_relax = args.macet_relax;
   o.world_frame = args.frame == "world";
   o.simplify = args.simplify;
+  // A GL backend named by --backend makes its context on a thread of its own from here on, while
+  // the volume is read (its checks below then wait for nothing; core/extract/extract.h).
+  start_backend(e.backend);
   // Their errors come before a malformed --iso's, as they always have.
   check_pipeline_options(o);
   o.iso_auto = args.iso == "auto";
