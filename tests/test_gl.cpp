@@ -450,7 +450,11 @@ TEST(GlBackends, RegisteredInTheTable) {
   }
   // Auto takes a GPU path only on a real GPU.
   const Backend a = resolve_backend({});
-  EXPECT_EQ(a == Backend::Cpu, gl::device().software);
+  // Never a GL path on a software device; on a GPU whatever the rules say (the CPU everywhere
+  // until a GL path is measured faster: kAutoRules).
+  if (gl::device().software) {
+    EXPECT_EQ(a, Backend::Cpu);
+  }
   for (const BackendCaps& c : capabilities())
     if (c.backend != Backend::Cpu) {
       EXPECT_TRUE(c.available);

@@ -301,7 +301,11 @@ TEST(GlDcBackends, RegisteredInTheTable) {
       }
   }
   const Backend a = resolve_backend({.method = Method::DualContouring});
-  EXPECT_EQ(a == Backend::Cpu, gl::device().software);
+  // Never a GL path on a software device; on a GPU whatever the rules say (the CPU everywhere
+  // until a GL path is measured faster: kAutoRules).
+  if (gl::device().software) {
+    EXPECT_EQ(a, Backend::Cpu);
+  }
 }
 
 }  // namespace

@@ -215,7 +215,11 @@ TEST(GlMacetBackends, RegisteredInTheTable) {
     expect_same_mesh(extract(vol.view(), o), cpu, vol.view(), std::string(backend_name(b)));
   }
   const Backend a = resolve_backend({.method = Method::Macet});
-  EXPECT_EQ(a == Backend::Cpu, gl::device().software);
+  // Never a GL path on a software device; on a GPU whatever the rules say (the CPU everywhere
+  // until a GL path is measured faster: kAutoRules).
+  if (gl::device().software) {
+    EXPECT_EQ(a, Backend::Cpu);
+  }
   for (const BackendCaps& c : capabilities())
     if (c.backend != Backend::Cpu) {
       EXPECT_NE(std::find(c.methods.begin(), c.methods.end(), Method::Macet), c.methods.end());
