@@ -174,16 +174,24 @@ bool try_egl_device(Context& c, std::string& why) {
   EGLDeviceEXT devices[16];
   EGLint n = 0;
   if (!query_devices(16, devices, &n) || n == 0) return why = "no EGL device", false;
+  std::vector<EGLDeviceEXT> hardware;
+  for (EGLint i = 0; i < n; ++i)
+    if (!has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software"))
+      hardware.push_back(devices[i]);
+  const DeviceOrder order = hardware_device_order(static_cast<int>(hardware.size()));
+  if (!order.why.empty()) return why = order.why, false;
   why = "no hardware EGL device (only software ones)";
-  for (EGLint i = 0; i < n; ++i) {
-    if (has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software")) continue;
-    EGLDisplay d = platform_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr);
+  for (const int k : order.order) {
+    EGLDisplay d = platform_display(EGL_PLATFORM_DEVICE_EXT, hardware[k], nullptr);
     if (d == EGL_NO_DISPLAY) {
-      why = egl_error("eglGetPlatformDisplayEXT(device)");
+      why = egl_error(("eglGetPlatformDisplayEXT(device " + std::to_string(k) + ")").c_str());
       continue;
     }
     if (egl_context_on(d, c, why)) {
       c.info.platform = "egl-device";
+      c.info.device_index = k;
+      c.info.device_count = static_cast<int>(hardware.size());
+      c.info.device_chosen_by = k == order.order.front() ? order.chosen_by : "the next that works";
       return gladLoadGL(egl_proc) != 0 || (why = "loading OpenGL functions failed", false);
     }
     eglTerminate(d);
@@ -304,6 +312,18 @@ void create() {
     g_failure = "no OpenGL context: disabled by ISOTILE_GL=off";
     return;
   }
+  // A device named by number is that GPU or nothing: no other way is tried.
+  std::string only_way = only;
+  if (const char* d = std::getenv("ISOTILE_GL_DEVICE"); d && *d) {
+    if (!only.empty() && only != "device") {
+      g_failure =
+          "no OpenGL context: ISOTILE_GL_DEVICE names a hardware EGL device, but "
+          "ISOTILE_GL='" +
+          only + "' asks for another way";
+      return;
+    }
+    only_way = "device";
+  }
   struct Way {
     const char* name;
     bool (*fn)(Context&, std::string&);
@@ -312,7 +332,7 @@ void create() {
       {"device", try_egl_device}, {"surfaceless", try_egl_surfaceless}, {"osmesa", try_osmesa}};
   std::string reasons;
   for (const Way& w : ways) {
-    if (!only.empty() && only != w.name) continue;
+    if (!only_way.empty() && only_way != w.name) continue;
     auto c = std::make_unique<Context>();
     std::string why;
     if (w.fn(*c, why)) {
@@ -387,6 +407,41 @@ void start_context() {
 
 bool context_started() {
   return g_started;
+}
+
+DeviceOrder hardware_device_order(int count) {
+  DeviceOrder o;
+  if (const char* env = std::getenv("ISOTILE_GL_DEVICE"); env && *env) {
+    const std::string v = env;
+    char* end = nullptr;
+    const long k = std::strtol(env, &end, 10);
+    if (*end != '\0' || k < 0 || v.find_first_not_of("0123456789") != std::string::npos)
+      return o.why = "ISOTILE_GL_DEVICE='" + v + "' is not a device number (0, 1, ...)", o;
+    if (k >= count)
+      return o.why = "ISOTILE_GL_DEVICE=" + v + ", but EGL lists " + std::to_string(count) +
+                     " hardware device" + (count == 1 ? "" : "s") +
+                     (count > 0 ? " (0 to " + std::to_string(count - 1) + ")" : ""),
+             o;
+    o.order = {static_cast<int>(k)};
+    o.chosen_by = "ISOTILE_GL_DEVICE";
+    return o;
+  }
+  int first = 0;
+  o.chosen_by = "first";
+  // The launchers' node-local ranks: Open MPI, MPICH's Hydra, MVAPICH, Slurm's srun.
+  for (const char* name : {"OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID",
+                           "MV2_COMM_WORLD_LOCAL_RANK", "SLURM_LOCALID"}) {
+    const char* env = std::getenv(name);
+    if (!env || !*env || count == 0) continue;
+    char* end = nullptr;
+    const long rank = std::strtol(env, &end, 10);
+    if (*end != '\0' || rank < 0) continue;
+    first = static_cast<int>(rank % count);
+    o.chosen_by = std::string(name) + "=" + env;
+    break;
+  }
+  for (int i = 0; i < count; ++i) o.order.push_back((first + i) % count);
+  return o;
 }
 
 const DeviceInfo& device() {

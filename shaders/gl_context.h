@@ -21,6 +21,10 @@ namespace isotile::gl {
 
 struct DeviceInfo {
   std::string platform;  // "egl-device", "egl-surfaceless" or "osmesa"
+  // egl-device: which of the hardware EGL devices (0-based, in EGL's order), of how many, and why
+  // that one (hardware_device_order()); -1, 0 and "" otherwise.
+  int device_index = -1, device_count = 0;
+  std::string device_chosen_by;
   std::string vendor, renderer, version, glsl_version;
   bool software = false;  // llvmpipe, softpipe, swrast, or an EGL device marked as software
   // Device memory in KiB from GL_NVX_gpu_memory_info or GL_ATI_meminfo; -1 when not told.
@@ -55,6 +59,21 @@ void start_context();
 // Whether start_context() has begun making the context (since the last shutdown()), whatever
 // came of it; takes no lock.
 bool context_started();
+
+// The order in which the `count` hardware EGL devices are tried, and why: ISOTILE_GL_DEVICE=N
+// names the one device to use (nothing else is tried, llvmpipe included); otherwise a process
+// started by an MPI or Slurm launcher starts from its rank among the processes of its node
+// (OMPI_COMM_WORLD_LOCAL_RANK, MPI_LOCALRANKID, MV2_COMM_WORLD_LOCAL_RANK, SLURM_LOCALID) modulo
+// `count`, so that the ranks of a node with several GPUs spread over them; else from device 0.
+// The others follow in turn, in case one cannot make a context. An empty order comes with `why`
+// (ISOTILE_GL_DEVICE is not a number, or names a device that does not exist). Reads only the
+// environment.
+struct DeviceOrder {
+  std::vector<int> order;
+  std::string chosen_by;  // "ISOTILE_GL_DEVICE", "OMPI_COMM_WORLD_LOCAL_RANK=3", "first"
+  std::string why;
+};
+DeviceOrder hardware_device_order(int count);
 
 // True when EGL lists a hardware device (a GPU) that the context would use; cheap (no context is
 // made), so that `--backend auto` on a machine without a GPU does not pay for starting llvmpipe.

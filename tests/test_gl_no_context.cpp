@@ -4,6 +4,8 @@
 
 #include <cstdlib>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
@@ -47,6 +49,51 @@ TEST_F(NoContext, AutoFallsBackToCpu) {
       EXPECT_FALSE(c.available);
       EXPECT_FALSE(c.why_unavailable.empty());
     }
+}
+
+// Which GPU a process takes (gl::hardware_device_order(), from the environment only): the one
+// ISOTILE_GL_DEVICE names, else from its launcher's node-local rank modulo the GPUs, else the
+// first; every other device after it in turn.
+TEST(HardwareDeviceOrder, NamedDeviceElseNodeLocalRankElseFirst) {
+  const char* names[] = {"ISOTILE_GL_DEVICE", "OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID",
+                         "MV2_COMM_WORLD_LOCAL_RANK", "SLURM_LOCALID"};
+  std::vector<std::pair<std::string, std::string>> saved;
+  for (const char* n : names)
+    if (const char* v = std::getenv(n)) saved.emplace_back(n, v);
+  for (const char* n : names) unsetenv(n);
+
+  gl::DeviceOrder o = gl::hardware_device_order(4);
+  EXPECT_EQ(o.order, (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_EQ(o.chosen_by, "first");
+  EXPECT_TRUE(o.why.empty());
+  EXPECT_TRUE(gl::hardware_device_order(0).order.empty());
+
+  setenv("SLURM_LOCALID", "1", 1);
+  EXPECT_EQ(gl::hardware_device_order(4).order, (std::vector<int>{1, 2, 3, 0}));
+  setenv("OMPI_COMM_WORLD_LOCAL_RANK", "6", 1);  // before Slurm's: mpirun inside an allocation
+  o = gl::hardware_device_order(4);
+  EXPECT_EQ(o.order, (std::vector<int>{2, 3, 0, 1}));
+  EXPECT_EQ(o.chosen_by, "OMPI_COMM_WORLD_LOCAL_RANK=6");
+  EXPECT_EQ(gl::hardware_device_order(1).order, (std::vector<int>{0}));
+  setenv("OMPI_COMM_WORLD_LOCAL_RANK", "x", 1);  // not a rank: the next variable
+  EXPECT_EQ(gl::hardware_device_order(4).chosen_by, "SLURM_LOCALID=1");
+
+  setenv("ISOTILE_GL_DEVICE", "3", 1);  // named: that one only, whatever the rank
+  o = gl::hardware_device_order(4);
+  EXPECT_EQ(o.order, (std::vector<int>{3}));
+  EXPECT_EQ(o.chosen_by, "ISOTILE_GL_DEVICE");
+  o = gl::hardware_device_order(2);
+  EXPECT_TRUE(o.order.empty());
+  EXPECT_EQ(o.why, "ISOTILE_GL_DEVICE=3, but EGL lists 2 hardware devices (0 to 1)");
+  for (const char* bad : {"-1", "1x", "one", " 1"}) {
+    setenv("ISOTILE_GL_DEVICE", bad, 1);
+    o = gl::hardware_device_order(4);
+    EXPECT_TRUE(o.order.empty()) << bad;
+    EXPECT_NE(o.why.find("is not a device number"), std::string::npos) << o.why;
+  }
+
+  for (const char* n : names) unsetenv(n);
+  for (const auto& [n, v] : saved) setenv(n.c_str(), v.c_str(), 1);
 }
 
 }  // namespace

@@ -35,6 +35,11 @@ int run_gl_info(bool as_json) {
   const isotile::gl::DeviceInfo& d = isotile::gl::device();  // InputError when there is none
   json j;
   j["platform"] = d.platform;
+  // Which GPU of how many, and why that one (ISOTILE_GL_DEVICE, the launcher's node-local rank).
+  j["egl_device"] = d.device_index < 0
+                        ? json(nullptr)
+                        : json(std::to_string(d.device_index) + " of " +
+                               std::to_string(d.device_count) + " (" + d.device_chosen_by + ")");
   j["vendor"] = d.vendor;
   j["renderer"] = d.renderer;
   j["version"] = d.version;
