@@ -378,7 +378,7 @@ TEST(GlHistoPyramid, ChunkedOutputPassesEqualCpu) {
 
 // The count pyramid and its vertex offsets (hp_pyramid.h) from random element codes, against
 // sums made here: every level and every offset, word for word, for 1, 2 and 3 levels per
-// dispatch, with element counts that end inside a workgroup's 512 nodes and pyramids of 1 to 7
+// dispatch, with element counts that end inside a workgroup's 256 nodes and pyramids of 1 to 7
 // levels (one level per pass is a software device's default, without the shaders' shared memory
 // and barriers). DC_CODES counts need no case table: vertices in bits 11-13, one face per bit
 // 8-10.

@@ -357,43 +357,29 @@ TEST_F(GlCli, GlInfoDescribesTheDevice) {
 }
 
 TEST_F(GlCli, NoContextIsOneErrorLine) {
-  for (const char* b : {"gs", "hp"}) {
-    const Result r =
-        run(std::string("extract field:sphere:16 --backend ") + b + " -o m.ply", "ISOTILE_GL=off");
-    EXPECT_EQ(r.code, 1);
+  // `args` under `env` exits 1 with one line on stderr starting with `error` and writes no file.
+  auto expect_one_error_line = [&](const std::string& args, const std::string& env,
+                                   const std::string& error) {
+    const Result r = run(args + " -o m.ply", env);
+    EXPECT_EQ(r.code, 1) << args << " " << env;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    EXPECT_EQ(r.err.rfind(std::string("isotile: error: backend '") + b + "': no OpenGL context", 0),
-              0u)
-        << r.err;
+    EXPECT_EQ(r.err.rfind("isotile: error: " + error, 0), 0u) << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
+  };
+  for (const std::string b : {"gs", "hp"}) {
+    expect_one_error_line("extract field:sphere:16 --backend " + b, "ISOTILE_GL=off",
+                          "backend '" + b + "': no OpenGL context");
+    // A context that fails while the volume is read (it is made on a thread of its own from the
+    // start, gl::start_context()): the same one line, in core and out of core.
+    for (const std::string memory : {"", " --memory 1MiB"})
+      expect_one_error_line(
+          "extract field:sphere:40 -q --backend " + b + memory, "ISOTILE_GL=nowhere",
+          "backend '" + b + "': no usable OpenGL 4.5 context (ISOTILE_GL='nowhere' names no way");
   }
-  // A context that fails while the volume is read (it is made on a thread of its own from the
-  // start, gl::start_context()): the same one line, in core and out of core, and no file.
-  for (const char* b : {"gs", "hp"})
-    for (const char* memory : {"", " --memory 1MiB"}) {
-      const Result r =
-          run(std::string("extract field:sphere:40 -q --backend ") + b + memory + " -o m.ply",
-              "ISOTILE_GL=nowhere");
-      EXPECT_EQ(r.code, 1) << b << memory;
-      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-      EXPECT_EQ(
-          r.err.rfind(std::string("isotile: error: backend '") + b +
-                          "': no usable OpenGL 4.5 context (ISOTILE_GL='nowhere' names no way",
-                      0),
-          0u)
-          << r.err;
-      EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
-    }
   // A GPU named by number that is not there: that GPU or nothing, never llvmpipe instead.
-  const Result d = run("extract field:sphere:16 -q --backend hp -o m.ply", "ISOTILE_GL_DEVICE=99");
-  EXPECT_EQ(d.code, 1);
-  EXPECT_EQ(std::count(d.err.begin(), d.err.end(), '\n'), 1) << d.err;
-  EXPECT_EQ(d.err.rfind("isotile: error: backend 'hp': no usable OpenGL 4.5 context (device: "
-                        "ISOTILE_GL_DEVICE=99, but EGL lists ",
-                        0),
-            0u)
-      << d.err;
-  EXPECT_FALSE(fs::exists(dir_ / "m.ply"));
+  expect_one_error_line("extract field:sphere:16 -q --backend hp", "ISOTILE_GL_DEVICE=99",
+                        "backend 'hp': no usable OpenGL 4.5 context (device: "
+                        "ISOTILE_GL_DEVICE=99, but EGL lists ");
   const Result a = run("extract field:sphere:16 -q -o m.ply --stats s.json", "ISOTILE_GL=off");
   ASSERT_EQ(a.code, 0) << a.err;
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "s.json"))["backend"], "cpu");

@@ -19,10 +19,9 @@
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
 # through pinned buffers and the pyramid's build at 1, 2 and 3 levels per dispatch (issue 36),
-# and the data path's targets (issue 35): upload GB/s on gyroid
-# 256/512 and bonsai, out of core on gyroid $size and a 4 GiB uint8 volume made from bonsai, the
-# one-shot whole process of `extract field:gyroid:512` on hp against cpu with a warm program
-# cache, the context's start-up.
+# and the data path's targets (issue 35): upload GB/s on gyroid 256/512 and bonsai, out of core
+# on gyroid $size and a 4 GiB uint8 volume made from bonsai, the one-shot whole process of
+# `extract field:gyroid:512` on hp against cpu with a warm program cache, the context's start-up.
 # --quick: the bricked runs on gyroid 192 in 16 MiB bricks and the measurements on gyroid 128
 # (a smoke run, also on llvmpipe). The GL program cache goes to a fresh XDG_CACHE_HOME under the
 # output folder, so the first GL run is cold and every later one warm.
