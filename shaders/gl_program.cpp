@@ -80,6 +80,10 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   const std::string_view body = embedded_glsl(s.file);
   if (body.empty()) throw Error("GLSL file " + std::string(s.file) + " is not embedded");
   src += body;
+  // The output passes' main() calls the pass's emit_output(), defined in its body.
+  if (s.file == "hp_vertices.comp" || s.file == "hp_triangles.comp" ||
+      s.file == "dc_hp_vertices.comp" || s.file == "dc_hp_quads.comp")
+    src += embedded_glsl("hp_output.glsl");
   return src;
 }
 

@@ -1,9 +1,11 @@
 #include "gl_variants.h"
 
 #include <map>
+#include <string_view>
 
 #include "core/extract/dual_contouring.h"
 #include "dc_gl_shared.h"
+#include "hp_pyramid.h"
 #include "macet_gl.h"
 #include "mesh_render.h"
 #include "sample_upload.h"
@@ -38,8 +40,19 @@ void add_pyramid(Variants& out, const std::string& what, const std::string& defi
         pyramid_pass_defines(defines, per_pass));
     add(out, what + " down-sweep" + levels, {{GL_COMPUTE_SHADER, "hp_downsweep.comp"}},
         pyramid_pass_defines(defines, per_pass));
+    add(out, what + " down-sweep, face offsets" + levels,
+        {{GL_COMPUTE_SHADER, "hp_downsweep.comp"}},
+        pyramid_pass_defines(defines, per_pass, false, true));
   }
   add(out, what + " prefix", {{GL_COMPUTE_SHADER, "hp_prefix.comp"}}, defines);
+}
+
+// An output pass of the HistoPyramid in both designs (hp_pyramid.h's HpOutput).
+void add_output_pass(Variants& out, const std::string& what, std::string_view file,
+                     const std::string& defines) {
+  for (const HpOutput o : {HpOutput::Descend, HpOutput::Scatter})
+    add(out, what + (o == HpOutput::Scatter ? ", per element" : ""), {{GL_COMPUTE_SHADER, file}},
+        output_pass_defines(defines, o));
 }
 
 // Marching Cubes and Macet: histopyramid_mesh() and geometry_shader_mesh() (gl_program.h) with
@@ -56,8 +69,8 @@ void add_edge_methods(Variants& out) {
                                  (normals ? ", normals:" : ":");
         add(out, what + " hp classify", {{GL_COMPUTE_SHADER, "hp_classify.comp"}}, defines);
         add_pyramid(out, what + " hp", defines);
-        add(out, what + " hp vertices", {{GL_COMPUTE_SHADER, "hp_vertices.comp"}}, defines);
-        add(out, what + " hp triangles", {{GL_COMPUTE_SHADER, "hp_triangles.comp"}}, defines);
+        add_output_pass(out, what + " hp vertices", "hp_vertices.comp", defines);
+        add_output_pass(out, what + " hp triangles", "hp_triangles.comp", defines);
         std::vector<std::string> varyings = {"tf_key", "tf_cell", "tf_pos"};
         if (normals) varyings.push_back("tf_nrm");
         add(out, what + " gs",
@@ -90,10 +103,10 @@ void add_dual_contouring(Variants& out) {
               add_pyramid(out, what + " hp", samples + dc_defines(o, DcPass::Pyramid));
               add(out, what + " classify", {{GL_COMPUTE_SHADER, "dc_hp_classify.comp"}},
                   samples + dc_defines(o, DcPass::Classify));
-              add(out, what + " vertices", {{GL_COMPUTE_SHADER, "dc_hp_vertices.comp"}},
-                  samples + dc_defines(o, DcPass::Vertices));
+              add_output_pass(out, what + " vertices", "dc_hp_vertices.comp",
+                              samples + dc_defines(o, DcPass::Vertices));
               const std::string faces = samples + dc_defines(o, DcPass::Faces);
-              add(out, what + " hp quads", {{GL_COMPUTE_SHADER, "dc_hp_quads.comp"}}, faces);
+              add_output_pass(out, what + " hp quads", "dc_hp_quads.comp", faces);
               add(out, what + " gs faces",
                   {{GL_VERTEX_SHADER, "dc_gs.vert"}, {GL_GEOMETRY_SHADER, "dc_gs.geom"}}, faces,
                   {"tf_vertex", "tf_elem"});

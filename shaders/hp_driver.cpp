@@ -40,13 +40,15 @@ struct Chunk {
   StageClock::Mark start{}, done{};  // around the dispatch, on the device
 };
 
-Chunk dispatch_chunk(GLuint prog, std::uint64_t first, std::uint64_t k, StageClock* clock,
-                     int& chunks) {
+// `elements`: the invocations of a per-element pass (HpOutput::Scatter; each writes its outputs
+// that fall in the chunk), else 0: one invocation per output of the chunk.
+Chunk dispatch_chunk(GLuint prog, std::uint64_t first, std::uint64_t k, std::uint64_t elements,
+                     StageClock* clock, int& chunks) {
   ++chunks;
   set_uniform_u(prog, "u_first", static_cast<std::uint32_t>(first));
   set_uniform_u(prog, "u_count", static_cast<std::uint32_t>(k));
   Chunk c{first, k, device_mark(clock), {}};
-  dispatch(k);
+  dispatch(elements > 0 ? elements : k);
   c.done = device_mark(clock);
   return c;
 }
@@ -68,12 +70,13 @@ void read_chunk(const Chunk& c, std::uint64_t bytes_per_item, const Buffer& out,
 
 // Runs the current program `prog` over `n` items in chunks of at most `cap`, each read back
 // before the next is dispatched (read_chunk()).
-void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint64_t bytes_per_item,
-                     const Buffer& out, void* dst, StageClock* clock, int& chunks, GlStage stage,
-                     const Buffer* out2 = nullptr, void* dst2 = nullptr) {
+void dispatch_chunks(GLuint prog, std::uint64_t n, std::uint64_t cap, std::uint64_t elements,
+                     std::uint64_t bytes_per_item, const Buffer& out, void* dst, StageClock* clock,
+                     int& chunks, GlStage stage, const Buffer* out2 = nullptr,
+                     void* dst2 = nullptr) {
   for (std::uint64_t first = 0; first < n; first += cap)
-    read_chunk(dispatch_chunk(prog, first, std::min(cap, n - first), clock, chunks), bytes_per_item,
-               out, dst, clock, stage, out2, dst2);
+    read_chunk(dispatch_chunk(prog, first, std::min(cap, n - first), elements, clock, chunks),
+               bytes_per_item, out, dst, clock, stage, out2, dst2);
 }
 
 }  // namespace
@@ -86,10 +89,15 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
   // The samples are on the device as stored (sample_upload.h).
   const double sample_bytes = static_cast<double>(scalar_size(view.type));
   const std::uint64_t budget = memory_budget(run.memory);
+  const HpOutput output = default_hp_output();
+  const bool scatter = output == HpOutput::Scatter;
+  // The per-element output passes keep the faces' offsets too: 4 bytes per pyramid node, at most
+  // one node per 7 elements (the levels above the first add a seventh of it).
+  const double face_offset_bytes = scatter ? 4.0 / 7.0 + 0.01 : 0.0;
   // The next slab's samples are uploaded while this slab's pyramid is built (below).
-  const std::vector<Box3> planned =
-      plan_overlapped_slabs(view, run.cells, sample_bytes, method.bytes_per_sample,
-                            method.largest_per_sample, method.halo, budget, run.max_brick_cells_z);
+  const std::vector<Box3> planned = plan_overlapped_slabs(
+      view, run.cells, sample_bytes, method.bytes_per_sample + face_offset_bytes,
+      method.largest_per_sample, method.halo, budget, run.max_brick_cells_z);
   std::deque<Box3> slabs(planned.begin(), planned.end());
   const std::uint64_t max_binding = static_cast<std::uint64_t>(dev.max_ssbo_bytes);
   const std::uint64_t words = face_words(method.faces);
@@ -154,9 +162,10 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // (2) the count pyramid, several levels per pass (hp_pyramid.h), then each node's vertex
     // offset, top-down
     pyramid_passes += reduce_levels(pyr, pyramid);
-    const Buffer offsets(pyr.nodes * 4);
+    // The per-element output passes start each element's faces from the faces' offsets too.
+    const Buffer offsets(pyr.nodes * 4 * (scatter ? 2 : 1));
     offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
-    pyramid_passes += sweep_offsets(pyr, pyramid, offsets);
+    pyramid_passes += sweep_offsets(pyr, pyramid, offsets, 0, scatter);
     check("building the HistoPyramid");
 
     // (3) totals
@@ -216,7 +225,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     GLuint vertex_prog = 0;
     if (n_vertices > 0) {
       vertex_prog = program({{GL_COMPUTE_SHADER, method.vertex_file}},
-                            samples.defines + method.vertex_defines);
+                            output_pass_defines(samples.defines + method.vertex_defines, output));
       uniforms(vertex_prog);
       pyr.set_uniforms(vertex_prog);
     }
@@ -225,7 +234,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     GLuint face_prog = 0;
     std::uint64_t fcap = 1;
     if (face_pass) {
-      face_prog = program({{GL_COMPUTE_SHADER, method.face_file}}, faces);
+      face_prog =
+          program({{GL_COMPUTE_SHADER, method.face_file}}, output_pass_defines(faces, output));
       uniforms(face_prog);
       pyr.set_uniforms(face_prog);
       fcap = std::max<std::uint64_t>(1, std::min(out_bytes / (words * 4), n_faces));
@@ -246,14 +256,15 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // pages' first-touch faults (gyroid 256^3's 23 MB of positions and triangles: 11 ms in a
     // fresh process on a 2-core VM); the reads follow.
     const bool ahead = n_vertices <= vcap && n_faces <= fcap && !method.gs_faces;
+    const std::uint64_t per_element = scatter ? elements : 0;
     Chunk vertex_chunk, face_chunk;
     if (ahead && n_vertices > 0) {
       use_vertex_pass();
-      vertex_chunk = dispatch_chunk(vertex_prog, 0, n_vertices, clock, chunks);
+      vertex_chunk = dispatch_chunk(vertex_prog, 0, n_vertices, per_element, clock, chunks);
     }
     if (ahead && face_pass) {
       use_face_pass();
-      face_chunk = dispatch_chunk(face_prog, 0, n_faces, clock, chunks);
+      face_chunk = dispatch_chunk(face_prog, 0, n_faces, per_element, clock, chunks);
     }
     const bool quads = method.faces == HpFaces::Quads;
     const std::size_t v0 = mesh.positions.size();
@@ -281,8 +292,9 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     } else {
       if (n_vertices > 0) {
         use_vertex_pass();
-        dispatch_chunks(vertex_prog, n_vertices, vcap, 12, pos, mesh.positions.data() + v0, clock,
-                        chunks, GlStage::Vertices, method.normals ? &nrm : nullptr,
+        dispatch_chunks(vertex_prog, n_vertices, vcap, per_element, 12, pos,
+                        mesh.positions.data() + v0, clock, chunks, GlStage::Vertices,
+                        method.normals ? &nrm : nullptr,
                         method.normals ? mesh.normals.data() + v0 : nullptr);
       }
       if (n_faces > 0 && method.gs_faces) {
@@ -292,8 +304,8 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
         if (clock) clock->add(GlStage::Faces, faces_start, StageClock::cpu_mark());
       } else if (face_pass) {
         use_face_pass();
-        dispatch_chunks(face_prog, n_faces, fcap, words * 4, face_buffer, out, clock, chunks,
-                        GlStage::Faces);
+        dispatch_chunks(face_prog, n_faces, fcap, per_element, words * 4, face_buffer, out, clock,
+                        chunks, GlStage::Faces);
       }
     }
     if (quads)

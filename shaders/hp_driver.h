@@ -4,8 +4,9 @@
 //
 // Per slab of cells along z: the samples are uploaded, the method's own passes run, one 16-bit
 // code per element is classified, the count pyramid and its vertex offsets are built, the totals
-// are read back, then one invocation per output vertex and one per face descend to their element,
-// read back in chunks that fit one storage-buffer binding. Slab i + 1's elements start with slab
+// are read back, then the vertex and face passes write the outputs (one invocation per output
+// descending to its element, or one per element: hp_pyramid.h's HpOutput), read back in chunks
+// that fit one storage-buffer binding. Slab i + 1's elements start with slab
 // i's top layer, whose vertices slab i drops, so a vertex's index is the running base plus its
 // slab-local index in either slab. The method plugs in its element box, its shaders and defines,
 // its uniforms and buffers, and the kind of face it emits.

@@ -1,6 +1,7 @@
 #include "hp_pyramid.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <string>
 
@@ -41,10 +42,36 @@ int default_levels_per_pass() {
   return device().software ? 1 : kMaxLevelsPerPass;
 }
 
-std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base) {
+std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base,
+                                 bool face_offsets) {
   std::string d = defines;  // appended, not concatenated: GCC 12's -Wrestrict
   if (base) d += "#define BASE\n";
   if (checked(per_pass) == 1) d += "#define ONE_LEVEL_PER_PASS\n";
+  if (face_offsets) d += "#define FACE_OFFSETS\n";
+  return d;
+}
+
+namespace {
+std::atomic<int> g_output{-1};  // set_hp_output()'s choice, -1: none
+}  // namespace
+
+void set_hp_output(std::optional<HpOutput> output) {
+  g_output = output ? static_cast<int>(*output) : -1;
+}
+
+HpOutput default_hp_output() {
+  if (const int chosen = g_output.load(); chosen >= 0) return static_cast<HpOutput>(chosen);
+  const char* env = std::getenv("ISOTILE_HP_OUTPUT");
+  if (!env || !*env) return HpOutput::Descend;
+  const std::string v = env;
+  if (v == "descend") return HpOutput::Descend;
+  if (v == "scatter") return HpOutput::Scatter;
+  throw InputError("ISOTILE_HP_OUTPUT is '" + v + "': it must be descend or scatter");
+}
+
+std::string output_pass_defines(const std::string& defines, HpOutput output) {
+  std::string d = defines;
+  if (output == HpOutput::Scatter) d += "#define SCATTER_OUTPUT\n#define FACE_OFFSETS\n";
   return d;
 }
 
@@ -70,15 +97,17 @@ int reduce_levels(const Pyramid& pyr, const std::string& defines, int per_pass) 
 }
 
 int sweep_offsets(const Pyramid& pyr, const std::string& defines, const Buffer& offsets,
-                  int per_pass) {
+                  int per_pass, bool face_offsets) {
   per_pass = checked(per_pass);
-  const GLuint prog =
-      program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}}, pyramid_pass_defines(defines, per_pass));
-  // The top node has no vertices before it; a clear is ordered before the dispatches that read
-  // it like any other command.
+  const GLuint prog = program({{GL_COMPUTE_SHADER, "hp_downsweep.comp"}},
+                              pyramid_pass_defines(defines, per_pass, false, face_offsets));
+  // The top node has no vertices (or faces) before it; a clear is ordered before the dispatches
+  // that read it like any other command.
   const std::uint32_t zero = 0;
-  glClearNamedBufferSubData(offsets.id(), GL_R32UI, std::size_t{pyr.offset[pyr.levels]} * 4, 4,
-                            GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+  for (int kind = 0; kind < (face_offsets ? 2 : 1); ++kind)
+    glClearNamedBufferSubData(offsets.id(), GL_R32UI,
+                              (kind * pyr.nodes + pyr.offset[pyr.levels]) * 4, 4, GL_RED_INTEGER,
+                              GL_UNSIGNED_INT, &zero);
   pyr.set_uniforms(prog);
   glUseProgram(prog);
   int passes = 0;

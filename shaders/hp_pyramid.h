@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "gl_program.h"
@@ -60,15 +61,34 @@ int default_levels_per_pass();
 // the number of dispatches.
 int reduce_levels(const Pyramid& pyr, const std::string& defines, int per_pass = 0);
 
-// The vertex offset of every node of levels 1..L (bound at 5; the pyramid at 2), top-down, the
-// top node's being zero, `per_pass` levels per dispatch as above, with hp_downsweep.comp built
-// from `defines`. Returns the number of dispatches.
+// The vertex offset of every node of levels 1..L (in `offsets`, bound at 5; the pyramid at 2),
+// top-down, the top node's being zero, `per_pass` levels per dispatch as above, with
+// hp_downsweep.comp built from `defines`; with `face_offsets`, the faces' offsets too, after the
+// vertices' (`offsets` then holds 2 * pyr.nodes words). Returns the number of dispatches.
 int sweep_offsets(const Pyramid& pyr, const std::string& defines, const Buffer& offsets,
-                  int per_pass = 0);
+                  int per_pass = 0, bool face_offsets = false);
 
 // The defines of hp_reduce.comp (with BASE: the level above the elements) and
-// hp_downsweep.comp for `per_pass` levels per dispatch.
-std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base = false);
+// hp_downsweep.comp (with `face_offsets`: the faces' too) for `per_pass` levels per dispatch.
+std::string pyramid_pass_defines(const std::string& defines, int per_pass, bool base = false,
+                                 bool face_offsets = false);
+
+// How the output passes find their outputs' elements (hp_output.glsl). Both write the same
+// outputs in the same order.
+enum class HpOutput {
+  Descend,  // one invocation per output, descending the pyramid from the top to its element
+  Scatter,  // one invocation per element, writing its outputs from the offsets' down-sweep
+};
+// Descend, unless ISOTILE_HP_OUTPUT says `scatter` (anything but `descend` or `scatter` is an
+// InputError naming the variable) or set_hp_output() chose. Which is faster is a GPU's to say
+// (bench_backends' "hpe" column, bench_hp_layouts' compact one; docs/gl.md): until one has, the
+// descent stays the default.
+HpOutput default_hp_output();
+// Chooses the output design for the process's later extractions over the environment's
+// (std::nullopt: the environment's again); for benchmarks that time both in one run.
+void set_hp_output(std::optional<HpOutput> output);
+// The output passes' defines for `output` (Scatter: SCATTER_OUTPUT and FACE_OFFSETS).
+std::string output_pass_defines(const std::string& defines, HpOutput output);
 
 // What hp_prefix.comp (`prog`, its other uniforms already set) counts before `element`: the
 // vertices of the elements before it, with the pyramid bound as for the output passes. Both

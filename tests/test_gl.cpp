@@ -397,8 +397,9 @@ TEST(GlHistoPyramid, PyramidLevelsAndOffsetsEqualSumsOnTheCpu) {
       codes[e] = (state >> 28) < 3 ? static_cast<std::uint16_t>(state & 0x3f00u) : 0;
     }
     const gl::Pyramid pyr(elements);
-    // Expected: (vertices, faces) per node, level by level; offsets top-down.
-    std::vector<std::uint32_t> want(pyr.nodes * 3, 0);
+    // Expected: (vertices, faces) per node, level by level; the vertices' offsets top-down, then
+    // the faces' (the per-element output passes' down-sweep, FACE_OFFSETS).
+    std::vector<std::uint32_t> want(pyr.nodes * 4, 0);
     auto node = [&](int l, std::uint64_t p) { return &want[2 * (pyr.offset[l] + p)]; };
     for (int l = 1; l <= pyr.levels; ++l)
       for (std::uint64_t q = 0; q < pyr.count[l - 1]; ++q) {
@@ -411,29 +412,36 @@ TEST(GlHistoPyramid, PyramidLevelsAndOffsetsEqualSumsOnTheCpu) {
           dst[1] += node(l - 1, q)[1];
         }
       }
-    std::uint32_t* offset = want.data() + pyr.nodes * 2;
-    for (int l = pyr.levels - 1; l >= 1; --l)
-      for (std::uint64_t p = 0; p < pyr.count[l]; ++p) {
-        std::uint32_t sum = offset[pyr.offset[l + 1] + p / 8];
-        for (std::uint64_t q = p & ~std::uint64_t{7}; q < p; ++q) sum += node(l, q)[0];
-        offset[pyr.offset[l] + p] = sum;
-      }
-    ASSERT_GT(node(pyr.levels, 0)[0], 0u) << elements;  // some vertices at all
-    for (int per_pass = 1; per_pass <= gl::kMaxLevelsPerPass; ++per_pass) {
-      const gl::Buffer code_buffer(codes.size() * 2, codes.data());
-      const gl::Buffer levels(pyr.nodes * 8), offsets(pyr.nodes * 4);
-      code_buffer.bind(GL_SHADER_STORAGE_BUFFER, 1);
-      levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
-      offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
-      const int reduce_passes = gl::reduce_levels(pyr, defines, per_pass);
-      const int sweep_passes = gl::sweep_offsets(pyr, defines, offsets, per_pass);
-      EXPECT_EQ(reduce_passes, (pyr.levels + per_pass - 1) / per_pass);
-      EXPECT_EQ(sweep_passes, (pyr.levels - 1 + per_pass - 1) / per_pass);
-      std::vector<std::uint32_t> got(pyr.nodes * 3, 0xdeadbeefu);
-      levels.read(0, pyr.nodes * 8, got.data());
-      offsets.read(0, pyr.nodes * 4, got.data() + pyr.nodes * 2);
-      EXPECT_EQ(got, want) << elements << " elements, " << per_pass << " levels per pass";
+    for (int kind = 0; kind < 2; ++kind) {
+      std::uint32_t* offset = want.data() + pyr.nodes * (2 + kind);
+      for (int l = pyr.levels - 1; l >= 1; --l)
+        for (std::uint64_t p = 0; p < pyr.count[l]; ++p) {
+          std::uint32_t sum = offset[pyr.offset[l + 1] + p / 8];
+          for (std::uint64_t q = p & ~std::uint64_t{7}; q < p; ++q) sum += node(l, q)[kind];
+          offset[pyr.offset[l] + p] = sum;
+        }
     }
+    ASSERT_GT(node(pyr.levels, 0)[0], 0u) << elements;  // some vertices at all
+    for (int per_pass = 1; per_pass <= gl::kMaxLevelsPerPass; ++per_pass)
+      for (const bool faces : {false, true}) {
+        const gl::Buffer code_buffer(codes.size() * 2, codes.data());
+        const gl::Buffer levels(pyr.nodes * 8), offsets(pyr.nodes * 4 * (faces ? 2 : 1));
+        code_buffer.bind(GL_SHADER_STORAGE_BUFFER, 1);
+        levels.bind(GL_SHADER_STORAGE_BUFFER, 2);
+        offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+        const int reduce_passes = gl::reduce_levels(pyr, defines, per_pass);
+        const int sweep_passes = gl::sweep_offsets(pyr, defines, offsets, per_pass, faces);
+        EXPECT_EQ(reduce_passes, (pyr.levels + per_pass - 1) / per_pass);
+        EXPECT_EQ(sweep_passes, (pyr.levels - 1 + per_pass - 1) / per_pass);
+        // Without `faces` the faces' offsets are not written: compared as not.
+        std::vector<std::uint32_t> got(pyr.nodes * 4, 0xdeadbeefu);
+        levels.read(0, pyr.nodes * 8, got.data());
+        offsets.read(0, pyr.nodes * 4 * (faces ? 2 : 1), got.data() + pyr.nodes * 2);
+        std::vector<std::uint32_t> expected = want;
+        if (!faces) std::fill(expected.begin() + pyr.nodes * 3, expected.end(), 0xdeadbeefu);
+        EXPECT_EQ(got, expected) << elements << " elements, " << per_pass
+                                 << " levels per pass, face offsets " << faces;
+      }
   }
   EXPECT_THROW(gl::reduce_levels(gl::Pyramid(8), defines, 4), Error);
 }

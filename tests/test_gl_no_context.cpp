@@ -12,6 +12,7 @@
 #include "core/volume/procedural_fields.h"
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
+#include "shaders/hp_pyramid.h"
 
 namespace isotile {
 namespace {
@@ -94,6 +95,46 @@ TEST(HardwareDeviceOrder, NamedDeviceElseNodeLocalRankElseFirst) {
 
   for (const char* n : names) unsetenv(n);
   for (const auto& [n, v] : saved) setenv(n.c_str(), v.c_str(), 1);
+}
+
+// The environment's choices of pyramid passes and output design: the words they take, and one
+// error naming the variable for anything else. The variables' values on entry are restored (the
+// ctests that rerun these suites set them).
+TEST(HpPassChoices, FromTheEnvironment) {
+  auto with_env = [](const char* name, const char* value, const auto& check) {
+    const char* was = std::getenv(name);
+    const std::string saved = was ? was : "";
+    if (value)
+      setenv(name, value, 1);
+    else
+      unsetenv(name);
+    check();
+    if (was)
+      setenv(name, saved.c_str(), 1);
+    else
+      unsetenv(name);
+  };
+  with_env("ISOTILE_HP_OUTPUT", nullptr,
+           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend); });
+  with_env("ISOTILE_HP_OUTPUT", "descend",
+           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend); });
+  with_env("ISOTILE_HP_OUTPUT", "scatter",
+           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Scatter); });
+  for (const char* bad : {"Scatter", "scatter ", "1"})
+    with_env("ISOTILE_HP_OUTPUT", bad, [&] {
+      try {
+        gl::default_hp_output();
+        ADD_FAILURE() << "ISOTILE_HP_OUTPUT=" << bad << " taken";
+      } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("ISOTILE_HP_OUTPUT"), std::string::npos) << e.what();
+      }
+    });
+  for (const char* good : {"1", "2", "3"})
+    with_env("ISOTILE_HP_LEVELS_PER_PASS", good,
+             [&] { EXPECT_EQ(gl::default_levels_per_pass(), good[0] - '0'); });
+  for (const char* bad : {"0", "4", "33", "x"})
+    with_env("ISOTILE_HP_LEVELS_PER_PASS", bad,
+             [&] { EXPECT_THROW(gl::default_levels_per_pass(), InputError) << bad; });
 }
 
 }  // namespace

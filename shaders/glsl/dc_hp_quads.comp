@@ -1,16 +1,12 @@
-// Dual Contouring on the HistoPyramid path, pass 4: one invocation per quad, by its edge's lower
-// sample and then axis (the CPU's order), from the face pyramid; without KEEP_QUADS two
-// triangles by the CPU's diagonal rule (dc_faces.glsl).
+// Dual Contouring on the HistoPyramid path, pass 4: the quads, by their edge's lower sample and
+// then axis (the CPU's order), from the face pyramid; without KEEP_QUADS two triangles by the
+// CPU's diagonal rule (dc_faces.glsl). main() is hp_output.glsl's.
 layout(std430, binding = 3) writeonly buffer Faces { uint out_face[]; };
 
-uniform uint u_first;  // first quad of this chunk
-uniform uint u_count;  // quads in this chunk
+#define OUTPUT_KIND 1
 
-void main() {
-  uint i = invocation();
-  if (i >= u_count) return;
-  uint k = u_first + i;
-  uint e = find_element(k, 1);  // k: the rank of the quad among the element's
+// Element e's quad of rank k among its own, at slot i.
+void emit_output(uint e, uint k, uint i) {
   uint code = code_of(e);
   uint q[4];
   dc_quad_corners(e, code, dc_axis_of_rank((code >> 8) & 7u, k), k, q);

@@ -1,19 +1,16 @@
-// Dual Contouring on the HistoPyramid path, pass 3: one invocation per dual vertex, in key order
-// (cell by cell, then patch), placed as core/extract/dual_contouring.cpp places it. Positions
-// stay on the device for the quad pass's diagonal rule.
+// Dual Contouring on the HistoPyramid path, pass 3: the dual vertices, in key order (cell by
+// cell, then patch), placed as core/extract/dual_contouring.cpp places it. Positions stay on the
+// device for the quad pass's diagonal rule. main() is hp_output.glsl's.
 layout(std430, binding = 6) readonly buffer PatchMaps { uint patch_maps[]; };
 layout(std430, binding = 3) writeonly buffer Positions { float out_pos[]; };
 #ifdef NORMALS
 layout(std430, binding = 4) writeonly buffer Normals { float out_nrm[]; };
 #endif
 
-uniform uint u_count;  // vertices of the slab
+#define OUTPUT_KIND 0
 
-void main() {
-  uint i = invocation();
-  if (i >= u_count) return;
-  uint k = i;
-  uint e = find_element(k, 0);  // k: the patch
+// Element e's vertex of patch k, at slot i.
+void emit_output(uint e, uint k, uint i) {
   uint cs = code_of(e) & 0xffu;
   ivec3 c = dc_element_cell(e);
   uint edges = case_edge_mask(cs);

@@ -1,7 +1,8 @@
 // HistoPyramid traversal, shared by the output passes (after mc_common.glsl).
 layout(std430, binding = 1) readonly buffer Codes { uint codes[]; };
 layout(std430, binding = 2) readonly buffer Pyramid { uvec2 pyramid[]; };
-// Vertices before each node's first element, per node of levels 1..L (hp_downsweep.comp).
+// Vertices before each node's first element, per node of levels 1..L (hp_downsweep.comp); with
+// FACE_OFFSETS (the per-element output passes), the faces' follow, node for node.
 layout(std430, binding = 5) buffer Offsets { uint vertex_offset[]; };
 
 uniform int u_levels;             // L: level L is one node holding the totals
@@ -49,3 +50,16 @@ uint vertex_prefix(uint e) {
   for (uint q = e & ~7u; q < e; ++q) sum += vertex_count_of(code_of(q));
   return sum;
 }
+
+#ifdef FACE_OFFSETS
+// Where node q's faces' offset is: after the vertices' offsets of all nodes (levels 1..L, the
+// top level being one node).
+uint face_offset_at(uint q) { return u_level_offset[u_levels] + 1u + q; }
+
+// Number of faces of the elements before e, as vertex_prefix() counts vertices.
+uint face_prefix(uint e) {
+  uint sum = vertex_offset[face_offset_at(u_level_offset[1] + (e >> 3))];
+  for (uint q = e & ~7u; q < e; ++q) sum += leaf_count(code_of(q), 1);
+  return sum;
+}
+#endif

@@ -1,15 +1,11 @@
-// HistoPyramid pass 4: one invocation per output triangle, cell by cell in element order and in
-// table order within a cell; its corners are vertex indices found from the vertex pyramid.
+// HistoPyramid pass 4: the triangles, cell by cell in element order and in table order within a
+// cell; their corners are vertex indices found from the vertex pyramid. main() is hp_output.glsl's.
 layout(std430, binding = 3) writeonly buffer Triangles { uint out_tri[]; };
 
-uniform uint u_first;  // first triangle of this chunk
-uniform uint u_count;  // triangles in this chunk
+#define OUTPUT_KIND 1
 
-void main() {
-  uint i = invocation();
-  if (i >= u_count) return;
-  uint k = u_first + i;
-  uint e = find_element(k, 1);
+// The k-th triangle of element e, at slot i.
+void emit_output(uint e, uint k, uint i) {
   uint cs = code_of(e) & 0xffu;
   ivec3 s = element_sample(e);
   for (uint v = 0u; v < 3u; ++v) {

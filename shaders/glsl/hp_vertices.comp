@@ -1,18 +1,14 @@
-// HistoPyramid pass 3: one invocation per output vertex, in key order (MACET: Macet's vertex on
-// the edge, macet_common.glsl).
+// HistoPyramid pass 3: the vertices, in key order (MACET: Macet's vertex on the edge,
+// macet_common.glsl); main() is hp_output.glsl's.
 layout(std430, binding = 3) writeonly buffer Positions { float out_pos[]; };
 #ifdef NORMALS
 layout(std430, binding = 4) writeonly buffer Normals { float out_nrm[]; };
 #endif
 
-uniform uint u_first;  // first vertex of this chunk
-uniform uint u_count;  // vertices in this chunk
+#define OUTPUT_KIND 0
 
-void main() {
-  uint i = invocation();
-  if (i >= u_count) return;
-  uint k = u_first + i;
-  uint e = find_element(k, 0);
+// The k-th vertex of element e, at slot i.
+void emit_output(uint e, uint k, uint i) {
   uint bits = code_of(e) >> 8;
   int axis = 0;
   for (; axis < 2; ++axis) {  // the k-th crossed edge of the element

@@ -16,7 +16,9 @@
 // at context creation). The real volumes (engine, bonsai) are read from --data DIR, else from
 // $ISOTILE_GPU_DATA (a GPU machine does not see ../shared), else from ../shared/data; each is
 // skipped, with a message, when absent. --gyroid512 adds gyroid 512^3 float32 (512 MiB of samples;
-// minutes on llvmpipe). For Marching Cubes and Macet a second table gives, per volume, the GL
+// minutes on llvmpipe). "hpe" is the HistoPyramid with its per-element output passes
+// (shaders/hp_pyramid.h's HpOutput::Scatter, ISOTILE_HP_OUTPUT=scatter) instead of the descents,
+// timed in the same run. For Marching Cubes and Macet a second table gives, per volume, the GL
 // stages of one more run of each path from GL timer queries (shaders/stage_clock.h), the upload's
 // GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
 // triangles/s of the median whole-call times. Before the volumes, a table of the read-back's
@@ -44,6 +46,7 @@
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
 #include "shaders/gl_program.h"
+#include "shaders/hp_pyramid.h"
 #include "shaders/macet_gl.h"
 #include "shaders/read_back.h"
 
@@ -73,11 +76,21 @@ bool same(const Mesh& a, const Mesh& b) {
          a.quads == b.quads;
 }
 
+// `run` with the HistoPyramid's per-element output passes instead of its descents.
+template <class Run>
+auto per_element(const Run& run) {
+  gl::set_hp_output(gl::HpOutput::Scatter);
+  auto result = run();
+  gl::set_hp_output(std::nullopt);
+  return result;
+}
+
 // Dual Contouring's rows: the CPU and both GL paths per volume and solver.
 void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
   std::printf("\nDual Contouring (patch vertices, central Hermite data)\n");
-  std::printf("%-12s %-9s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "solver", "triangles",
-              "cpu ms", "gs ms", "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+  std::printf("%-12s %-9s %10s %10s %10s %10s %10s %8s %8s %8s  %s\n", "volume", "solver",
+              "triangles", "cpu ms", "gs ms", "hp ms", "hpe ms", "gs/cpu", "hp/cpu", "hpe/cpu",
+              "same mesh");
   for (const Case& c : cases)
     for (DcSolver solver : {DcSolver::MassPoint, DcSolver::Particle}) {
       const VolumeView v = c.volume->view();
@@ -86,7 +99,7 @@ void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
       o.solver = solver;
       gl::DcGlOptions g;
       g.dc = o;
-      Mesh cpu, gs, hp;
+      Mesh cpu, gs, hp, hpe;
       const double t_cpu = median_seconds(
           repeat, [&] { return dual_contouring(v, o); }, cpu);
       gl::dc_geometry_shader(v, g);  // compile the shaders outside the timing
@@ -95,10 +108,14 @@ void bench_dual_contouring(const std::vector<Case>& cases, int repeat) {
       gl::dc_histopyramid(v, g);
       const double t_hp = median_seconds(
           repeat, [&] { return gl::dc_histopyramid(v, g); }, hp);
-      std::printf("%-12s %-9s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
-                  solver == DcSolver::MassPoint ? "mass" : "particle", cpu.triangles.size(),
-                  1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu, t_hp / t_cpu,
-                  same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
+      auto hp_per_element = [&] { return per_element([&] { return gl::dc_histopyramid(v, g); }); };
+      hp_per_element();
+      const double t_hpe = median_seconds(repeat, hp_per_element, hpe);
+      std::printf("%-12s %-9s %10zu %10.1f %10.1f %10.1f %10.1f %8.1f %8.1f %8.1f  %s\n",
+                  c.name.c_str(), solver == DcSolver::MassPoint ? "mass" : "particle",
+                  cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, 1e3 * t_hpe,
+                  t_gs / t_cpu, t_hp / t_cpu, t_hpe / t_cpu,
+                  same(cpu, gs) && same(cpu, hp) && same(cpu, hpe) ? "yes" : "NO");
     }
 }
 
@@ -245,18 +262,18 @@ int main(int argc, char** argv) {
 
   struct Stages {
     std::string name;
-    gl::McStats gs, hp;
+    gl::McStats gs, hp, hpe;
     std::size_t triangles;
-    double cpu, gs_s, hp_s;  // median whole-call seconds
+    double cpu, gs_s, hp_s, hpe_s;  // median whole-call seconds
   };
   std::vector<Stages> stages;
   for (const Runner& r : runners) {
     std::printf("\nmethod %s\n", r.method);
-    std::printf("%-12s %10s %10s %10s %10s %8s %8s  %s\n", "volume", "triangles", "cpu ms", "gs ms",
-                "hp ms", "gs/cpu", "hp/cpu", "same mesh");
+    std::printf("%-12s %10s %10s %10s %10s %10s %8s %8s %8s  %s\n", "volume", "triangles", "cpu ms",
+                "gs ms", "hp ms", "hpe ms", "gs/cpu", "hp/cpu", "hpe/cpu", "same mesh");
     for (const Case& c : cases) {
       const VolumeView v = c.volume->view();
-      Mesh cpu, gs, hp;
+      Mesh cpu, gs, hp, hpe;
       const double t_cpu = median_seconds(
           repeat, [&] { return r.cpu(v, c.iso); }, cpu);
       r.gs(v, c.iso, nullptr);  // compile the shaders outside the timing
@@ -265,14 +282,19 @@ int main(int argc, char** argv) {
       r.hp(v, c.iso, nullptr);
       const double t_hp = median_seconds(
           repeat, [&] { return r.hp(v, c.iso, nullptr); }, hp);
-      std::printf("%-12s %10zu %10.1f %10.1f %10.1f %8.1f %8.1f  %s\n", c.name.c_str(),
-                  cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, t_gs / t_cpu,
-                  t_hp / t_cpu, same(cpu, gs) && same(cpu, hp) ? "yes" : "NO");
-      gl::McStats sg, sh;
+      auto hp_per_element = [&] { return per_element([&] { return r.hp(v, c.iso, nullptr); }); };
+      hp_per_element();
+      const double t_hpe = median_seconds(repeat, hp_per_element, hpe);
+      std::printf("%-12s %10zu %10.1f %10.1f %10.1f %10.1f %8.1f %8.1f %8.1f  %s\n", c.name.c_str(),
+                  cpu.triangles.size(), 1e3 * t_cpu, 1e3 * t_gs, 1e3 * t_hp, 1e3 * t_hpe,
+                  t_gs / t_cpu, t_hp / t_cpu, t_hpe / t_cpu,
+                  same(cpu, gs) && same(cpu, hp) && same(cpu, hpe) ? "yes" : "NO");
+      gl::McStats sg, sh, she;
       r.gs(v, c.iso, &sg);
       r.hp(v, c.iso, &sh);
-      stages.push_back(
-          {std::string(r.method) + " " + c.name, sg, sh, cpu.triangles.size(), t_cpu, t_gs, t_hp});
+      per_element([&] { return r.hp(v, c.iso, &she); });
+      stages.push_back({std::string(r.method) + " " + c.name, sg, sh, she, cpu.triangles.size(),
+                        t_cpu, t_gs, t_hp, t_hpe});
     }
   }
   // Where the GL time goes: one more run of each path, its stages from GL timer queries
@@ -298,6 +320,7 @@ int main(int argc, char** argv) {
                 static_cast<double>(st.triangles) / st.cpu / 1e6);
     row(st.name, "gs", st.gs, st.triangles, st.gs_s);
     row(st.name, "hp", st.hp, st.triangles, st.hp_s);
+    row(st.name, "hpe", st.hpe, st.triangles, st.hpe_s);
   }
   return 0;
 }

@@ -18,7 +18,8 @@
 #
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
-# through pinned buffers and the pyramid's build at 1, 2 and 3 levels per dispatch (issue 36),
+# through pinned buffers, the pyramid's build at 1, 2 and 3 levels per dispatch and the output
+# passes per output against per element (bench_backends' "hpe" columns; issue 36),
 # and the data path's targets (issue 35): upload GB/s on gyroid 256/512 and bonsai, out of core
 # on gyroid $size and a 4 GiB uint8 volume made from bonsai, the one-shot whole process of
 # `extract field:gyroid:512` on hp against cpu with a warm program cache, the context's start-up.
@@ -56,6 +57,15 @@ for t in test_gl test_gl_macet test_gl_dc; do
   grep -m 5 -E 'Failure|error' "$out/$t-one-level.log"
   report "$t hp, one pyramid level per pass" $rc
 done
+# And with the per-element output passes (ISOTILE_HP_OUTPUT=scatter; the default descends the
+# pyramid once per output, shaders/hp_pyramid.h's HpOutput).
+for t in test_gl test_gl_macet test_gl_dc; do
+  ISOTILE_HP_OUTPUT=scatter "$t" --gtest_brief=1 --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
+    >"$out/$t-per-element.log" 2>&1
+  rc=$?
+  grep -m 5 -E 'Failure|error' "$out/$t-per-element.log"
+  report "$t hp, per-element output passes" $rc
+done
 
 # 2. Bricked runs at 16 threads on both GL paths: exit 0 (no crash at exit, glibc's heap checks
 # on), and the CPU's file byte for byte.
@@ -89,7 +99,8 @@ gl_double_check 4000000
 report "double / and sqrt as the CPU" $?
 
 # 5. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5), with
-# the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick.
+# the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick. "hpe"
+# is the HistoPyramid with per-element output passes: whether it beats "hp" decides the default.
 big=--gyroid512
 [ "$size" = 192 ] && big=
 bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
