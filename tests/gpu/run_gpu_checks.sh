@@ -16,6 +16,8 @@
 #   then, on the GPU machine, with .gpu/ and gpu-data/ carried along:
 #   source .gpu/env.sh && ISOTILE_GPU_DATA=$PWD/gpu-data bash tests/gpu/run_gpu_checks.sh [--quick]
 #
+# Where $OUT names a folder (the device machine's), the whole output is also written to
+# $OUT/gpu-checks.log and the raw logs and tables copied there.
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
 # through pinned buffers, the pyramid's build at 1, 2 and 3 levels per dispatch and the output
@@ -31,6 +33,14 @@ size=1024 memory=8GiB
 [ "${1:-}" = --quick ] && size=192 memory=16MiB
 out=${TMPDIR:-/tmp}/isotile-gpu-checks
 rm -rf "$out" && mkdir -p "$out"
+# On the lent machine only what is written under $OUT comes back, and of the output only its
+# tail: the whole output goes to $OUT/gpu-checks.log as it is printed (so a run cut short by the
+# time limit still returns what it measured), and the logs, tables and stats of $out are copied
+# there at the end.
+if [ -n "${OUT:-}" ] && [ -d "$OUT" ]; then
+  exec > >(tee -a "$OUT/gpu-checks.log") 2>&1
+  trap 'cp "$out"/*.log "$out"/*.txt "$out"/*.json "$OUT"/ 2>/dev/null' EXIT
+fi
 export XDG_CACHE_HOME="$out/cache"
 data=${ISOTILE_GPU_DATA:-}
 failed=0
