@@ -164,6 +164,8 @@ void bench_read_back(int repeat) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Each row as it is measured, also into a pipe (tee): a run cut short keeps what it printed.
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   int threads = 2, repeat = 5;
   std::string methods = "mc,macet,dc";
   std::filesystem::path data = ISOTILE_SHARED_DATA;

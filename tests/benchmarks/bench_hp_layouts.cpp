@@ -393,6 +393,8 @@ std::uint64_t sum_of(const std::vector<std::uint32_t>& v) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Each row as it is measured, also into a pipe (tee): a run cut short keeps what it printed.
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);
   int threads = 2, repeat = 5;
   // engine from --data DIR, else $ISOTILE_GPU_DATA (a GPU machine does not see ../shared), else
   // ../shared/data.
