@@ -16,6 +16,8 @@
 #   then, on the GPU machine, with .gpu/ and gpu-data/ carried along:
 #   source .gpu/env.sh && ISOTILE_GPU_DATA=$PWD/gpu-data bash tests/gpu/run_gpu_checks.sh [--quick]
 #
+# --part=1 runs the correctness checks only (steps 1 to 4), --part=2 the measurements (5 to 7):
+# two calls of the lent machine, each within its 600 s, where the whole might not fit one.
 # Where $OUT names a folder (the device machine's), the whole output is also written to
 # $OUT/gpu-checks.log and the raw logs and tables copied there.
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
@@ -29,9 +31,16 @@
 # (a smoke run, also on llvmpipe). The GL program cache goes to a fresh XDG_CACHE_HOME under the
 # output folder, so the first GL run is cold and every later one warm.
 set -uo pipefail
-size=1024 memory=8GiB
-[ "${1:-}" = --quick ] && size=192 memory=16MiB
-out=${TMPDIR:-/tmp}/isotile-gpu-checks
+size=1024 memory=8GiB part=all
+for arg in "$@"; do
+  case "$arg" in
+    --quick) size=192 memory=16MiB ;;
+    --part=1 | --part=2) part=${arg#--part=} ;;
+    *) echo "run_gpu_checks.sh: unknown argument '$arg' (--quick, --part=1, --part=2)" >&2; exit 2 ;;
+  esac
+done
+in_part() { [ "$part" = all ] || [ "$part" = "$1" ]; }
+out=${TMPDIR:-/tmp}/isotile-gpu-checks/part-$part
 rm -rf "$out" && mkdir -p "$out"
 # On the lent machine only what is written under $OUT comes back, and of the output only its
 # tail: the whole output goes to $OUT/gpu-checks.log as it is printed (so a run cut short by the
@@ -50,6 +59,18 @@ report() {  # NAME STATUS DETAIL
 nvidia-smi -L 2>/dev/null | head -1
 isotile gl-info || report gl-info 1 "(no OpenGL context)"
 
+# The data path's stages from --stats (seconds.gl).
+json_get() {  # FILE EXPR (python3 expression over j)
+  python3 -c "import json,sys; j=json.load(open(sys.argv[1])); print($2)" "$1"
+}
+gl_stages() {  # FILE [bricks]: "[N bricks, upload ]G GB/s, B bytes; stages ms NAME MS, ..."
+  local head=
+  [ -n "${2:-}" ] && head='"%d bricks, upload " % j["bricks"] + '
+  json_get "$1" "$head"'"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())'
+}
+
+# Part 1: correctness, steps 1 to 4.
+if in_part 1; then
 # 1. The GL test programs: every one must pass (the positions' tolerance off llvmpipe: docs/gl.md).
 for t in test_gl test_gl_macet test_gl_dc; do
   "$t" --gtest_brief=1 >"$out/$t.log" 2>&1
@@ -92,6 +113,10 @@ for b in hp gs; do
   rm -f "$out/$b.ply"
 done
 rm -f "$out/cpu.ply"
+# Out of core: the uploads of the bricks summed (seconds.gl over the bricks).
+for b in hp gs; do
+  [ -f "$out/$b.json" ] && echo "gpu-measure: out of core gyroid $size $b: $(gl_stages "$out/$b.json" bricks)"
+done
 
 # 3. Every method on the GL paths through the CLI (auto stays on the CPU; the GL paths named).
 for m in "--method mc --normals" "--method macet" "--method macet --quality max" "--method dc" \
@@ -108,6 +133,10 @@ done
 gl_double_check 4000000
 report "double / and sqrt as the CPU" $?
 
+fi
+
+# Part 2: the measurements, steps 5 to 7.
+if in_part 2; then
 # 5. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5), with
 # the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick. "hpe"
 # is the HistoPyramid with per-element output passes: whether it beats "hp" decides the default.
@@ -127,16 +156,8 @@ report bench_hp_layouts "${PIPESTATUS[0]}"
 # The pyramid built with 1, 2 and 3 levels per dispatch (shaders/hp_pyramid.h): which to keep.
 grep -A4 '^production build' "$out/bench_hp_layouts.txt" | sed 's/^/gpu-measure: /'
 
-# 6. The data path (issue 35). Upload GB/s and the stages from --stats (seconds.gl), a run with a
-# warm program cache each: gyroid 256 and 512 float32, bonsai uint8 (from $ISOTILE_GPU_DATA).
-json_get() {  # FILE EXPR (python3 expression over j)
-  python3 -c "import json,sys; j=json.load(open(sys.argv[1])); print($2)" "$1"
-}
-gl_stages() {  # FILE [bricks]: "[N bricks, upload ]G GB/s, B bytes; stages ms NAME MS, ..."
-  local head=
-  [ -n "${2:-}" ] && head='"%d bricks, upload " % j["bricks"] + '
-  json_get "$1" "$head"'"%.2f GB/s, %d bytes; stages ms " % (j["upload_gbps"], j["upload_bytes"]) + ", ".join("%s %.2f" % (k, 1e3 * v) for k, v in j["seconds"]["gl"].items())'
-}
+# 6. The data path (issue 35). Upload GB/s and the stages, a run with a warm program cache each:
+# gyroid 256 and 512 float32, bonsai uint8 (from $ISOTILE_GPU_DATA).
 inputs="field:gyroid:256 field:gyroid:512"
 [ "$size" = 192 ] && inputs="field:gyroid:128"
 if [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
@@ -154,12 +175,9 @@ for in in $inputs; do
   [ $rc = 0 ] && echo "gpu-measure: upload $(basename "$in"): $(gl_stages "$out/d.json"); program cache $(json_get "$out/d.json" 'j["gl_program_cache"]["state"]')"
 done
 rm -f "$out/d.ply"
-# Out of core: the bricked runs of step 2 (gyroid $size float32) and a 4 GiB uint8 volume (bonsai
-# repeated 8x8x4, made here from $ISOTILE_GPU_DATA), in bricks within 2 GiB: the bricks' uploads
-# summed (seconds.gl over the bricks).
-for b in hp gs; do
-  echo "gpu-measure: out of core gyroid $size $b: $(gl_stages "$out/$b.json" bricks)"
-done
+# Out of core: a 4 GiB uint8 volume (bonsai repeated 8x8x4, made here from $ISOTILE_GPU_DATA), in
+# bricks within 2 GiB: the bricks' uploads summed (seconds.gl over the bricks); the gyroid's are
+# step 2's.
 big_u8="$out/bonsai-tiled_2048x2048x1024_uint8.raw"
 if [ "$size" != 192 ] && [ -n "$data" ] && [ -f "$data/bonsai_256x256x256_uint8.raw.gz" ]; then
   # Each z-slice of bonsai repeated 8 times along x and y, the whole 4 times along z (no NumPy).
@@ -219,6 +237,7 @@ rm -f "$out"/o*.ply
 XDG_CACHE_HOME="$out/cold-cache" isotile --threads 16 extract $one -q --backend hp -o "$out/o.ply" --stats "$out/o.json"
 echo "gpu-measure: one-shot $one hp, isotile's program cache cold: total $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["total"]'), $(json_get "$out/o.json" 'j["gl_program_cache"]["compiled"]') programs compiled"
 rm -f "$out"/o*.ply
+fi
 
 echo "gpu-check: $failed failed"
 [ "$failed" = 0 ]
