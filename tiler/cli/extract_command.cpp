@@ -111,7 +111,7 @@ int run_extract_distributed(const ExtractArgs& args, PipelineOptions o, Clock::t
   // The pipeline's checks, in its order, before any rank reads.
   check_output(o.output, o.simplify >= 1);
   const MeshFormat format = mesh_format_from_path(o.output);
-  const ExtractOptions e = pipeline_extract_options({.path = args.in.input}, o);
+  const ExtractOptions e = pipeline_extract_options({.path = args.in.input, .raw = {}}, o);
   TiledOptions to = tiled_options(o, e, format);
   json auto_iso;
   // Every rank reads the whole input once for the histogram and finds the same value.
