@@ -17,7 +17,8 @@
 #   source .gpu/env.sh && ISOTILE_GPU_DATA=$PWD/gpu-data bash tests/gpu/run_gpu_checks.sh [--quick]
 #
 # --part=1 runs the correctness checks only (steps 1 to 4), --part=2 the measurements (5 to 7):
-# two calls of the lent machine, each within its 600 s, where the whole might not fit one.
+# two calls of the lent machine, each within its 600 s, where the whole might not fit one. The
+# long steps run under time limits (limit() below), so that one that hangs costs only its own.
 # Where $OUT names a folder (the device machine's), the whole output is also written to
 # $OUT/gpu-checks.log and the raw logs and tables copied there.
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
@@ -31,10 +32,10 @@
 # (a smoke run, also on llvmpipe). The GL program cache goes to a fresh XDG_CACHE_HOME under the
 # output folder, so the first GL run is cold and every later one warm.
 set -uo pipefail
-size=1024 memory=8GiB part=all
+size=1024 memory=8GiB part=all slow=1
 for arg in "$@"; do
   case "$arg" in
-    --quick) size=192 memory=16MiB ;;
+    --quick) size=192 memory=16MiB slow=5 ;;  # also a smoke run on llvmpipe: longer limits
     --part=1 | --part=2) part=${arg#--part=} ;;
     *) echo "run_gpu_checks.sh: unknown argument '$arg' (--quick, --part=1, --part=2)" >&2; exit 2 ;;
   esac
@@ -56,6 +57,16 @@ failed=0
 report() {  # NAME STATUS DETAIL
   if [ "$2" = 0 ]; then echo "gpu-check: $1: pass ${3:-}"; else echo "gpu-check: $1: FAIL ${3:-}"; failed=$((failed + 1)); fi
 }
+# The long steps run under a time limit, so that one that hangs on a driver costs its limit and
+# not the whole call: exit 124 (a failure where it is a check) and a "gpu-timeout:" line.
+limit() {  # SECONDS COMMAND...
+  local seconds=$(($1 * slow))
+  shift
+  timeout --kill-after=10 "$seconds" "$@"
+  local rc=$?
+  [ "$rc" = 124 ] && echo "gpu-timeout: $1 stopped after $seconds s"
+  return "$rc"
+}
 nvidia-smi -L 2>/dev/null | head -1
 isotile gl-info || report gl-info 1 "(no OpenGL context)"
 
@@ -73,37 +84,40 @@ gl_stages() {  # FILE [bricks]: "[N bricks, upload ]G GB/s, B bytes; stages ms N
 if in_part 1; then
 # 1. The GL test programs: every one must pass (the positions' tolerance off llvmpipe: docs/gl.md).
 for t in test_gl test_gl_macet test_gl_dc; do
-  "$t" --gtest_brief=1 >"$out/$t.log" 2>&1
+  limit 200 "$t" --gtest_brief=1 >"$out/$t.log" 2>&1
   rc=$?
   tail -n 3 "$out/$t.log"
-  grep -m 5 -E 'Failure|error' "$out/$t.log"
+  grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t.log"
   report "$t" $rc
 done
 # The HistoPyramid extractions again with one pyramid level per dispatch (a software device's
 # passes, without shared memory and barriers; the GPU's default is three, shaders/hp_pyramid.h).
 for t in test_gl test_gl_macet test_gl_dc; do
-  ISOTILE_HP_LEVELS_PER_PASS=1 "$t" --gtest_brief=1 --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
+  ISOTILE_HP_LEVELS_PER_PASS=1 limit 120 "$t" --gtest_brief=1 \
+    --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
     >"$out/$t-one-level.log" 2>&1
   rc=$?
-  grep -m 5 -E 'Failure|error' "$out/$t-one-level.log"
+  grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t-one-level.log"
   report "$t hp, one pyramid level per pass" $rc
 done
 # And with the per-element output passes (ISOTILE_HP_OUTPUT=scatter; the default descends the
 # pyramid once per output, shaders/hp_pyramid.h's HpOutput).
 for t in test_gl test_gl_macet test_gl_dc; do
-  ISOTILE_HP_OUTPUT=scatter "$t" --gtest_brief=1 --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
+  ISOTILE_HP_OUTPUT=scatter limit 120 "$t" --gtest_brief=1 \
+    --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
     >"$out/$t-per-element.log" 2>&1
   rc=$?
-  grep -m 5 -E 'Failure|error' "$out/$t-per-element.log"
+  grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t-per-element.log"
   report "$t hp, per-element output passes" $rc
 done
 
 # 2. Bricked runs at 16 threads on both GL paths: exit 0 (no crash at exit, glibc's heap checks
 # on), and the CPU's file byte for byte.
-isotile --threads 16 extract "field:gyroid:$size" -q --memory "$memory" --backend cpu -o "$out/cpu.ply"
+limit 150 isotile --threads 16 extract "field:gyroid:$size" -q --memory "$memory" --backend cpu \
+  -o "$out/cpu.ply"
 report "bricked cpu gyroid $size" $?
 for b in hp gs; do
-  MALLOC_CHECK_=3 isotile --threads 16 extract "field:gyroid:$size" -q --memory "$memory" \
+  MALLOC_CHECK_=3 limit 150 isotile --threads 16 extract "field:gyroid:$size" -q --memory "$memory" \
     --backend "$b" -o "$out/$b.ply" --stats "$out/$b.json" 2>"$out/$b.err"
   rc=$?
   cat "$out/$b.err"
@@ -142,7 +156,7 @@ if in_part 2; then
 # is the HistoPyramid with per-element output passes: whether it beats "hp" decides the default.
 big=--gyroid512
 [ "$size" = 192 ] && big=
-bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
+limit 360 bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends $?
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
 # The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
@@ -151,7 +165,8 @@ grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 # stops with FAILED when a layout's counts or outputs differ from the CPU's or the linear's.
 repeat=5
 [ "$size" = 192 ] && repeat=1  # --quick: llvmpipe's texture descents take minutes
-bench_hp_layouts --threads 16 --repeat $repeat ${data:+--data "$data"} | tee "$out/bench_hp_layouts.txt"
+limit 150 bench_hp_layouts --threads 16 --repeat $repeat ${data:+--data "$data"} |
+  tee "$out/bench_hp_layouts.txt"
 report bench_hp_layouts "${PIPESTATUS[0]}"
 # The pyramid built with 1, 2 and 3 levels per dispatch (shaders/hp_pyramid.h): which to keep.
 grep -A4 '^production build' "$out/bench_hp_layouts.txt" | sed 's/^/gpu-measure: /'
@@ -196,7 +211,7 @@ with open(sys.argv[2], "wb") as f:
 PY
   for b in cpu hp; do
     t0=$(date +%s.%N)
-    isotile --threads 16 extract "$big_u8" --iso 49.5 -q --memory 2GiB --backend "$b" \
+    limit 150 isotile --threads 16 extract "$big_u8" --iso 49.5 -q --memory 2GiB --backend "$b" \
       -o "$out/big-$b.ply" --stats "$out/big-$b.json"
     rc=$?
     t1=$(date +%s.%N)
