@@ -91,24 +91,19 @@ for t in test_gl test_gl_macet test_gl_dc; do
   report "$t" $rc
 done
 # The HistoPyramid extractions again with one pyramid level per dispatch (a software device's
-# passes, without shared memory and barriers; the GPU's default is three, shaders/hp_pyramid.h).
-for t in test_gl test_gl_macet test_gl_dc; do
-  ISOTILE_HP_LEVELS_PER_PASS=1 limit 120 "$t" --gtest_brief=1 \
-    --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
-    >"$out/$t-one-level.log" 2>&1
-  rc=$?
-  grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t-one-level.log"
-  report "$t hp, one pyramid level per pass" $rc
-done
-# And with the per-element output passes (ISOTILE_HP_OUTPUT=scatter; the default descends the
-# pyramid once per output, shaders/hp_pyramid.h's HpOutput).
-for t in test_gl test_gl_macet test_gl_dc; do
-  ISOTILE_HP_OUTPUT=scatter limit 120 "$t" --gtest_brief=1 \
-    --gtest_filter='Gl/*/Hp:GlHistoPyramid.*' \
-    >"$out/$t-per-element.log" 2>&1
-  rc=$?
-  grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t-per-element.log"
-  report "$t hp, per-element output passes" $rc
+# passes, without shared memory and barriers; the GPU's default is three), and with per-element
+# output passes (the default descends the pyramid once per output): shaders/hp_pyramid.h.
+hp_tests='Gl/*/Hp:GlHistoPyramid.*'
+for variant in "ISOTILE_HP_LEVELS_PER_PASS=1 one-level one pyramid level per pass" \
+               "ISOTILE_HP_OUTPUT=scatter per-element per-element output passes"; do
+  read -r setting tag what <<<"$variant"
+  for t in test_gl test_gl_macet test_gl_dc; do
+    (export "$setting" && limit 120 "$t" --gtest_brief=1 --gtest_filter="$hp_tests") \
+      >"$out/$t-$tag.log" 2>&1
+    rc=$?
+    grep -m 5 -E 'Failure|error|gpu-timeout' "$out/$t-$tag.log"
+    report "$t hp, $what" $rc
+  done
 done
 
 # 2. Bricked runs at 16 threads on both GL paths: exit 0 (no crash at exit, glibc's heap checks
