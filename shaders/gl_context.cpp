@@ -162,25 +162,36 @@ GLADapiproc egl_proc(const char* name) {
   return eglGetProcAddress(name);
 }
 
-bool try_egl_device(Context& c, std::string& why) {
+// The hardware EGL devices (not EGL_MESA_device_software), in EGL's order; `why` gets the reason
+// when there are none.
+std::vector<EGLDeviceEXT> hardware_devices(std::string* why = nullptr) {
   auto query_devices =
       reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
   auto device_string = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(
       eglGetProcAddress("eglQueryDeviceStringEXT"));
-  auto platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
-      eglGetProcAddress("eglGetPlatformDisplayEXT"));
-  if (!query_devices || !device_string || !platform_display)
-    return why = "EGL_EXT_device_enumeration is not supported", false;
+  std::string reason = "EGL_EXT_device_enumeration is not supported";
+  std::vector<EGLDeviceEXT> hardware;
   EGLDeviceEXT devices[16];
   EGLint n = 0;
-  if (!query_devices(16, devices, &n) || n == 0) return why = "no EGL device", false;
-  std::vector<EGLDeviceEXT> hardware;
-  for (EGLint i = 0; i < n; ++i)
-    if (!has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software"))
-      hardware.push_back(devices[i]);
+  if (query_devices && device_string) {
+    reason = "no EGL device";
+    if (query_devices(16, devices, &n) && n > 0)
+      reason = "no hardware EGL device (only software ones)";
+    for (EGLint i = 0; i < n; ++i)
+      if (!has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software"))
+        hardware.push_back(devices[i]);
+  }
+  if (hardware.empty() && why) *why = reason;
+  return hardware;
+}
+
+bool try_egl_device(Context& c, std::string& why) {
+  auto platform_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(
+      eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (!platform_display) return why = "EGL_EXT_platform_base is not supported", false;
+  const std::vector<EGLDeviceEXT> hardware = hardware_devices(&why);
   const DeviceOrder order = hardware_device_order(static_cast<int>(hardware.size()));
   if (!order.why.empty()) return why = order.why, false;
-  why = "no hardware EGL device (only software ones)";
   for (const int k : order.order) {
     EGLDisplay d = platform_display(EGL_PLATFORM_DEVICE_EXT, hardware[k], nullptr);
     if (d == EGL_NO_DISPLAY) {
@@ -359,22 +370,6 @@ void create() {
   g_failure = "no usable OpenGL 4.5 context (" + reasons + ")";
 }
 
-// Hardware EGL devices (not EGL_MESA_device_software).
-int count_hardware_devices() {
-  auto query_devices =
-      reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
-  auto device_string = reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(
-      eglGetProcAddress("eglQueryDeviceStringEXT"));
-  if (!query_devices || !device_string) return 0;
-  EGLDeviceEXT devices[16];
-  EGLint n = 0;
-  if (!query_devices(16, devices, &n)) return 0;
-  int hw = 0;
-  for (EGLint i = 0; i < n; ++i)
-    hw += !has_word(device_string(devices[i], EGL_EXTENSIONS), "EGL_MESA_device_software");
-  return hw;
-}
-
 }  // namespace
 
 bool hardware_device_present() {
@@ -383,7 +378,7 @@ bool hardware_device_present() {
   if (!g_failure.empty()) return false;
   const char* env = std::getenv("ISOTILE_GL");
   if (env && std::string_view(env) != "device") return false;
-  return count_hardware_devices() > 0;
+  return !hardware_devices().empty();
 }
 
 void start_context() {
@@ -413,10 +408,9 @@ DeviceOrder hardware_device_order(int count) {
   DeviceOrder o;
   if (const char* env = std::getenv("ISOTILE_GL_DEVICE"); env && *env) {
     const std::string v = env;
-    char* end = nullptr;
-    const long k = std::strtol(env, &end, 10);
-    if (*end != '\0' || k < 0 || v.find_first_not_of("0123456789") != std::string::npos)
+    if (v.find_first_not_of("0123456789") != std::string::npos)
       return o.why = "ISOTILE_GL_DEVICE='" + v + "' is not a device number (0, 1, ...)", o;
+    const long k = std::strtol(env, nullptr, 10);  // digits only: LONG_MAX at worst
     if (k >= count)
       return o.why = "ISOTILE_GL_DEVICE=" + v + ", but EGL lists " + std::to_string(count) +
                      " hardware device" + (count == 1 ? "" : "s") +
