@@ -10,7 +10,6 @@ uniform uint u_level_offset[16];  // level l >= 1 starts at pyramid[u_level_offs
 uniform uint u_level_count[16];   // nodes of level l; level 0: the elements
 
 uint code_of(uint e) { return (codes[e >> 1] >> (16u * (e & 1u))) & 0xffffu; }
-uint vertex_count_of(uint code) { return hp_vertex_count(code); }
 // which = 0: vertices, 1: faces (triangles; Dual Contouring's quads).
 uint leaf_count(uint code, int which) {
   return which == 0 ? hp_vertex_count(code) : hp_face_count(code);
@@ -43,23 +42,16 @@ uint find_element(inout uint k, int which) {
   return base;
 }
 
-// Number of vertices of the elements before e: its level-1 node's offset plus its left
-// siblings' counts.
-uint vertex_prefix(uint e) {
-  uint sum = vertex_offset[u_level_offset[1] + (e >> 3)];
-  for (uint q = e & ~7u; q < e; ++q) sum += vertex_count_of(code_of(q));
-  return sum;
-}
-
-#ifdef FACE_OFFSETS
-// Where node q's faces' offset is: after the vertices' offsets of all nodes (levels 1..L, the
-// top level being one node).
+// Where node q's faces' offset is (FACE_OFFSETS only): after the vertices' offsets of all nodes
+// (levels 1..L, the top level being one node).
 uint face_offset_at(uint q) { return u_level_offset[u_levels] + 1u + q; }
 
-// Number of faces of the elements before e, as vertex_prefix() counts vertices.
-uint face_prefix(uint e) {
-  uint sum = vertex_offset[face_offset_at(u_level_offset[1] + (e >> 3))];
-  for (uint q = e & ~7u; q < e; ++q) sum += leaf_count(code_of(q), 1);
+// Number of outputs of kind `which` (0: vertices; 1: faces, FACE_OFFSETS only) of the elements
+// before e: its level-1 node's offset plus its left siblings' counts.
+uint output_prefix(uint e, int which) {
+  uint node = u_level_offset[1] + (e >> 3);
+  uint sum = vertex_offset[which == 0 ? node : face_offset_at(node)];
+  for (uint q = e & ~7u; q < e; ++q) sum += leaf_count(code_of(q), which);
   return sum;
 }
-#endif
+uint vertex_prefix(uint e) { return output_prefix(e, 0); }

@@ -14,11 +14,7 @@ void main() {
   if (e >= u_level_count[0]) return;
   uint n = leaf_count(code_of(e), OUTPUT_KIND);
   if (n == 0u) return;
-#if OUTPUT_KIND == 0
-  uint first = vertex_prefix(e);
-#else
-  uint first = face_prefix(e);
-#endif
+  uint first = output_prefix(e, OUTPUT_KIND);
   uint lo = max(first, u_first), hi = min(first + n, u_first + u_count);
   for (uint k = lo; k < hi; ++k) emit_output(e, k - first, k - u_first);
 #else
