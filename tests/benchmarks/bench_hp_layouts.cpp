@@ -205,29 +205,23 @@ Result run_linear(const Setup& s, Timing& t) {
   return r;
 }
 
-// The compact output design on the linear pyramid: the build adds a down-sweep of both kinds'
-// offsets to level 1; then one invocation per element writes its outputs' element index (no
-// descent). Timed as build and "descend" like the others.
+// The compact output design on the linear pyramid: the build adds production's down-sweep of
+// both kinds' offsets (the per-element output passes', FACE_OFFSETS); then one invocation per
+// element writes its outputs' element index (no descent). Timed as build and "descend" like the
+// others.
 Result run_compact(const Setup& s, Timing& t) {
   LinearPyramid p(volume_of(s.d));
   const std::string& defines = s.samples.defines;
-  const GLuint sweep = program({{GL_COMPUTE_SHADER, "hp_bench_compact_sweep.comp"}}, defines);
   const GLuint scatter = program({{GL_COMPUTE_SHADER, "hp_bench_compact_scatter.comp"}}, defines);
-  for (GLuint prog : {sweep, scatter}) {
-    set_grid_uniforms(prog, s.grid);
-    p.shape.set_uniforms(prog);
-  }
+  set_grid_uniforms(scatter, s.grid);
+  p.shape.set_uniforms(scatter);
   glFinish();
   const double t0 = now();
   Result r;
   build_linear(s, p, r);
   const Buffer offsets(p.shape.nodes * 8);
-  offsets.bind(GL_SHADER_STORAGE_BUFFER, 6);
-  glUseProgram(sweep);
-  for (int l = p.shape.levels; l >= 1; --l) {
-    set_i(sweep, "u_level", l);
-    dispatch(p.shape.count[l]);
-  }
+  offsets.bind(GL_SHADER_STORAGE_BUFFER, 5);
+  sweep_offsets(p.shape, defines, offsets, 0, true);
   glFinish();
   check("the compact down-sweep");
   t.build = now() - t0;
