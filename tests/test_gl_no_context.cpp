@@ -3,8 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <optional>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include "core/errors.h"
@@ -52,16 +52,36 @@ TEST_F(NoContext, AutoFallsBackToCpu) {
     }
 }
 
+// Sets (or, with nullptr, unsets) an environment variable for its lifetime, then puts back what
+// was there: the ctests that rerun these suites set some of them.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const char* value) : name_(name) {
+    if (const char* was = std::getenv(name)) saved_ = was;
+    set(value);
+  }
+  ~ScopedEnv() { set(saved_ ? saved_->c_str() : nullptr); }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+  void set(const char* value) {
+    if (value)
+      setenv(name_, value, 1);
+    else
+      unsetenv(name_);
+  }
+
+ private:
+  const char* name_;
+  std::optional<std::string> saved_;
+};
+
 // Which GPU a process takes (gl::hardware_device_order(), from the environment only): the one
 // ISOTILE_GL_DEVICE names, else from its launcher's node-local rank modulo the GPUs, else the
 // first; every other device after it in turn.
 TEST(HardwareDeviceOrder, NamedDeviceElseNodeLocalRankElseFirst) {
-  const char* names[] = {"ISOTILE_GL_DEVICE", "OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID",
-                         "MV2_COMM_WORLD_LOCAL_RANK", "SLURM_LOCALID"};
-  std::vector<std::pair<std::string, std::string>> saved;
-  for (const char* n : names)
-    if (const char* v = std::getenv(n)) saved.emplace_back(n, v);
-  for (const char* n : names) unsetenv(n);
+  ScopedEnv device("ISOTILE_GL_DEVICE", nullptr), ompi("OMPI_COMM_WORLD_LOCAL_RANK", nullptr),
+      mpich("MPI_LOCALRANKID", nullptr), mvapich("MV2_COMM_WORLD_LOCAL_RANK", nullptr),
+      slurm("SLURM_LOCALID", nullptr);
 
   gl::DeviceOrder o = gl::hardware_device_order(4);
   EXPECT_EQ(o.order, (std::vector<int>{0, 1, 2, 3}));
@@ -69,17 +89,17 @@ TEST(HardwareDeviceOrder, NamedDeviceElseNodeLocalRankElseFirst) {
   EXPECT_TRUE(o.why.empty());
   EXPECT_TRUE(gl::hardware_device_order(0).order.empty());
 
-  setenv("SLURM_LOCALID", "1", 1);
+  slurm.set("1");
   EXPECT_EQ(gl::hardware_device_order(4).order, (std::vector<int>{1, 2, 3, 0}));
-  setenv("OMPI_COMM_WORLD_LOCAL_RANK", "6", 1);  // before Slurm's: mpirun inside an allocation
+  ompi.set("6");  // before Slurm's: mpirun inside an allocation
   o = gl::hardware_device_order(4);
   EXPECT_EQ(o.order, (std::vector<int>{2, 3, 0, 1}));
   EXPECT_EQ(o.chosen_by, "OMPI_COMM_WORLD_LOCAL_RANK=6");
   EXPECT_EQ(gl::hardware_device_order(1).order, (std::vector<int>{0}));
-  setenv("OMPI_COMM_WORLD_LOCAL_RANK", "x", 1);  // not a rank: the next variable
+  ompi.set("x");  // not a rank: the next variable
   EXPECT_EQ(gl::hardware_device_order(4).chosen_by, "SLURM_LOCALID=1");
 
-  setenv("ISOTILE_GL_DEVICE", "3", 1);  // named: that one only, whatever the rank
+  device.set("3");  // named: that one only, whatever the rank
   o = gl::hardware_device_order(4);
   EXPECT_EQ(o.order, (std::vector<int>{3}));
   EXPECT_EQ(o.chosen_by, "ISOTILE_GL_DEVICE");
@@ -87,54 +107,39 @@ TEST(HardwareDeviceOrder, NamedDeviceElseNodeLocalRankElseFirst) {
   EXPECT_TRUE(o.order.empty());
   EXPECT_EQ(o.why, "ISOTILE_GL_DEVICE=3, but EGL lists 2 hardware devices (0 to 1)");
   for (const char* bad : {"-1", "1x", "one", " 1"}) {
-    setenv("ISOTILE_GL_DEVICE", bad, 1);
+    device.set(bad);
     o = gl::hardware_device_order(4);
     EXPECT_TRUE(o.order.empty()) << bad;
     EXPECT_NE(o.why.find("is not a device number"), std::string::npos) << o.why;
   }
-
-  for (const char* n : names) unsetenv(n);
-  for (const auto& [n, v] : saved) setenv(n.c_str(), v.c_str(), 1);
 }
 
 // The environment's choices of pyramid passes and output design: the words they take, and one
-// error naming the variable for anything else. The variables' values on entry are restored (the
-// ctests that rerun these suites set them).
+// error naming the variable for anything else.
 TEST(HpPassChoices, FromTheEnvironment) {
-  auto with_env = [](const char* name, const char* value, const auto& check) {
-    const char* was = std::getenv(name);
-    const std::string saved = was ? was : "";
-    if (value)
-      setenv(name, value, 1);
-    else
-      unsetenv(name);
-    check();
-    if (was)
-      setenv(name, saved.c_str(), 1);
-    else
-      unsetenv(name);
-  };
-  with_env("ISOTILE_HP_OUTPUT", nullptr,
-           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend); });
-  with_env("ISOTILE_HP_OUTPUT", "descend",
-           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend); });
-  with_env("ISOTILE_HP_OUTPUT", "scatter",
-           [] { EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Scatter); });
-  for (const char* bad : {"Scatter", "scatter ", "1"})
-    with_env("ISOTILE_HP_OUTPUT", bad, [&] {
-      try {
-        gl::default_hp_output();
-        ADD_FAILURE() << "ISOTILE_HP_OUTPUT=" << bad << " taken";
-      } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("ISOTILE_HP_OUTPUT"), std::string::npos) << e.what();
-      }
-    });
-  for (const char* good : {"1", "2", "3"})
-    with_env("ISOTILE_HP_LEVELS_PER_PASS", good,
-             [&] { EXPECT_EQ(gl::default_levels_per_pass(), good[0] - '0'); });
-  for (const char* bad : {"0", "4", "33", "x"})
-    with_env("ISOTILE_HP_LEVELS_PER_PASS", bad,
-             [&] { EXPECT_THROW(gl::default_levels_per_pass(), InputError) << bad; });
+  ScopedEnv output("ISOTILE_HP_OUTPUT", nullptr), levels("ISOTILE_HP_LEVELS_PER_PASS", nullptr);
+  EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend);
+  output.set("descend");
+  EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Descend);
+  output.set("scatter");
+  EXPECT_EQ(gl::default_hp_output(), gl::HpOutput::Scatter);
+  for (const char* bad : {"Scatter", "scatter ", "1"}) {
+    output.set(bad);
+    try {
+      gl::default_hp_output();
+      ADD_FAILURE() << "ISOTILE_HP_OUTPUT=" << bad << " taken";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("ISOTILE_HP_OUTPUT"), std::string::npos) << e.what();
+    }
+  }
+  for (const char* good : {"1", "2", "3"}) {
+    levels.set(good);
+    EXPECT_EQ(gl::default_levels_per_pass(), good[0] - '0');
+  }
+  for (const char* bad : {"0", "4", "33", "x"}) {
+    levels.set(bad);
+    EXPECT_THROW(gl::default_levels_per_pass(), InputError) << bad;
+  }
 }
 
 }  // namespace
