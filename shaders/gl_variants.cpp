@@ -117,8 +117,9 @@ void add_dual_contouring(Variants& out) {
 void add_benchmark_layouts(Variants& out) {
   // Stage names view these literals (Stage::file is a string_view).
   static constexpr const char* kPasses[] = {
-      "hp_bench_linear_find.comp",    "hp_bench_block_classify.comp", "hp_bench_block_find.comp",
-      "hp_bench_tex_classify.comp",   "hp_bench_tex_find.comp",       "hp_bench_compact_scatter.comp"};
+      "hp_bench_linear_find.comp", "hp_bench_block_classify.comp",
+      "hp_bench_block_find.comp",  "hp_bench_tex_classify.comp",
+      "hp_bench_tex_find.comp",    "hp_bench_compact_scatter.comp"};
   static constexpr const char* kReduces[] = {"hp_bench_block_reduce.comp",
                                              "hp_bench_tex_reduce.comp"};
   for (const ScalarType type : kSampleTypes) {
