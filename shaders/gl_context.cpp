@@ -231,7 +231,21 @@ GLADapiproc osmesa_proc(const char* name) {
   return g_osmesa_proc(name);
 }
 
+// The Gallium drivers Debian's OSMesa is built with. OSMesa 22.3 does not check that the driver
+// named by GALLIUM_DRIVER exists: with any other name (a typo, "zink" without Vulkan)
+// OSMesaCreateContextAttribs dereferences a null screen and the process dies of SIGSEGV, so such
+// a name is refused here with the reason instead.
+constexpr std::string_view kOsmesaDrivers[] = {"llvmpipe", "softpipe"};
+
 bool try_osmesa(Context& c, std::string& why) {
+  if (const char* g = std::getenv("GALLIUM_DRIVER"); g && *g) {
+    const std::string_view name = g;
+    if (std::find(std::begin(kOsmesaDrivers), std::end(kOsmesaDrivers), name) ==
+        std::end(kOsmesaDrivers))
+      return why = "GALLIUM_DRIVER='" + std::string(name) +
+                   "' names no driver OSMesa has (llvmpipe, softpipe)",
+             false;
+  }
   void* lib = dlopen("libOSMesa.so.8", RTLD_NOW | RTLD_LOCAL);
   if (!lib) lib = dlopen("libOSMesa.so", RTLD_NOW | RTLD_LOCAL);
   if (!lib) return why = "libOSMesa.so.8 not found (Debian: libosmesa6)", false;
