@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace isotile {
 
@@ -84,9 +85,15 @@ void Progress::report_root(const ProgressUpdate& update) {
     // Under callback_mutex_: the callback is called one call at a time (from any thread, children's
     // included), and a false answer is seen by every thread before its next unit of work.
     std::lock_guard lock(callback_mutex_);
-    if (callback_ && !callback_(update)) cancel();
+    if ((callback_ && !callback_(update)) || (stop_when_ && stop_when_())) cancel();
   }
   check();
+}
+
+void Progress::set_stop_when(std::function<bool()> stop) {
+  if (parent_) return parent_->set_stop_when(std::move(stop));
+  std::lock_guard lock(callback_mutex_);
+  stop_when_ = std::move(stop);
 }
 
 }  // namespace isotile

@@ -89,13 +89,20 @@ class Progress {
   // Cancels the run from outside the callback (another thread; a signal handler: the flag is a
   // lock-free atomic).
   void cancel() { cancelled_.store(true, std::memory_order_relaxed); }
+  // A second reason to stop, asked after the callback at every report of this Progress and its
+  // children: true cancels the run as a false from the callback would, and the one who set it
+  // says why (the pipeline ends a volume's read early when the GL backend it will need failed to
+  // start meanwhile). Called one call at a time, from whichever thread reports; whoever sets it
+  // clears it (an empty function) when the work it watches ends.
+  void set_stop_when(std::function<bool()> stop);
 
  private:
   void report(const ProgressUpdate& update);       // calls the callback (a child: the parent's)
   void report_root(const ProgressUpdate& update);  // a root's callback, under callback_mutex_
 
   ProgressCallback callback_;
-  Progress* parent_ = nullptr;  // a child's parent
+  std::function<bool()> stop_when_;  // a root's, under callback_mutex_
+  Progress* parent_ = nullptr;       // a child's parent
   Stage parent_stage_ = Stage::Extract;
   int child_stages_ = 0;       // a child's begin() calls so far
   double child_reported_ = 0;  // the highest fraction a child told its parent

@@ -178,9 +178,9 @@ Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r)
 std::string probe(bool* hardware, bool hardware_only) {
   if (hardware_only && !hardware_device_present()) return "no GPU (hardware EGL device) found";
   // Asked for by name once start_context() began making the context (start_backend()): yes
-  // without waiting for it, so that the caller reads its volume meanwhile; reported() gives the
-  // failure if there is one.
-  if (!hardware_only && context_started()) return {};
+  // without waiting for it, so that the caller reads its volume meanwhile, unless it has failed
+  // already; a later failure comes from backend_start_failure() during the read, or reported().
+  if (!hardware_only && context_started()) return start_failure();
   std::string why;
   if (!available(&why)) return why;
   *hardware = !device().software;
@@ -198,9 +198,10 @@ ProgramCacheState program_cache_state() {
 }
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe,
-                   start_context);
-  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context);
+  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe, start_context,
+                   start_failure);
+  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context,
+                   start_failure);
 }
 
 }  // namespace isotile::gl

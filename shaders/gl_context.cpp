@@ -105,6 +105,9 @@ thread_local int t_depth = 0;
 // start_context(): true from its call to shutdown(); its thread is joined by shutdown(), or at
 // exit by its destructor, before the objects above go.
 std::atomic<bool> g_started{false};
+// Set by start_context()'s thread when it failed (g_failure says why), so that start_failure()
+// need not take g_mutex, which that thread holds while it tries.
+std::atomic<bool> g_start_failed{false};
 std::jthread g_starter;
 
 bool has_word(const char* list, std::string_view word) {
@@ -410,12 +413,19 @@ void start_context() {
     } catch (const std::exception& e) {  // nothing may leave a thread
       g_failure = std::string("no usable OpenGL 4.5 context: ") + e.what();
     }
+    if (!g_context) g_start_failed = true;
     if (g_context && t_depth == 0) g_context->release_thread();
   });
 }
 
 bool context_started() {
   return g_started;
+}
+
+std::string start_failure() {
+  if (!g_start_failed) return {};
+  std::lock_guard lock(g_mutex);  // its thread has released it, or is about to
+  return g_failure;
 }
 
 DeviceOrder hardware_device_order(int count) {

@@ -60,6 +60,10 @@ void start_context();
 // came of it; takes no lock.
 bool context_started();
 
+// Why start_context()'s thread could not make the context, once it has finished failing; "" while
+// it runs, when it succeeded, or when it was not started. Never waits for that thread.
+std::string start_failure();
+
 // The order in which the `count` hardware EGL devices are tried, and why: ISOTILE_GL_DEVICE=N
 // names the one device to use (nothing else is tried, llvmpipe included); otherwise a process
 // started by an MPI or Slurm launcher starts from its rank among the processes of its node

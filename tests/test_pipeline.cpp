@@ -7,7 +7,10 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
+#include <atomic>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -15,6 +18,7 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
+#include "core/extract/marching_cubes.h"
 #include "core/mesh/mesh_io.h"
 #include "core/volume/itk_reader.h"
 #include "core/volume/procedural_fields.h"
@@ -235,6 +239,78 @@ TEST_F(Pipeline, CancelStopsTheRunAndLeavesNoFile) {
   EXPECT_GE(calls, 5);
   EXPECT_LE(calls, 5 + tbb::this_task_arena::max_concurrency());
   EXPECT_TRUE(fs::is_empty(dir_));
+}
+
+// A stand-in for a GL backend whose start (its context, made on a thread while the volume is
+// read: start_backend()) fails once `g_start_fails` is set; until then it runs the CPU's Marching
+// Cubes.
+std::atomic<bool> g_start_fails{false};
+Mesh stand_in_run(const VolumeView& view, const ExtractOptions& o, GpuReport*) {
+  return marching_cubes(
+      view, {.iso = o.iso, .normals = o.normals, .cells = o.cells, .progress = o.progress});
+}
+std::string stand_in_probe(bool* hardware, bool) {
+  *hardware = true;
+  return "";
+}
+void stand_in_start() {}
+std::string stand_in_failure() {
+  return g_start_fails ? "no usable OpenGL 4.5 context (the stand-in's)" : "";
+}
+
+// The start failing during the read stops the run at the next report with the backend's error,
+// not after the read; in core and out of core, and nothing is written.
+TEST_F(Pipeline, ABackendWhoseStartFailsStopsTheReadWithItsError) {
+  register_backend(Backend::HistoPyramid, {stand_in_run, stand_in_run, stand_in_run},
+                   stand_in_probe, stand_in_start, stand_in_failure);
+  const Volume volume = make_field_volume({FieldKind::Sphere, 48});
+  const fs::path raw =
+      dir_ / ("sphere_48x48x48_" + std::string(scalar_name(volume.view().type)) + ".raw");
+  {
+    std::ofstream out(raw, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(volume.bytes()),
+              static_cast<std::streamsize>(volume.byte_size()));
+  }
+  for (const std::string memory : {"", "256KiB"}) {
+    SCOPED_TRACE("memory '" + memory + "'");
+    PipelineOptions o;
+    o.extract.backend = Backend::HistoPyramid;
+    o.iso = field_default_iso(FieldKind::Sphere);
+    o.memory = memory;
+    o.output = (dir_ / "m.ply").string();
+    double read = 0;
+    int reports = 0;
+    // The start fails at the run's first report (the read's start, in core).
+    Progress progress([&](const ProgressUpdate& u) {
+      if (u.stage == Stage::Read) read = std::max(read, u.fraction);
+      g_start_fails = ++reports == 1 || g_start_fails;
+      return true;
+    });
+    o.progress = &progress;
+    g_start_fails = false;
+    try {
+      run_pipeline(input(raw.string()), o);
+      ADD_FAILURE() << "the run went on";
+    } catch (const InputError& e) {
+      EXPECT_STREQ(e.what(), "backend 'hp': no usable OpenGL 4.5 context (the stand-in's)");
+    }
+    EXPECT_EQ(reports, 1);
+    EXPECT_LT(read, 1.0);
+    EXPECT_FALSE(fs::exists(o.output));
+
+    // The same run, the start not failing: it runs to the end.
+    Progress quiet;
+    o.progress = &quiet;
+    g_start_fails = false;
+    EXPECT_GT(run_pipeline(input(raw.string()), o).triangles, 100);
+    EXPECT_TRUE(fs::exists(o.output));
+    fs::remove(o.output);
+    // Failed before the run (the probe says nothing of it here): the first report stops it.
+    g_start_fails = true;
+    EXPECT_THROW(run_pipeline(input(raw.string()), o), InputError);
+    EXPECT_FALSE(fs::exists(o.output));
+  }
+  g_start_fails = false;
 }
 
 TEST_F(Pipeline, TheWrittenCallbackSeesTheMeshAsWritten) {

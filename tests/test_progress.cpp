@@ -196,6 +196,40 @@ TEST(Progress, ChildReportsWithinItsBrick) {
   EXPECT_THROW(child.advance(), Cancelled);
 }
 
+// A stop condition beside the callback: asked after it at every report, a child's included; true
+// cancels the run; cleared, it is asked no more.
+TEST(Progress, StopWhenCancelsAtTheNextReport) {
+  int asked = 0;
+  bool stop = false;
+  Progress root([](const ProgressUpdate&) { return true; });
+  root.set_stop_when([&] {
+    ++asked;
+    return stop;
+  });
+  root.begin(Stage::Read, 4);
+  root.advance();
+  EXPECT_EQ(asked, 2);
+  {
+    Progress child(root, Stage::Extract, 0, 2);
+    child.begin(Stage::Count, 2);
+    EXPECT_EQ(asked, 3);
+    stop = true;
+    EXPECT_THROW(child.advance(), Cancelled);
+    EXPECT_EQ(asked, 4);
+  }
+  EXPECT_TRUE(root.cancelled());
+
+  Progress silent;  // no callback: still asked
+  silent.set_stop_when([] { return true; });
+  EXPECT_THROW(silent.begin(Stage::Read, 1), Cancelled);
+  Progress cleared;
+  cleared.set_stop_when([] { return true; });
+  cleared.set_stop_when({});
+  cleared.begin(Stage::Read, 1);
+  cleared.advance();
+  EXPECT_FALSE(cleared.cancelled());
+}
+
 class ProgressFiles : public isotile::testing::TempDirTest {
  protected:
   ProgressFiles() : TempDirTest("isotile-progress-") {}

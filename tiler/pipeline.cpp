@@ -243,7 +243,9 @@ ExtractOptions pipeline_extract_options(const PipelineInput& input,
   return eo;
 }
 
-PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& options) {
+namespace {
+
+PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOptions& options) {
   const auto t_total = Clock::now();
   const Log log = [&](const std::string& line) {
     if (options.log) options.log(line);
@@ -452,6 +454,28 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
     }
   }
   return result;
+}
+
+}  // namespace
+
+PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& options) {
+  // A GL backend asked for by name makes its context on a thread while the volume is read
+  // (start_backend()). If that fails, a fraction of a second in, the run stops at its next report
+  // with the backend's error, instead of after a read that may take minutes.
+  const Backend asked = options.extract.backend;
+  struct Watch {
+    Progress* p;
+    ~Watch() {
+      if (p) p->set_stop_when({});
+    }
+  } watch{options.progress};
+  if (watch.p) watch.p->set_stop_when([asked] { return !backend_start_failure(asked).empty(); });
+  try {
+    return run_pipeline_watched(input, options);
+  } catch (const Cancelled&) {
+    if (std::string why = backend_start_failure(asked); !why.empty()) throw InputError(why);
+    throw;
+  }
 }
 
 }  // namespace isotile

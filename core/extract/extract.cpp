@@ -38,6 +38,7 @@ struct BackendEntry {
   // Set by register_backend(): whether it can run here (see extract.h).
   ProbeFn probe = nullptr;
   StartFn start = nullptr;  // start_backend()
+  StartFailureFn start_failure = nullptr;
 };
 
 // The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
@@ -125,19 +126,28 @@ std::string_view backend_name(Backend b) {
 }
 
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe, StartFn start) {
+                      ProbeFn probe, StartFn start, StartFailureFn start_failure) {
   for (auto& e : kBackends)
     if (e.backend == backend) {
       e.run = run;
       e.missing = "";
       e.probe = probe;
       e.start = start;
+      e.start_failure = start_failure;
     }
 }
 
 void start_backend(Backend backend) {
   if (backend == Backend::Auto) return;
   if (const auto& e = entry(backend); e.start) e.start();
+}
+
+std::string backend_start_failure(Backend backend) {
+  if (backend == Backend::Auto) return {};
+  const auto& e = entry(backend);
+  if (!e.start_failure) return {};
+  const std::string why = e.start_failure();
+  return why.empty() ? why : "backend '" + std::string(e.name) + "': " + why;
 }
 
 std::vector<BackendCaps> capabilities() {

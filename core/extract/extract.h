@@ -129,9 +129,13 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
 // extract() and takes long (start_backend()).
 using ExtractFn = Mesh (*)(const VolumeView&, const ExtractOptions&, GpuReport* report);
 using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
+// `start_failure`, given with `start`, says without waiting why that work failed, once it has
+// ("" while it runs, succeeded or was not started).
 using StartFn = void (*)();
+using StartFailureFn = std::string (*)();
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe, StartFn start = nullptr);
+                      ProbeFn probe, StartFn start = nullptr,
+                      StartFailureFn start_failure = nullptr);
 
 // For a backend asked for by name (not Auto, which must probe first): starts in the background
 // what it needs before its first extract() and takes long, so that it overlaps the caller's
@@ -140,5 +144,11 @@ void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>
 // on it throws the InputError the probe would have. Does nothing for Auto, the CPU and backends
 // without such work.
 void start_backend(Backend backend);
+
+// Without waiting: the error every extract() on `backend` will throw because what
+// start_backend() began for it has failed ("backend 'hp': no usable OpenGL 4.5 context (...)"),
+// or "" (not failed, not started, or nothing to start). The pipeline asks it while it reads the
+// volume, so that a run whose context failed ends then and not after the read.
+std::string backend_start_failure(Backend backend);
 
 }  // namespace isotile
