@@ -20,7 +20,8 @@
 # two calls of the lent machine, each within its 600 s, where the whole might not fit one. The
 # long steps run under time limits (limit() below), so that one that hangs costs only its own.
 # Where $OUT names a folder (the device machine's), the whole output is also written to
-# $OUT/gpu-checks.log and the raw logs and tables copied there.
+# $OUT/gpu-checks.log and the raw logs, tables and stats packed into one archive beside it
+# ($OUT/gpu-checks-part-P-files.tar.gz: at most 8 files come back from $OUT).
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
 # through pinned buffers, the pyramid's build at 1, 2 and 3 levels per dispatch and the output
@@ -43,13 +44,14 @@ done
 in_part() { [ "$part" = all ] || [ "$part" = "$1" ]; }
 out=${TMPDIR:-/tmp}/isotile-gpu-checks/part-$part
 rm -rf "$out" && mkdir -p "$out"
-# On the lent machine only what is written under $OUT comes back, and of the output only its
-# tail: the whole output goes to $OUT/gpu-checks.log as it is printed (so a run cut short by the
-# time limit still returns what it measured), and the logs, tables and stats of $out are copied
-# there at the end.
+# On the lent machine only what is written under $OUT comes back (at most 8 files), and of the
+# output only its tail: the whole output goes to $OUT/gpu-checks.log as it is printed (so a run
+# cut short by the time limit still returns what it measured), and the logs, tables and stats of
+# $out go into one archive there at the end (python3's tarfile: the machine has python3).
 if [ -n "${OUT:-}" ] && [ -d "$OUT" ]; then
   exec > >(tee -a "$OUT/gpu-checks.log") 2>&1
-  trap 'cp "$out"/*.log "$out"/*.txt "$out"/*.json "$OUT"/ 2>/dev/null' EXIT
+  trap '(cd "$out" && python3 -m tarfile -c "$OUT/gpu-checks-part-$part-files.tar.gz" \
+    $(ls -- *.log *.txt *.json 2>/dev/null))' EXIT
 fi
 export XDG_CACHE_HOME="$out/cache"
 data=${ISOTILE_GPU_DATA:-}
