@@ -139,10 +139,10 @@ void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>
 
 // For a backend asked for by name (not Auto, which must probe first): starts in the background
 // what it needs before its first extract() and takes long, so that it overlaps the caller's
-// reading of the volume (the GL backends: their context, tenths of a second on a GPU). From then
-// on the backend's probe answers that it can run without waiting; if it cannot, every extract()
-// on it throws the InputError the probe would have. Does nothing for Auto, the CPU and backends
-// without such work.
+// reading of the volume (the GL backends: their context, tenths of a second on a GPU). Then the
+// backend's probe answers without waiting: it can run unless that work has failed already; if it
+// fails, every extract() on it throws the InputError the probe would have, and
+// backend_start_failure() says so at once. Not for Auto, the CPU, backends without such work.
 void start_backend(Backend backend);
 
 // Without waiting: the error every extract() on `backend` will throw because what
