@@ -15,6 +15,7 @@
 #include <memory>
 #include <string_view>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "core/errors.h"
@@ -234,21 +235,35 @@ GLADapiproc osmesa_proc(const char* name) {
   return g_osmesa_proc(name);
 }
 
-// The Gallium drivers Debian's OSMesa is built with. OSMesa 22.3 does not check that the driver
-// named by GALLIUM_DRIVER exists: with any other name (a typo, "zink" without Vulkan)
-// OSMesaCreateContextAttribs dereferences a null screen and the process dies of SIGSEGV, so such
-// a name is refused here with the reason instead.
+// The Gallium drivers Debian's OSMesa is built with.
 constexpr std::string_view kOsmesaDrivers[] = {"llvmpipe", "softpipe"};
 
-bool try_osmesa(Context& c, std::string& why) {
+// Why OSMesa must not be asked for a context in this environment, or "". Debian's OSMesa (Mesa
+// 22.3) dies of SIGSEGV inside OSMesaCreateContextAttribs, where it should fail, when
+// GALLIUM_DRIVER names a driver it does not have (a typo, "zink" without Vulkan: a null screen)
+// and when MESA_GLSL_VERSION_OVERRIDE is below 140; neither can give a 4.5 context with GLSL 4.50
+// (every override below 450 fails anyway), so both are refused with the variable's name.
+std::string osmesa_refusal() {
   if (const char* g = std::getenv("GALLIUM_DRIVER"); g && *g) {
     const std::string_view name = g;
     if (std::find(std::begin(kOsmesaDrivers), std::end(kOsmesaDrivers), name) ==
         std::end(kOsmesaDrivers))
-      return why = "GALLIUM_DRIVER='" + std::string(name) +
-                   "' names no driver OSMesa has (llvmpipe, softpipe)",
-             false;
+      return "GALLIUM_DRIVER='" + std::string(name) +
+             "' names no driver OSMesa has (llvmpipe, softpipe)";
   }
+  if (const char* v = std::getenv("MESA_GLSL_VERSION_OVERRIDE"); v && *v) {
+    char* end = nullptr;
+    const long glsl = std::strtol(v, &end, 10);
+    if (end != v && glsl < 450)
+      return "MESA_GLSL_VERSION_OVERRIDE=" + std::string(v) +
+             " is below the GLSL 4.50 that isotile's programs need";
+  }
+  return {};
+}
+
+bool try_osmesa(Context& c, std::string& why) {
+  if (std::string refused = osmesa_refusal(); !refused.empty())
+    return why = std::move(refused), false;
   void* lib = dlopen("libOSMesa.so.8", RTLD_NOW | RTLD_LOCAL);
   if (!lib) lib = dlopen("libOSMesa.so", RTLD_NOW | RTLD_LOCAL);
   if (!lib) return why = "libOSMesa.so.8 not found (Debian: libosmesa6)", false;

@@ -380,12 +380,16 @@ TEST_F(GlCli, NoContextIsOneErrorLine) {
   expect_one_error_line("extract field:sphere:16 -q --backend hp", "ISOTILE_GL_DEVICE=99",
                         "backend 'hp': no usable OpenGL 4.5 context (device: "
                         "ISOTILE_GL_DEVICE=99, but EGL lists ");
-  // A Gallium driver OSMesa does not have: Mesa 22.3's OSMesa dies of SIGSEGV on it, isotile
-  // refuses it with the name.
+  // What Mesa 22.3's OSMesa dies of SIGSEGV on, refused with the variable's name: a Gallium
+  // driver it does not have, a GLSL version override below 140.
   expect_one_error_line("extract field:sphere:16 -q --backend hp",
                         "ISOTILE_GL=osmesa GALLIUM_DRIVER=nosuchdriver",
                         "backend 'hp': no usable OpenGL 4.5 context (osmesa: "
                         "GALLIUM_DRIVER='nosuchdriver' names no driver OSMesa has");
+  expect_one_error_line("extract field:sphere:16 -q --backend hp",
+                        "ISOTILE_GL=osmesa MESA_GLSL_VERSION_OVERRIDE=130",
+                        "backend 'hp': no usable OpenGL 4.5 context (osmesa: "
+                        "MESA_GLSL_VERSION_OVERRIDE=130 is below the GLSL 4.50");
   const Result a = run("extract field:sphere:16 -q -o m.ply --stats s.json", "ISOTILE_GL=off");
   ASSERT_EQ(a.code, 0) << a.err;
   EXPECT_EQ(nlohmann::json::parse(slurp(dir_ / "s.json"))["backend"], "cpu");
