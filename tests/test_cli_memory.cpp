@@ -82,10 +82,17 @@ TEST_F(CliMemory, PeakRssStaysWithinTheBudgetAboveTheBaseline) {
       {waves, tiny_waves, " --iso 128.5 --method macet --memory 8MiB", 8},
       {waves, tiny_waves, " --iso 128.5 --method dc --memory 4MiB", 4},
   };
+  // The same command's peak varies from run to run by up to 0.9 MiB, with the same binary and
+  // input: DC over the gzip'd slabs at 4 MiB measured 3.27 to 4.13 MiB above its baseline (31
+  // runs, the highest with ctest running beside it; as wide with MALLOC_ARENA_MAX=1, so not
+  // glibc's per-thread arenas), and an older build went over 4 MiB in 1 run of 8.
+  // Within the budget plus this allowance, a working set that grows past the budget by more than
+  // the noise still fails.
+  constexpr double kRunToRunMiB = 0.5;
   for (const Case& c : cases) {
     const double baseline = peak(c.tiny + c.options + " -o tiny.ply", 1);
     const double p = peak(c.args + c.options + " -o out.ply");
-    EXPECT_LE(p, baseline + c.budget_mib)
+    EXPECT_LE(p, baseline + c.budget_mib + kRunToRunMiB)
         << c.args << c.options << ": peak " << p << " MiB, baseline " << baseline << " MiB";
   }
 }
