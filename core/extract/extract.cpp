@@ -65,6 +65,11 @@ const BackendEntry& entry(Backend b) {
   throw InputError("unknown backend");
 }
 
+// The one form of a backend's own errors: "backend 'hp': why".
+std::string backend_error(const BackendEntry& e, std::string_view why) {
+  return "backend '" + std::string(e.name) + "': " + std::string(why);
+}
+
 // Auto's rules, the first whose backend implements the method and can run here wins. Measured on
 // an NVIDIA H200 (docs/gl.md), the HistoPyramid path is 4-7x slower than the CPU at 16 threads
 // and llvmpipe is slower still, so no rule sends a machine to a GL path yet; a measured rule
@@ -147,7 +152,7 @@ std::string backend_start_failure(Backend backend) {
   const auto& e = entry(backend);
   if (!e.start_failure) return {};
   const std::string why = e.start_failure();
-  return why.empty() ? why : "backend '" + std::string(e.name) + "': " + why;
+  return why.empty() ? why : backend_error(e, why);
 }
 
 std::vector<BackendCaps> capabilities() {
@@ -195,15 +200,13 @@ Backend resolve_backend(const ExtractOptions& options) {
   const int m = static_cast<int>(options.method);
   if (options.backend == Backend::Auto) return choose_backend(options).backend;
   const auto& e = entry(options.backend);
-  if (!e.run[m] && !e.missing.empty())
-    throw InputError("backend '" + std::string(e.name) + "': " + std::string(e.missing));
+  if (!e.run[m] && !e.missing.empty()) throw InputError(backend_error(e, e.missing));
   if (!e.run[m])
     throw InputError("backend '" + std::string(e.name) + "' does not implement method '" +
                      std::string(method_name(options.method)) + "'");
   std::string why;
   bool hardware = false;
-  if (!usable(e, &why, &hardware))
-    throw InputError("backend '" + std::string(e.name) + "': " + why);
+  if (!usable(e, &why, &hardware)) throw InputError(backend_error(e, why));
   return options.backend;
 }
 
