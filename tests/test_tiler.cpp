@@ -19,6 +19,7 @@
 #include "core/errors.h"
 #include "core/extract/extract.h"
 #include "core/mesh/mesh_io.h"
+#include "core/progress.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
 #include "test_support.h"
@@ -393,6 +394,42 @@ TEST_F(Tiler, OverfullBricksAreSlicedWithoutChangingTheFile) {
   const std::string got = tiled(field, o, MeshFormat::Ply, 150000, &r);
   EXPECT_GT(r.bricks_extracted, r.plan.total());
   EXPECT_EQ(got, whole(field, o, MeshFormat::Ply));
+}
+
+// A budget that one-cell slices of a dense surface still overflow: TiledOptions::warn hears it
+// once, before any brick is extracted, and the file is still exact. Macet counts its crossings
+// (and their halo's) once the bricks are counted: torus 33's one-cell slices need about 76 kB.
+TEST_F(Tiler, ABudgetTheSurfaceOverflowsIsSaidBeforeExtracting) {
+  const std::string field = "field:torus:33";
+  const ExtractOptions o = options(Method::Macet);
+  const std::string want = whole(field, o, MeshFormat::Ply);
+  for (std::uint64_t memory : {std::uint64_t{6000}, std::uint64_t{1} << 30}) {
+    TiledOptions to;
+    to.extract = o;
+    to.memory = memory;
+    std::vector<std::string> said;
+    bool extracting_before = false;  // an extraction report before the warning
+    Progress progress([&](const ProgressUpdate& u) {
+      if (u.stage == Stage::Extract && said.empty()) extracting_before = true;
+      return true;
+    });
+    to.progress = &progress;
+    to.warn = [&](const std::string& line) { said.push_back(line); };
+    const fs::path out = dir_ / "warned.ply";
+    const TiledResult r = extract_tiled(*open_volume_source(field, {}), to, out);
+    EXPECT_EQ(slurp(out), want) << memory;
+    if (memory == 6000) {
+      ASSERT_EQ(said.size(), 1u);
+      EXPECT_NE(said[0].find("memory budget of 6000 bytes is too small for this surface"),
+                std::string::npos)
+          << said[0];
+      EXPECT_GT(r.largest_brick_bytes, memory);
+      EXPECT_FALSE(extracting_before);
+    } else {
+      EXPECT_TRUE(said.empty());
+      EXPECT_LE(r.largest_brick_bytes, memory);
+    }
+  }
 }
 
 TEST_F(Tiler, RealVolumeWithASmallBudget) {

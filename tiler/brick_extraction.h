@@ -96,7 +96,8 @@ class BrickExtraction {
   std::vector<std::uint64_t>& brick_vertices() { return brick_vertices_; }
   std::vector<std::uint64_t>& brick_faces() { return brick_faces_; }
   // Once every brick is counted (in these tables): the exclusive scan, the totals and the
-  // file's layout. InputError for binary STL past 2^32 - 1 triangles.
+  // file's layout. InputError for binary STL past 2^32 - 1 triangles. A budget that even one-cell
+  // z-slices of the densest brick overflow goes to TiledOptions::warn.
   void scan(TiledResult& result);
   // The file's header (PLY or STL), written at offset 0.
   std::string header() const;
@@ -121,6 +122,8 @@ class BrickExtraction {
   const std::optional<GpuReport>& gpu() const { return gpu_; }
 
  private:
+  // The z-slices brick b is cut into for its counted output to fit the budget.
+  BrickReader::Slicing slicing(std::int64_t b) const;
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
                         SegmentTable& table);
   // The final index of every vertex a brick lists, and whether the brick owns (writes) it.

@@ -4,6 +4,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <string>
 
 #include "core/volume/volume_io.h"
 
@@ -93,10 +94,15 @@ std::uint64_t BrickReader::kept_bytes() const {
                        static_cast<std::uint64_t>(n_[1]) * scalar_size(src_.type);
 }
 
-// Macet displaces every grid vertex of its view, halo included, and keeps about 70 bytes per
-// crossing for it (peak RSS in core over MC's: bonsai +24 MB for 335k crossings, engine +18.5
-// MB for 293k). 4 bytes per sample allows for a crossing at 5.7% of the samples (engine 3.5%,
-// bonsai 2%). The other extractors' state is per cell with output, in output_bytes_per_cell.
+// Macet displaces every grid vertex of its view, halo included, and keeps about 90 bytes per
+// crossing for it: smooth_all()'s 58 per crossed edge and find_grid_vertices()'s 32 per displaced
+// grid vertex, about one per crossing (massif at the peak of a 128^3 gzip'd volume's slices at
+// --memory 2MiB: 22.5k crossed edges, 22.9k displaced grid vertices, 2.04 MB). Before a brick is
+// counted, 4 bytes per sample allows for a crossing at 4.4% of the samples (engine has 3.5%,
+// bonsai 2%); once it is counted, estimate() takes its real crossings where they are denser. The
+// other extractors' state is per cell with output, in output_bytes_per_cell.
+constexpr double kMacetBytesPerCrossing = 90;
+
 double BrickReader::state_bytes_per_sample() const {
   return ex_.method == Method::Macet ? 4.0 : 0.0;
 }
@@ -114,9 +120,16 @@ std::uint64_t BrickReader::estimate(const Box3& cells, std::uint64_t vertices, s
   const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
   const double per_face = 16.0 + 4 * 8 + extra_per_face;
   const double sample_buffers = read_ahead_ ? 2 : 1;
+  double state = samples * state_bytes_per_sample();
+  if (ex_.method == Method::Macet) {
+    // Macet's crossings: the brick's own vertices, and its halo's at the same density.
+    const double own = static_cast<double>(cells.extent(0)) * static_cast<double>(cells.extent(1)) *
+                       static_cast<double>(cells.extent(2));
+    state = std::max(state, static_cast<double>(vertices) * samples / std::max(own, 1.0) *
+                                kMacetBytesPerCrossing);
+  }
   return static_cast<std::uint64_t>(
-      samples * (static_cast<double>(sample_bytes()) * sample_buffers + 0.125 +
-                 state_bytes_per_sample()) +
+      samples * (static_cast<double>(sample_bytes()) * sample_buffers + 0.125) + state +
       static_cast<double>(vertices) * per_vertex * 1.25 + static_cast<double>(faces) * per_face +
       static_cast<double>(kept_bytes()));
 }
@@ -145,6 +158,13 @@ BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertice
     if (s.bytes <= memory || s.count >= depth) return s;
     ++s.count;
   }
+}
+
+std::string over_budget_warning(std::uint64_t memory, std::uint64_t need) {
+  return "the memory budget of " + std::to_string(memory) +
+         " bytes is too small for this surface: a one-cell z-slice of its densest brick needs " +
+         std::to_string(need) + " bytes (its samples with their halo and its counted output); " +
+         "the run goes over the budget";
 }
 
 void QualityAccumulator::add(double q) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/extract/brick_sites.h"
@@ -78,6 +79,10 @@ class BrickReader {
   double read_seconds_ = 0;
   bool read_ahead_ = false;
 };
+
+// TiledOptions::warn's line for a budget that a counted brick overflows even cut into one-cell
+// z-slices (a dense surface): `need` is the largest such slice's estimate.
+std::string over_budget_warning(std::uint64_t memory, std::uint64_t need);
 
 // Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
 // exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5). The sum

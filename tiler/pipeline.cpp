@@ -1,6 +1,7 @@
 #include "tiler/pipeline.h"
 
 #include <malloc.h>
+#include <cstdio>
 
 #include <chrono>
 #include <cmath>
@@ -72,6 +73,10 @@ TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions&
         "--check-intersections needs the whole mesh in memory; drop --memory, or run "
         "`isotile quality --check-intersections` on the output");
   to.progress = options.progress;
+  // Shown under --quiet too: the budget the user asked for is not kept.
+  to.warn = [](const std::string& line) {
+    std::fprintf(stderr, "isotile: warning: %s\n", line.c_str());
+  };
   return to;
 }
 

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <string>
 #include <string_view>
 
 #include "core/extract/extract.h"
@@ -52,6 +53,10 @@ struct TiledOptions {
   // Told of each brick counted and extracted (Stage::Count, Stage::Extract, the brick set);
   // null: nobody listens. Cancelling throws Cancelled and leaves no output file.
   Progress* progress = nullptr;
+  // Told once, after the count and before any brick is extracted, when the run must go over the
+  // budget: a brick whose surface is so dense that even its one-cell z-slices overflow it (the
+  // mesh is still exact). null: nobody is told (largest_brick_bytes says it).
+  std::function<void(const std::string&)> warn;
 };
 
 struct TiledResult {

@@ -199,16 +199,26 @@ class TiledSimplification {
     const std::int64_t bricks = plan_.total();
     result.seconds_count = since(t0);
 
+    // An even count would cut at the brick's middle plane, which is also a seam cell's boundary:
+    // that cut would stay locked in both passes.
+    auto slicing = [&](std::int64_t b) {
+      return reader_.slice(plan_.cells(b), brick_vertices[b], brick_faces[b], opt_.memory,
+                           kSimplifyBytesPerFace, true);
+    };
+    // Bricks whose one-cell slices still overflow the budget: said before anything is extracted.
+    std::uint64_t need = 0;
+    for (std::int64_t b = 0; b < bricks; ++b)
+      if (const BrickReader::Slicing cut = slicing(b); cut.bytes > opt_.memory)
+        need = std::max(need, cut.bytes);
+    if (need > 0 && opt_.warn) opt_.warn(over_budget_warning(opt_.memory, need));
+
     // 2. Extract and simplify each brick; spill its octants.
     t0 = Clock::now();
     chunks_.assign(static_cast<std::size_t>(bricks) * 8, {});
     src_.rewind();
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
-      // An even count would cut at the brick's middle plane, which is also a seam cell's
-      // boundary: that cut would stay locked in both passes.
-      const BrickReader::Slicing cut = reader_.slice(cells, brick_vertices[b], brick_faces[b],
-                                                     opt_.memory, kSimplifyBytesPerFace, true);
+      const BrickReader::Slicing cut = slicing(b);
       const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
         Box3 part = cells;
