@@ -152,9 +152,11 @@ if in_part 2; then
 # 6. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5), with
 # the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick. "hpe"
 # is the HistoPyramid with per-element output passes: whether it beats "hp" decides the default.
-big=--gyroid512
-[ "$size" = 192 ] && big=
-limit 360 bench_backends --threads 16 $big ${data:+--data "$data"} | tee "$out/bench_backends.txt"
+big=--gyroid512 bench_repeat=5
+# --quick: one run per cell of the table (at five, llvmpipe took more than 600 s on gyroid 256)
+[ "$size" = 192 ] && big= bench_repeat=1
+limit 360 bench_backends --threads 16 --repeat $bench_repeat $big ${data:+--data "$data"} |
+  tee "$out/bench_backends.txt"
 report bench_backends $?
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
 # The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
