@@ -50,10 +50,10 @@ packages=(
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev
   help2man
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-skimage
-  python3-meshio
+  python3-meshio python3-vtk9
 )
 if [ "$bench" = 1 ]; then
-  packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev python3-vtk9)
+  packages+=(libbenchmark-dev libvtk9-dev libmeshoptimizer-dev)
   extra+=(-DISOTILE_BUILD_BENCHMARKS=ON)
 fi
 
