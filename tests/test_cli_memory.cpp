@@ -88,7 +88,7 @@ TEST_F(CliMemory, PeakRssStaysWithinTheBudgetAboveTheBaseline) {
       // Slabs of a gzip'd file, with the planes kept between slabs and zlib's buffers. The
       // surface is dense (630k triangles): Macet's crossings, counted per crossing once the
       // slabs are counted, cut them into thinner slices (before, Macet peaked 0.06-0.25 MiB
-      // over 4 MiB here; with ASLR off, 8 runs).
+      // over 4 MiB here; with ASLR off, 6 runs).
       {waves, tiny_waves, " --iso 128.5 --method mc --memory 4MiB", 4},
       {waves, tiny_waves, " --iso 128.5 --method macet --memory 4MiB", 4},
       {waves, tiny_waves, " --iso 128.5 --method dc --memory 4MiB", 4},
