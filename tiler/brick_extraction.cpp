@@ -138,12 +138,22 @@ void BrickExtraction::scan(TiledResult& result) {
     face_base_ = kStlHeaderBytes;
     face_bytes_ = (quads_ ? 2 : 1) * kStlTriangleBytes;
   }
-  // Bricks whose one-cell slices still overflow the budget: said before anything is extracted.
-  std::uint64_t need = 0;
-  for (std::int64_t b = 0; b < plan_.total(); ++b)
-    if (const BrickReader::Slicing cut = slicing(b); cut.bytes > opt_.memory)
-      need = std::max(need, cut.bytes);
-  if (need > 0 && opt_.warn) opt_.warn(over_budget_warning(opt_.memory, need));
+  // The real output is known now: a brick whose output would overflow the budget is cut into
+  // thinner z-slices.
+  cuts_ = slice_bricks(
+      plan_.total(),
+      [&](std::int64_t b) {
+        const auto i = static_cast<std::size_t>(b);
+        // Records of the part before, still being written while this one is extracted.
+        double extra_per_face = 0;
+        if (overlap_ && brick_faces_[i] > 0)
+          extra_per_face = static_cast<double>(face_bytes_) +
+                           static_cast<double>(vertex_bytes_ * brick_vertices_[i]) /
+                               static_cast<double>(brick_faces_[i]);
+        return reader_.slice(plan_.cells(b), brick_vertices_[i], brick_faces_[i], opt_.memory,
+                             extra_per_face);
+      },
+      opt_.memory, opt_.warn);
 }
 
 std::string BrickExtraction::header() const {
@@ -161,23 +171,9 @@ void BrickExtraction::extract(std::int64_t b, const WriteAt& write, QualityAccum
     this->write(extract_part(part, read_part(part, buffer), quality), write);
 }
 
-BrickReader::Slicing BrickExtraction::slicing(std::int64_t b) const {
-  const auto i = static_cast<std::size_t>(b);
-  // Records of the part before, still being written while this one is extracted.
-  double extra_per_face = 0;
-  if (overlap_ && brick_faces_[i] > 0)
-    extra_per_face =
-        static_cast<double>(face_bytes_) + static_cast<double>(vertex_bytes_ * brick_vertices_[i]) /
-                                               static_cast<double>(brick_faces_[i]);
-  // The real output is known now: cut a brick whose output would overflow the budget into
-  // thinner z-slices.
-  return reader_.slice(plan_.cells(b), brick_vertices_[i], brick_faces_[i], opt_.memory,
-                       extra_per_face);
-}
-
 std::vector<Box3> BrickExtraction::parts(std::int64_t b, TiledResult& result) {
   const Box3 cells = plan_.cells(b);
-  const BrickReader::Slicing cut = slicing(b);
+  const BrickReader::Slicing cut = cuts_[static_cast<std::size_t>(b)];
   const std::int64_t slices = cut.count;
   std::vector<Box3> out;
   for (std::int64_t s = 0; s < slices; ++s) {

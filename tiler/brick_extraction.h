@@ -96,8 +96,9 @@ class BrickExtraction {
   std::vector<std::uint64_t>& brick_vertices() { return brick_vertices_; }
   std::vector<std::uint64_t>& brick_faces() { return brick_faces_; }
   // Once every brick is counted (in these tables): the exclusive scan, the totals and the
-  // file's layout. InputError for binary STL past 2^32 - 1 triangles. A budget that even one-cell
-  // z-slices of the densest brick overflow goes to TiledOptions::warn.
+  // file's layout, and each brick's z-slices (slice_bricks(): a budget that even one-cell slices
+  // of the densest brick overflow goes to TiledOptions::warn). InputError for binary STL past
+  // 2^32 - 1 triangles.
   void scan(TiledResult& result);
   // The file's header (PLY or STL), written at offset 0.
   std::string header() const;
@@ -122,8 +123,6 @@ class BrickExtraction {
   const std::optional<GpuReport>& gpu() const { return gpu_; }
 
  private:
-  // The z-slices brick b is cut into for its counted output to fit the budget.
-  BrickReader::Slicing slicing(std::int64_t b) const;
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
                         SegmentTable& table);
   // The final index of every vertex a brick lists, and whether the brick owns (writes) it.
@@ -156,6 +155,7 @@ class BrickExtraction {
   BrickPlan plan_;
   std::unique_ptr<SegmentTable> vseg_, fseg_;
   std::vector<std::uint64_t> brick_vertices_, brick_faces_;
+  std::vector<BrickReader::Slicing> cuts_;  // each brick's z-slices, from scan()
   std::uint64_t vertices_ = 0, faces_ = 0;
   bool index64_ = false;
   std::uint64_t vertex_base_ = 0, vertex_bytes_ = 12, face_base_ = 0, face_bytes_ = 13;

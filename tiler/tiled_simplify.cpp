@@ -201,16 +201,13 @@ class TiledSimplification {
 
     // An even count would cut at the brick's middle plane, which is also a seam cell's boundary:
     // that cut would stay locked in both passes.
-    auto slicing = [&](std::int64_t b) {
-      return reader_.slice(plan_.cells(b), brick_vertices[b], brick_faces[b], opt_.memory,
-                           kSimplifyBytesPerFace, true);
-    };
-    // Bricks whose one-cell slices still overflow the budget: said before anything is extracted.
-    std::uint64_t need = 0;
-    for (std::int64_t b = 0; b < bricks; ++b)
-      if (const BrickReader::Slicing cut = slicing(b); cut.bytes > opt_.memory)
-        need = std::max(need, cut.bytes);
-    if (need > 0 && opt_.warn) opt_.warn(over_budget_warning(opt_.memory, need));
+    const std::vector<BrickReader::Slicing> cuts = slice_bricks(
+        bricks,
+        [&](std::int64_t b) {
+          return reader_.slice(plan_.cells(b), brick_vertices[b], brick_faces[b], opt_.memory,
+                               kSimplifyBytesPerFace, true);
+        },
+        opt_.memory, opt_.warn);
 
     // 2. Extract and simplify each brick; spill its octants.
     t0 = Clock::now();
@@ -218,7 +215,7 @@ class TiledSimplification {
     src_.rewind();
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
-      const BrickReader::Slicing cut = slicing(b);
+      const BrickReader::Slicing& cut = cuts[static_cast<std::size_t>(b)];
       const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
         Box3 part = cells;
