@@ -173,7 +173,7 @@ void BrickExtraction::extract(std::int64_t b, const WriteAt& write, QualityAccum
 
 std::vector<Box3> BrickExtraction::parts(std::int64_t b, TiledResult& result) {
   const Box3 cells = plan_.cells(b);
-  const BrickReader::Slicing cut = cuts_[static_cast<std::size_t>(b)];
+  const BrickReader::Slicing& cut = cuts_[static_cast<std::size_t>(b)];
   const std::int64_t slices = cut.count;
   std::vector<Box3> out;
   for (std::int64_t s = 0; s < slices; ++s) {
