@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <utility>
 
 namespace isotile {
@@ -28,6 +29,13 @@ std::string_view stage_name(Stage stage) {
 
 double stage_series_fraction(int n, double fraction) {
   return 1 - std::ldexp(1.0, 1 - n) + std::ldexp(1.0, -n) * fraction;
+}
+
+void say_warning(const Warn& to, const std::string& line) {
+  if (to)
+    to(line);
+  else
+    std::fprintf(stderr, "isotile: warning: %s\n", line.c_str());
 }
 
 Progress::Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks)

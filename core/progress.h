@@ -29,6 +29,7 @@
 #include <functional>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <string_view>
 
 #include "core/errors.h"
@@ -53,6 +54,17 @@ struct ProgressUpdate {
 
 // Returns whether to go on. Called one call at a time, from whichever thread advanced the work.
 using ProgressCallback = std::function<bool(const ProgressUpdate&)>;
+
+// Told, one line at a time and without the "isotile: warning: " that stderr gets, what a run
+// does other than it was asked while its result stays right: auto's fall back to the CPU after a
+// GPU backend failed (ExtractOptions::warn), a memory budget the surface overflows
+// (TiledOptions::warn). Front ends route it to their own channel (the MeshLab plugin's log,
+// Python's warnings). Called from the thread that found it, at most a few times a run.
+using Warn = std::function<void(const std::string&)>;
+
+// `line` to `to`, or where `to` is null to stderr as "isotile: warning: LINE", so that a caller
+// that set nothing still hears it.
+void say_warning(const Warn& to, const std::string& line);
 
 // Thrown out of the library when a progress callback (or cancel()) asked to stop.
 struct Cancelled : Error {

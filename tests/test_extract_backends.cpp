@@ -60,10 +60,21 @@ TEST_F(AutoBackend, AFailingBackendUnderAutoIsFollowedByTheCpu) {
   EXPECT_EQ(ran.backend, Backend::Cpu);
   EXPECT_NE(ran.reason.find("the device lost its context"), std::string::npos) << ran.reason;
   EXPECT_EQ(err,
-            "isotile: the gs backend failed (the device lost its context); extracting on the CPU "
-            "instead\n");
+            "isotile: warning: the gs backend failed (the device lost its context); extracting "
+            "on the CPU instead\n");
   EXPECT_TRUE(mesh.positions == reference.positions);
   EXPECT_TRUE(mesh.triangles == reference.triangles);
+
+  // A caller that hears the warnings itself gets the line, and stderr nothing.
+  std::vector<std::string> said;
+  ExtractOptions heard = options_;
+  heard.warn = [&](const std::string& line) { said.push_back(line); };
+  testing::internal::CaptureStderr();
+  const Mesh again = extract(volume_.view(), heard);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  EXPECT_EQ(said, std::vector<std::string>{"the gs backend failed (the device lost its context); "
+                                           "extracting on the CPU instead"});
+  EXPECT_TRUE(again.triangles == reference.triangles);
 
   // Asked for by name, the same backend's failure is the caller's error.
   ExtractOptions gs = options_;

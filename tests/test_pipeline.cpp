@@ -146,6 +146,31 @@ TEST_F(Pipeline, ThePluginsRunAutoIsoUnderABudgetWithSimplification) {
   EXPECT_EQ(c.triangles_extracted, r.triangles_extracted);
 }
 
+// The run's warnings go to PipelineOptions::warn where a front end sets it (the plugin's log,
+// Python's warnings), else to stderr as the CLI prints them: here a budget that Macet's one-cell
+// slices of torus 33 overflow (tests/test_tiler.cpp), said once; the file is still exact.
+TEST_F(Pipeline, WarningsGoWhereTheFrontEndSaysElseToStderr) {
+  PipelineOptions o;
+  o.extract.method = Method::Macet;
+  o.output = (dir_ / "whole.ply").string();
+  run_pipeline(input("field:torus:33"), o);
+  o.memory = "6000";
+  o.output = (dir_ / "warned.ply").string();
+  std::vector<std::string> said;
+  o.warn = [&](const std::string& line) { said.push_back(line); };
+  ::testing::internal::CaptureStderr();
+  run_pipeline(input("field:torus:33"), o);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+  ASSERT_EQ(said.size(), 1u);
+  EXPECT_EQ(said[0].rfind("the memory budget of 6000 bytes is too small for this surface", 0), 0u)
+      << said[0];
+  EXPECT_EQ(slurp(dir_ / "warned.ply"), slurp(dir_ / "whole.ply"));
+  o.warn = nullptr;
+  ::testing::internal::CaptureStderr();
+  run_pipeline(input("field:torus:33"), o);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "isotile: warning: " + said[0] + "\n");
+}
+
 // The samples' range (options.range) comes back for a front end to show, from what the run read:
 // in core one pass or iso_auto's histogram, out of core the histogram.
 TEST_F(Pipeline, ReportsTheSamplesRange) {

@@ -162,7 +162,7 @@ BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertice
 
 std::vector<BrickReader::Slicing> slice_bricks(
     std::int64_t bricks, const std::function<BrickReader::Slicing(std::int64_t)>& slice_brick,
-    std::uint64_t memory, const std::function<void(const std::string&)>& warn) {
+    std::uint64_t memory, const Warn& warn) {
   std::vector<BrickReader::Slicing> cuts;
   cuts.reserve(static_cast<std::size_t>(bricks));
   std::uint64_t need = 0;
@@ -170,11 +170,13 @@ std::vector<BrickReader::Slicing> slice_bricks(
     cuts.push_back(slice_brick(b));
     if (cuts.back().bytes > memory) need = std::max(need, cuts.back().bytes);
   }
-  if (need > 0 && warn)
-    warn("the memory budget of " + std::to_string(memory) +
-         " bytes is too small for this surface: a one-cell z-slice of its densest brick needs " +
-         std::to_string(need) + " bytes (its samples with their halo and its counted output); " +
-         "the run goes over the budget");
+  if (need > 0)
+    say_warning(
+        warn,
+        "the memory budget of " + std::to_string(memory) +
+            " bytes is too small for this surface: a one-cell z-slice of its densest brick needs " +
+            std::to_string(need) + " bytes (its samples with their halo and its counted output); " +
+            "the run goes over the budget");
   return cuts;
 }
 

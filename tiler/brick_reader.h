@@ -82,12 +82,12 @@ class BrickReader {
 };
 
 // Once every brick of a plan is counted: the slicing of bricks 0..bricks-1 (`slice_brick`), and
-// one line to `warn` (when set), before anything is extracted, where some brick's one-cell
-// z-slices still overflow `memory` (a surface denser than the budget allows), naming the largest
-// slice's bytes. The run then goes over the budget.
+// one line to `warn` (say_warning(), core/progress.h), before anything is extracted, where some
+// brick's one-cell z-slices still overflow `memory` (a surface denser than the budget allows),
+// naming the largest slice's bytes. The run then goes over the budget.
 std::vector<BrickReader::Slicing> slice_bricks(
     std::int64_t bricks, const std::function<BrickReader::Slicing(std::int64_t)>& slice_brick,
-    std::uint64_t memory, const std::function<void(const std::string&)>& warn);
+    std::uint64_t memory, const Warn& warn);
 
 // Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
 // exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5). The sum

@@ -315,7 +315,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   TiledOptions options = requested;
   const Ranks mpi;
   const int me = mpi.rank(), ranks = mpi.size();
-  if (me != 0) options.warn = nullptr;  // every rank would say the same
+  if (me != 0) options.warn = [](const std::string&) {};  // every rank would say the same
   DistributedResult out;
   out.ranks = ranks;
   TiledResult& result = out.tiled;

@@ -1,7 +1,6 @@
 #include "tiler/pipeline.h"
 
 #include <malloc.h>
-#include <cstdio>
 
 #include <chrono>
 #include <cmath>
@@ -73,10 +72,7 @@ TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions&
         "--check-intersections needs the whole mesh in memory; drop --memory, or run "
         "`isotile quality --check-intersections` on the output");
   to.progress = options.progress;
-  // Shown under --quiet too: the budget the user asked for is not kept.
-  to.warn = [](const std::string& line) {
-    std::fprintf(stderr, "isotile: warning: %s\n", line.c_str());
-  };
+  to.warn = options.warn;
   return to;
 }
 
@@ -229,6 +225,7 @@ ExtractOptions pipeline_extract_options(const PipelineInput& input,
   ExtractOptions eo = options.extract;
   eo.cells = {};
   eo.progress = nullptr;
+  eo.warn = options.warn;
   const std::optional<FieldSpec> field = parse_field_spec(input.path);
   if (options.iso && !options.iso_auto) {
     if (!std::isfinite(*options.iso))

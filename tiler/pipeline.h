@@ -54,8 +54,8 @@ struct PipelineOptions {
   // iso_auto: Otsu's threshold of the samples' histogram (core/volume/otsu_isovalue.h).
   std::optional<double> iso;
   bool iso_auto = false;
-  // Method, backend, normals, Dual Contouring's and Macet's options. Its iso, cells and progress
-  // are set by the run.
+  // Method, backend, normals, Dual Contouring's and Macet's options. Its iso, cells, progress and
+  // warn are set by the run.
   ExtractOptions extract;
   bool world_frame = true;           // positions in the volume's world frame (else the grid frame)
   double simplify = 1;               // fraction of faces kept, (0, 1]; 1: off
@@ -88,6 +88,10 @@ struct PipelineOptions {
   // One line per step ("reading ct.nrrd", "--iso auto: 412 (...)", ...), as the CLI prints them;
   // empty: silent.
   std::function<void(const std::string&)> log;
+  // Told what the run does other than asked while its result stays right (core/progress.h: a GPU
+  // backend's failure under auto, a memory budget the surface overflows); null: stderr, as
+  // "isotile: warning: LINE" (the CLI's, shown under --quiet too).
+  Warn warn;
   // In core with `output`: called with the mesh as written (world frame where it applies), e.g.
   // to draw it; its time is left out of the stats' write seconds.
   std::function<void(const Mesh&)> written;

@@ -49,14 +49,13 @@ struct TiledOptions {
   // InputError naming the samples' range (found by one more pass, on that error only) before
   // the output is touched; true writes the empty mesh.
   bool allow_empty = true;
-  // Called after each brick of each pass ("count", "extract").
   // Told of each brick counted and extracted (Stage::Count, Stage::Extract, the brick set);
   // null: nobody listens. Cancelling throws Cancelled and leaves no output file.
   Progress* progress = nullptr;
-  // Told once, after the count and before any brick is extracted, when the run must go over the
-  // budget: a brick whose surface is so dense that even its one-cell z-slices overflow it (the
-  // mesh is still exact). null: nobody is told (largest_brick_bytes says it).
-  std::function<void(const std::string&)> warn;
+  // Told once (core/progress.h), after the count and before any brick is extracted, when the run
+  // must go over the budget: a brick whose surface is so dense that even its one-cell z-slices
+  // overflow it (the mesh is still exact; largest_brick_bytes says it too). Null: stderr.
+  Warn warn;
 };
 
 struct TiledResult {

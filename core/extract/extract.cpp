@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cstdio>
 #include <cstdlib>
 #include <string>
 
@@ -277,8 +276,8 @@ Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoic
   try {
     return run();
   } catch (const Error& e) {
-    std::fprintf(stderr, "isotile: the %s backend failed (%s); extracting on the CPU instead\n",
-                 std::string(entry(b).name).c_str(), e.what());
+    say_warning(options.warn, "the " + std::string(entry(b).name) + " backend failed (" + e.what() +
+                                  "); extracting on the CPU instead");
     if (ran)
       *ran = {Backend::Cpu, "auto: the CPU after the " + std::string(entry(b).name) +
                                 " backend failed: " + e.what()};

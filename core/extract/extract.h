@@ -52,6 +52,9 @@ struct ExtractOptions {
   // Told of the extraction's progress (Stage::Count, Stage::Extract, Stage::MacetSearch); null:
   // nobody listens. Cancelling throws Cancelled.
   Progress* progress = nullptr;
+  // Told when Backend::Auto's GPU backend fails and the CPU extracts instead (core/progress.h);
+  // null: stderr.
+  Warn warn{};
 };
 
 // Samples beyond a brick's cells that `options` needs the view to hold.
