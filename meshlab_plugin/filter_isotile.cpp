@@ -387,6 +387,8 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   if (p.simplify < 1)
     Log("isotile: simplified from %llu triangles",
         static_cast<unsigned long long>(r.triangles_extracted));
+  for (const std::string& line : r.warnings)
+    Log(GLLogStream::WARNING, "isotile: warning: %s", line.c_str());
   return true;
 }
 

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
@@ -250,6 +251,12 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     mesh_file = tmp->path / "bricks.ply";
     options.output = mesh_file.string();
   }
+  IsosurfaceResult r;
+  std::mutex said;  // a warning may come from a worker thread
+  options.warn = [&](const std::string& line) {
+    std::lock_guard lock(said);
+    r.warnings.push_back(line);
+  };
   PipelineResult run;
   try {
     run = run_pipeline(input, options);
@@ -260,7 +267,6 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
                      "; set iso inside the range, or to nan for the automatic isovalue");
   }
 
-  IsosurfaceResult r;
   if (!mesh_file.empty()) {
     if (progress) progress("loading the bricks' mesh", 0.9);
     r.mesh = read_mesh(mesh_file);

@@ -12,6 +12,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/mesh/mesh.h"
 #include "core/mesh/mesh_quality.h"
@@ -65,7 +66,10 @@ struct IsosurfaceResult {
   std::uint64_t triangles_extracted = 0;
   QualityStats quality;
   double seconds = 0;
-  std::string note;  // what the caller should log besides (e.g. a fallback), or empty
+  // The run's warnings (PipelineOptions::warn: a GPU backend's failure under auto, a memory
+  // budget the surface overflows), in order, for the log: not on MeshLab's stderr, which a GUI
+  // user never sees.
+  std::vector<std::string> warnings;
 };
 
 // Progress: what is being done (the stage) and the fraction of the whole run done, in [0, 1].

@@ -340,6 +340,23 @@ TEST_F(MeshlabServer, BricksSimplificationAndTheSimplifyFilter) {
 
 // Simplifying a layer the isosurface filter coloured by quality paints it again from the new
 // faces' quality; other colours are dropped, saying so.
+// A warning of the run (here a budget that Macet's one-cell slices of the nucleon overflow) is in
+// MeshLab's log at its warning level, where a GUI user sees it, and not printed by the library on
+// stderr (meshlabserver echoes its log there, as "LOG: LEVEL line"); the layer is still exact.
+TEST_F(MeshlabServer, TheRunsWarningsAreInTheLog) {
+  const ServerRun r =
+      run(script({{"file", kNucleon}, {"iso", "60.5"}, {"method", "1"}, {"memory", "200000"}}));
+  ASSERT_EQ(r.code, 0) << r.log;
+  const std::string line =
+      "isotile: warning: the memory budget of 200000 bytes is too small for this surface";
+  EXPECT_NE(r.out.find(line), std::string::npos) << r.log;
+  const std::string err = "\n" + slurp(dir_ / "err.txt");
+  EXPECT_NE(err.find("\nLOG: 1 " + line), std::string::npos) << r.log;  // GLLogStream::WARNING
+  EXPECT_EQ(err.find("\nisotile: warning:"), std::string::npos) << r.log;
+  expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"),
+                   cli(kNucleon + " --iso 60.5 --method macet"), "warned");
+}
+
 TEST_F(MeshlabServer, SimplifyRecoloursTheQualityRampAndDropsOtherColours) {
   ServerRun r =
       run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})), "out.ply", "-m fc fq sa");
