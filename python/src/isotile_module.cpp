@@ -22,6 +22,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "core/errors.h"
 #include "core/extract/cell_mask.h"
@@ -112,6 +113,34 @@ auto run_released(std::optional<int> threads, F&& f) {
   return f();
 }
 
+// The library's warnings (core/progress.h), kept from whichever thread says them until the
+// calling thread, holding the GIL, hands them to Python's warnings.
+class Warnings {
+ public:
+  Warn sink() {
+    return [this](const std::string& line) {
+      std::lock_guard lock(mutex_);
+      lines_.push_back(line);
+    };
+  }
+  // Under the GIL: each line kept so far as a RuntimeWarning, attributed to the code that called
+  // the isotile function (stack level 2: past the pure-Python layer). Where a warnings filter
+  // makes them errors, the first one is raised (py::error_already_set) and the rest dropped.
+  void issue() {
+    std::vector<std::string> lines;
+    {
+      std::lock_guard lock(mutex_);
+      lines.swap(lines_);
+    }
+    for (const std::string& line : lines)
+      if (PyErr_WarnEx(PyExc_RuntimeWarning, line.c_str(), 2) < 0) throw py::error_already_set();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::string> lines_;
+};
+
 // What one extraction hands to Python: the arrays point into it, a capsule owns it.
 struct Result {
   Mesh mesh;
@@ -178,6 +207,8 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
   if (quality != "fast" && quality != "max")
     throw py::value_error("quality must be fast or max, not '" + quality + "'");
   options.quality = quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
+  Warnings warnings;
+  options.warn = warnings.sink();
   auto* result = new Result;
   py::capsule owner = owner_of(result);  // frees the result on any exception below
   enum class Level { Ok, NaN, OutOfRange } level_check = Level::Ok;
@@ -198,6 +229,7 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
     if (values) result->values = vertex_cell_ranges(view, result->mesh);
     return 0;
   });
+  warnings.issue();
   // scikit-image's messages.
   if (level_check == Level::NaN) throw py::value_error("Surface level must be a number, not NaN.");
   if (level_check == Level::OutOfRange)
@@ -576,6 +608,18 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     return !bridge.error && !bridge.declined;
   });
   po.progress = &reporter;
+  // Issued while the run goes on (the watcher below), so that a long run's warning is seen when
+  // it is said; a filter that makes them errors cancels the run.
+  Warnings warnings;
+  po.warn = warnings.sink();
+  const auto issue_warnings = [&] {
+    if (bridge.error) return;
+    try {
+      warnings.issue();
+    } catch (py::error_already_set& e) {
+      bridge.error.emplace(std::move(e));
+    }
+  };
 
   PipelineResult result;
   std::exception_ptr failure;
@@ -604,6 +648,7 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
       {
         py::gil_scoped_acquire gil;
         if (!bridge.error && PyErr_CheckSignals() != 0) bridge.error.emplace();
+        issue_warnings();
         if (bridge.error) reporter.cancel();
       }
       lock.lock();
@@ -611,6 +656,7 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     lock.unlock();
     worker.join();
   }
+  issue_warnings();  // those said after the watcher's last look
   if (bridge.error) {
     // A run that finished before it saw the cancel is undone: an interrupted call leaves no file.
     if (!failure && !po.output.empty()) {

@@ -9,6 +9,7 @@ import pathlib
 import signal
 import subprocess
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -181,6 +182,25 @@ def test_errors_are_the_clis(tmp_path, ball):
     with pytest.raises(ValueError):
         isotile.extract(ball, 100, output=tmp_path / "mesh.xyz")
     assert not (tmp_path / "mesh.xyz").exists()
+
+
+def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
+    """A warning of the run (a budget that Macet's one-cell slices of torus 33 overflow) is a
+    RuntimeWarning at the caller's line, not a line on stderr; the file is still exact. Made an
+    error by a warnings filter, it stops the run and leaves no file."""
+    torus = dict(method="macet", stats=False)
+    isotile.extract("field:torus:33", output=tmp_path / "in.ply", **torus)
+    with pytest.warns(RuntimeWarning, match="memory budget of 6000 bytes is too small") as said:
+        isotile.extract("field:torus:33", memory=6000, output=tmp_path / "ooc.ply", **torus)
+    assert len(said) == 1
+    assert said[0].filename == __file__
+    assert (tmp_path / "ooc.ply").read_bytes() == (tmp_path / "in.ply").read_bytes()
+    assert "warning" not in capfd.readouterr().err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(RuntimeWarning, match="memory budget of 6000 bytes"):
+            isotile.extract("field:torus:33", memory=6000, output=tmp_path / "err.ply", **torus)
+    assert not (tmp_path / "err.ply").exists()
 
 
 # --- progress, cancel, Ctrl-C: a tiled run of many bricks (the loops that report today) --------
