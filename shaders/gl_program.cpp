@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "core/errors.h"
 #include "core/extract/macet_table.h"
@@ -119,6 +122,22 @@ GLuint empty_vertex_array() {
 
 namespace {
 
+// A driver's info log as one line of a message: its lines joined by "; ", no trailing newline
+// (Mesa's and NVIDIA's logs end with one, and have a line per error).
+std::string one_line(const char* log) {
+  std::string out;
+  std::string_view rest = log;
+  while (!rest.empty()) {
+    const std::size_t end = std::min(rest.find('\n'), rest.size());
+    std::string_view line = rest.substr(0, end);
+    while (!line.empty() && std::isspace(static_cast<unsigned char>(line.back())))
+      line.remove_suffix(1);
+    if (!line.empty()) out += (out.empty() ? "" : "; ") + std::string(line);
+    rest.remove_prefix(std::min(end + 1, rest.size()));
+  }
+  return out;
+}
+
 GLuint compile(const Stage& s, const std::string& src) {
   const GLuint sh = glCreateShader(s.type);
   const char* text = src.c_str();
@@ -130,7 +149,7 @@ GLuint compile(const Stage& s, const std::string& src) {
     char log[4096] = {};
     glGetShaderInfoLog(sh, sizeof log, nullptr, log);
     glDeleteShader(sh);
-    throw Error("compiling " + std::string(s.file) + " failed: " + log);
+    throw Error("compiling " + std::string(s.file) + " failed: " + one_line(log));
   }
   return sh;
 }
@@ -183,7 +202,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
     char log[4096] = {};
     glGetProgramInfoLog(prog, sizeof log, nullptr, log);
     glDeleteProgram(prog);
-    throw Error("linking " + std::string(stages.front().file) + " failed: " + log);
+    throw Error("linking " + std::string(stages.front().file) + " failed: " + one_line(log));
   }
   check("linking a program");
   store_program(disk_key, prog);

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -443,6 +444,23 @@ TEST(GlHistoPyramid, PyramidLevelsAndOffsetsEqualSumsOnTheCpu) {
       }
   }
   EXPECT_THROW(gl::reduce_levels(gl::Pyramid(8), defines, 4), Error);
+}
+
+// A program the driver rejects is one error line naming its file, with the driver's log joined
+// (Mesa's has a line per error and ends with a newline), as every message of the library is; under
+// auto it becomes the warning's one line.
+TEST(GlProgram, ARejectedProgramIsOneLine) {
+  REQUIRE_GL();
+  gl::Scope scope;
+  try {
+    gl::program({{GL_COMPUTE_SHADER, "hp_classify.comp"}}, "not glsl;\nnor this;\n");
+    ADD_FAILURE() << "the driver took it";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("compiling hp_classify.comp failed: ", 0), 0u) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    EXPECT_FALSE(std::isspace(static_cast<unsigned char>(m.back()))) << m;
+  }
 }
 
 TEST(GlBackends, RegisteredInTheTable) {
