@@ -1,7 +1,11 @@
 # isotile.marching_cubes: the same mesh as the C++ library (through the isotile program) bit for
 # bit, scikit-image's conventions, every dtype and layout read in place, errors, lifetime.
 import gc
+import json
 import os
+import subprocess
+import sys
+import textwrap
 import threading
 import time
 import tracemalloc
@@ -361,3 +365,44 @@ def test_gl_backends_give_the_cpu_mesh(method):
         got = isotile.marching_cubes(vol, 0.0, method=method, backend=backend)
         for a, b in zip(got, cpu):
             assert np.array_equal(a, b), (backend, method)
+
+
+def test_a_gl_failure_under_auto_is_a_warning_and_the_cpus_mesh(tmp_path):
+    """Under backend="auto" a GL backend that fails is followed by the CPU: one RuntimeWarning at
+    the caller's line (one line: the driver's log joined), nothing on stderr, the CPU's mesh.
+    Mesa is made to offer OpenGL 4.5 but accept no GLSL newer than 1.40, so the HistoPyramid's
+    first program fails; in a process of its own, as the GL context is made once per process."""
+    why = isotile.backends().get("hp")
+    if why:
+        skip("gl", f"backend hp unavailable: {why}")
+    script = tmp_path / "fallback.py"
+    script.write_text(textwrap.dedent("""
+        import json, warnings
+        import numpy as np
+        import isotile
+        z, y, x = np.indices((20, 22, 24), dtype=np.float64)
+        vol = (8.0 - np.sqrt((z - 9.5) ** 2 + (y - 10.5) ** 2 + (x - 11.5) ** 2)).astype("f4")
+        cpu = isotile.marching_cubes(vol, 0.0)
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            got = isotile.marching_cubes(vol, 0.0, backend="auto")
+        print(json.dumps({"same": all(np.array_equal(a, b) for a, b in zip(got, cpu)),
+                          "said": [[w.category.__name__, str(w.message), w.filename]
+                                   for w in said]}))
+        """))
+    env = dict(os.environ, ISOTILE_AUTO_BACKEND="hp", ISOTILE_PROGRAM_CACHE="off",
+               MESA_GL_VERSION_OVERRIDE="4.5", MESA_GLSL_VERSION_OVERRIDE="140")
+    r = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "isotile: warning" not in r.stderr, r.stderr
+    out = json.loads(r.stdout)
+    assert out["same"]
+    if not out["said"]:
+        skip("gl", "the GL driver ignores MESA_GLSL_VERSION_OVERRIDE: hp did not fail")
+    assert len(out["said"]) == 1, out["said"]
+    category, message, filename = out["said"][0]
+    assert category == "RuntimeWarning"
+    assert message.startswith("the hp backend failed ("), message
+    assert message.endswith("); extracting on the CPU instead"), message
+    assert "\n" not in message, message
+    assert filename == str(script)
