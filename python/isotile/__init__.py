@@ -112,6 +112,11 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         A dtype that is not a number.
     RuntimeError
         No surface at the given level.
+
+    Warns
+    -----
+    RuntimeWarning
+        With backend="auto", a GPU backend that failed (the CPU's mesh is returned).
     """
     if not isinstance(volume, _np.ndarray) or volume.ndim != 3:
         raise ValueError("Input volume should be a 3D numpy array.")
@@ -353,6 +358,14 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         In core: the mesh (in the world frame unless frame="grid") with its ``stats``.
     dict or None
         Out of core (``memory``): the stats; the mesh is in ``output``.
+
+    Warns
+    -----
+    RuntimeWarning
+        What the CLI says as ``isotile: warning:``, while the run goes on: a ``memory`` budget
+        the surface overflows (the run goes above it; the mesh is exact), or with
+        backend="auto" a GPU backend that failed (the CPU took over). Made an error by a
+        warnings filter, it stops the run and leaves no file.
     """
     options = {"iso": iso}
     local = locals()
