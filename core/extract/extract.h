@@ -118,7 +118,8 @@ struct BackendChoice {
 BackendChoice choose_backend(const ExtractOptions& options);
 
 // Under Backend::Auto, a GL backend that fails (any isotile::Error) is followed by the CPU, with
-// one line on stderr naming the failure: Auto never fails where the CPU would succeed. `ran`, when
+// one line naming the failure to options.warn (null: stderr): Auto never fails where the CPU
+// would succeed. `ran`, when
 // given, gets the backend that made the mesh and why.
 Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoice* ran = nullptr);
 
