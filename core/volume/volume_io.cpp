@@ -207,6 +207,15 @@ void apply_overrides(const RawOptions& raw, Vec3d& spacing, Vec3d& origin,
   }
 }
 
+void apply_overrides(const RawOptions& raw, Volume& volume) {
+  Vec3d spacing = volume.spacing(), origin = volume.origin();
+  std::optional<WorldFrame> world = volume.world();
+  apply_overrides(raw, spacing, origin, world);
+  volume.set_spacing(spacing);
+  volume.set_origin(origin);
+  volume.set_world(world);
+}
+
 }  // namespace
 
 InputKind input_kind(const std::string& input) {
@@ -320,7 +329,11 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
     reject_raw_only_options(input, raw, "procedural field");
     if (!raw.series.empty()) throw InputError(input + ": --series applies to DICOM only");
-    return make_field_volume(*spec);
+    // --spacing and --origin place a field's grid as they do a file's (and as the streamed
+    // source does, so that in core and out of core give the same file).
+    Volume volume = make_field_volume(*spec);
+    apply_overrides(raw, volume);
+    return volume;
   }
   const InputKind kind = input_kind(input);
   if (!raw.series.empty() && kind != InputKind::Dicom)
@@ -348,12 +361,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     check_finite(volume.view(), input);
   }
   if (kind != InputKind::Mrc) progress_advance(raw.progress);
-  Vec3d spacing = volume.spacing(), origin = volume.origin();
-  std::optional<WorldFrame> world = volume.world();
-  apply_overrides(raw, spacing, origin, world);
-  volume.set_spacing(spacing);
-  volume.set_origin(origin);
-  volume.set_world(world);
+  apply_overrides(raw, volume);
   return volume;
 }
 
