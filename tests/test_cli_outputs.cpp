@@ -317,6 +317,61 @@ TEST_F(CliOutputs, BadGeometryInAFileIsAnError) {
   }
 }
 
+// Positions are written as float32: a file whose grid passes float32's range is refused (its
+// vertices would be inf), as is a grid whose cells are narrower than a float32 step (they would
+// collapse); one whose vertices would snap to a coarse lattice (UTM-like coordinates) is said,
+// once, in core, out of core and under --frame grid, and the run goes on.
+TEST_F(CliOutputs, PositionsFloat32CannotHoldAreRefusedAndCoarseOnesSaid) {
+  const std::string data(64, '\x10');
+  {
+    std::ofstream f(dir_ / "huge.nrrd", std::ios::binary);
+    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspacings: 2e38 1 1\n"
+         "encoding: raw\n\n"
+      << data;
+  }
+  for (const std::string memory : {"", " --memory 1MiB"}) {
+    CliResult r = run("extract huge.nrrd --iso 1 --allow-empty -o out.ply" + memory);
+    EXPECT_EQ(r.code, 1) << memory;
+    EXPECT_TRUE(says(r,
+                     "huge.nrrd: the grid's coordinates reach 6e+38, beyond the largest "
+                     "float32 (3.40282e+38), in which positions are written"))
+        << r.err;
+    r = run("extract field:sphere:16 -o out.ply --origin 1,0,0 --spacing 1e-9,1,1" + memory);
+    EXPECT_EQ(r.code, 1) << memory;
+    EXPECT_TRUE(says(r, "the grid's cells, 1e-09 wide, are narrower than a float32 step")) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << memory;
+    for (const std::string frame : {"", " --frame grid"}) {
+      r = run("extract field:sphere:16 -q -o out.ply --origin 5e6,5e6,0" + memory + frame);
+      EXPECT_EQ(r.code, 0) << memory << frame << r.err;
+      EXPECT_EQ(r.err,
+                "isotile: warning: positions are float32: at the grid's coordinates of up to "
+                "5.00002e+06 a float32 steps by 0.5, against cells 1 wide, so vertices snap to a "
+                "lattice of about 2 steps per cell, which makes thin and degenerate triangles; a "
+                "grid nearer 0 (the CLI's --origin) keeps full precision\n")
+          << memory << frame;
+      EXPECT_TRUE(fs::exists(dir_ / "out.ply"));
+      fs::remove(dir_ / "out.ply");
+    }
+    r = run("extract field:sphere:16 -q -o out.ply --origin 5e5,5e5,0" + memory);
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.err, "") << memory;
+    fs::remove(dir_ / "out.ply");
+  }
+}
+
+// --spacing and --origin place a procedural field's grid in core as out of core: the same file
+// (in core they were ignored, so the two differed).
+TEST_F(CliOutputs, AFieldTakesSpacingAndOriginInCoreAsOutOfCore) {
+  ASSERT_EQ(run("extract field:sphere:16 -q -o a.ply --origin 3,2,1 --spacing 0.5,1,2").code, 0);
+  ASSERT_EQ(run("extract field:sphere:16 -q -o b.ply --origin 3,2,1 --spacing 0.5,1,2 --memory "
+                "1MiB")
+                .code,
+            0);
+  EXPECT_EQ(slurp(dir_ / "a.ply"), slurp(dir_ / "b.ply"));
+  ASSERT_EQ(run("extract field:sphere:16 -q -o c.ply").code, 0);
+  EXPECT_NE(slurp(dir_ / "a.ply"), slurp(dir_ / "c.ply"));
+}
+
 TEST_F(CliOutputs, AnIsovalueOutsideTheSamplesIsAnErrorNamingTheRange) {
   for (const std::string memory : {"", " --memory 1MiB", " --memory 1MiB --simplify 0.5"}) {
     CliResult r = run("extract field:sphere:16 --iso 5 -o out.ply" + memory);

@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -878,6 +879,51 @@ TEST_F(VolumeIo, ReadVolumeDispatchesAndOverrides) {
   dims.dims = Index3{2, 2, 2};
   EXPECT_TRUE(contains(message_of<InputError>([&] { read_volume(nrrd, dims); }),
                        "apply only to raw files"));
+}
+
+// Positions are float32: how finely they hold a grid, per coordinate (an axis of tiny cells at 0
+// stays fine beside wide ones), in the grid frame and in a rotated world frame; past float32's
+// range, or with cells narrower than a float32 step, the grid is refused.
+TEST(GridGeometry, Float32PositionsHoldTheGridOrItIsRefused) {
+  const Index3 n{41, 41, 41};
+  const Vec3d unit{1, 1, 1};
+  EXPECT_EQ(position_resolution(n, unit, {5e6, 5e6, 0}, std::nullopt).steps, 2);  // 2^22..2^23
+  EXPECT_EQ(position_resolution(n, unit, {1e6, 0, 0}, std::nullopt).steps, 16);
+  EXPECT_EQ(position_resolution(n, unit, {0, 0, 0}, std::nullopt).steps, std::ldexp(1.0, 18));
+  EXPECT_GT(position_resolution(n, {1e-6, 1, 1}, {0, 0, 0}, std::nullopt).steps, 1e5);
+  // A world frame 5e6 from 0, rotated a quarter turn about z: its rows mix the grid's axes.
+  const WorldFrame far{{5e6, 0, 0}, {0, -1, 0, 1, 0, 0, 0, 0, 1}};
+  EXPECT_EQ(position_resolution(n, unit, {0, 0, 0}, far).steps, 2);
+  EXPECT_TRUE(coarse_positions_warning(n, unit, {0, 0, 0}, std::nullopt).empty());
+  EXPECT_TRUE(coarse_positions_warning(n, unit, {5e5, 0, 0}, std::nullopt).empty());  // 32 steps
+  const std::string said = coarse_positions_warning(n, unit, {0, 0, 0}, far);
+  EXPECT_EQ(said.rfind("positions are float32: at the grid's coordinates of up to 5e+06 a "
+                       "float32 steps by 0.5, against cells 1 wide, so vertices snap to a lattice "
+                       "of about 2 steps per cell",
+                       0),
+            0u)
+      << said;
+  EXPECT_NO_THROW(check_grid_geometry(n, unit, {5e6, 5e6, 0}, far, "v"));  // coarse, not refused
+  auto refused = [&](const Vec3d& spacing, const Vec3d& origin,
+                     const std::optional<WorldFrame>& world) {
+    try {
+      check_grid_geometry(n, spacing, origin, world, "v");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(refused({1e37, 1, 1}, {0, 0, 0}, std::nullopt),
+            "v: the grid's coordinates reach 4e+38, beyond the largest float32 (3.40282e+38), in "
+            "which positions are written");
+  EXPECT_EQ(refused(unit, {0, 0, 0}, WorldFrame{{1e39, 0, 0}, kIdentity3})
+                .rfind("v: the grid's coordinates reach 1e+39, beyond the largest float32", 0),
+            0u);
+  EXPECT_EQ(refused({1e-9, 1, 1}, {1, 0, 0}, std::nullopt),
+            "v: the grid's cells, 1e-09 wide, are narrower than a float32 step (1.19209e-07) at "
+            "its coordinates of up to 1, in which positions are written: the mesh would collapse");
+  EXPECT_EQ(
+      refused({1e-300, 1, 1}, {0, 0, 0}, std::nullopt).rfind("v: the grid's cells, 1e-300", 0), 0u);
 }
 
 TEST(ReadVolume, ProceduralField) {

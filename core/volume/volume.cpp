@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 
@@ -68,21 +69,32 @@ Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo) 
   return local;
 }
 
-void check_grid_geometry(const Vec3d& spacing, const Vec3d& origin,
-                         const std::optional<WorldFrame>& world, const std::string& what) {
-  const auto text = [](const Vec3d& v) {
-    return std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]);
-  };
-  for (double s : spacing)
-    if (!(std::isfinite(s) && s > 0))
-      throw InputError(what + ": the spacing must be finite and positive, got " + text(spacing));
-  for (double o : origin)
-    if (!std::isfinite(o)) throw InputError(what + ": the origin is not finite: " + text(origin));
-  if (!world) return;
-  for (double o : world->origin)
+namespace {
+
+// A number as messages show it: 6 significant digits, exponent where needed.
+std::string short_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+// The distance from float32 `m` (> 0) to the next float32 up: the step of a position there.
+double float_step(double m) {
+  const float f = static_cast<float>(m);
+  return static_cast<double>(std::nextafter(f, std::numeric_limits<float>::infinity())) -
+         static_cast<double>(f);
+}
+
+std::string triple_text(const Vec3d& v) {
+  return std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]);
+}
+
+// The world frame's part of check_grid_geometry().
+void check_world_frame(const WorldFrame& world, const std::string& what) {
+  for (double o : world.origin)
     if (!std::isfinite(o))
-      throw InputError(what + ": the world origin is not finite: " + text(world->origin));
-  const Mat3& d = world->direction;
+      throw InputError(what + ": the world origin is not finite: " + triple_text(world.origin));
+  const Mat3& d = world.direction;
   for (double x : d)
     if (!std::isfinite(x)) throw InputError(what + ": the direction cosines are not finite");
   const double det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) +
@@ -90,6 +102,86 @@ void check_grid_geometry(const Vec3d& spacing, const Vec3d& origin,
   if (!(std::abs(det) > 1e-6))
     throw InputError(what + ": the direction matrix is singular (determinant " +
                      std::to_string(det) + "): its axes do not span space");
+}
+
+}  // namespace
+
+PositionResolution position_resolution(const Index3& dims, const Vec3d& spacing,
+                                       const Vec3d& origin,
+                                       const std::optional<WorldFrame>& world) {
+  PositionResolution r;
+  r.steps = std::numeric_limits<double>::infinity();
+  // One frame's positions, each coordinate on its own: its largest magnitude over the grid's
+  // corners (positions are affine in the sample index, so the corners bound them) against the
+  // widest extent of a cell along it (a cell's own width in the grid frame).
+  auto frame = [&](const Vec3d& base, const Mat3& d) {
+    for (int row = 0; row < 3; ++row) {
+      double largest = 0, cell = 0;
+      for (int corner = 0; corner < 8; ++corner) {
+        double x = base[row];
+        for (int c = 0; c < 3; ++c)
+          if (corner >> c & 1)
+            x += d[3 * row + c] * spacing[c] *
+                 static_cast<double>(std::max<std::int64_t>(dims[c] - 1, 0));
+        largest = std::max(largest, std::abs(x));
+      }
+      for (int c = 0; c < 3; ++c) cell = std::max(cell, std::abs(d[3 * row + c]) * spacing[c]);
+      r.largest = std::max(r.largest, largest);
+      if (!(largest <= std::numeric_limits<float>::max())) {
+        r.steps = 0;
+        continue;
+      }
+      const double step = float_step(largest);
+      if (cell / step < r.steps) {
+        r.steps = cell / step;
+        r.at = largest;
+        r.step = step;
+        r.cell = cell;
+      }
+    }
+  };
+  // Extractors write origin + spacing * index as float32; a world frame maps those floats.
+  frame(origin, kIdentity3);
+  if (world) frame(world->origin, world->direction);
+  return r;
+}
+
+std::string coarse_positions_warning(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
+                                     const std::optional<WorldFrame>& world) {
+  const PositionResolution r = position_resolution(dims, spacing, origin, world);
+  if (!(r.steps < kFewPositionSteps)) return "";
+  return "positions are float32: at the grid's coordinates of up to " + short_number(r.at) +
+         " a float32 steps by " + short_number(r.step) + ", against cells " + short_number(r.cell) +
+         " wide, so vertices snap to a lattice of about " +
+         std::to_string(static_cast<long long>(r.steps)) +
+         " steps per cell, which makes thin and degenerate triangles; a grid nearer 0 (the CLI's "
+         "--origin) keeps full precision";
+}
+
+void check_grid_geometry(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
+                         const std::optional<WorldFrame>& world, const std::string& what) {
+  for (double s : spacing)
+    if (!(std::isfinite(s) && s > 0))
+      throw InputError(what + ": the spacing must be finite and positive, got " +
+                       triple_text(spacing));
+  for (double o : origin)
+    if (!std::isfinite(o))
+      throw InputError(what + ": the origin is not finite: " + triple_text(origin));
+  if (world) check_world_frame(*world, what);
+  check_position_range(dims, spacing, origin, world, what);
+}
+
+void check_position_range(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
+                          const std::optional<WorldFrame>& world, const std::string& what) {
+  const PositionResolution r = position_resolution(dims, spacing, origin, world);
+  if (r.largest > std::numeric_limits<float>::max())
+    throw InputError(what + ": the grid's coordinates reach " + short_number(r.largest) +
+                     ", beyond the largest float32 (3.40282e+38), in which positions are written");
+  if (r.steps < 1)
+    throw InputError(what + ": the grid's cells, " + short_number(r.cell) +
+                     " wide, are narrower than a float32 step (" + short_number(r.step) +
+                     ") at its coordinates of up to " + short_number(r.at) +
+                     ", in which positions are written: the mesh would collapse");
 }
 
 std::size_t checked_volume_bytes(ScalarType type, const Index3& dims) {

@@ -129,6 +129,10 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
                          "docstring.")
     if len(spacing) != 3:
         raise ValueError("`spacing` must consist of three floats.")
+    # scikit-image takes any spacing; zero flattens the mesh, a negative one turns it inside
+    # out and a non-finite one gives non-finite vertices, so isotile refuses them, as its files do.
+    if not all(_np.isfinite(float(s)) and float(s) > 0 for s in spacing):
+        raise ValueError(f"`spacing` must be finite and positive, got {tuple(spacing)}.")
     step_size = int(step_size)
     if step_size < 1:
         raise ValueError("step_size must be at least one.")
@@ -363,8 +367,9 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
     -----
     RuntimeWarning
         What the CLI says as ``isotile: warning:``, while the run goes on: a ``memory`` budget
-        the surface overflows (the run goes above it; the mesh is exact), or with
-        backend="auto" a GPU backend that failed (the CPU took over). Made an error by a
+        the surface overflows (the run goes above it; the mesh is exact), a grid so far from 0
+        that float32 vertices snap to a coarse lattice, or with backend="auto" a GPU backend
+        that failed (the CPU took over). Made an error by a
         warnings filter, it stops the run and leaves no file.
     """
     options = {"iso": iso}

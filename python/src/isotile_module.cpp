@@ -193,6 +193,9 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
                          const std::string& backend, bool normals, bool values,
                          const std::optional<py::array>& mask, std::optional<int> threads) {
   const VolumeView view = view_of(volume, spacing_xyz, "volume");
+  // Positions are float32: a spacing whose grid they cannot hold is refused (the Python layer has
+  // checked that it is finite and positive).
+  check_position_range(view.dims, spacing_xyz, view.origin, std::nullopt, "volume");
   const VolumeView whole_view = view_of(whole, {1, 1, 1}, "volume");
   std::optional<VolumeView> mask_view;
   if (mask) {

@@ -273,6 +273,13 @@ def test_errors_of_isotile_own():
         isotile.marching_cubes(vol.astype(np.complex64), 0.0)
     with pytest.raises(ValueError, match="threads"):
         isotile.marching_cubes(vol, 0.0, threads=0)
+    # scikit-image takes these and returns a flat, an inside-out or a non-finite mesh.
+    for spacing in [(0, 1, 1), (1, -1, 1), (1, 1, np.nan), (np.inf, 1, 1)]:
+        with pytest.raises(ValueError, match="`spacing` must be finite and positive"):
+            isotile.marching_cubes(vol, 0.0, spacing=spacing)
+    # Float32 vertices cannot hold this grid (scikit-image gives inf).
+    with pytest.raises(ValueError, match="beyond the largest float32"):
+        isotile.marching_cubes(vol, 0.0, spacing=(1e38, 1, 1))
     with pytest.raises(ValueError, match="backend"):
         isotile.marching_cubes(vol, 0.0, backend="cuda")
     with pytest.raises(ValueError, match="quality"):

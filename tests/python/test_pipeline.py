@@ -203,6 +203,19 @@ def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
     assert not (tmp_path / "err.ply").exists()
 
 
+def test_coarse_float32_positions_are_a_warning(tmp_path):
+    """A grid so far from 0 that float32 vertices snap to a coarse lattice (UTM-like) is said as
+    a RuntimeWarning; the mesh still comes back. A grid nearer 0 is not."""
+    vol = np.zeros((12, 12, 12), np.float32)
+    vol[3:9, 3:9, 3:9] = 1
+    with pytest.warns(RuntimeWarning, match="positions are float32: .* about 2 steps per cell"):
+        mesh = isotile.extract(vol, 0.5, origin=(5e6, 5e6, 0), stats=False)
+    assert len(mesh.faces) > 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        isotile.extract(vol, 0.5, origin=(5e5, 5e5, 0), stats=False)
+
+
 # --- progress, cancel, Ctrl-C: a tiled run of many bricks (the loops that report today) --------
 
 MANY_BRICKS = dict(memory="256KiB")
