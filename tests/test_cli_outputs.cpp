@@ -291,19 +291,19 @@ TEST_F(CliOutputs, BadNumbersAreOneLineErrors) {
   }
 }
 
+// A 4x4x4 uint8 NRRD of constant samples whose header has `geometry` (its spacing, space and
+// origin lines) besides the fields every one has.
+void write_geometry_nrrd(const fs::path& path, const std::string& geometry) {
+  std::ofstream(path, std::ios::binary) << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\n"
+                                        << geometry << "encoding: raw\n\n"
+                                        << std::string(64, '\x10');
+}
+
 TEST_F(CliOutputs, BadGeometryInAFileIsAnError) {
-  const std::string data(64, '\x10');
-  {
-    std::ofstream f(dir_ / "singular.nrrd", std::ios::binary);
-    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspace: left-posterior-superior\n"
-         "space directions: (1,0,0) (1,0,0) (0,0,1)\nspace origin: (0,0,0)\nencoding: raw\n\n"
-      << data;
-  }
-  {
-    std::ofstream f(dir_ / "flipped.nrrd", std::ios::binary);
-    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspacings: -1 1 1\nencoding: raw\n\n"
-      << data;
-  }
+  write_geometry_nrrd(dir_ / "singular.nrrd",
+                      "space: left-posterior-superior\nspace directions: (1,0,0) (1,0,0) "
+                      "(0,0,1)\nspace origin: (0,0,0)\n");
+  write_geometry_nrrd(dir_ / "flipped.nrrd", "spacings: -1 1 1\n");
   for (const std::string memory : {"", " --memory 1MiB"}) {
     CliResult r = run("extract singular.nrrd --iso 1 -o out.ply" + memory);
     EXPECT_EQ(r.code, 1);
@@ -322,13 +322,7 @@ TEST_F(CliOutputs, BadGeometryInAFileIsAnError) {
 // collapse); one whose vertices would snap to a coarse lattice (UTM-like coordinates) is said,
 // once, in core, out of core and under --frame grid, and the run goes on.
 TEST_F(CliOutputs, PositionsFloat32CannotHoldAreRefusedAndCoarseOnesSaid) {
-  const std::string data(64, '\x10');
-  {
-    std::ofstream f(dir_ / "huge.nrrd", std::ios::binary);
-    f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nspacings: 2e38 1 1\n"
-         "encoding: raw\n\n"
-      << data;
-  }
+  write_geometry_nrrd(dir_ / "huge.nrrd", "spacings: 2e38 1 1\n");
   for (const std::string memory : {"", " --memory 1MiB"}) {
     CliResult r = run("extract huge.nrrd --iso 1 --allow-empty -o out.ply" + memory);
     EXPECT_EQ(r.code, 1) << memory;
