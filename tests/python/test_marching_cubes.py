@@ -277,7 +277,7 @@ def test_errors_of_isotile_own():
     for spacing in [(0, 1, 1), (1, -1, 1), (1, 1, np.nan), (np.inf, 1, 1)]:
         with pytest.raises(ValueError, match="`spacing` must be finite and positive"):
             isotile.marching_cubes(vol, 0.0, spacing=spacing)
-    # Float32 vertices cannot hold this grid (scikit-image gives inf).
+    # isotile's float32 vertices cannot hold this grid (scikit-image's come back as float64).
     with pytest.raises(ValueError, match="beyond the largest float32"):
         isotile.marching_cubes(vol, 0.0, spacing=(1e38, 1, 1))
     with pytest.raises(ValueError, match="backend"):
