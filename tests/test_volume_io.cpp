@@ -894,9 +894,14 @@ TEST(GridGeometry, Float32PositionsHoldTheGridOrItIsRefused) {
   // A world frame 5e6 from 0, rotated a quarter turn about z: its rows mix the grid's axes.
   const WorldFrame far{{5e6, 0, 0}, {0, -1, 0, 1, 0, 0, 0, 0, 1}};
   EXPECT_EQ(position_resolution(n, unit, {0, 0, 0}, far).steps, 2);
-  EXPECT_TRUE(coarse_positions_warning(n, unit, {0, 0, 0}, std::nullopt).empty());
-  EXPECT_TRUE(coarse_positions_warning(n, unit, {5e5, 0, 0}, std::nullopt).empty());  // 32 steps
-  const std::string said = coarse_positions_warning(n, unit, {0, 0, 0}, far);
+  std::vector<std::string> lines;
+  const Warn heard = [&](const std::string& line) { lines.push_back(line); };
+  warn_coarse_positions(n, unit, {0, 0, 0}, std::nullopt, heard);
+  warn_coarse_positions(n, unit, {5e5, 0, 0}, std::nullopt, heard);  // 32 steps
+  EXPECT_TRUE(lines.empty());
+  warn_coarse_positions(n, unit, {0, 0, 0}, far, heard);
+  ASSERT_EQ(lines.size(), 1u);
+  const std::string& said = lines[0];
   EXPECT_EQ(said.rfind("positions are float32: at the grid's coordinates of up to 5e+06 a "
                        "float32 steps by 0.5, against cells 1 wide, so vertices snap to a lattice "
                        "of about 2 steps per cell",

@@ -338,9 +338,9 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     check_output(output, true);
     source = open_volume_source(input, raw, options.memory);
     check_grid_geometry(source->dims, source->spacing, source->origin, source->world, input);
-    const std::string coarse = coarse_positions_warning(
-        source->dims, source->spacing, source->origin, world_frame ? source->world : std::nullopt);
-    if (!coarse.empty()) say_warning(options.warn, coarse);  // rank 0's; the others' are silent
+    // Rank 0's; the others' warn is silent.
+    warn_coarse_positions(source->dims, source->spacing, source->origin,
+                          world_frame ? source->world : std::nullopt, options.warn);
     if (world_frame) options.frame = mesh_frame(source->origin, source->world);
     if (source->sequential())
       throw InputError(source->name +

@@ -50,15 +50,6 @@ std::string_view dc_vertices_name(DcVertices v) {
   return v == DcVertices::Cell ? "cell" : "patch";
 }
 
-// Said once, before the extraction: a grid whose float32 positions snap its vertices (the world
-// frame's too where the mesh is written in it).
-void warn_coarse_positions(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
-                           const std::optional<WorldFrame>& world, const PipelineOptions& options) {
-  const std::string line =
-      coarse_positions_warning(dims, spacing, origin, options.world_frame ? world : std::nullopt);
-  if (!line.empty()) say_warning(options.warn, line);
-}
-
 std::string dims_text(const Index3& d) {
   return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
@@ -96,7 +87,8 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   TiledOptions to = tiled_options(options, extract, format);
   auto source = open_volume_source(input.path, input.raw, to.memory);
   check_grid_geometry(source->dims, source->spacing, source->origin, source->world, input.path);
-  warn_coarse_positions(source->dims, source->spacing, source->origin, source->world, options);
+  warn_coarse_positions(source->dims, source->spacing, source->origin,
+                        options.world_frame ? source->world : std::nullopt, options.warn);
   if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);
   StatsJson auto_iso;
   PipelineResult result;
@@ -301,7 +293,8 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
     view = volume.view();
   }
   check_grid_geometry(view.dims, view.spacing, view.origin, view.world, input.path);
-  warn_coarse_positions(view.dims, view.spacing, view.origin, view.world, options);
+  warn_coarse_positions(view.dims, view.spacing, view.origin,
+                        options.world_frame ? view.world : std::nullopt, options.warn);
   if (!input.volume)
     log("read " + dims_text(view.dims) + " " + std::string(scalar_name(view.type)) + " in " +
         fmt_seconds(t_read));

@@ -146,16 +146,18 @@ PositionResolution position_resolution(const Index3& dims, const Vec3d& spacing,
   return r;
 }
 
-std::string coarse_positions_warning(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
-                                     const std::optional<WorldFrame>& world) {
+void warn_coarse_positions(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
+                           const std::optional<WorldFrame>& world, const Warn& warn) {
   const PositionResolution r = position_resolution(dims, spacing, origin, world);
-  if (!(r.steps < kFewPositionSteps)) return "";
-  return "positions are float32: at the grid's coordinates of up to " + short_number(r.at) +
-         " a float32 steps by " + short_number(r.step) + ", against cells " + short_number(r.cell) +
-         " wide, so vertices snap to a lattice of about " +
-         std::to_string(static_cast<long long>(r.steps)) +
-         " steps per cell, which makes thin and degenerate triangles; a grid nearer 0 (the CLI's "
-         "--origin) keeps full precision";
+  if (!(r.steps < kFewPositionSteps)) return;
+  say_warning(
+      warn,
+      "positions are float32: at the grid's coordinates of up to " + short_number(r.at) +
+          " a float32 steps by " + short_number(r.step) + ", against cells " +
+          short_number(r.cell) + " wide, so vertices snap to a lattice of about " +
+          std::to_string(static_cast<long long>(r.steps)) +
+          " steps per cell, which makes thin and degenerate triangles; a grid nearer 0 (the CLI's "
+          "--origin) keeps full precision");
 }
 
 void check_grid_geometry(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,

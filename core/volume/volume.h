@@ -18,6 +18,7 @@
 #include <string>
 #include <utility>
 
+#include "core/progress.h"
 #include "core/volume/scalar_type.h"
 
 namespace isotile {
@@ -162,10 +163,11 @@ void check_position_range(const Index3& dims, const Vec3d& spacing, const Vec3d&
 // the mean radius ratio 0.59 against 0.66.
 inline constexpr double kFewPositionSteps = 32;
 
-// The warning (core/progress.h) for a grid whose positions have fewer than kFewPositionSteps
-// steps per cell, naming the numbers and the way out; empty where they have enough.
-std::string coarse_positions_warning(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
-                                     const std::optional<WorldFrame>& world);
+// Says to `warn` (core/progress.h), once, where the grid's positions have fewer than
+// kFewPositionSteps steps per cell, naming the numbers and the way out; nothing where they have
+// enough. `world`: the world frame where the mesh is written in it.
+void warn_coarse_positions(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
+                           const std::optional<WorldFrame>& world, const Warn& warn);
 
 // Number of bytes of dims[0]*dims[1]*dims[2] samples of `type`. Throws InputError when a dim is
 // not positive and CapacityError when the product overflows 63 bits.
