@@ -199,6 +199,17 @@ TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
     ASSERT_EQ(v.dims(), raw.dims());
     ASSERT_EQ(v.type(), ScalarType::UInt16);
     EXPECT_EQ(std::memcmp(v.bytes(), raw.bytes(), raw.byte_size()), 0);
+    // Uncompressed slices are read plane by plane out of core, in the stack's order.
+    auto source = open_volume_source(input.string(), {});
+    EXPECT_FALSE(source->in_memory());
+    const Box3 box{{2, 3, 4}, {13, 9, 15}};
+    std::vector<std::uint16_t> got(11 * 6 * 11);
+    source->read(box, got.data());
+    for (std::int64_t k = 0; k < 11; ++k)
+      for (std::int64_t j = 0; j < 6; ++j)
+        for (std::int64_t i = 0; i < 11; ++i)
+          ASSERT_EQ(got[(k * 6 + j) * 11 + i],
+                    raw.data<std::uint16_t>()[((4 + k) * 16 + 3 + j) * 16 + 2 + i]);
   }
   // A slice of another size is an error naming it.
   write_itk((dir / "slices" / "s_017.tif").string(), raw.bytes(), ScalarType::UInt16, {8, 8, 1},
@@ -232,6 +243,123 @@ TEST(ItkRegions, PlainFilesAreReadByRegion) {
       EXPECT_THROW(open_volume_source(p.string(), {}, 1000), InputError);
     }
   }
+  fs::remove_all(dir);
+}
+
+// A multi-page classic TIFF of one strip per page, written by hand so that its layout is known:
+// `order` 'I' or 'M' (the samples in that byte order too), `gap` bytes between pages' samples,
+// `compression` as tag 259 says (the samples are stored plainly whatever it says: only the
+// check reads them), `orientation` 0 for no tag 274.
+void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::uint32_t gap = 0,
+                      std::uint16_t compression = 1, std::uint16_t orientation = 0) {
+  const bool big = order == 'M';
+  std::string out;
+  auto put = [&](std::uint64_t x, int bytes) {
+    for (int i = 0; i < bytes; ++i)
+      out.push_back(static_cast<char>((x >> (8 * (big ? bytes - 1 - i : i))) & 0xff));
+  };
+  const std::size_t size = scalar_size(v.type());
+  const std::uint32_t plane = static_cast<std::uint32_t>(v.dims()[0] * v.dims()[1] * size);
+  const auto pages = static_cast<std::uint32_t>(v.dims()[2]);
+  out.append(2, order);
+  put(42, 2);
+  put(8 + pages * (plane + gap), 4);  // the first directory, after the samples
+  const auto* bytes = reinterpret_cast<const unsigned char*>(v.bytes());
+  for (std::uint32_t k = 0; k < pages; ++k) {
+    for (std::uint32_t i = 0; i < plane; i += static_cast<std::uint32_t>(size))
+      for (std::size_t b = 0; b < size; ++b)  // the sample's bytes in the file's order
+        out.push_back(static_cast<char>(bytes[k * plane + i + (big ? size - 1 - b : b)]));
+    out.append(gap, '\0');
+  }
+  const std::uint16_t format = is_floating(v.type())                                           ? 3
+                               : v.type() == ScalarType::Int16 || v.type() == ScalarType::Int8 ? 2
+                                                                                               : 1;
+  for (std::uint32_t k = 0; k < pages; ++k) {
+    struct Entry {
+      std::uint16_t tag, type;
+      std::uint32_t value;
+    };
+    std::vector<Entry> e = {{256, 4, static_cast<std::uint32_t>(v.dims()[0])},
+                            {257, 4, static_cast<std::uint32_t>(v.dims()[1])},
+                            {258, 3, static_cast<std::uint32_t>(8 * size)},
+                            {259, 3, compression},
+                            {262, 3, 1},
+                            {273, 4, 8 + k * (plane + gap)},
+                            {274, 3, orientation},
+                            {277, 3, 1},
+                            {278, 4, static_cast<std::uint32_t>(v.dims()[1])},
+                            {279, 4, plane},
+                            {339, 3, format}};
+    if (orientation == 0) e.erase(e.begin() + 6);
+    put(e.size(), 2);
+    for (const Entry& x : e) {
+      put(x.tag, 2);
+      put(x.type, 2);
+      put(1, 4);
+      put(x.value, x.type == 3 ? 2 : 4);
+      if (x.type == 3) put(0, 2);
+    }
+    const std::size_t next = out.size() + 4;
+    put(k + 1 < pages ? next : 0, 4);
+  }
+  std::ofstream(path, std::ios::binary) << out;
+}
+
+// A TIFF whose pages' samples follow each other uncompressed (as ImageJ writes stacks) is read
+// box by box out of core, in either byte order, with the samples ITK reads; other layouts are
+// read whole.
+TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
+  REQUIRE_ITK();
+  const fs::path dir =
+      fs::temp_directory_path() / ("isotile-tiff-pages-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  struct Case {
+    const char* name;
+    ScalarType type;
+    char order;
+    std::uint32_t gap;
+    std::uint16_t orientation;
+    bool by_region;
+  };
+  for (const Case& c : {Case{"u16_le", ScalarType::UInt16, 'I', 0, 0, true},
+                        Case{"u16_be", ScalarType::UInt16, 'M', 0, 1, true},
+                        Case{"i16_be", ScalarType::Int16, 'M', 0, 0, true},
+                        Case{"f32_be", ScalarType::Float32, 'M', 0, 0, true},
+                        Case{"gap", ScalarType::UInt16, 'I', 2, 0, false},
+                        Case{"bottom_up", ScalarType::UInt16, 'I', 0, 4, false}}) {
+    SCOPED_TRACE(c.name);
+    const Volume raw = field_as("field:torus:20", c.type);
+    const fs::path p = dir / (std::string(c.name) + ".tif");
+    write_tiff_pages(p, raw, c.order, c.gap, 1, c.orientation);
+    const Volume whole = read_volume(p.string());
+    ASSERT_EQ(whole.dims(), raw.dims());
+    ASSERT_EQ(whole.type(), c.type);
+    if (c.orientation != 4) {  // (ITK applies no orientation: the rows as stored either way)
+      ASSERT_EQ(std::memcmp(whole.bytes(), raw.bytes(), raw.byte_size()), 0);
+    }
+    auto source = open_volume_source(p.string(), {});
+    EXPECT_EQ(source->in_memory(), !c.by_region);
+    const Box3 box{{3, 4, 5}, {11, 9, 17}};
+    const std::size_t size = scalar_size(c.type);
+    std::vector<std::byte> got(8 * 5 * 12 * size);
+    source->read(box, got.data());
+    for (std::int64_t k = 0; k < 12; ++k)
+      for (std::int64_t j = 0; j < 5; ++j)
+        ASSERT_EQ(std::memcmp(got.data() + ((k * 5 + j) * 8) * size,
+                              static_cast<const std::byte*>(whole.bytes()) +
+                                  (((5 + k) * 20 + 4 + j) * 20 + 3) * size,
+                              8 * size),
+                  0)
+            << "row " << j << " plane " << k;
+    if (!c.by_region) {
+      EXPECT_THROW(open_volume_source(p.string(), {}, 1000), InputError);
+    }
+  }
+  // Compressed pages are ITK's to decode (here PackBits' tag over plain bytes; the header alone
+  // is read, not the samples).
+  write_tiff_pages(dir / "packbits.tif", field_as("field:torus:20", ScalarType::UInt16), 'I', 0,
+                   32773);
+  EXPECT_FALSE(read_volume_header((dir / "packbits.tif").string()).plain);
   fs::remove_all(dir);
 }
 
@@ -463,6 +591,12 @@ TEST(RealData, TiffStackWithImageJTags) {
   EXPECT_EQ(v.dims(), (Index3{109, 112, 106}));
   EXPECT_EQ(v.type(), ScalarType::UInt8);
   EXPECT_EQ(value_range(v.view()), (std::pair<double, double>{0, 255}));
+  // ImageJ stores the pages' samples one after another: read by region, the same samples.
+  auto source = open_volume_source(file.string(), {});
+  EXPECT_FALSE(source->in_memory());
+  std::vector<std::byte> all(v.byte_size());
+  source->read({{0, 0, 0}, v.dims()}, all.data());
+  EXPECT_EQ(std::memcmp(all.data(), v.bytes(), v.byte_size()), 0);
 }
 
 // Copies of a few slices of the real series in a directory of the test's own.

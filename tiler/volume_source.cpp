@@ -38,13 +38,30 @@ class FieldSource final : public VolumeSource {
   FieldSpec spec_;
 };
 
+// `bytes` at `offset` of the open file `fd` (named `name`) into `dst`.
+void read_exactly(int fd, const std::string& name, char* dst, std::int64_t bytes,
+                  std::int64_t offset) {
+  std::int64_t done = 0;
+  while (done < bytes) {
+    const ssize_t n = ::pread(fd, dst + done, static_cast<std::size_t>(bytes - done),
+                              static_cast<off_t>(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0)
+      throw IoError("cannot read " + name + ": " +
+                    (n == 0 ? std::string("file is shorter than its dims say")
+                            : std::string(std::strerror(errno))));
+    done += n;
+  }
+}
+
 // Samples stored plainly in one file from byte `offset` on (raw files, NRRD's raw data).
 struct PlainLayout {
   std::string file;
   std::uint64_t offset = 0;
   ScalarType type = ScalarType::UInt8;
   Index3 dims{0, 0, 0};
-  bool swap = false;  // stored in the other byte order
+  bool swap = false;         // stored in the other byte order
+  bool bytes_after = false;  // the file may go on past the samples (PlainData::bytes_after)
 };
 
 class RawFileSource final : public VolumeSource {
@@ -58,7 +75,8 @@ class RawFileSource final : public VolumeSource {
     const std::size_t need = checked_volume_bytes(type, dims);
     struct stat st {};
     if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode) &&
-        static_cast<std::uint64_t>(st.st_size) != need + offset_)
+        (layout.bytes_after ? static_cast<std::uint64_t>(st.st_size) < need + offset_
+                            : static_cast<std::uint64_t>(st.st_size) != need + offset_))
       throw InputError(name + ": file holds " + std::to_string(st.st_size) + " bytes but " +
                        std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
                        std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
@@ -85,17 +103,7 @@ class RawFileSource final : public VolumeSource {
       const std::int64_t k = box.lo[2] + r / box.extent(1), j = box.lo[1] + r % box.extent(1);
       const std::int64_t offset =
           static_cast<std::int64_t>(offset_) + ((k * dims[1] + j) * dims[0] + box.lo[0]) * size;
-      std::int64_t done = 0;
-      while (done < run_bytes) {
-        const ssize_t n = ::pread(fd_, dst + done, static_cast<std::size_t>(run_bytes - done),
-                                  static_cast<off_t>(offset + done));
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0)
-          throw IoError("cannot read " + name + ": " +
-                        (n == 0 ? std::string("file is shorter than its dims say")
-                                : std::string(std::strerror(errno))));
-        done += n;
-      }
+      read_exactly(fd_, name, dst, run_bytes, offset);
     }
     if (swap_)
       swap_sample_bytes(out,
@@ -106,6 +114,50 @@ class RawFileSource final : public VolumeSource {
  private:
   int fd_ = -1;
   std::uint64_t offset_ = 0;
+  bool swap_ = false;
+};
+
+// A stack of files of one plane each, stored plainly (TIFF slices: PlainData::planes). Each read
+// opens the files of its planes in turn: a stack may hold more files than a process may keep
+// open.
+class PlaneFilesSource final : public VolumeSource {
+ public:
+  PlaneFilesSource(const PlainData& data, bool swap) : planes_(data.planes), swap_(swap) {
+    name = data.planes.front().file;
+    type = data.type;
+    dims = data.dims;
+    checked_volume_bytes(type, dims);
+  }
+
+  void read(const Box3& box, void* out) override {
+    const auto size = static_cast<std::int64_t>(scalar_size(type));
+    const bool whole_rows = box.lo[0] == 0 && box.hi[0] == dims[0];
+    const std::int64_t run_rows = whole_rows ? box.extent(1) : 1;
+    const std::int64_t run_bytes = run_rows * box.extent(0) * size;
+    auto* dst = static_cast<char*>(out);
+    for (std::int64_t k = box.lo[2]; k < box.hi[2]; ++k) {
+      const PlainData::Plane& plane = planes_[static_cast<std::size_t>(k)];
+      const int fd = ::open(plane.file.c_str(), O_RDONLY | O_CLOEXEC);
+      if (fd < 0) throw IoError("cannot open " + plane.file + ": " + std::strerror(errno));
+      try {
+        for (std::int64_t j = box.lo[1]; j < box.hi[1]; j += run_rows, dst += run_bytes)
+          read_exactly(fd, plane.file, dst, run_bytes,
+                       static_cast<std::int64_t>(plane.offset) +
+                           (j * dims[0] + box.lo[0]) * size);
+      } catch (...) {
+        ::close(fd);
+        throw;
+      }
+      ::close(fd);
+    }
+    if (swap_)
+      swap_sample_bytes(out,
+                        static_cast<std::size_t>(box.extent(0) * box.extent(1) * box.extent(2)),
+                        static_cast<std::size_t>(size));
+  }
+
+ private:
+  std::vector<PlainData::Plane> planes_;
   bool swap_ = false;
 };
 
@@ -303,10 +355,13 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
   const InputKind kind = input_kind(input);
   if (kind == InputKind::Mrc || is_itk_kind(kind)) {
     const VolumeHeader h = read_volume_header(input, raw);
-    if (h.plain) {
+    if (h.plain && !h.plain->planes.empty()) {
+      source = std::make_unique<PlaneFilesSource>(*h.plain,
+                                                  (h.plain->endian == Endian::Big) != native_big);
+    } else if (h.plain) {
       source = std::make_unique<RawFileSource>(
           PlainLayout{h.plain->file, h.plain->offset, h.plain->type, h.plain->dims,
-                      (h.plain->endian == Endian::Big) != native_big});
+                      (h.plain->endian == Endian::Big) != native_big, h.plain->bytes_after});
     } else {
       const std::uint64_t bytes = checked_volume_bytes(h.type, h.dims);
       if (memory_budget > 0 && bytes > memory_budget)

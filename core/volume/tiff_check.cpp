@@ -3,6 +3,7 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -15,7 +16,26 @@ namespace isotile {
 using file_check::FileBytes;
 using file_check::get;
 
-void check_tiff_file(const std::string& path) {
+namespace {
+
+// The sample type of a page of one gray sample per pixel, as ITK reads it.
+std::optional<ScalarType> tiff_sample_type(std::uint64_t bits, std::uint64_t format) {
+  if (format == 3) {
+    if (bits == 32) return ScalarType::Float32;
+    if (bits == 64) return ScalarType::Float64;
+    return std::nullopt;
+  }
+  if (format != 1 && format != 2) return std::nullopt;
+  const bool sign = format == 2;
+  if (bits == 8) return sign ? ScalarType::Int8 : ScalarType::UInt8;
+  if (bits == 16) return sign ? ScalarType::Int16 : ScalarType::UInt16;
+  if (bits == 32) return sign ? ScalarType::Int32 : ScalarType::UInt32;
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::optional<PlainData> check_tiff_file(const std::string& path) {
   FileBytes file(path);
   unsigned char h[16];
   if (!file.read(0, h, 8))
@@ -46,6 +66,12 @@ void check_tiff_file(const std::string& path) {
   std::vector<std::uint64_t> seen;
   std::array<std::uint64_t, 4> first{};       // page 1's width, height, bits and samples
   std::array<std::uint64_t, 3> first_kind{};  // its photometric, planar configuration, format
+  // Whether every page so far holds its samples uncompressed, as rows of one gray sample, in
+  // strips that follow each other and the previous page's (ImageJ writes its stacks so), and
+  // where they start and end: then the file reads box by box like a raw file.
+  bool plain = true;
+  std::optional<ScalarType> plain_type;
+  std::uint64_t plain_start = 0, plain_end = 0;
   int page = 0;
   while (ifd != 0) {
     ++page;
@@ -59,7 +85,8 @@ void check_tiff_file(const std::string& path) {
     if (!file.fits(ifd + count_size, entries * entry_size + inline_size))
       cut(page, "its directory", ifd, count_size + entries * entry_size + inline_size);
     std::uint64_t width = 0, height = 0, bps = 1, spp = 1, compression = 1, rows_per_strip = 0,
-                  tile_w = 0, tile_h = 0, subfile = 0, photometric = 1, planar = 1, format = 1;
+                  tile_w = 0, tile_h = 0, subfile = 0, photometric = 1, planar = 1, format = 1,
+                  orientation = 1;
     std::vector<std::uint64_t> offsets, counts;
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
@@ -108,6 +135,9 @@ void check_tiff_file(const std::string& path) {
           break;
         case 262:
           photometric = value(0);
+          break;
+        case 274:
+          orientation = value(0);
           break;
         case 284:
           planar = value(0);
@@ -190,6 +220,19 @@ void check_tiff_file(const std::string& path) {
                          std::to_string(bps) + "-bit samples needs " + std::to_string(need) +
                          " bytes but its strips hold " + std::to_string(held));
     }
+    // Rows top to bottom, left to right (orientation 1), of gray values where 0 is black: what
+    // ITK reads into its buffer as the samples are stored (it applies none of these tags).
+    const std::optional<ScalarType> type = tiff_sample_type(bps, format);
+    plain = plain && compression == 1 && !tile_w && spp == 1 && photometric == 1 &&
+            orientation == 1 && type && (page == 1 || type == plain_type) && !offsets.empty() &&
+            held == (width * bps / 8) * height && (page == 1 || offsets[0] == plain_end);
+    for (std::size_t i = 1; plain && i < offsets.size(); ++i)
+      plain = offsets[i] == offsets[i - 1] + counts[i - 1];
+    if (plain) {
+      if (page == 1) plain_start = offsets[0];
+      plain_type = type;
+      plain_end = offsets[0] + held;
+    }
     // ITK sizes its buffer by the first page and reads every page into it: pages of another
     // size, or reduced-resolution and mask pages it counts differently, would overrun it.
     if (subfile & 5)
@@ -219,6 +262,15 @@ void check_tiff_file(const std::string& path) {
     file.read(next_at, nx, inline_size);
     ifd = big ? get<std::uint64_t>(nx, swap) : get<std::uint32_t>(nx, swap);
   }
+  if (!plain || page == 0) return std::nullopt;
+  PlainData data;
+  data.file = path;
+  data.offset = plain_start;
+  data.type = *plain_type;
+  data.dims = {static_cast<std::int64_t>(first[0]), static_cast<std::int64_t>(first[1]), page};
+  data.endian = little ? Endian::Little : Endian::Big;
+  data.bytes_after = true;  // the later pages' directories may follow the samples
+  return data;
 }
 
 }  // namespace isotile

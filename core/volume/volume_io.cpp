@@ -11,6 +11,7 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <unordered_map>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
@@ -135,13 +136,20 @@ ItkInput itk_input(const std::string& input, InputKind kind, const RawOptions& r
 ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
   if (kind == InputKind::Nifti) return check_nifti_header(input);
   if (kind == InputKind::MetaImage) return check_metaimage_header(input);
-  if (kind == InputKind::Tiff) check_tiff_file(input);
+  if (kind == InputKind::Tiff) {
+    ImageHeaderCheck check;
+    check.plain = check_tiff_file(input);
+    return check;
+  }
   if (kind == InputKind::TiffStack) {
+    ImageHeaderCheck check;
+    const auto slice = [&](const std::string& file) {
+      if (std::optional<PlainData> p = check_tiff_file(file)) check.plain_slices.push_back(*p);
+    };
     std::error_code ec;
     if (std::filesystem::is_directory(input, ec)) {
       for (const auto& e : std::filesystem::directory_iterator(input, ec))
-        if (e.is_regular_file(ec) && is_tiff_name(e.path().string()))
-          check_tiff_file(e.path().string());
+        if (e.is_regular_file(ec) && is_tiff_name(e.path().string())) slice(e.path().string());
     } else {
       // Numbered slices, from 0 or 1 on, as the ITK reader takes them.
       for (int i = 0;; ++i) {
@@ -152,12 +160,37 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
           if (i == 0) continue;
           break;
         }
-        check_tiff_file(name);
+        slice(name);
       }
     }
+    return check;
   }
   if (kind == InputKind::Dicom) check_dicom_input(input);
   return {};
+}
+
+// A TIFF stack whose every slice, in the order ITK stacks them, is one plane stored plainly, of
+// the type ITK reads and in one byte order: read plane by plane out of core.
+std::optional<PlainData> stacked_slices(const std::vector<PlainData>& slices,
+                                        const ItkImageInfo& info) {
+  if (info.files.size() != static_cast<std::size_t>(info.dims[2]) || info.files.empty())
+    return std::nullopt;
+  std::unordered_map<std::string, const PlainData*> by_name;
+  for (const PlainData& p : slices) by_name.emplace(p.file, &p);
+  PlainData out;
+  out.type = info.type;
+  out.dims = info.dims;
+  for (const std::string& file : info.files) {
+    const auto found = by_name.find(file);
+    const PlainData* s = found == by_name.end() ? nullptr : found->second;
+    if (!s || s->type != info.type || s->dims[0] != info.dims[0] ||
+        s->dims[1] != info.dims[1] || s->dims[2] != 1 ||
+        (file != info.files.front() && s->endian != out.endian))
+      return std::nullopt;
+    out.endian = s->endian;
+    out.planes.push_back({file, s->offset});
+  }
+  return out;
 }
 
 // Options that only a raw file can use would otherwise be dropped without a word.
@@ -296,6 +329,7 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     h.series_description = info.series_description;
     if (check.plain && check.plain->type == info.type && check.plain->dims == info.dims)
       h.plain = check.plain;
+    if (kind == InputKind::TiffStack) h.plain = stacked_slices(check.plain_slices, info);
   } else if (kind == InputKind::Nrrd) {
     if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(input)) {
       h.type = d->type;

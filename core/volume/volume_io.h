@@ -20,6 +20,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/progress.h"
 #include "core/volume/volume.h"
@@ -62,14 +63,23 @@ InputKind input_kind(const std::string& input);
 const char* input_kind_name(InputKind kind);
 bool is_itk_kind(InputKind kind);
 
-// Samples stored plainly (uncompressed, unscaled) in one file from byte `offset` on: such
-// inputs are read box by box out of core.
+// Samples stored plainly (uncompressed, unscaled) in one file from byte `offset` on, or a plane
+// per file: such inputs are read box by box out of core.
 struct PlainData {
   std::string file;
   std::uint64_t offset = 0;
   ScalarType type = ScalarType::UInt8;
   Index3 dims{0, 0, 0};
   Endian endian = Endian::Little;
+  // The file ends with the samples, or (TIFF: the later pages' directories) may go on past them.
+  bool bytes_after = false;
+  // A stack of files (TIFF slices): plane z's samples at planes[z].offset in planes[z].file;
+  // `file` and `offset` unused. Empty: one file.
+  struct Plane {
+    std::string file;
+    std::uint64_t offset = 0;
+  };
+  std::vector<Plane> planes = {};
 };
 
 // An input's header: what `isotile info` shows besides the samples, and how the tiler can read
