@@ -218,6 +218,51 @@ TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
   fs::remove_all(dir);
 }
 
+// A numbered pattern is expanded by isotile, never given to printf (a %s or %n would read or
+// write through a stray pointer), and a stack with a slice missing is refused, not cut short.
+TEST(ItkRegions, ASlicePatternIsANumberAndEverySliceIsThere) {
+  REQUIRE_ITK();
+  const fs::path dir =
+      fs::temp_directory_path() / ("isotile-pattern-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume raw = field_as("field:sphere:16", ScalarType::UInt16);
+  const std::size_t plane = static_cast<std::size_t>(16 * 16);
+  auto write_slice = [&](int k, const char* format) {
+    char name[32];
+    std::snprintf(name, sizeof name, format, k);
+    write_itk((dir / name).string(), raw.data<std::uint16_t>() + (k % 16) * plane,
+              ScalarType::UInt16, {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
+  };
+  for (int k = 1; k <= 16; ++k) write_slice(k, "p_%d.tif");
+  EXPECT_EQ(read_volume_header((dir / "p_%d.tif").string()).dims, (Index3{16, 16, 16}));
+  for (const char* bad : {"p_%s.tif", "p_%n.tif", "p_%d_%d.tif", "p_%x.tif", "p_%.tif"}) {
+    SCOPED_TRACE(bad);
+    try {
+      read_volume_header((dir / bad).string());
+      ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("not a slice pattern"), std::string::npos) << e.what();
+    }
+  }
+  // Slices 0 to 9 and 11 to 14 of a zero-padded stack: refused, naming the missing slice.
+  for (int k = 0; k < 15; ++k)
+    if (k != 10) write_slice(k, "z_%03d.tif");
+  for (const bool whole : {false, true}) {
+    try {
+      if (whole)
+        read_volume((dir / "z_%03d.tif").string());
+      else
+        read_volume_header((dir / "z_%03d.tif").string());
+      ADD_FAILURE() << "a stack with a gap was read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("z_010.tif is missing"), std::string::npos) << e.what();
+    }
+  }
+  write_slice(10, "z_%03d.tif");
+  EXPECT_EQ(read_volume((dir / "z_%03d.tif").string()).dims(), (Index3{16, 16, 15}));
+  fs::remove_all(dir);
+}
+
 // Plainly stored NIfTI and MetaImage are read box by box; gzip'd NIfTI is read whole.
 TEST(ItkRegions, PlainFilesAreReadByRegion) {
   REQUIRE_ITK();
@@ -887,13 +932,28 @@ TEST_F(DamagedInputs, CompressedNiftiAndMetaImageMustInflateToEverySample) {
 
   const std::string mha = testing::slurp(dir_ / "good.mha");
   expect_refused(write("cut.mha", mha.substr(0, mha.size() - packed.size() / 3)),
-                 "compressed data cut off");
+                 "(truncated file)");
+  // MetaIO inflates CompressedDataSize bytes; without it, the header's own file from its first
+  // byte (the header's text): "Uncompress failed" on stderr and samples never written.
+  std::string unsized = mha;
+  const std::size_t size_line = unsized.find("CompressedDataSize");
+  unsized.erase(size_line, unsized.find('\n', size_line) + 1 - size_line);
+  expect_refused(write("unsized.mha", unsized), "needs CompressedDataSize");
+  std::string small = mha;
+  small.replace(small.find(std::to_string(packed.size())), std::to_string(packed.size()).size(),
+                std::to_string(packed.size() - 100));
+  expect_refused(write("small.mha", small), "compressed data cut off");
+  // MetaIO reads data in the header's file under any of its three spellings of LOCAL.
+  std::string lower = mha;
+  lower.replace(lower.find("ElementDataFile = LOCAL"), 23, "ElementDataFile = local");
+  write("lower.mha", lower);
+  EXPECT_EQ(triangles("lower.mha"), want);
   // Header says more samples than the stream holds.
   std::string dims = mha;
   dims.replace(dims.find("DimSize = 40 40 40"), 18, "DimSize = 40 40 41");
   expect_refused(write("dims.mha", dims), "(too short)");
   expect_refused(write("CUT.MHA", mha.substr(0, mha.size() - packed.size() / 3)),
-                 "compressed data cut off");
+                 "(truncated file)");
 }
 
 TEST_F(DamagedInputs, GzipRawInCoreAndOutOfCore) {
@@ -925,6 +985,46 @@ TEST_F(DamagedInputs, NrrdRawAndGzipMustHoldEverySample) {
   write("data.raw.gz", gz.substr(0, gz.size() - 4));
   expect_refused(write("detached.nhdr", header + "encoding: gzip\ndata file: data.raw.gz\n\n"),
                  "cut off", true, "data.raw.gz");
+}
+
+// What teem reads, isotile reads the same in core and out of core: attached raw data after a byte
+// skip (counted once: teem has passed it when it hands the file over), gzip data of several
+// members, or after skipped lines of text; raw data longer than the samples is refused in core
+// as out of core (teem reads it with a warning).
+TEST_F(DamagedInputs, NrrdSkipsAndMembersReadAsTeemReadsThem) {
+  gzFile f = gzopen((fs::path(ISOTILE_TEST_DATA) / "nucleon_41x41x41_uint8.raw.gz").c_str(), "rb");
+  std::string samples(41 * 41 * 41, '\0');
+  ASSERT_EQ(gzread(f, samples.data(), static_cast<unsigned>(samples.size())),
+            static_cast<int>(samples.size()));
+  gzclose(f);
+  const std::string header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 41 41 41\n";
+  write("plain.nrrd", header + "encoding: raw\n\n" + samples);
+  const std::string want = run("extract plain.nrrd -o want.ply --iso 60 -q").err;
+  ASSERT_TRUE(want.empty()) << want;
+  const std::string reference = testing::slurp(dir_ / "want.ply");
+  auto same_mesh = [&](const std::string& file) {
+    for (const char* memory : {"", " --memory 1MiB"}) {
+      const CliResult r = run("extract " + file + " -o got.ply --iso 60 -q" + memory);
+      ASSERT_EQ(r.code, 0) << file << memory << ": " << r.err;
+      EXPECT_EQ(testing::slurp(dir_ / "got.ply"), reference) << file << memory;
+    }
+  };
+  write("skip.nrrd", header + "encoding: raw\nbyte skip: 5\n\n12345" + samples);
+  same_mesh("skip.nrrd");
+  write("lines.nrrd", header + "encoding: raw\nline skip: 2\n\nl1\nl2\n" + samples);
+  same_mesh("lines.nrrd");
+  const std::size_t half = samples.size() / 2;
+  write("members.nrrd",
+        header + "encoding: gzip\n\n" + gzip(samples.substr(0, half)) + gzip(samples.substr(half)));
+  same_mesh("members.nrrd");
+  write("lines.raw.gz", "a line of text\n" + gzip(samples));
+  write("lines.nhdr", header + "encoding: gzip\ndata file: lines.raw.gz\nline skip: 1\n");
+  same_mesh("lines.nhdr");
+  expect_refused(write("long.nrrd", header + "encoding: raw\n\n" + samples + "1234567"),
+                 "(too long)");
+  expect_refused(
+      write("long_skip.nrrd", header + "encoding: raw\nbyte skip: 5\n\n12345" + samples + "12"),
+      "(too long)");
 }
 
 TEST_F(DamagedInputs, GzipMrcIsReadDirectlyAndMustBeWhole) {

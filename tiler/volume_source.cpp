@@ -81,7 +81,9 @@ class RawFileSource final : public VolumeSource {
                        std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
                        std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
                        " samples need " + std::to_string(need) +
-                       (offset_ ? " after " + std::to_string(offset_) + " header bytes" : ""));
+                       (offset_ ? " after " + std::to_string(offset_) + " header bytes" : "") +
+                       (static_cast<std::uint64_t>(st.st_size) < need + offset_ ? " (too short)"
+                                                                                : " (too long)"));
   }
   ~RawFileSource() override {
     if (fd_ >= 0) ::close(fd_);
@@ -142,8 +144,7 @@ class PlaneFilesSource final : public VolumeSource {
       try {
         for (std::int64_t j = box.lo[1]; j < box.hi[1]; j += run_rows, dst += run_bytes)
           read_exactly(fd, plane.file, dst, run_bytes,
-                       static_cast<std::int64_t>(plane.offset) +
-                           (j * dims[0] + box.lo[0]) * size);
+                       static_cast<std::int64_t>(plane.offset) + (j * dims[0] + box.lo[0]) * size);
       } catch (...) {
         ::close(fd);
         throw;

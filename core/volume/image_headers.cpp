@@ -235,6 +235,7 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   std::string element_type;
   bool compressed = false, msb = false, found = false;
   std::int64_t header_size = 0, channels = 1;
+  std::optional<std::uint64_t> compressed_size;
   std::uint64_t header_end = 0;
   while (std::getline(f, line)) {
     header_end += line.size() + 1;
@@ -268,6 +269,12 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
       element_type = value;
     } else if (key == "CompressedData") {
       compressed = value == "True" || value == "true";
+    } else if (key == "CompressedDataSize") {
+      if (value.empty() || value.size() > 18 ||
+          value.find_first_not_of("0123456789") != std::string::npos)
+        throw InputError(path + ": MetaImage CompressedDataSize is '" + value +
+                         "', not a byte count");
+      compressed_size = std::stoull(value);
     } else if (key == "BinaryDataByteOrderMSB" || key == "ElementByteOrderMSB") {
       msb = value == "True" || value == "true";
     } else if (key == "HeaderSize") {
@@ -332,7 +339,9 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   const Endian endian = msb ? Endian::Big : Endian::Little;
   std::string file = path;
   std::uint64_t offset = header_end, available = size > header_end ? size - header_end : 0;
-  if (data_file != "LOCAL") {
+  // MetaIO takes these three spellings for data in the header's own file.
+  const bool local = data_file == "LOCAL" || data_file == "Local" || data_file == "local";
+  if (!local) {
     if (data_file == "LIST" || data_file.find('%') != std::string::npos ||
         data_file.find(' ') != std::string::npos)
       throw InputError(path + ": MetaImage data in several files (ElementDataFile " + data_file +
@@ -348,12 +357,26 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
     available = n > offset ? n - offset : 0;
   }
   if (compressed) {
+    // MetaIO inflates CompressedDataSize bytes from the samples' start; without the field it
+    // takes the whole file from its first byte, which for data after the header is the header's
+    // text: it prints "Uncompress failed" and returns a buffer it never filled.
+    if (local && !compressed_size)
+      throw InputError(path +
+                       ": compressed MetaImage data in the header's own file needs "
+                       "CompressedDataSize (the size of the compressed samples), which "
+                       "the header lacks");
+    if (compressed_size && *compressed_size > available)
+      throw InputError(file + ": CompressedDataSize is " + std::to_string(*compressed_size) +
+                       " bytes but the file holds " + std::to_string(available) +
+                       " after the header (truncated file)");
+    if (compressed_size) available = *compressed_size;
     if (available * kMaxDeflateRatio < bytes)
       throw InputError(path + ": " + std::to_string(available) + " compressed bytes cannot hold " +
                        dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
     out.compressed = ImageHeaderCheck::Compressed{
         file, offset, bytes, false,
         dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples"};
+    out.compressed->limit = compressed_size.value_or(0);
     return out;
   }
   if (available < bytes)
@@ -374,24 +397,28 @@ void verify_compressed(const ImageHeaderCheck& check) {
   // 15 + 32: zlib or gzip, told apart by their headers (MetaIO writes zlib, NIfTI files are gzip).
   if (inflateInit2(&z, 15 + 32) != Z_OK) throw IoError(c.file + ": out of memory for zlib");
   std::vector<unsigned char> in(1 << 20), out(1 << 20);
-  std::uint64_t total = 0;
+  std::uint64_t total = 0, left = c.limit ? c.limit : UINT64_MAX;  // compressed bytes to read
   bool ended = false;
   int code = Z_OK;
+  const auto more = [&] { return left > 0 && f.peek() != std::ifstream::traits_type::eof(); };
   for (;;) {
     if (z.avail_in == 0) {
-      f.read(reinterpret_cast<char*>(in.data()), static_cast<std::streamsize>(in.size()));
+      f.read(reinterpret_cast<char*>(in.data()),
+             static_cast<std::streamsize>(std::min<std::uint64_t>(in.size(), left)));
       z.next_in = in.data();
       z.avail_in = static_cast<uInt>(f.gcount());
-      if (z.avail_in == 0) break;  // the file ends
+      left -= z.avail_in;
+      if (z.avail_in == 0) break;  // the file, or the header's compressed bytes, end
     }
     z.next_out = out.data();
     z.avail_out = static_cast<uInt>(out.size());
     code = inflate(&z, Z_NO_FLUSH);
     total += out.size() - z.avail_out;
     if (code == Z_STREAM_END) {
-      // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip.
-      if (c.whole_gzip) {
-        if (z.avail_in == 0 && f.peek() == std::ifstream::traits_type::eof()) {
+      // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip, and
+      // so is NRRD's data.
+      if (c.whole_gzip || c.members) {
+        if (z.avail_in == 0 && !more()) {
           ended = true;
           break;
         }

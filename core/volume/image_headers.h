@@ -28,6 +28,8 @@ struct ImageHeaderCheck {
     bool whole_gzip = false;   // NIfTI .nii.gz: the file is one gzip stream, header included,
                                // and may run on past `need`; else a zlib stream of exactly need
     std::string what;          // the samples, e.g. "256x256x133 uint8 samples"
+    bool members = false;      // gzip of exactly `need` in one or more members (NRRD)
+    std::uint64_t limit = 0;   // the stream's compressed bytes when the header says (else 0)
   };
   std::optional<Compressed> compressed;
 };

@@ -2,6 +2,7 @@
 // templated reader pipeline: headers and samples go straight into the caller's buffer (no second
 // copy of the volume), and this file stays cheap to compile.
 #include "core/volume/itk_reader.h"
+#include "core/volume/numbered_files.h"
 
 #include <itkGDCMImageIO.h>
 #include <itkGDCMSeriesFileNames.h>
@@ -392,24 +393,6 @@ bool tiff_name(const fs::path& p) {
   return ext == ".tif" || ext == ".tiff";
 }
 
-// Numbered slices: `pattern` holds one printf integer conversion; slices are numbered from 0 or
-// 1 on, as long as the files exist.
-std::vector<std::string> pattern_files(const std::string& pattern) {
-  std::vector<std::string> out;
-  for (int first : {0, 1}) {
-    for (int i = first;; ++i) {
-      char name[4096];
-      if (std::snprintf(name, sizeof name, pattern.c_str(), i) >= static_cast<int>(sizeof name))
-        break;
-      if (!fs::is_regular_file(name)) break;
-      out.push_back(name);
-    }
-    if (!out.empty()) break;
-  }
-  if (out.empty()) throw IoError("cannot open " + pattern + ": no file matches the pattern");
-  return out;
-}
-
 std::vector<std::string> stack_files(const ItkInput& input) {
   if (input.kind == ItkInput::Kind::TiffStack) {
     if (fs::is_directory(input.path)) {
@@ -417,7 +400,7 @@ std::vector<std::string> stack_files(const ItkInput& input) {
       if (files.empty()) throw InputError(input.path + ": no .tif files in the directory");
       return files;
     }
-    return pattern_files(input.path);
+    return numbered_files(input.path);
   }
   // DICOM: the directory, or the directory of the file given.
   const bool dir = fs::is_directory(input.path);

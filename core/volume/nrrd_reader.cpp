@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -178,8 +179,9 @@ struct IoStateNixer {
 };
 
 // The file holding a NRRD's data (one detached file, or the header's own) and where its bytes
-// begin in it (0 for a detached file, before any byte skip); nothing when teem did not keep the
-// attached file open where it stopped reading the header.
+// begin in it: 0 for a detached file, before any line or byte skip; in the header's own file
+// where teem stopped reading, after the header and its line and byte skips. Nothing when teem
+// did not keep the attached file open.
 struct DataStart {
   std::string file;
   std::uint64_t offset = 0;
@@ -212,6 +214,10 @@ std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path)
   }
   if (nio->encoding != nrrdEncodingGzip || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
     return std::nullopt;
+  // Lines skipped before a detached file's compressed data (teem skips them as text). In the
+  // header's own file, teem has read past them already (data_start()).
+  std::uint64_t lines = 0;
+  if (nio->lineSkip > 0 && nio->dataFNArr->len == 1) lines = nio->lineSkip;
   const HeaderInfo h = header_info(path, *nrrd);
   ImageHeaderCheck::Compressed c;
   c.need = checked_volume_bytes(h.type, h.dims);
@@ -221,6 +227,16 @@ std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path)
   if (!start) return std::nullopt;
   c.file = start->file;
   c.offset = start->offset;
+  c.members = true;  // teem reads a gzip stream of several members, as gzip(1) does
+  if (lines > 0) {
+    std::ifstream f(c.file, std::ios::binary);
+    std::string line;
+    for (std::uint64_t i = 0; i < lines; ++i)
+      if (!std::getline(f, line))
+        throw InputError(c.file + ": the NRRD header's line skip of " + std::to_string(lines) +
+                         " lines passes the data file's end");
+    c.offset = static_cast<std::uint64_t>(f.tellg());
+  }
   return c;
 }
 
@@ -232,6 +248,20 @@ Volume read_nrrd(const std::string& path) {
     ImageHeaderCheck check;
     check.compressed = std::move(gz);
     verify_compressed(check);
+  }
+  // Raw data must be exactly the samples, as out of core (teem reads a longer file with a warning
+  // on stderr).
+  if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(path); d && !d->gzip) {
+    const std::uint64_t need = checked_volume_bytes(d->type, d->dims);
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(d->data_file, ec);
+    if (!ec && size != d->offset + need)
+      throw InputError(d->data_file + ": file holds " + std::to_string(size) + " bytes but " +
+                       std::to_string(d->dims[0]) + "x" + std::to_string(d->dims[1]) + "x" +
+                       std::to_string(d->dims[2]) + " " + std::string(scalar_name(d->type)) +
+                       " samples need " + std::to_string(need) +
+                       (d->offset ? " after " + std::to_string(d->offset) + " header bytes" : "") +
+                       (size < d->offset + need ? " (too short)" : " (too long)"));
   }
   std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
   {
@@ -280,7 +310,10 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
   const std::optional<DataStart> data = data_start(path, *nio);
   if (!data) return std::nullopt;
   out.data_file = data->file;
-  const std::uint64_t start = data->offset;  // where the samples begin, before byte skip
+  // Where the samples begin: a detached file's skip is counted here, the header's own file's
+  // was passed by teem already (data_start()).
+  const bool attached = nio->dataFNArr->len == 0;
+  const std::uint64_t start = data->offset;
   if (out.gzip) {
     if (nio->byteSkip != 0) return std::nullopt;
     out.offset = start;
@@ -293,7 +326,7 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
     if (ec || size < bytes) return std::nullopt;
     out.offset = size - bytes;
   } else {
-    out.offset = start + static_cast<std::uint64_t>(nio->byteSkip);
+    out.offset = attached ? start : start + static_cast<std::uint64_t>(nio->byteSkip);
   }
   return out;
 }

@@ -21,6 +21,7 @@
 #include "core/errors.h"
 #include "core/volume/image_headers.h"
 #include "core/volume/itk_reader.h"
+#include "core/volume/numbered_files.h"
 #include "core/volume/procedural_fields.h"
 
 namespace isotile {
@@ -151,17 +152,7 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
       for (const auto& e : std::filesystem::directory_iterator(input, ec))
         if (e.is_regular_file(ec) && is_tiff_name(e.path().string())) slice(e.path().string());
     } else {
-      // Numbered slices, from 0 or 1 on, as the ITK reader takes them.
-      for (int i = 0;; ++i) {
-        char name[4096];
-        if (std::snprintf(name, sizeof name, input.c_str(), i) >= static_cast<int>(sizeof name))
-          break;
-        if (!std::filesystem::is_regular_file(name, ec)) {
-          if (i == 0) continue;
-          break;
-        }
-        slice(name);
-      }
+      for (const std::string& name : numbered_files(input)) slice(name);  // as ITK takes them
     }
     return check;
   }
@@ -183,9 +174,8 @@ std::optional<PlainData> stacked_slices(const std::vector<PlainData>& slices,
   for (const std::string& file : info.files) {
     const auto found = by_name.find(file);
     const PlainData* s = found == by_name.end() ? nullptr : found->second;
-    if (!s || s->type != info.type || s->dims[0] != info.dims[0] ||
-        s->dims[1] != info.dims[1] || s->dims[2] != 1 ||
-        (file != info.files.front() && s->endian != out.endian))
+    if (!s || s->type != info.type || s->dims[0] != info.dims[0] || s->dims[1] != info.dims[1] ||
+        s->dims[2] != 1 || (file != info.files.front() && s->endian != out.endian))
       return std::nullopt;
     out.endian = s->endian;
     out.planes.push_back({file, s->offset});
@@ -260,8 +250,11 @@ InputKind input_kind(const std::string& input) {
       if (e.is_regular_file() && is_tiff_name(e.path().string())) return InputKind::TiffStack;
     return InputKind::Dicom;
   }
+  // A name with a % is a pattern of numbered slices, unless it names a file.
   if (is_tiff_name(input))
-    return input.find('%') != std::string::npos ? InputKind::TiffStack : InputKind::Tiff;
+    return input.find('%') != std::string::npos && !std::filesystem::is_regular_file(input, ec)
+               ? InputKind::TiffStack
+               : InputKind::Tiff;
   const std::string ext = lower_extension(input);
   if (ext == ".nrrd" || ext == ".nhdr") return InputKind::Nrrd;
   if (ext == ".vdb") return InputKind::Vdb;
