@@ -234,6 +234,28 @@ TEST(Simplify, NonManifoldInputKeepsEveryFaceItCannotSimplifyAndMakesNoNewOne) {
   EXPECT_GE(out.triangles.size(), 8u);
 }
 
+// Faces with a repeated corner pass through as they are, beside a surface that simplifies: OpenMesh
+// fails an assertion (and the process ends) on some of them, so they never reach it.
+TEST(Simplify, FacesWithARepeatedCornerPassThrough) {
+  Mesh in = field_mesh(FieldKind::Sphere, 24);
+  const std::size_t faces = in.triangles.size();
+  const auto n = static_cast<std::uint32_t>(in.positions.size());
+  in.positions.push_back({100, 0, 0});
+  in.positions.push_back({100, 1, 0});
+  in.positions.push_back({100, 0, 1});
+  // The sequences found to end the process: a face, then one with a corner twice after it.
+  in.triangles.push_back({n, n + 1, n + 2});
+  in.triangles.push_back({n, n, n + 1});
+  in.triangles.push_back({n + 2, n + 2, n + 2});
+  SimplifyStats st;
+  const Mesh out = simplify(in, {.ratio = 0.5}, &st);
+  EXPECT_EQ(st.unlinked_faces, 2u);
+  EXPECT_LT(out.triangles.size(), faces);
+  std::size_t repeated = 0;
+  for (const Tri& t : out.triangles) repeated += t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
+  EXPECT_EQ(repeated, 2u);
+}
+
 TEST(Simplify, DualContouringNonManifoldEdgesStayAsTheyWere) {
   // Random samples give Dual Contouring plenty of cells whose sheets share an edge.
   Volume vol(ScalarType::Float32, {24, 24, 24});

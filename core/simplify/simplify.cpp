@@ -638,9 +638,15 @@ Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& op
     const double held = kSeamFaces * static_cast<double>(count_shared(m, grid)) * (1 - keep);
     target1 = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
   }
+  const std::uint64_t unlinked_before = stats.unlinked_faces;
   PassResult p1 = run_pass(m, grid, target1, ro, options, stats);
   stats.regions += p1.regions;
+  // Faces OpenMesh cannot link pass through both passes: counted once, not once per pass.
+  const std::uint64_t unlinked_first = stats.unlinked_faces - unlinked_before;
+  stats.unlinked_faces = unlinked_before;
   PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, options, stats);
+  stats.unlinked_faces =
+      unlinked_before + std::max(unlinked_first, stats.unlinked_faces - unlinked_before);
   stats.seam_regions += p2.regions;
   return weld(p2.mesh);
 }

@@ -184,7 +184,10 @@ struct RegionSimplifier::Impl {
     std::vector<int> face_of(region.triangles.size(), -1);  // input triangle -> face, or -1
     for (std::size_t i = 0; i < region.triangles.size(); ++i) {
       const Tri& t = region.triangles[i];
-      const FH f = mesh.add_face(VH(t[0]), VH(t[1]), VH(t[2]));
+      // A repeated corner never goes to OpenMesh: some such faces it refuses, others fail an
+      // assertion in add_face (a face after one with the same corners twice: the process ends).
+      const bool repeated = t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
+      const FH f = repeated ? FH() : mesh.add_face(VH(t[0]), VH(t[1]), VH(t[2]));
       if (f.is_valid()) {
         face_of[i] = f.idx();
       } else {
