@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "core/errors.h"
+
 namespace isotile {
 namespace {
 
@@ -34,8 +36,32 @@ inline double largest_cell_range(const T* corner, const Index3& stride) {
   return best;
 }
 
+// The largest (max - min) of the cells [lo, hi] (inclusive, per axis) that lie inside `mask`.
 template <class T>
-std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
+double largest_masked_range(const VolumeView& view, const VolumeView& mask,
+                            const std::int64_t lo[3], const std::int64_t hi[3]) {
+  const T* data = view.typed<T>();
+  const std::uint8_t* set = mask.typed<std::uint8_t>();
+  double best = 0;
+  for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+      for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+        bool inside = true;
+        T mn{}, mx{};
+        for (int c = 0; c < 8 && inside; ++c) {
+          const std::int64_t x = i + (c & 1), y = j + ((c >> 1) & 1), z = k + (c >> 2);
+          inside = set[mask.offset(x, y, z)] != 0;
+          const T v = data[view.offset(x, y, z)];
+          mn = c == 0 ? v : std::min(mn, v);
+          mx = c == 0 ? v : std::max(mx, v);
+        }
+        if (inside) best = std::max(best, static_cast<double>(mx) - static_cast<double>(mn));
+      }
+  return best;
+}
+
+template <class T>
+std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh, const VolumeView* mask) {
   const T* data = view.typed<T>();
   const std::size_t n = mesh.positions.size();
   std::vector<float> out(n);
@@ -59,6 +85,10 @@ std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
             }
             lo[a] = std::clamp<std::int64_t>(lo[a], 0, last);
             hi[a] = std::clamp<std::int64_t>(hi[a], 0, last);
+          }
+          if (mask) {
+            out[v] = static_cast<float>(largest_masked_range<T>(view, *mask, lo, hi));
+            continue;
           }
           // Which axes hold two cells picks one of eight fixed-size loops (an MC vertex has two,
           // on the two grid planes through its edge): unrolled, where loops whose trip counts
@@ -104,10 +134,14 @@ std::vector<float> typed_ranges(const VolumeView& view, const Mesh& mesh) {
 
 }  // namespace
 
-std::vector<float> vertex_cell_ranges(const VolumeView& view, const Mesh& mesh) {
+std::vector<float> vertex_cell_ranges(const VolumeView& view, const Mesh& mesh,
+                                      const VolumeView* mask) {
   if (view.dims[0] < 2 || view.dims[1] < 2 || view.dims[2] < 2)
     return std::vector<float>(mesh.positions.size(), 0.0f);
-  return visit_scalar(view.type, [&](auto tag) { return typed_ranges<decltype(tag)>(view, mesh); });
+  if (mask && (mask->type != ScalarType::UInt8 || mask->dims != view.dims))
+    throw InputError("the mask must be uint8 samples of the volume's dims");
+  return visit_scalar(view.type,
+                      [&](auto tag) { return typed_ranges<decltype(tag)>(view, mesh, mask); });
 }
 
 }  // namespace isotile

@@ -17,6 +17,10 @@ namespace isotile {
 // One value per position of `mesh`, whose positions are in the grid frame of `view` (origin +
 // spacing x global index). Positions outside the view take the nearest cell's range.
 // Deterministic for any thread count.
-std::vector<float> vertex_cell_ranges(const VolumeView& view, const Mesh& mesh);
+// With `mask` (UInt8, the dims of `view`; core/extract/cell_mask.h), only the cells inside it
+// (all eight corners set) count: the cells whose faces were kept, as scikit-image skips the
+// others.
+std::vector<float> vertex_cell_ranges(const VolumeView& view, const Mesh& mesh,
+                                      const VolumeView* mask = nullptr);
 
 }  // namespace isotile

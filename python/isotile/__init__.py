@@ -47,7 +47,8 @@ def _readable(array, what):
                           else _np.float64)
     in_place = (dtype == a.dtype and a.flags.aligned
                 and all(s >= 0 and s % a.itemsize == 0 for s in a.strides))
-    return a if in_place else _np.ascontiguousarray(a, dtype=dtype)
+    # A copy, always: ascontiguousarray returns an unaligned C-ordered array as it is.
+    return a if in_place else _np.array(a, dtype=dtype, order="C", copy=True)
 
 
 def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_direction="descent",
@@ -377,7 +378,7 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
     for key in _EXTRACT_OPTIONS:
         options[key] = local[key]
     if options["output"] is not None:
-        options["output"] = _os.fspath(options["output"])
+        options["output"] = _os.fsdecode(_os.fspath(options["output"]))
     if isinstance(source, Volume):
         if source._handle is not None:
             src = source._handle

@@ -114,13 +114,19 @@ auto run_released(std::optional<int> threads, F&& f) {
 }
 
 // The library's warnings (core/progress.h), kept from whichever thread says them until the
-// calling thread, holding the GIL, hands them to Python's warnings.
+// calling thread, holding the GIL, hands them to Python's warnings. With `handed`, the thread
+// that says one waits until a watcher has issued it and called released() (extract's watcher
+// issues them while the run goes on): a filter that makes it an error has cancelled the run by
+// then, before the run can write its file.
 class Warnings {
  public:
+  explicit Warnings(bool handed = false) : handed_(handed) {}
   Warn sink() {
     return [this](const std::string& line) {
-      std::lock_guard lock(mutex_);
+      std::unique_lock lock(mutex_);
       lines_.push_back(line);
+      const std::uint64_t ticket = ++said_;
+      if (handed_) released_cv_.wait(lock, [&] { return released_ >= ticket; });
     };
   }
   // Under the GIL: each line kept so far as a RuntimeWarning, attributed to the code that called
@@ -135,10 +141,21 @@ class Warnings {
     for (const std::string& line : lines)
       if (PyErr_WarnEx(PyExc_RuntimeWarning, line.c_str(), 2) < 0) throw py::error_already_set();
   }
+  // Lets the threads waiting on the lines said so far go on (issued, or dropped after an error).
+  void release() {
+    {
+      std::lock_guard lock(mutex_);
+      released_ = said_;
+    }
+    released_cv_.notify_all();
+  }
 
  private:
+  const bool handed_;
   std::mutex mutex_;
+  std::condition_variable released_cv_;
   std::vector<std::string> lines_;
+  std::uint64_t said_ = 0, released_ = 0;
 };
 
 // What one extraction hands to Python: the arrays point into it, a capsule owns it.
@@ -229,7 +246,8 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
     }
     result->mesh = extract(view, options);
     if (mask_view) result->mesh = keep_masked_cells(result->mesh, view, *mask_view);
-    if (values) result->values = vertex_cell_ranges(view, result->mesh);
+    if (values)
+      result->values = vertex_cell_ranges(view, result->mesh, mask_view ? &*mask_view : nullptr);
     return 0;
   });
   warnings.issue();
@@ -612,8 +630,9 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
   });
   po.progress = &reporter;
   // Issued while the run goes on (the watcher below), so that a long run's warning is seen when
-  // it is said; a filter that makes them errors cancels the run.
-  Warnings warnings;
+  // it is said; a filter that makes them errors cancels the run before it writes its file (the
+  // thread that says one waits for the watcher).
+  Warnings warnings(true);
   po.warn = warnings.sink();
   const auto issue_warnings = [&] {
     if (bridge.error) return;
@@ -653,6 +672,7 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
         if (!bridge.error && PyErr_CheckSignals() != 0) bridge.error.emplace();
         issue_warnings();
         if (bridge.error) reporter.cancel();
+        warnings.release();  // after the cancel, so that the run sees it
       }
       lock.lock();
     }
@@ -660,14 +680,9 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     worker.join();
   }
   issue_warnings();  // those said after the watcher's last look
-  if (bridge.error) {
-    // A run that finished before it saw the cancel is undone: an interrupted call leaves no file.
-    if (!failure && !po.output.empty()) {
-      std::error_code ec;
-      std::filesystem::remove(po.output, ec);
-    }
-    throw std::move(*bridge.error);
-  }
+  // A Ctrl-C that came after the run wrote its file (it replaced the one before) leaves the new
+  // file: removing it would lose both.
+  if (bridge.error) throw std::move(*bridge.error);
   if (failure) std::rethrow_exception(failure);  // Cancelled (declined) included
   py::object mesh = py::none();
   if (po.memory.empty()) mesh = make_mesh_tuple(std::move(result.mesh));

@@ -203,6 +203,45 @@ def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
     assert not (tmp_path / "err.ply").exists()
 
 
+def test_an_arrays_samples_pass_a_files_checks():
+    """An array handed to extract is checked as a file's samples are: NaN or Inf, and no samples
+    at all, are errors, not a mesh with NaN vertices or a range made up."""
+    vol = np.zeros((16, 16, 16), np.float32)
+    vol[4:12, 4:12, 4:12] = 1
+    vol[8, 8, 3] = np.nan
+    with pytest.raises(ValueError, match="1 sample is NaN or Inf .first at x=3, y=8, z=8"):
+        isotile.extract(vol, 0.5)
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        isotile.extract(isotile.Volume(vol), 0.5)
+    with pytest.raises(ValueError, match="volume dimensions must be positive"):
+        isotile.extract(np.zeros((0, 4, 4), np.float32), 0.0, allow_empty=True)
+
+
+def test_a_volume_one_sample_thick_has_no_surface():
+    """No cells, so no face: an error as for any run without a face (allow_empty: the empty
+    mesh), not an empty mesh without a word."""
+    flat = np.linspace(0, 1, 256, dtype=np.float32).reshape(1, 16, 16)
+    with pytest.raises(ValueError, match="no face crosses it"):
+        isotile.extract(flat, 0.5)
+    assert len(isotile.extract(flat, 0.5, allow_empty=True).faces) == 0
+
+
+def test_a_warning_made_an_error_keeps_the_previous_file(tmp_path):
+    """A warning turned into an error by a filter cancels the run before it writes: the file
+    from before stays as it was, however quickly the run ends (the run waits for the warning to
+    be issued)."""
+    vol = np.zeros((8, 8, 8), np.float32)
+    vol[2:6, 2:6, 2:6] = 1
+    out = tmp_path / "keep.ply"
+    for _ in range(5):
+        out.write_text("my previous mesh")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            with pytest.raises(RuntimeWarning, match="positions are float32"):
+                isotile.extract(vol, 0.5, origin=(1e7, 0, 0), output=out)
+        assert out.read_text() == "my previous mesh"
+
+
 def test_coarse_float32_positions_are_a_warning(tmp_path):
     """A grid so far from 0 that float32 vertices snap to a coarse lattice (UTM-like) is said as
     a RuntimeWarning; the mesh still comes back. A grid nearer 0 is not."""
