@@ -269,6 +269,45 @@ TEST_F(CliOutputs, BadOutputPathsFailBeforeTheInputIsRead) {
   EXPECT_EQ(stray_files({"adir.ply"}), std::vector<std::string>{});
 }
 
+// Two of a run's files that are one file: refused before any work, the files as they were (the
+// stats used to replace the mesh, or the input volume, with exit 0).
+TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {
+  ASSERT_EQ(run("extract field:sphere:16 -q -o m.ply").code, 0);
+  const std::string mesh = slurp(dir_ / "m.ply");
+  std::ofstream(dir_ / "v_8x8x8_uint8.raw", std::ios::binary) << std::string(512, '\x10');
+  fs::create_directory(dir_ / "sub");
+  struct Bad {
+    std::string args, says;
+  } const cases[] = {
+      {"extract field:sphere:16 -o m.ply --stats m.ply",
+       "--stats m.ply is the same file as the output"},
+      {"extract field:sphere:16 -o m.ply --stats sub/../m.ply", "the same file as the output"},
+      {"extract field:sphere:16 -o m.ply --memory 1MiB --stats ./m.ply", "the same file"},
+      {"extract v_8x8x8_uint8.raw --iso 9 -o out.ply --stats v_8x8x8_uint8.raw",
+       "--stats v_8x8x8_uint8.raw is the same file as the input"},
+      {"simplify m.ply out.ply --ratio 0.5 --stats m.ply", "the same file as the input"},
+      {"simplify m.ply m.ply --ratio 0.5", "the output m.ply is the same file as the input"},
+      {"simplify m.ply out.ply --ratio 0.5 --stats out.ply", "the same file as the output"},
+  };
+  for (const Bad& b : cases) {
+    const CliResult r = run(b.args);
+    EXPECT_EQ(r.code, 1) << b.args;
+    EXPECT_TRUE(says(r, b.says)) << b.args << ": " << r.err;
+    EXPECT_EQ(slurp(dir_ / "m.ply"), mesh) << b.args;
+    EXPECT_EQ(fs::file_size(dir_ / "v_8x8x8_uint8.raw"), 512u) << b.args;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << b.args;
+  }
+}
+
+// A legal name of 250 bytes: the temporary file beside it must fit NAME_MAX (255) too.
+TEST_F(CliOutputs, ALongLegalOutputNameIsWritten) {
+  const std::string name = std::string(246, 'a') + ".ply";
+  const CliResult r = run("extract field:sphere:16 -q -o " + name);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(isotile::read_mesh(dir_ / name).triangles.size(), 100u);
+  EXPECT_EQ(stray_files({name}), std::vector<std::string>{});
+}
+
 TEST_F(CliOutputs, BadNumbersAreOneLineErrors) {
   struct Bad {
     std::string args, says;
@@ -282,6 +321,11 @@ TEST_F(CliOutputs, BadNumbersAreOneLineErrors) {
       {"--iso nan", "--iso must be a finite number or 'auto', got 'nan'"},
       {"--iso inf", "--iso must be a finite number or 'auto'"},
       {"--iso 1x", "--iso must be a finite number or 'auto', got '1x'"},
+      // A fourth value, or a trailing comma, was dropped without a word.
+      {"--spacing 1,1,1,7", "--spacing must be three comma-separated numbers, got '1,1,1,7'"},
+      {"--origin 1,2,3,", "--origin must be three comma-separated numbers"},
+      {"--spacing 1,,1", "--spacing must be three comma-separated numbers"},
+      {"--dims 16,16,16,2 --type float32", "--dims must be three comma-separated numbers"},
   };
   for (const Bad& b : cases) {
     const CliResult r = run("extract field:sphere:16 -o out.ply " + b.args);
@@ -389,6 +433,38 @@ TEST_F(CliOutputs, AnIsovalueOutsideTheSamplesIsAnErrorNamingTheRange) {
     fs::remove(dir_ / "out.ply");
     fs::remove(dir_ / "s.json");
   }
+}
+
+// No face although samples straddle the isovalue: a volume one sample thick (no cells), or DC on
+// a surface that meets only the volume's border. The same error in core and out of core, saying
+// so; --allow-empty writes the empty mesh in both.
+TEST_F(CliOutputs, NoFaceIsAnErrorInCoreAsOutOfCoreEvenInsideTheRange) {
+  {
+    std::ofstream flat(dir_ / "flat_16x16x1_float32.raw", std::ios::binary);
+    for (int i = 0; i < 256; ++i) {
+      const float v = static_cast<float>(i) / 255.0f;
+      flat.write(reinterpret_cast<const char*>(&v), sizeof v);
+    }
+    std::string corner(8 * 8 * 8, '\0');
+    corner[0] = '\xff';
+    std::ofstream(dir_ / "corner_8x8x8_uint8.raw", std::ios::binary) << corner;
+  }
+  for (const std::string input :
+       {"flat_16x16x1_float32.raw --iso 0.5", "corner_8x8x8_uint8.raw --iso 100 --method dc"})
+    for (const std::string memory : {"", " --memory 1MiB", " --memory 1MiB --simplify 0.5"}) {
+      if (input.find("dc") != std::string::npos && memory.find("simplify") != std::string::npos)
+        continue;  // (the simplifying tiler needs triangles)
+      CliResult r = run("extract " + input + " -o out.ply" + memory);
+      EXPECT_EQ(r.code, 1) << input << memory;
+      EXPECT_TRUE(says(r, "but no face crosses it")) << input << memory << ": " << r.err;
+      EXPECT_EQ(r.err.find("all at or above"), std::string::npos) << r.err;
+      EXPECT_EQ(stray_files({"flat_16x16x1_float32.raw", "corner_8x8x8_uint8.raw"}),
+                std::vector<std::string>{})
+          << input << memory;
+      r = run("extract " + input + " -o out.ply --allow-empty -q" + memory);
+      EXPECT_EQ(r.code, 0) << input << memory << ": " << r.err;
+      fs::remove(dir_ / "out.ply");
+    }
 }
 
 TEST_F(CliOutputs, AnEmptyMeshFileMeasuresAsNull) {

@@ -65,13 +65,24 @@ TEST_F(CliSimplify, BadArgumentsFailWithOneLineAndNoOutput) {
   for (const Case& c : {
            Case{"simplify s.ply o.ply", 1, "exactly one of --ratio, --faces and --max-error"},
            Case{"simplify s.ply o.ply --ratio 0.5 --faces 10", 2, "excludes"},
-           Case{"simplify s.ply o.ply --ratio 1.5", 1, "ratio must be in (0, 1]"},
-           Case{"simplify s.ply o.ply --max-error -1", 1, "exactly one of"},
+           // Values out of range are usage errors naming the option (a bad value used to read
+           // as a missing one, and --faces -1 wrapped to 2^64 - 1: nothing done, exit 0).
+           Case{"simplify s.ply o.ply --ratio 1.5", 2, "--ratio: must be a number in (0, 1]"},
+           Case{"simplify s.ply o.ply --ratio 0", 2, "--ratio: must be a number in (0, 1]"},
+           Case{"simplify s.ply o.ply --ratio nan", 2, "--ratio: must be a number in (0, 1]"},
+           Case{"simplify s.ply o.ply --max-error -1", 2, "--max-error: must be a distance above"},
+           Case{"simplify s.ply o.ply --faces -1", 2, "--faces: must be a whole number of faces"},
+           Case{"simplify s.ply o.ply --faces 99999999999999999999", 2, "--faces: must be"},
+           Case{"simplify s.ply o.ply --faces 2.5", 2, "--faces: must be a whole number"},
            Case{"simplify missing.ply o.ply --ratio 0.5", 1, "missing.ply"},
            Case{"simplify s.ply o.xyz --ratio 0.5", 1, ".xyz"},
            Case{"simplify s.ply --ratio 0.5", 2, "OUT"},
            Case{"extract field:sphere:20 -o o.ply --simplify 0", 2, "simplify"},
            Case{"extract field:sphere:20 -o o.ply --simplify 2", 2, "simplify"},
+           // Not a number: its check once converted it itself and ended the program.
+           Case{"extract field:sphere:20 -o o.ply --simplify abc", 2,
+                "--simplify: must be a number in (0, 1], got 'abc'"},
+           Case{"extract field:sphere:20 -o o.ply --simplify 1e400", 2, "--simplify: must be"},
            Case{"extract field:sphere:20 -o o.ply --method dc --quads --simplify 0.5", 1,
                 "drop --quads"},
        }) {

@@ -15,11 +15,14 @@ namespace {
 template <class T>
 std::array<T, 3> parse_triple(const std::string& text, const std::string& what) {
   std::array<T, 3> out{};
-  std::stringstream ss(text);
-  std::string item;
-  int n = 0;
-  while (std::getline(ss, item, ',')) {
-    if (n == 3) break;
+  // Exactly three items between commas, each a whole number: a fourth, or an empty one after a
+  // trailing comma, is an error, not dropped.
+  std::size_t start = 0;
+  for (int n = 0; n < 3; ++n) {
+    const std::size_t comma = text.find(',', start);
+    if ((n < 2) != (comma != std::string::npos)) start = std::string::npos;
+    if (start == std::string::npos) break;
+    const std::string item = text.substr(start, comma == std::string::npos ? comma : comma - start);
     std::size_t used = 0;
     try {
       if constexpr (std::is_integral_v<T>)
@@ -29,10 +32,13 @@ std::array<T, 3> parse_triple(const std::string& text, const std::string& what) 
     } catch (const std::exception&) {
       used = 0;
     }
-    if (used == 0 || used != item.size()) break;
-    ++n;
+    if (used == 0 || used != item.size()) {
+      start = std::string::npos;
+      break;
+    }
+    start = comma == std::string::npos ? text.size() : comma + 1;
   }
-  if (n != 3 || ss.rdbuf()->in_avail() != 0)
+  if (start != text.size())
     throw InputError(what + " must be three comma-separated numbers, got '" + text + "'");
   return out;
 }

@@ -356,6 +356,11 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   });
   if (bricks->empty_volume()) {
     mpi.phase([&] {
+      // No cells, so no face: every rank throws the same error, as below.
+      if (!options.allow_empty) {
+        const ValueHistogram h = source_histogram(*source, options.memory);
+        throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+      }
       if (me == 0)
         write_mesh(Mesh{}, output,
                    {.format = options.format, .ascii = false, .write_normals = false});

@@ -263,6 +263,9 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   if (!options.output.empty()) {
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_format_from_path(options.output);
+    if (!input.volume && !input.path.empty() && same_file(options.output, input.path))
+      throw InputError("the output " + options.output +
+                       " is the input's file (it would be replaced)");
   }
   // A GL backend asked for by name makes its context while the volume is read (or the bricks
   // counted) instead of before.
@@ -281,7 +284,10 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   double t_read = 0;
   auto t0 = Clock::now();
   if (input.volume) {
+    // Samples in memory (an array) pass the checks a file's do in read_volume().
     view = *input.volume;
+    checked_volume_bytes(view.type, view.dims);
+    check_finite(view, input.path);
   } else {
     log("reading " + input.path);
     RawOptions raw = input.raw;
@@ -316,11 +322,10 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   t0 = Clock::now();
   Mesh mesh = extract(view, eo, &choice);
   const double t_extract = seconds_since(t0);
-  // No face: found from the mesh, at no cost to a run that has one. The range is a cheap pass.
-  if (mesh.triangles.empty() && mesh.quads.empty() && !options.allow_empty) {
-    const auto [lo, hi] = result.range ? *result.range : value_range(view);
-    if (!(lo < eo.iso && eo.iso <= hi)) throw_no_surface(eo.iso, std::pair(lo, hi));
-  }
+  // No face: found from the mesh, at no cost to a run that has one (as out of core, where the
+  // count pass finds it). The range, for the message, is a cheap pass.
+  if (mesh.triangles.empty() && mesh.quads.empty() && !options.allow_empty)
+    throw_no_surface(eo.iso, result.range ? *result.range : value_range(view));
   log("extracted " + std::to_string(mesh.triangles.size()) + " triangles, " +
       std::to_string(mesh.positions.size()) + " vertices in " + fmt_seconds(t_extract));
   result.triangles_extracted = mesh.triangles.size() + 2 * mesh.quads.size();

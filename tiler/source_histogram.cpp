@@ -59,17 +59,22 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
 void throw_no_surface(double iso, const std::optional<std::pair<double, double>>& range) {
   std::ostringstream f;
   f.precision(10);
-  if (range)
+  if (range && range->first < iso && iso <= range->second)  // straddled, yet no face
+    f << "the samples range from " << range->first << " to " << range->second
+      << " but no face crosses it (a volume one sample thick has no cells; Dual Contouring makes "
+         "no face where the surface meets only the volume's border)";
+  else if (range)
     f << "the samples range from " << range->first << " to " << range->second
       << (iso > range->second ? ", all below it" : ", all at or above it");
   else
     f << "every sample lies on one side of it";
   std::ostringstream s;
   s.precision(10);
+  const bool inside = range && range->first < iso && iso <= range->second;
   s << "no surface at iso " << iso << ": " << f.str()
     << (range ? "" : " (`isotile info` shows the range)")
-    << "; choose an isovalue inside the range, or --iso auto (or --allow-empty to write the empty "
-       "mesh)";
+    << (inside ? "; choose another isovalue or method" : "; choose an isovalue inside the range")
+    << ", or --iso auto (or --allow-empty to write the empty mesh)";
   throw NoSurfaceError(s.str(), iso, range, f.str());
 }
 

@@ -36,8 +36,9 @@ struct NoSurfaceError : InputError {
   std::string finding;
 };
 
-// NoSurfaceError: no pair of samples straddles `iso` (every sample on one side), so there is no
-// surface; names the samples' range where known and the ways out (--iso auto, --allow-empty).
+// NoSurfaceError: the run made no face, most often because no pair of samples straddles `iso`
+// (every sample on one side); names the samples' range where known, what it means, and the ways
+// out (--iso auto, --allow-empty).
 [[noreturn]] void throw_no_surface(double iso,
                                    const std::optional<std::pair<double, double>>& range);
 

@@ -27,6 +27,11 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   TiledResult result;
   BrickExtraction bricks(source, options);
   if (bricks.empty_volume()) {
+    // No cells (a volume one sample thick), so no face.
+    if (!options.allow_empty) {
+      const ValueHistogram h = source_histogram(source, options.memory);
+      throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+    }
     write_mesh(Mesh{}, output, {.format = options.format, .ascii = false, .write_normals = false});
     return result;
   }

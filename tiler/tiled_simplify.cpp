@@ -166,7 +166,11 @@ class TiledSimplification {
   TiledResult run(const std::filesystem::path& output) {
     TiledResult result;
     for (int a = 0; a < 3; ++a)
-      if (n_[a] < 2) {
+      if (n_[a] < 2) {  // no cells, so no face
+        if (!opt_.allow_empty) {
+          const ValueHistogram h = source_histogram(src_, opt_.memory);
+          throw_no_surface(opt_.extract.iso, std::pair(h.min, h.max));
+        }
         write_mesh(Mesh{}, output, {.format = opt_.format, .ascii = false});
         return result;
       }

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdlib>
@@ -150,6 +151,16 @@ OutputTarget resolve_output(const std::filesystem::path& path) {
   }
 }
 
+bool same_file(const std::filesystem::path& a, const std::filesystem::path& b) {
+  std::error_code ec;
+  if (std::filesystem::exists(a, ec) && std::filesystem::exists(b, ec))
+    return std::filesystem::equivalent(a, b, ec);
+  const std::filesystem::path ca = std::filesystem::weakly_canonical(a, ec);
+  if (ec) return false;
+  const std::filesystem::path cb = std::filesystem::weakly_canonical(b, ec);
+  return !ec && ca == cb;
+}
+
 OutputTarget check_output(const std::filesystem::path& path, bool positioned_writes) {
   const OutputTarget t = resolve_output(path);
   if (positioned_writes && t.in_place())
@@ -185,7 +196,10 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   }
   // Built with append: GCC 12 gives a false -Wrestrict for "." + std::string at -O2.
   std::string prefix(1, '.');
-  prefix.append(final_.filename().string());
+  // The target's name cut to leave room for the suffix within a name's 255 bytes (NAME_MAX on
+  // Linux file systems): a legal name of 250 bytes must not fail after all the work.
+  const std::string name = final_.filename().string();
+  prefix.append(name, 0, std::min<std::size_t>(name.size(), 200));
   prefix.append(".tmp-");
   prefix.append(std::to_string(static_cast<long>(::getpid())));
   prefix.append("-");

@@ -48,6 +48,10 @@ struct OutputTarget {
 // closed descriptor, a link loop.
 OutputTarget resolve_output(const std::filesystem::path& path);
 
+// Whether two paths name one file: the same file where both exist (links included), else the
+// same absolute path once `.`, `..` and links of the existing part are resolved.
+bool same_file(const std::filesystem::path& a, const std::filesystem::path& b);
+
 // resolve_output(), and for writers that place records at offsets out of order (write_at: the
 // out-of-core and MPI writers) an IoError when the target would be written in place. Call it
 // before any work, so that a bad output fails at once.

@@ -5,7 +5,9 @@
 #include <tbb/task_arena.h>
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <limits>
@@ -25,6 +27,33 @@ bool g_distributed = false;
 
 void progress(const std::string& message) {
   if (!g_quiet) std::fprintf(stderr, "isotile: %s\n", message.c_str());
+}
+
+void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files,
+                          std::size_t inputs) {
+  for (std::size_t i = inputs; i < files.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j) {
+      const auto& [what, path] = files[i];
+      const auto& [other, other_path] = files[j];
+      if (path.empty() || path == "-" || other_path.empty() || other_path == "-") continue;
+      if (same_file(path, other_path))
+        throw InputError(
+            what + " " + path + " is the same file as " + other +
+            (j < inputs ? " (it would be replaced)" : " (one would replace the other)"));
+    }
+}
+
+CLI::Validator positive_number(double max, const std::string& description, bool integer) {
+  return CLI::Validator(
+      [max, description, integer](std::string& s) {
+        char* end = nullptr;
+        const double v = std::strtod(s.c_str(), &end);
+        const bool digits = !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
+        const bool ok = end != s.c_str() && *end == '\0' && std::isfinite(v) && v > 0 && v <= max &&
+                        (!integer || digits);
+        return ok ? std::string() : "must be " + description + ", got '" + s + "'";
+      },
+      description);
 }
 
 // The library's progress as lines on stderr: about twenty per stage of a tiled run (one per

@@ -8,6 +8,8 @@
 #include <chrono>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/progress.h"
 #include "core/volume/volume_io.h"
@@ -31,6 +33,17 @@ extern std::optional<MpiSession> g_mpi;
 // other ranks wait for it in a collective, so the job is aborted.
 extern bool g_distributed;
 #endif
+
+// A number option's check on its text, before CLI11 converts it: a finite number in (0, max]
+// (strtod's syntax, the whole text), or with `integer` digits only (CLI11 would wrap -1 into an
+// unsigned option).
+CLI::Validator positive_number(double max, const std::string& description, bool integer = false);
+
+// A run's files, as (what, path) with its `inputs` inputs first: InputError naming both when an
+// output is another output or an input (the later write would replace the first file, or the
+// input, and the run would say it succeeded). "-" and empty paths are skipped.
+void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files,
+                          std::size_t inputs);
 
 // One progress line on stderr ("isotile: MESSAGE") unless --quiet.
 void progress(const std::string& message);

@@ -229,9 +229,7 @@ CLI::App* add_extract_command(CLI::App& app, ExtractArgs& ex) {
       ->add_option("--simplify", ex.simplify,
                    "Simplify the mesh to this fraction of its faces (0 < R <= 1; 1: off), keeping "
                    "its topology, its border and well-shaped triangles (see `isotile simplify`)")
-      ->check(
-          CLI::Range(0.0, 1.0).description("in (0, 1]") &
-          CLI::Validator([](std::string& s) { return std::stod(s) > 0 ? "" : "must be > 0"; }, ""));
+      ->check(positive_number(1, "a number in (0, 1]"));
   extract_cmd
       ->add_option("--frame", ex.frame,
                    "Mesh coordinates: world (default; the file's orientation, LPS for medical "
@@ -256,6 +254,11 @@ int run_extract(const ExtractArgs& args) {
   check_output(args.output, !args.memory.empty() && args.simplify >= 1);
   mesh_format_from_path(args.output);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
+  check_distinct_files({{"the input", args.in.input},
+                        {"the output", args.output},
+                        {"--stats", args.stats},
+                        {"--render", args.render}},
+                       1);
   PipelineInput input;
   input.path = args.in.input;
   input.raw = args.in.raw_options();  // --dims, --spacing, ... checked before anything is read

@@ -2,9 +2,11 @@
 #include "tiler/cli/commands.h"
 
 #include <tbb/parallel_for.h>
+#include <cmath>
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -56,6 +58,9 @@ CLI::App* add_simplify_command(CLI::App& app, SimplifyArgs& sa) {
       "--max-error", sa.max_error,
       "Simplify as far as the surface stays within E (mesh units) of the input: its "
       "vertices, edge midpoints and face centroids within E of the result (docs/simplify.md)");
+  ratio_opt->check(positive_number(1, "a number in (0, 1]"));
+  faces_opt->check(positive_number(1.8e19, "a whole number of faces, at least 1", true));
+  error_opt->check(positive_number(HUGE_VAL, "a distance above 0"));
   // Exactly one of the three is given: none has a default.
   for (CLI::Option* o : {ratio_opt, faces_opt, error_opt}) o->default_str("");
   ratio_opt->excludes(faces_opt)->excludes(error_opt);
@@ -78,6 +83,8 @@ int run_simplify(const SimplifyArgs& args) {
   check_output(args.output);
   const MeshFormat format = mesh_format_from_path(args.output);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
+  check_distinct_files(
+      {{"the input", args.input}, {"the output", args.output}, {"--stats", args.stats}}, 1);
   if ((args.ratio > 0) + (args.faces > 0) + (args.max_error > 0) != 1)
     throw InputError("give exactly one of --ratio, --faces and --max-error");
   progress("reading " + args.input);
