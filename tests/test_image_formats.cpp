@@ -913,7 +913,9 @@ TEST_F(DamagedInputs, CompressedNiftiAndMetaImageMustInflateToEverySample) {
   const std::string nii = testing::slurp(dir_ / "good.nii.gz");
   expect_refused(write("cut.nii.gz", nii.substr(0, nii.size() * 2 / 3)),
                  "compressed data cut off: it inflates to");
-  expect_refused(write("trailer.nii.gz", nii.substr(0, nii.size() - 4)), "compressed data cut off");
+  // Only the trailer cut: every sample is there, and the message says so.
+  expect_refused(write("trailer.nii.gz", nii.substr(0, nii.size() - 4)),
+                 "are there but the stream's end is cut off");
   std::string flipped = nii;
   flipped[flipped.size() / 2] = static_cast<char>(flipped[flipped.size() / 2] ^ 0x55);
   expect_refused(write("flipped.nii.gz", flipped), "corrupt compressed data");
@@ -964,7 +966,8 @@ TEST_F(DamagedInputs, GzipRawInCoreAndOutOfCore) {
   ASSERT_GT(triangles("good_41x41x41_uint8.raw.gz", "", "60"), 100u);
   expect_refused(write("half_41x41x41_uint8.raw.gz", gz.substr(0, gz.size() / 2)), "truncated");
   // Only the trailer (CRC and length) cut: every sample is there, the stream is not whole.
-  expect_refused(write("trailer_41x41x41_uint8.raw.gz", gz.substr(0, gz.size() - 4)), "truncated");
+  expect_refused(write("trailer_41x41x41_uint8.raw.gz", gz.substr(0, gz.size() - 4)),
+                 "all 68921 bytes are there but the stream's end (CRC and length) is cut off");
   std::string bad = gz;
   bad[bad.size() - 6] = static_cast<char>(bad[bad.size() - 6] ^ 0x1);  // the CRC
   expect_refused(write("crc_41x41x41_uint8.raw.gz", bad), "gzip");
@@ -1040,6 +1043,8 @@ TEST_F(DamagedInputs, GzipMrcIsReadDirectlyAndMustBeWhole) {
   EXPECT_EQ(triangles("UPPER.MRC.GZ"), want);
   const std::string gz = gzip(mrc);
   expect_refused(write("cut.map.gz", gz.substr(0, gz.size() / 2)), "gzip data cut off");
+  expect_refused(write("trailer.map.gz", gz.substr(0, gz.size() - 4)),
+                 "are there but the stream's end (CRC and length) is cut off");
   expect_refused(write("short.ccp4.gz", gzip(mrc.substr(0, mrc.size() - 100))), "(too short)");
   expect_refused(write("long.map.gz", gzip(mrc + "xxxx")), "(too long)");
 }

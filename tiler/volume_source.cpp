@@ -245,7 +245,9 @@ class GzipRawSource final : public VolumeSource {
       if (n < 0 || (code != Z_OK && code != Z_BUF_ERROR))
         throw InputError(file_name_ + ": corrupt gzip data (" +
                          std::string(message ? message : "bad gzip data") + ")");
-      if (n == 0 || code == Z_BUF_ERROR)
+      // Z_BUF_ERROR with the whole chunk: zlib's look-ahead met the file's end, the trailer is
+      // missing (check_end() says so after the last plane); with less, the samples are.
+      if (n == 0 || (code == Z_BUF_ERROR && static_cast<unsigned>(n) < chunk))
         throw InputError(file_name_ + ": gzip data cut off: it ends after " +
                          std::to_string(static_cast<std::uint64_t>(next_plane_) * plane_bytes_ +
                                         done + static_cast<std::size_t>(std::max(n, 0))) +
@@ -273,9 +275,10 @@ class GzipRawSource final : public VolumeSource {
                        " bytes " + volume_text().substr(0, volume_text().find(" samples")) +
                        " samples need (too long)");
     if (code == Z_BUF_ERROR)
-      throw InputError(file_name_ + ": gzip data cut off in its trailer after all " +
+      throw InputError(file_name_ + ": gzip data cut off: all " +
                        std::to_string(plane_bytes_ * static_cast<std::uint64_t>(dims[2])) +
-                       " bytes (truncated file)");
+                       " bytes are there but the stream's end (CRC and length) is cut off "
+                       "(truncated file)");
     if (n < 0 || code != Z_OK)
       throw InputError(file_name_ + ": corrupt gzip data (" +
                        std::string(message ? message : "bad gzip data") + ")");

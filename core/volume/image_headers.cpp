@@ -440,6 +440,9 @@ void verify_compressed(const ImageHeaderCheck& check) {
   if (!c.whole_gzip && total > c.need)
     throw InputError(c.file + ": compressed data inflates to more than the " + expected +
                      " expected (too long)");
+  if (!ended && total >= c.need)
+    throw InputError(c.file + ": compressed data cut off: all " + expected +
+                     " are there but the stream's end is cut off (truncated file)");
   if (!ended)
     throw InputError(c.file + ": compressed data cut off: it inflates to " + std::to_string(total) +
                      " bytes but " + expected + " were expected (truncated file)");

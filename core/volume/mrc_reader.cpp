@@ -65,7 +65,9 @@ std::size_t gz_read(const std::string& path, gzFile f, void* out, std::size_t n)
       if (code == Z_ERRNO) throw IoError("cannot read " + path + ": " + std::strerror(errno));
       throw InputError(path + ": corrupt gzip data (" + std::string(message ? message : "") + ")");
     }
-    if (code == Z_BUF_ERROR)
+    // zlib says Z_BUF_ERROR where its look-ahead found the file's end, also after handing over
+    // every byte asked for (a stream cut in its trailer): the trailer check below says that.
+    if (code == Z_BUF_ERROR && static_cast<unsigned>(got) < want)
       throw InputError(path + ": gzip data cut off after " + std::to_string(done + got) +
                        " bytes of the " + std::to_string(n) + " expected here (truncated file)");
     done += static_cast<std::size_t>(got);
@@ -337,10 +339,19 @@ Volume read_mrc(const std::string& path, Progress* progress) {
   if (m.gzip) {
     // Reading on also makes zlib check the gzip trailer (CRC and length).
     char extra;
-    if (gz_read(path, gz.get(), &extra, 1) != 0)
+    const int got = gzread(gz.get(), &extra, 1);
+    int code = Z_OK;
+    const char* message = gzerror(gz.get(), &code);
+    if (got == 1)
       throw InputError(path + ": decompresses to more than the " +
                        std::to_string(m.offset + m.bytes) +
                        " bytes the MRC header says (too long)");
+    if (code == Z_BUF_ERROR)
+      throw InputError(path + ": gzip data cut off: all " + std::to_string(m.offset + m.bytes) +
+                       " bytes are there but the stream's end (CRC and length) is cut off "
+                       "(truncated file)");
+    if (got < 0 || code != Z_OK)
+      throw InputError(path + ": corrupt gzip data (" + std::string(message ? message : "") + ")");
   }
   check_finite(volume.view(), path);
   return volume;
