@@ -44,7 +44,7 @@ packages=(
   cmake ninja-build g++ pkg-config python3
   libtbb-dev libeigen3-dev zlib1g-dev libdeflate-dev nlohmann-json3-dev libcli11-dev
   libteem-dev libopenvdb-dev libboost-iostreams-dev libcgal-dev libgmp-dev libmpfr-dev
-  libgtest-dev libopenmesh-dev libinsighttoolkit5-dev libopenmpi-dev openmpi-bin
+  libgtest-dev libopenmesh-dev libinsighttoolkit5-dev libgdcm-dev libopenmpi-dev openmpi-bin
   libegl-dev libegl-mesa0 libgl1-mesa-dri libgl1-mesa-dev libosmesa6-dev python3-glad glslang-tools
   libpng-dev
   meshlab qtbase5-dev libqt5opengl5-dev libglew-dev xvfb xauth dpkg-dev

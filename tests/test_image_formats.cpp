@@ -712,6 +712,21 @@ TEST_F(DicomDir, UnevenOrDuplicateSlicesAreErrors) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("lie at the same position"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+  // Among more slices (GDCM gives up sorting the series, so neighbours in its order are others):
+  // the two files at one position named, on one line (GDCM's own multi-line errors silenced).
+  for (int n = 52; n < 60; ++n) copy(n);
+  r = run("info .");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("lie at the same position"), std::string::npos) << r.err;
+  for (const char* name : {"00000051.dcm", "copy_of_51.dcm"})
+    EXPECT_NE(r.err.find(name), std::string::npos) << name << ": " << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  // A folder without a series: one line, ITK's warnings silenced.
+  fs::create_directory(dir_ / "empty");
+  r = run("info empty");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("empty: no DICOM series found"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }
 
 // The real series in core and out of core: the same bytes, in world coordinates.

@@ -4,6 +4,7 @@
 #include "core/volume/itk_reader.h"
 #include "core/volume/numbered_files.h"
 
+#include <gdcmTrace.h>
 #include <itkGDCMImageIO.h>
 #include <itkGDCMSeriesFileNames.h>
 #include <itkImageIOBase.h>
@@ -123,10 +124,17 @@ IOComponent component_of(ScalarType t) {
   return IOComponent::UCHAR;
 }
 
-itk::ImageIOBase::Pointer make_io(ItkInput::Kind kind) {
-  // ITK's warnings (e.g. "Analyze file is deprecated") would reach the user's terminal beside
-  // the one error line; what matters comes back as exceptions.
+// ITK's warnings (e.g. "Analyze file is deprecated", "No Series were found") and GDCM's
+// warnings and errors (e.g. "position is not unique", several lines each) would reach the user's
+// terminal beside the one error line; what matters comes back as exceptions or is checked here.
+void quiet_itk() {
   itk::Object::GlobalWarningDisplayOff();
+  gdcm::Trace::WarningOff();
+  gdcm::Trace::ErrorOff();
+}
+
+itk::ImageIOBase::Pointer make_io(ItkInput::Kind kind) {
+  quiet_itk();
   switch (kind) {
     case ItkInput::Kind::Nifti:
       return itk::NiftiImageIO::New().GetPointer();
@@ -243,6 +251,7 @@ std::string series_tag(itk::GDCMImageIO& io, const char* key) {
 }
 
 itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
+  quiet_itk();
   auto names = itk::GDCMSeriesFileNames::New();
   names->SetUseSeriesDetails(false);
   names->SetRecursive(false);
@@ -316,6 +325,20 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
       }
       const double total = d.back() - d.front();
       const double step = total / static_cast<double>(files.size() - 1);
+      // Two slices at one position: named by position, whatever order GDCM left them in (it
+      // gives up sorting such a series, so the neighbours below would be others).
+      std::vector<std::size_t> by_position(files.size());
+      for (std::size_t k = 0; k < files.size(); ++k) by_position[k] = k;
+      std::stable_sort(by_position.begin(), by_position.end(),
+                       [&](std::size_t a, std::size_t b) { return d[a] < d[b]; });
+      for (std::size_t k = 1; k < files.size(); ++k) {
+        const std::size_t a = by_position[k - 1], b = by_position[k];
+        if (d[b] - d[a] <= 1e-6 * std::max(1.0, std::abs(step)))
+          throw InputError(input.path + ": slices " + files[std::min(a, b)] + " and " +
+                           files[std::max(a, b)] +
+                           " lie at the same position (duplicates or several stacks in one "
+                           "series)");
+      }
       for (std::size_t k = 1; k < files.size(); ++k) {
         const double s = d[k] - d[k - 1];
         if (s <= 1e-6 * std::max(1.0, std::abs(step)))
