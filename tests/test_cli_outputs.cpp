@@ -299,6 +299,23 @@ TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {
   }
 }
 
+// The stats' "threads" is what ran: --threads, or the cores where there are fewer (it said the
+// limit asked for); a count TBB cannot reserve is a usage error, not "out of memory".
+TEST_F(CliOutputs, TheStatsSayTheThreadsThatRan) {
+  const auto cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  for (const int asked : {1, 64}) {
+    const CliResult r = run("-q --threads " + std::to_string(asked) +
+                            " extract field:sphere:16 -o t.ply --stats -");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const int ran = nlohmann::json::parse(r.out)["threads"].get<int>();
+    EXPECT_GE(ran, 1) << asked;
+    EXPECT_LE(ran, std::min(asked, cores)) << asked;
+  }
+  const CliResult r = run("--threads 1000000000 extract field:sphere:16 -o t.ply");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--threads"), std::string::npos) << r.err;
+}
+
 // A legal name of 250 bytes: the temporary file beside it must fit NAME_MAX (255) too.
 TEST_F(CliOutputs, ALongLegalOutputNameIsWritten) {
   const std::string name = std::string(246, 'a') + ".ply";

@@ -115,8 +115,9 @@ int main(int argc, char** argv) {
   // Every option's default in --help (and so in the man page), inherited by the subcommands.
   app.option_defaults()->always_capture_default();
   int threads = 0;
-  app.add_option("--threads", threads, "Worker threads (0, the default: every core)")
-      ->check(CLI::NonNegativeNumber);
+  // Bounded: TBB reserves per-thread state up front, so a billion ended in "out of memory".
+  app.add_option("--threads", threads, "Worker threads (0, the default: every core; at most 4096)")
+      ->check(CLI::Range(0, 4096));
   app.add_flag("--quiet,-q", g_quiet, "No progress messages on stderr");
 
   ExtractArgs ex;

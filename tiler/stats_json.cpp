@@ -1,9 +1,11 @@
 #include "tiler/stats_json.h"
 
+#include <algorithm>
 #include <cstdio>
 
 #include <sys/resource.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include "core/mesh/surface_distance.h"
 
@@ -79,9 +81,12 @@ double peak_rss_mb() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
 }
 
+// The threads that ran: the process's limit (--threads), or fewer where the machine has fewer
+// cores (TBB's arenas run at most one thread per core).
 int stats_threads() {
-  return static_cast<int>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  return static_cast<int>(std::min<std::size_t>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism),
+      static_cast<std::size_t>(tbb::this_task_arena::max_concurrency())));
 }
 
 }  // namespace isotile
