@@ -316,6 +316,28 @@ TEST_F(CliOutputs, TheStatsSayTheThreadsThatRan) {
   EXPECT_NE(r.err.find("--threads"), std::string::npos) << r.err;
 }
 
+// Raw samples from a pipe are read once, in order, in core (looking at the input's first bytes
+// for its format consumed them, so the samples came up short); out of core, which reads its input
+// twice, a pipe is refused saying so.
+TEST_F(CliOutputs, RawSamplesFromAPipeAreReadInCoreAndRefusedOutOfCore) {
+  std::string ball(16 * 16 * 16, '\0');
+  for (int k = 0; k < 16; ++k)
+    for (int j = 0; j < 16; ++j)
+      for (int i = 0; i < 16; ++i)
+        ball[static_cast<std::size_t>((k * 16 + j) * 16 + i)] = static_cast<char>(
+            (i - 7) * (i - 7) + (j - 8) * (j - 8) + (k - 7) * (k - 7) < 30 ? 200 : 10);
+  std::ofstream(dir_ / "v_16x16x16_uint8.raw", std::ios::binary) << ball;
+  ASSERT_EQ(run("-q extract v_16x16x16_uint8.raw --iso 100 -o file.ply").code, 0);
+  const std::string raw = " -q extract /dev/stdin --dims 16,16,16 --type uint8 --iso 100";
+  CliResult r = shell("cat v_16x16x16_uint8.raw | \"$ISOTILE\"" + raw + " -o pipe.ply");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(slurp(dir_ / "pipe.ply"), slurp(dir_ / "file.ply"));
+  r = shell("cat v_16x16x16_uint8.raw | \"$ISOTILE\"" + raw + " -o ooc.ply --memory 1MiB");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "a pipe or device, which can be read only once")) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "ooc.ply"));
+}
+
 // A legal name of 250 bytes: the temporary file beside it must fit NAME_MAX (255) too.
 TEST_F(CliOutputs, ALongLegalOutputNameIsWritten) {
   const std::string name = std::string(246, 'a') + ".ply";

@@ -414,6 +414,12 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
     if (::stat(input.c_str(), &st) != 0)
       throw IoError("cannot open " + input + ": " + std::strerror(errno));
     if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + input + ": " + std::strerror(EISDIR));
+    // Out of core reads the samples twice (the count and extract passes), box by box.
+    if (!S_ISREG(st.st_mode))
+      throw InputError(input +
+                       ": a pipe or device, which can be read only once and in order; an "
+                       "out-of-core run reads its input twice: save it to a file, or "
+                       "drop --memory");
     const RawLayout r = resolve_raw_layout(input, raw);
     const PlainLayout layout{input, 0, r.type, r.dims, (raw.endian == Endian::Big) != native_big};
     if (ends_with(input, ".gz"))

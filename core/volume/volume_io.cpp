@@ -45,6 +45,8 @@ bool ends_with_ci(const std::string& s, const char* suffix) {
 
 // DICOM Part 10 files carry "DICM" after a 128-byte preamble.
 bool has_dicom_marker(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;  // a pipe is read once
   std::ifstream f(path, std::ios::binary);
   char b[132];
   if (!f.read(b, sizeof b)) return false;
@@ -65,6 +67,8 @@ void refuse_foreign_content(const std::string& path) {
             "zarr.open(path)[:].tofile('out.raw') in Python) and pass --dims and --type");
     return;
   }
+  // A pipe or FIFO (`<(zcat v.raw.gz)`) is read once: looking at its start would consume it.
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec)) return;
   std::ifstream f(path, std::ios::binary);
   if (!f) return;  // the reader names the problem
   char b[1032] = {};
