@@ -477,6 +477,18 @@ py::array samples_of(const py::object& self) {
   return a;
 }
 
+// An option's value as T, or a ValueError naming the option and what it takes (pybind11's own
+// "Unable to cast Python instance to C++ type" names neither).
+template <class T>
+T option_as(const py::handle& value, const char* key, const char* takes) {
+  try {
+    return value.cast<T>();
+  } catch (const py::cast_error&) {
+    throw py::value_error(std::string(key) + " must be " + takes + ", not " +
+                          py::repr(value).cast<std::string>());
+  }
+}
+
 // The options of isotile.extract (its keywords, checked by the library).
 PipelineOptions pipeline_options_of(const py::dict& o) {
   const auto has = [&](const char* key) { return o.contains(key) && !o[key].is_none(); };
@@ -512,7 +524,8 @@ PipelineOptions pipeline_options_of(const py::dict& o) {
   e.quality = pick(str("quality", "fast"), "quality", {"fast", "max"}) == "max"
                   ? MacetQuality::Max
                   : MacetQuality::Fast;
-  e.macet_relax = has("macet_relax") ? o["macet_relax"].cast<double>() : 0.0;
+  e.macet_relax =
+      has("macet_relax") ? option_as<double>(o["macet_relax"], "macet_relax", "a number") : 0.0;
   e.keep_quads = flag("quads");
   if (has("iso")) {
     const py::object iso = o["iso"];
@@ -522,17 +535,19 @@ PipelineOptions pipeline_options_of(const py::dict& o) {
                               "'");
       p.iso_auto = true;
     } else {
-      p.iso = iso.cast<double>();
+      p.iso = option_as<double>(iso, "iso", "a number or 'auto'");
     }
   }
   p.world_frame = pick(str("frame", "world"), "frame", {"world", "grid"}) == "world";
-  p.simplify = has("simplify") ? o["simplify"].cast<double>() : 1.0;
+  p.simplify = has("simplify") ? option_as<double>(o["simplify"], "simplify", "a number") : 1.0;
   p.check_intersections = flag("check_intersections");
   p.allow_empty = flag("allow_empty");
   if (has("memory")) {
     const py::object m = o["memory"];
-    p.memory = py::isinstance<py::str>(m) ? m.cast<std::string>()
-                                          : std::to_string(m.cast<std::uint64_t>());
+    p.memory = py::isinstance<py::str>(m)
+                   ? m.cast<std::string>()
+                   : std::to_string(option_as<std::uint64_t>(
+                         m, "memory", "a byte count (an int above 0) or a size such as '256MiB'"));
   }
   if (has("output")) p.output = py::str(o["output"]).cast<std::string>();
   p.ascii = flag("ascii");
@@ -586,14 +601,15 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     const py::array a = source.cast<py::array>();
     const auto triple = [&](const char* key, Vec3d fallback) {
       if (!options.contains(key) || options[key].is_none()) return fallback;
-      const auto v = options[key].cast<std::vector<double>>();
+      const auto v = option_as<std::vector<double>>(options[key], key, "three numbers");
       if (v.size() != 3) throw py::value_error(std::string(key) + " must be three numbers");
       return Vec3d{v[0], v[1], v[2]};
     };
     view = view_of(a, triple("spacing", {1, 1, 1}), "source");
     view.origin = triple("origin", {0, 0, 0});
     if (options.contains("direction") && !options["direction"].is_none()) {
-      const auto d = options["direction"].cast<std::vector<std::vector<double>>>();
+      const auto d = option_as<std::vector<std::vector<double>>>(options["direction"], "direction",
+                                                                 "a 3x3 matrix");
       if (d.size() != 3 || d[0].size() != 3 || d[1].size() != 3 || d[2].size() != 3)
         throw py::value_error("direction must be a 3x3 matrix");
       WorldFrame w{view.origin, {}};

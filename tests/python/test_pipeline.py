@@ -175,6 +175,13 @@ def test_errors_are_the_clis(tmp_path, ball):
         isotile.extract(ball, 100, method="marching")
     with pytest.raises(ValueError, match="iso must be a number or 'auto'"):
         isotile.extract(ball, "otsu")
+    # Values of the wrong kind name their option (not pybind11's "Unable to cast").
+    with pytest.raises(ValueError, match="memory must be a byte count .* not -1"):
+        isotile.extract("field:sphere:16", memory=-1, output="never.ply")
+    with pytest.raises(ValueError, match="spacing must be three numbers, not '1,1,2'"):
+        isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, spacing="1,1,2")
+    with pytest.raises(ValueError, match="simplify must be a number"):
+        isotile.extract("field:sphere:16", simplify="half")
     with pytest.raises(ValueError, match="--simplify gives triangles"):
         isotile.extract("field:sphere:16", method="dc", quads=True, simplify=0.5)
     with pytest.raises(OSError):
