@@ -196,17 +196,37 @@ TEST(DualContouring, CentreSampleNormalsPointAwayFromTheCentre) {
 }
 
 TEST(DualContouring, BorderEdgesGetNoQuads) {
-  // 2x2x2: one cell, edges all on the border: a vertex and nothing else.
+  // 2x2x2: one cell, edges all on the border: no quad, so no vertex either (it used to keep a
+  // vertex no face used), in both vertex modes.
   std::vector<float> v(8, 0.0f);
   v[0] = 1.0f;
-  const Mesh m =
-      dual_contouring(dense_view(v.data(), ScalarType::Float32, {2, 2, 2}), {.iso = 0.5});
-  EXPECT_EQ(m.positions.size(), 1u);
-  EXPECT_TRUE(m.triangles.empty());
+  for (const DcVertices mode : {DcVertices::Patch, DcVertices::Cell}) {
+    const Mesh m = dual_contouring(dense_view(v.data(), ScalarType::Float32, {2, 2, 2}),
+                                   {.iso = 0.5, .vertices = mode});
+    EXPECT_TRUE(m.positions.empty());
+    EXPECT_TRUE(m.triangles.empty());
+  }
   std::vector<float> flat(16, 0.0f);
   flat[5] = 1.0f;
   EXPECT_TRUE(dual_contouring(dense_view(flat.data(), ScalarType::Float32, {4, 4, 1}), {})
                   .positions.empty());
+}
+
+// Every vertex is used by a face: cells on the volume's border whose crossed edges all lie on it
+// (no quad) get none. The gyroid and Marschner-Lobb at 16 had 18 and 8 such vertices, bonsai 8.
+TEST(DualContouring, EveryVertexIsUsedByAFace) {
+  for (const FieldKind kind : {FieldKind::Gyroid, FieldKind::MarschnerLobb})
+    for (const DcVertices mode : {DcVertices::Patch, DcVertices::Cell}) {
+      const Volume vol = make_field_volume({kind, 16});
+      const Mesh m =
+          dual_contouring(vol.view(), {.iso = field_default_iso(kind), .vertices = mode});
+      ASSERT_GT(m.triangles.size(), 500u);
+      std::vector<char> used(m.positions.size(), 0);
+      for (const Tri& t : m.triangles)
+        for (const std::uint32_t v : t) used[v] = 1;
+      EXPECT_EQ(std::count(used.begin(), used.end(), 0), 0)
+          << field_name(kind) << (mode == DcVertices::Cell ? " cell" : " patch");
+    }
 }
 
 TEST(DualContouring, RejectsBadParticleOptions) {
@@ -217,8 +237,9 @@ TEST(DualContouring, RejectsBadParticleOptions) {
 
 // --- The whole pipeline against a brute-force reference --------------------------------------
 
-// Vertices are the mixed cells in z, y, x order; quads, in sample order and x, y, z within a
-// sample, surround each crossed edge whose four cells exist, facing its outside end.
+// Vertices are the mixed cells with a crossed edge whose four cells exist (the others would get
+// no quad), in z, y, x order; quads, in sample order and x, y, z within a sample, surround each
+// crossed edge whose four cells exist, facing its outside end.
 TEST(DualContouring, RandomVolumesMatchABruteForceReference) {
   std::mt19937 rng(2024);
   for (int round = 0; round < 12; ++round) {
@@ -242,6 +263,20 @@ TEST(DualContouring, RandomVolumesMatchABruteForceReference) {
           int n = 0;
           for (int c = 0; c < 8; ++c) n += inside(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2));
           if (n == 0 || n == 8) continue;
+          // An edge along axis a from corner p is crossed where its ends differ, and gets its
+          // four cells where p lies inside the volume along the other two axes.
+          bool quad = false;
+          for (int c = 0; c < 8; ++c)
+            for (int a = 0; a < 3; ++a) {
+              if ((c >> a) & 1) continue;
+              const Cell p{i + (c & 1), j + (c >> 1 & 1), k + (c >> 2)};
+              Cell q = p;
+              ++q[a];
+              const int u = (a + 1) % 3, w = (a + 2) % 3;
+              quad = quad || (inside(p[0], p[1], p[2]) != inside(q[0], q[1], q[2]) && p[u] > 0 &&
+                              p[u] + 1 < d[u] && p[w] > 0 && p[w] + 1 < d[w]);
+            }
+          if (!quad) continue;
           index[(k * d[1] + j) * d[0] + i] = static_cast<std::int64_t>(cells.size());
           cells.push_back({i, j, k});
         }

@@ -87,6 +87,15 @@ int patch_count(const Classified& c, int64_t x, int64_t y, int64_t z, int cs) {
   return dc::cell_patches_or_table(cs, flips, open).count;
 }
 
+// Vertices of global cell (x, y, z) of case cs: its patches, or one (DcVertices::Cell); none
+// where its crossed edges all lie on the volume's border (dc::live_edges), as the extractor has.
+int cell_vertex_count(const Classified& c, int64_t x, int64_t y, int64_t z, int cs, bool patches) {
+  if (patches) return patch_count(c, x, y, z, cs);
+  const int64_t cell[3] = {x, y, z};
+  const unsigned open = dc::border_faces(cell, c.n);
+  return open && dc::live_edges(cs, open) == 0 ? 0 : 1;
+}
+
 template <class Fn>
 RowCounts per_row(const Box3& box, Fn&& count_row) {
   RowCounts out{box, {}};
@@ -177,7 +186,7 @@ BrickCounts count_brick_sites(const VolumeView& view, double iso, SiteLayout lay
   } else {
     const bool patches = layout == SiteLayout::PatchVertices;
     out.vertices = cells(vertex_box, [&](int cs, int64_t x, int64_t y, int64_t z) {
-      return patches ? static_cast<uint32_t>(patch_count(c, x, y, z, cs)) : uint32_t{1};
+      return static_cast<uint32_t>(cell_vertex_count(c, x, y, z, cs, patches));
     });
     out.faces = edges(face_box, true);
   }
@@ -242,7 +251,7 @@ std::vector<uint64_t> brick_vertex_keys(const VolumeView& view, double iso, Site
       for (uint64_t m = cw.mixed & range_bits(w, lo, hi); m; m &= m - 1) {
         const int b = std::countr_zero(m);
         const int64_t x = c.lo[0] + w * 64 + b;
-        fn(x - c.lo[0], patches ? patch_count(c, x, j, k, cw.cell_case(b)) : 1);
+        fn(x - c.lo[0], cell_vertex_count(c, x, j, k, cw.cell_case(b), patches));
       }
     }
   };

@@ -288,8 +288,8 @@ class Extractor {
             const int64_t global[3] = {view_.box.lo[0] + i, view_.box.lo[1] + j,
                                        view_.box.lo[2] + k};
             const unsigned open = dc::border_faces(global, view_.global_dims);
-            out.border_cut_cells +=
-                dc::cell_patches(cs, flips, open).count != dc::cell_patches(cs, flips, 0).count;
+            const int cut = dc::cell_patches(cs, flips, open).count;
+            out.border_cut_cells += cut > 0 && cut != dc::cell_patches(cs, flips, 0).count;
           }
         }
       }
@@ -392,7 +392,18 @@ class Extractor {
       out[w] = {0, 0, total};
       if (!has_cells) continue;
       const CellWord cw(rows, w, grid_.words, grid_.nx);
-      const uint64_t m = cw.mixed & bits_in(w, vcells_.lo[0], vcells_.hi[0]);
+      uint64_t m = cw.mixed & bits_in(w, vcells_.lo[0], vcells_.hi[0]);
+      // A cell on the volume's border whose crossed edges all lie on it gets no quad, so no
+      // vertex (dc::live_edges).
+      if (m && border_row(j, k)) {
+        for (uint64_t b = m; b; b &= b - 1) {
+          const int bit = std::countr_zero(b);
+          const int64_t global[3] = {view_.box.lo[0] + w * 64 + bit, view_.box.lo[1] + j,
+                                     view_.box.lo[2] + k};
+          const unsigned open = dc::border_faces(global, view_.global_dims);
+          if (open && dc::live_edges(cw.cell_case(bit), open) == 0) m &= ~(uint64_t{1} << bit);
+        }
+      }
       out[w].mask = m;
       total += static_cast<uint32_t>(std::popcount(m));
       if (!patches_) continue;
@@ -421,6 +432,15 @@ class Extractor {
       cs |= static_cast<int>((word >> (x & 63)) & 1) << c;
     }
     return cs;
+  }
+
+  // Whether cells of row (j, k) can lie on the volume's border: the row is on it in y or z, or
+  // the view reaches the border in x.
+  bool border_row(int64_t j, int64_t k) const {
+    const int64_t gj = view_.box.lo[1] + j, gk = view_.box.lo[2] + k;
+    const int64_t gx0 = view_.box.lo[0] + vcells_.lo[0], gx1 = view_.box.lo[0] + vcells_.hi[0];
+    return gj == 0 || gj + 2 == view_.global_dims[1] || gk == 0 || gk + 2 == view_.global_dims[2] ||
+           gx0 == 0 || gx1 + 1 >= view_.global_dims[0];
   }
 
   bool on_border(int64_t i, int64_t j, int64_t k) const {

@@ -58,13 +58,15 @@ CellPatches cell_patches(int cs, unsigned flips, unsigned open) {
       if (inside == cut_inside) join(root, fc.edge[(i + 3) % 4], fc.edge[i]);
     }
   }
-  // A piece whose edges all lie on the border gets no quad: it joins the first piece that does
-  // (or, where none does, all such pieces are one), so it leaves no stray vertex.
+  // A piece whose edges all lie on the border gets no quad: it joins the first piece that does,
+  // so it leaves no stray vertex; a cell where none does has no patch at all (live_edges()).
   if (open) {
-    std::uint16_t on_border = 0;
-    for (int f = 0; f < 6; ++f)
-      if ((open >> f) & 1)
-        for (int e : face(f).edge) on_border |= static_cast<std::uint16_t>(1u << e);
+    if (live_edges(cs, open) == 0) {
+      CellPatches none;
+      none.patch.fill(-1);
+      return none;
+    }
+    const unsigned on_border = border_edges(open);
     std::array<bool, 12> live{};
     int first_live = -1, first_dead = -1;
     for (int e = 0; e < 12; ++e)
@@ -92,6 +94,18 @@ CellPatches cell_patches(int cs, unsigned flips, unsigned open) {
     if (number[r] < kMaxPatches) out.edges[number[r]] |= static_cast<std::uint16_t>(1u << e);
   }
   return out;
+}
+
+unsigned border_edges(unsigned open) {
+  unsigned out = 0;
+  for (int f = 0; f < 6; ++f)
+    if ((open >> f) & 1)
+      for (int e : face(f).edge) out |= 1u << e;
+  return out;
+}
+
+unsigned live_edges(int cs, unsigned open) {
+  return mc::kCaseTable.edge_mask[cs] & ~border_edges(open) & 0xfffu;
 }
 
 const std::array<std::uint8_t, 256> kConflictFaces = [] {

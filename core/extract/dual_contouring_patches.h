@@ -40,6 +40,13 @@ struct CellPatches {
 };
 CellPatches cell_patches(int cs, unsigned flips, unsigned open);
 
+// The cube edges on the faces in `open` (a mask of 12 edges), and the crossed edges of a cell of
+// case `cs` off them: those that can get a quad. A cell whose crossed edges all lie on the
+// volume's border (no live edge) gets no vertex in either DcVertices mode, as no quad would use
+// it; cell_patches() then has no patch.
+unsigned border_edges(unsigned open);
+unsigned live_edges(int cs, unsigned open);
+
 // The same, from the table where nothing flips and no face is on the border (almost every cell).
 inline CellPatches cell_patches_or_table(int cs, unsigned flips, unsigned open) {
   if (flips || open) return cell_patches(cs, flips, open);

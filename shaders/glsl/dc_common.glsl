@@ -123,8 +123,12 @@ uint dc_patches(uint cs, uint flips, uint open, out uint map) {
     }
   }
   if (open != 0u) {
-    // Pieces whose crossed edges all lie on the border join the first piece that has one off it
-    // (or, where none has, one another).
+    // No crossed edge off the border: no quad, so no patch (dc::live_edges).
+    if ((mask & ~on_border) == 0u) {
+      map = 0u;
+      return 0u;
+    }
+    // Pieces whose crossed edges all lie on the border join the first piece that has one off it.
     uint live = 0u;  // by root
     for (uint m = mask & ~on_border; m != 0u; m &= m - 1u)
       live |= 1u << dc_find(rlo, rhi, findLSB(m));
@@ -159,6 +163,16 @@ int dc_case_in_view(ivec3 c) {
   return int(cell_case(c));
 }
 
+// The faces of global cell c on the volume's border (dc::border_faces).
+uint dc_open_faces(ivec3 c) {
+  uint open = 0u;
+  for (int a = 0; a < 3; ++a) {
+    if (c[a] == 0) open |= 1u << (2 * a);
+    if (c[a] + 2 == u_global_dims[a]) open |= 1u << (2 * a + 1);
+  }
+  return open;
+}
+
 // The patches of global cell c of case cs: flips from the cells across its faces, cuts at the
 // border of the volume.
 uint dc_cell_patches(ivec3 c, uint cs, out uint map) {
@@ -170,12 +184,20 @@ uint dc_cell_patches(ivec3 c, uint cs, out uint map) {
     int other = dc_case_in_view(c + d);
     if (other >= 0 && ((dc_patch_info[other] >> (8 + (f ^ 1))) & 1u) != 0u) flips |= 1u << f;
   }
-  uint open = 0u;
-  for (int a = 0; a < 3; ++a) {
-    if (c[a] == 0) open |= 1u << (2 * a);
-    if (c[a] + 2 == u_global_dims[a]) open |= 1u << (2 * a + 1);
+  return dc_patches(cs, flips, dc_open_faces(c), map);
+}
+
+// Whether global cell c of case cs has a crossed edge off the volume's border (one that can get
+// a quad): a cell without one gets no vertex in either vertex mode (dc::live_edges).
+bool dc_has_live_edge(ivec3 c, uint cs) {
+  uint open = dc_open_faces(c);
+  if (open == 0u) return true;
+  uint on_border = 0u;
+  for (uint fm = open; fm != 0u; fm &= fm - 1u) {
+    uint fe = dc_face_edges(findLSB(fm));
+    for (int i = 0; i < 4; ++i) on_border |= 1u << ((fe >> (4 * i)) & 15u);
   }
-  return dc_patches(cs, flips, open, map);
+  return (case_edge_mask(cs) & ~on_border) != 0u;
 }
 
 // ---- Hermite data ----

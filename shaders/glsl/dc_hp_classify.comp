@@ -12,7 +12,7 @@ uint dc_element_code(uint e) {
 #ifdef DC_PATCH
     vertices = dc_cell_patches(c, cs, map);
 #else
-    vertices = 1u;
+    vertices = dc_has_live_edge(c, cs) ? 1u : 0u;
 #endif
   }
   patch_maps[e] = map;
