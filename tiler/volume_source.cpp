@@ -414,8 +414,9 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
     if (::stat(input.c_str(), &st) != 0)
       throw IoError("cannot open " + input + ": " + std::strerror(errno));
     if (S_ISDIR(st.st_mode)) throw IoError("cannot open " + input + ": " + std::strerror(EISDIR));
-    // Out of core reads the samples twice (the count and extract passes), box by box.
-    if (!S_ISREG(st.st_mode))
+    // Out of core reads the samples twice (the count and extract passes), box by box: a pipe or
+    // a character device cannot be read again (a block device, a disk image, can).
+    if (S_ISFIFO(st.st_mode) || S_ISCHR(st.st_mode) || S_ISSOCK(st.st_mode))
       throw InputError(input +
                        ": a pipe or device, which can be read only once and in order; an "
                        "out-of-core run reads its input twice: save it to a file, or "
