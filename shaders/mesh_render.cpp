@@ -224,12 +224,17 @@ Picture render_pieces(const std::vector<Vec3f>& positions, std::uint64_t expecte
   const double pad = (dmax - dmin) * 0.01 + 1e-6 * (1 + std::abs(dmin) + std::abs(dmax));
   const double zmid = (dmin + dmax) / 2, zhalf = (dmax - dmin) / 2 + pad;
   const double sx = scale / (o.width / 2.0), sy = scale / (view_h / 2.0), sz = 1 / zhalf;
+  // Positions go to the device as (p - centre) / unit, in double on the CPU, so that the floats
+  // on the device and the matrix's entries stay near 1 whatever the mesh's size: sent as they
+  // were, a mesh 1e38 across gave entries below float's normal range (flushed to zero: a blank
+  // picture) and one 1e-38 across flushed its own coordinates.
+  const double unit = std::max({hx, hy, zhalf}) > 0 ? std::max({hx, hy, zhalf}) : 1.0;
   // Column-major: row 0 = right * sx, row 1 = up * sy, row 2 = forward * sz - zmid * sz.
   float m[16] = {};
   for (int a = 0; a < 3; ++a) {
-    m[a * 4 + 0] = static_cast<float>(cam.right[a] * sx);
-    m[a * 4 + 1] = static_cast<float>(cam.up[a] * sy);
-    m[a * 4 + 2] = static_cast<float>(-cam.back[a] * sz);
+    m[a * 4 + 0] = static_cast<float>(cam.right[a] * sx * unit);
+    m[a * 4 + 1] = static_cast<float>(cam.up[a] * sy * unit);
+    m[a * 4 + 2] = static_cast<float>(-cam.back[a] * sz * unit);
   }
   m[14] = static_cast<float>(-zmid * sz);
   m[15] = 1;
@@ -299,9 +304,9 @@ Picture render_pieces(const std::vector<Vec3f>& positions, std::uint64_t expecte
         float* out = host.data() + i * 3 * kFloatsPerCorner;
         for (int k = 0; k < 3; ++k, out += kFloatsPerCorner) {
           const V3 p = sub(to_v3(positions[idx[k]]), centre);
-          out[0] = static_cast<float>(p[0]);
-          out[1] = static_cast<float>(p[1]);
-          out[2] = static_cast<float>(p[2]);
+          out[0] = static_cast<float>(p[0] / unit);
+          out[1] = static_cast<float>(p[1] / unit);
+          out[2] = static_cast<float>(p[2] / unit);
           out[3] = static_cast<float>(quality[i]);
           out[4] = static_cast<float>(n[0]);
           out[5] = static_cast<float>(n[1]);

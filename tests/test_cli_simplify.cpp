@@ -94,6 +94,18 @@ TEST_F(CliSimplify, BadArgumentsFailWithOneLineAndNoOutput) {
   EXPECT_EQ(stray_files({"s.ply"}), std::vector<std::string>{});
 }
 
+// A mesh without a face of non-zero area has no surface distance: --stats says null and the run
+// succeeds, as without --stats (it exited 1 after writing the output).
+TEST_F(CliSimplify, StatsOfAMeshWithoutAreaSayNull) {
+  std::ofstream(dir_ / "flat.obj") << "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n";
+  const Result r = run("simplify flat.obj o.ply --ratio 0.5 --stats s.json -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(dir_ / "s.json"));
+  for (const char* key : {"simplify_hausdorff_mean", "simplify_hausdorff_max",
+                          "simplify_hausdorff_max_at", "simplify_hausdorff_max_direction"})
+    EXPECT_TRUE(j.contains(key) && j[key].is_null()) << key;
+}
+
 TEST_F(CliSimplify, ExtractSimplifyReportsBothMeshesInVoxels) {
   // Spacing 2 along z: the distances in the stats are in voxels, the mesh in world units.
   const std::string nucleon = std::string(ISOTILE_TEST_DATA) + "/nucleon_41x41x41_uint8.raw.gz";

@@ -555,6 +555,59 @@ TEST(MeshReaderErrors, HugeCountsAreRejectedBeforeAllocating) {
   EXPECT_NE(error_of(dir / "s.stl").find("4294967295 triangles"), std::string::npos);
 }
 
+// Counts that say less than the file holds: an error, not the rest dropped without a word (a
+// binary STL whose header says 1 of its 4 triangles read as 1 triangle with exit 0).
+TEST(MeshReaderErrors, DataPastTheCountsIsRefused) {
+  TempDir dir;
+  std::string stl(80, '\0');
+  const std::uint32_t one = 1;
+  stl.append(reinterpret_cast<const char*>(&one), 4);
+  for (int t = 0; t < 4; ++t) {
+    const float v[12] = {0, 0, 1, 0, 0, 0, 1, 0, 0, 0, static_cast<float>(t + 1), 0};
+    stl.append(reinterpret_cast<const char*>(v), sizeof v);
+    stl.append(2, '\0');
+  }
+  write_bytes(dir / "count.stl", stl);
+  EXPECT_NE(
+      error_of(dir / "count.stl").find("header says 1 triangles (134 bytes) but the file has 284"),
+      std::string::npos)
+      << error_of(dir / "count.stl");
+  // A binary STL whose header starts with "solid" and whose size is off is named as binary.
+  std::string solid = stl;
+  solid.replace(0, 5, "solid");
+  write_bytes(dir / "solid.stl", solid);
+  EXPECT_NE(error_of(dir / "solid.stl").find("binary STL header says 1 triangles"),
+            std::string::npos)
+      << error_of(dir / "solid.stl");
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  write_bytes(dir / "more.ply", head + "3 2 1 0\n");
+  EXPECT_NE(error_of(dir / "more.ply").find("line 14: '3' after the last element's records"),
+            std::string::npos)
+      << error_of(dir / "more.ply");
+  write_bytes(dir / "blank.ply", head + "\n\n");
+  EXPECT_EQ(read_mesh(dir / "blank.ply").triangles.size(), 1u);
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}};
+  write_mesh(m, dir / "bin.ply", {.format = MeshFormat::Ply});
+  std::ifstream bin(dir / "bin.ply", std::ios::binary);
+  const std::string bin_bytes((std::istreambuf_iterator<char>(bin)),
+                              std::istreambuf_iterator<char>());
+  write_bytes(dir / "more_bin.ply", bin_bytes + std::string(13, '\0'));
+  EXPECT_NE(error_of(dir / "more_bin.ply").find("13 bytes after the last element's records"),
+            std::string::npos)
+      << error_of(dir / "more_bin.ply");
+  write_bytes(dir / "more.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 2 1 0\n# fine\n");
+  EXPECT_NE(error_of(dir / "more.off").find("after the last face (the counts line says 1 faces)"),
+            std::string::npos)
+      << error_of(dir / "more.off");
+  write_bytes(dir / "comment.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n# a comment\n");
+  EXPECT_EQ(read_mesh(dir / "comment.off").triangles.size(), 1u);
+}
+
 TEST(MeshReaderErrors, MissingFileIsIoError) {
   TempDir dir;
   EXPECT_THROW(read_mesh(dir / "absent.ply"), IoError);

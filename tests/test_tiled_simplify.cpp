@@ -112,8 +112,8 @@ TEST_F(TiledSimplify, GyroidBorderIsKeptExactlyAndTheMeshIsWatertight) {
               0.02 * 0.1 * whole.triangles.size());
   // Close to simplifying the whole mesh in core.
   const Mesh in_core = simplify(whole, {.ratio = 0.1});
-  const SurfaceDistance d = surface_distance(whole, m);
-  const SurfaceDistance d_core = surface_distance(whole, in_core);
+  const SurfaceDistance d = *surface_distance(whole, m);
+  const SurfaceDistance d_core = *surface_distance(whole, in_core);
   EXPECT_LT(d.mean(), 1.3 * d_core.mean());
   EXPECT_LT(d.max(), 1.0);
   EXPECT_GT(triangle_quality(m).mean, triangle_quality(in_core).mean - 0.03);

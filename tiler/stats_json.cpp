@@ -64,7 +64,14 @@ StatsJson simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& 
   j["simplify_split_vertices"] = s.split_vertices;
   j["simplify_split_copies"] = s.split_copies;
   j["simplify_unlinked_faces"] = s.unlinked_faces;
-  const SurfaceDistance d = surface_distance(before, after, {.scale = scale});
+  const std::optional<SurfaceDistance> distance = surface_distance(before, after, {.scale = scale});
+  if (!distance) {  // a mesh without a face of non-zero area: no distance to say
+    for (const char* key : {"simplify_hausdorff_mean", "simplify_hausdorff_max",
+                            "simplify_hausdorff_max_at", "simplify_hausdorff_max_direction"})
+      j[key] = nullptr;
+    return j;
+  }
+  const SurfaceDistance& d = *distance;
   j["simplify_hausdorff_mean"] = d.mean();
   j["simplify_hausdorff_max"] = d.max();
   const OneWayDistance& worst = d.a_to_b.max >= d.b_to_a.max ? d.a_to_b : d.b_to_a;

@@ -319,6 +319,19 @@ class PlyReader : Reader {
         skip_element(e);
       }
     }
+    // Data past the last element: its counts say less than the file holds (a count cut short
+    // would otherwise drop the rest without a word).
+    if (format_ == PlyFormat::Ascii) {
+      Text t = ascii_text();
+      if (const std::string_view extra = t.token(); !extra.empty())
+        fail("line " + std::to_string(lines_before_ + t.line()) + ": " + quoted(extra) +
+             " after the last element's records (the header's counts say less than the file "
+             "holds)");
+    } else if (pos_ != end_) {
+      fail(std::to_string(end_ - pos_) +
+           " bytes after the last element's records (the header's counts say less than the file "
+           "holds)");
+    }
     return mesh;
   }
 
@@ -830,6 +843,9 @@ Mesh read_off(const Reader& r, const std::vector<char>& data) {
     add_polygon(mesh, corners.data(), n);
     t.skip_line();
   }
+  if (const std::string_view extra = t.token(); !extra.empty())
+    r.fail(at() + quoted(extra) + " after the last face (the counts line says " +
+           std::to_string(nf) + " faces)");
   return mesh;
 }
 
@@ -903,7 +919,8 @@ Mesh read_stl_binary(const Reader& r, const std::vector<char>& data) {
   const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
   const bool swap = std::endian::native == std::endian::big;
   const std::uint64_t count = load<std::uint32_t>(bytes + 80, swap);
-  if (count > (data.size() - 84) / 50) {
+  // Exactly: fewer triangles than the file holds would drop the rest without a word.
+  if (84 + 50 * count != data.size()) {
     r.fail("binary STL header says " + std::to_string(count) + " triangles (" +
            std::to_string(84 + 50 * count) + " bytes) but the file has " +
            std::to_string(data.size()) + " bytes");
@@ -984,7 +1001,11 @@ Mesh read_stl(const Reader& r, const std::vector<char>& data) {
   }
   std::size_t i = 0;
   while (i < data.size() && is_space(data[i])) ++i;
-  if (data.size() - i >= 5 && std::memcmp(data.data() + i, "solid", 5) == 0 &&
+  // Text never holds a NUL byte; a binary STL's header and floats almost always do, so one
+  // whose size is off is named as binary, not read as text that ends too soon.
+  const bool text =
+      std::memchr(data.data(), '\0', std::min<std::size_t>(data.size(), 4096)) == nullptr;
+  if (text && data.size() - i >= 5 && std::memcmp(data.data() + i, "solid", 5) == 0 &&
       (data.size() - i == 5 || is_space(data[i + 5]))) {
     return read_stl_ascii(r, data);
   }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <sstream>
 #include <string>
 
@@ -59,9 +60,12 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
       in >> fmt >> version;
       binary_le = fmt == "binary_little_endian" && version == "1.0";
     } else if (kw == "element") {
-      std::string name;
-      std::uint64_t count = 0;
-      if (!(in >> name >> count)) return std::nullopt;
+      std::string name, digits;
+      // Digits only: >> into an unsigned takes "-1" as 2^64 - 1.
+      if (!(in >> name >> digits) || digits.empty() || digits.size() > 19 ||
+          digits.find_first_not_of("0123456789") != std::string::npos)
+        return std::nullopt;
+      const std::uint64_t count = std::stoull(digits);
       if (at == None && name == "vertex") {
         at = Vertex;
         vertices = count;
@@ -108,6 +112,23 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
   if (vertices > 0xFFFFFFFFull)
     throw CapacityError(path.string() + " has " + std::to_string(vertices) +
                         " vertices; faces are read with 32-bit indices (at most 4294967295)");
+  // The counts against the file before anything is sized by them: a header's claim of 3e8
+  // vertices took 3.5 GB and seconds before the read found them missing.
+  const long header_end = std::ftell(f);
+  std::error_code ec;
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (!ec && header_end >= 0) {
+    const std::uint64_t left = size - static_cast<std::uint64_t>(header_end);
+    const std::uint64_t record = 4 * static_cast<std::uint64_t>(props);
+    if (vertices > left / record)
+      throw InputError(path.string() + ": element 'vertex' declares " + std::to_string(vertices) +
+                       " records but the file has only " + std::to_string(left) + " bytes left");
+    const std::uint64_t face_min = 1 + 3 * static_cast<std::uint64_t>(s.index_bytes_);
+    if (s.faces_ > (left - vertices * record) / face_min)
+      throw InputError(path.string() + ": element 'face' declares " + std::to_string(s.faces_) +
+                       " records but the file has only " +
+                       std::to_string(left - vertices * record) + " bytes left");
+  }
   // The vertices, a block at a time.
   s.positions_.resize(vertices);
   std::vector<float> block;

@@ -119,12 +119,11 @@ OneWayDistance one_way(const std::vector<Point>& from, const Tree& to) {
 
 }  // namespace
 
-SurfaceDistance surface_distance(const Mesh& a, const Mesh& b,
-                                 const SurfaceDistanceOptions& options) {
+std::optional<SurfaceDistance> surface_distance(const Mesh& a, const Mesh& b,
+                                                const SurfaceDistanceOptions& options) {
   const std::vector<Triangle> ta = scaled_triangles(a, options.scale);
   const std::vector<Triangle> tb = scaled_triangles(b, options.scale);
-  if (ta.empty() || tb.empty())
-    throw InputError("surface distance: both meshes need at least one face with non-zero area");
+  if (ta.empty() || tb.empty()) return std::nullopt;
   Tree tree_a(ta.begin(), ta.end()), tree_b(tb.begin(), tb.end());
   // Both trees are built here, before the parallel queries: CGAL builds them lazily on first use
   // otherwise, which is not thread-safe.

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 
 #include "core/mesh/mesh.h"
 #include "core/volume/volume.h"
@@ -37,8 +38,9 @@ struct SurfaceDistance {
   double mean() const { return 0.5 * (a_to_b.mean + b_to_a.mean); }
 };
 
-// Quads count as two triangles. Throws InputError when either mesh has no faces.
-SurfaceDistance surface_distance(const Mesh& a, const Mesh& b,
-                                 const SurfaceDistanceOptions& options = {});
+// Quads count as two triangles. Nothing where either mesh has no face of non-zero area: the
+// distance is undefined there (the stats say null).
+std::optional<SurfaceDistance> surface_distance(const Mesh& a, const Mesh& b,
+                                                const SurfaceDistanceOptions& options = {});
 
 }  // namespace isotile

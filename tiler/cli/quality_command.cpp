@@ -58,6 +58,9 @@ int run_quality(const QualityArgs& args) {
   std::optional<SurfaceDistance> distance;
   if (!reference.empty()) {
     distance = surface_distance(read_mesh(reference), mesh);
+    if (!distance)
+      throw InputError("--reference: the distance between " + reference + " and " + path +
+                       " needs a face of non-zero area in each");
     j["reference"] = reference;
     j["hausdorff_mean"] = distance->mean();
     j["hausdorff_max"] = distance->max();
