@@ -8,8 +8,10 @@
 #include <QDir>
 #include <QMainWindow>
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <exception>
 #include <future>
 #include <limits>
@@ -329,6 +331,20 @@ bool FilterIsotile::applyFilter(QAction* a, MeshDocument& md, const RichParamete
   }
 }
 
+namespace {
+
+// The number typed in the dialog or script, from the float MeshLab keeps: the shortest decimal
+// that reads back as that float, read as a double, as the CLI reads the same text (0.3 is stored
+// as 0.30000001192...; taken as it is, Macet's relaxation moved other vertices than the CLI's
+// --macet-relax 0.3, and iso 60.3 gave other positions than --iso 60.3).
+double typed(float value) {
+  char text[32];
+  const auto end = std::to_chars(text, text + sizeof text, value).ptr;
+  return std::strtod(std::string(text, end).c_str(), nullptr);
+}
+
+}  // namespace
+
 bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
                                vcg::CallBackPos* cb) {
   ml::IsosurfaceParams p;
@@ -338,17 +354,17 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   p.endian = par.getString("endian").trimmed().toStdString();
   p.spacing = par.getString("spacing").trimmed().toStdString();
   p.series = par.getString("series").trimmed().toStdString();
-  p.iso = par.getFloat("iso");
+  p.iso = typed(par.getFloat("iso"));
   p.iso_auto = std::isnan(p.iso);
   p.method = par.getEnum("method");
   p.macet_quality = par.getEnum("macet_quality");
-  p.macet_relax = par.getFloat("macet_relax");
+  p.macet_relax = typed(par.getFloat("macet_relax"));
   p.dc_solver = par.getEnum("dc_solver");
   p.dc_hermite = par.getEnum("dc_hermite");
   p.dc_vertices = par.getEnum("dc_vertices");
   p.backend = par.getEnum("backend");
   p.memory = par.getString("memory").trimmed().toStdString();
-  p.simplify = par.getFloat("simplify");
+  p.simplify = typed(par.getFloat("simplify"));
   p.normals = par.getBool("normals");
   const bool colour = par.getBool("colour_by_quality");
   const std::string temp = QDir::tempPath().toStdString();
@@ -396,10 +412,10 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
   MeshModel* m = md.mm();
   if (m == nullptr || m->cm.fn == 0) return fail("the current layer has no faces to simplify");
   ml::SimplifyParams p;
-  p.ratio = par.getFloat("ratio");
+  p.ratio = typed(par.getFloat("ratio"));
   p.faces = static_cast<std::uint64_t>(std::max(0, par.getInt("faces")));
-  p.max_error = par.getFloat("max_error");
-  p.min_quality = par.getFloat("min_quality");
+  p.max_error = typed(par.getFloat("max_error"));
+  p.min_quality = typed(par.getFloat("min_quality"));
   if (par.getInt("faces") < 0) return fail("faces must be 0 (use the fraction) or more");
 
   // The layer as plain arrays (deleted elements left out).

@@ -249,6 +249,19 @@ TEST_F(MeshlabServer, EngineGivesTheCliMeshForEveryMethod) {
   }
 }
 
+// Numbers typed in the script are the CLI's numbers: MeshLab keeps them as floats (60.3 as
+// 60.29999924, 0.3 as 0.30000001), and the plugin reads back the decimal typed.
+TEST_F(MeshlabServer, TypedDecimalsAreTheClisNumbers) {
+  const ServerRun r = run(script({{"file", kNucleon},
+                                  {"iso", "60.3"},
+                                  {"method", "1"},
+                                  {"macet_quality", "0"},
+                                  {"macet_relax", "0.3"}}));
+  ASSERT_EQ(r.code, 0) << r.log;
+  expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"),
+                   cli(kNucleon + " --iso 60.3 --method macet --macet-relax 0.3"), "relax 0.3");
+}
+
 TEST_F(MeshlabServer, TheShippedExampleRuns) {
   const fs::path engine = isotile::testing::shared_volume("engine_256x256x128_uint8.raw.gz");
   // Only `file` changes; without the shared data, the small volume stands in (and its isovalue).
