@@ -380,15 +380,24 @@ TEST(MeshReader, PlyAsciiHandWritten) {
 TEST(MeshReader, DoublesRoundToNearestFloat) {
   TempDir dir;
   // FLT_MAX printed to 8 digits is slightly above it as a double yet rounds back to FLT_MAX;
-  // 3.5e38 is past the halfway point to 2^128 and becomes infinity; 0.1 rounds once.
-  const std::string s =
+  // 0.1 rounds once; 1e-50 underflows to 0. 3.5e38 is past the halfway point to 2^128 and becomes
+  // infinity, which is no position: refused, naming the file and the vertex.
+  const std::string head =
       "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\n"
-      "property double z\nend_header\n3.4028235e38 -3.4028235e38 0.1\n3.5e38 -3.5e38 1e-50\n";
-  write_bytes(dir / "d.ply", s);
+      "property double z\nend_header\n3.4028235e38 -3.4028235e38 0.1\n";
+  write_bytes(dir / "d.ply", head + "1 -1 1e-50\n");
   const Mesh m = read_mesh(dir / "d.ply");
-  const float inf = std::numeric_limits<float>::infinity();
   const float max = std::numeric_limits<float>::max();
-  EXPECT_TRUE(same_bits(m.positions, {{max, -max, 0.1f}, {inf, -inf, 0.0f}}));
+  EXPECT_TRUE(same_bits(m.positions, {{max, -max, 0.1f}, {1.0f, -1.0f, 0.0f}}));
+  write_bytes(dir / "inf.ply", head + "3.5e38 -3.5e38 0\n");
+  try {
+    read_mesh(dir / "inf.ply");
+    ADD_FAILURE() << "an infinite position was read";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              (dir / "inf.ply").string() +
+                  ": vertex 1 has a coordinate that is not a finite number (inf)");
+  }
 }
 
 TEST(MeshReader, ObjHandWritten) {

@@ -1020,17 +1020,29 @@ Mesh read_mesh(const std::filesystem::path& path) {
   const std::string name = path.string();
   Reader r(name);
   if (data.empty()) r.fail("empty file");
+  Mesh mesh;
   switch (format) {
     case MeshFormat::Ply:
-      return PlyReader(name, data).read();
+      mesh = PlyReader(name, data).read();
+      break;
     case MeshFormat::Obj:
-      return ObjReader(name, data).read();
+      mesh = ObjReader(name, data).read();
+      break;
     case MeshFormat::Off:
-      return read_off(r, data);
+      mesh = read_off(r, data);
+      break;
     case MeshFormat::Stl:
-      return read_stl(r, data);
+      mesh = read_stl(r, data);
+      break;
   }
-  r.fail("unknown format");
+  // A position that is not a number is no place: refused here, naming the file, rather than
+  // by whatever reads the mesh next (simplify, render and the intersection test named none).
+  for (std::size_t v = 0; v < mesh.positions.size(); ++v)
+    for (const float c : mesh.positions[v])
+      if (!std::isfinite(c))
+        r.fail("vertex " + std::to_string(v) + " has a coordinate that is not a finite number (" +
+               std::to_string(c) + ")");
+  return mesh;
 }
 
 }  // namespace isotile

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <sstream>
@@ -139,7 +140,14 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
     if (std::fread(block.data(), sizeof(float) * props, n, f) != n)
       throw InputError(path.string() + ": the vertices are cut short");
     for (std::uint64_t k = 0; k < n; ++k)
-      for (int a = 0; a < 3; ++a) s.positions_[v + k][a] = block[k * props + xyz[a]];
+      for (int a = 0; a < 3; ++a) {
+        const float c = block[k * props + xyz[a]];
+        if (!std::isfinite(c))  // as read_mesh() refuses it
+          throw InputError(path.string() + ": vertex " + std::to_string(v + k) +
+                           " has a coordinate that is not a finite number (" + std::to_string(c) +
+                           ")");
+        s.positions_[v + k][a] = c;
+      }
   }
   return s;
 }

@@ -323,9 +323,10 @@ Layout resolve_layout(const std::string& path, const RawOptions& options) {
   }
   if (!dims || !type) {
     std::string missing = !dims && !type ? "dims and type" : !dims ? "dims" : "type";
-    throw InputError(path + ": the " + missing +
-                     " of a raw volume are unknown (name is not NAME_XxYxZ_TYPE.raw[.gz]); pass "
-                     "--dims X,Y,Z and --type T");
+    throw InputError(path + ": the " + missing + " of a raw volume " +
+                     (!dims && !type ? "are" : "is") +
+                     " unknown (name is not NAME_XxYxZ_TYPE.raw[.gz]); pass --dims X,Y,Z and "
+                     "--type T");
   }
   return {*dims, *type};
 }

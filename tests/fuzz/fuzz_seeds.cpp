@@ -214,7 +214,7 @@ std::vector<Seed> mesh_seeds() {
        "5 0 1 2 0 1 7\r\n");
   text("ply_doubles", kPly,
        "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\n"
-       "property double z\nend_header\n3.4028235e38 -3.4028235e38 0.1\n3.5e38 -3.5e38 1e-50\n");
+       "property double z\nend_header\n3.4028235e38 -3.4028235e38 0.1\n3.4e38 -3.4e38 1e-50\n");
   text("obj_hand", kObj,
        "# a comment\nmtllib none.mtl\no thing\nv 0 0 0\nv 1 0 0\nv 1 1 0 1.0\n"
        "v 0 1 0 0.5 0.5 0.5\nvt 0 0\nvn 0 0 1\n\nf 1/1/1 2/1/1 3/1/1\n"

@@ -78,8 +78,11 @@ int run_quality(const QualityArgs& args) {
   std::printf("mesh                  %s\n", path.c_str());
   std::printf("vertices / triangles  %zu / %llu\n", mesh.positions.size(),
               static_cast<unsigned long long>(q.triangles));
-  std::printf("radius ratio          min %.4g  q0.1%% %.4g  q1%% %.4g  mean %.4f  median %.4f\n",
-              q.min, q.q001, q.q01, q.mean, q.median);
+  if (q.triangles == 0)  // no value to say (the JSON says null), not the zeros of no triangles
+    std::printf("radius ratio          n/a (no triangles)\n");
+  else
+    std::printf("radius ratio          min %.4g  q0.1%% %.4g  q1%% %.4g  mean %.4f  median %.4f\n",
+                q.min, q.q001, q.q01, q.mean, q.median);
   std::printf("degenerate triangles  %llu\n", static_cast<unsigned long long>(q.degenerate));
   std::printf("boundary edges        %llu\n", static_cast<unsigned long long>(t.boundary_edges));
   std::printf("non-manifold          %llu edges, %llu vertices\n",
