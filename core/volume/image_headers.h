@@ -17,7 +17,7 @@ struct ImageHeaderCheck {
   std::optional<PlainData> plain;  // uncompressed, unscaled samples in one file
   // TIFF stacks: each slice file stored plainly, by its name (as the stack lists it).
   std::vector<PlainData> plain_slices;
-  bool rescaled = false;           // NIfTI's scl_slope/scl_inter change the values
+  bool rescaled = false;  // NIfTI's scl_slope/scl_inter change the values
   double rescale_slope = 1;
   double rescale_intercept = 0;
   // Compressed samples, which only inflating them shows to be all there (verify_compressed).
