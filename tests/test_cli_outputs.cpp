@@ -269,6 +269,36 @@ TEST_F(CliOutputs, BadOutputPathsFailBeforeTheInputIsRead) {
   EXPECT_EQ(stray_files({"adir.ply"}), std::vector<std::string>{});
 }
 
+// Options that would be dropped without a word are errors: an empty value (an unset shell
+// variable: --memory "" ran in core), a method's option with another method, --ascii for STL.
+TEST_F(CliOutputs, OptionsThatWouldBeDroppedAreErrors) {
+  struct Bad {
+    std::string args, says;
+    int code;
+  } const cases[] = {
+      {"--memory ''", "--memory: must not be empty", 2},
+      {"--stats ''", "--stats: must not be empty", 2},
+      {"--iso ''", "--iso: must not be empty", 2},
+      {"--spacing ''", "--spacing: must not be empty", 2},
+      {"--method mc --quads", "--quads applies to --method dc only", 1},
+      {"--method macet --dc-solver qef", "--dc-solver applies to --method dc only", 1},
+      {"--dc-vertices cell", "--dc-vertices applies to --method dc only", 1},
+      {"--method dc --quality max", "--quality applies to --method macet only", 1},
+      {"--ascii", "--ascii writes PLY as text; STL is written binary only", 1},
+  };
+  for (const Bad& b : cases) {
+    const std::string out = b.args == "--ascii" ? "out.stl" : "out.ply";
+    const CliResult r = run("extract field:sphere:16 -o " + out + " " + b.args);
+    EXPECT_EQ(r.code, b.code) << b.args << ": " << r.err;
+    EXPECT_NE(r.err.find(b.says), std::string::npos) << b.args << ": " << r.err;
+    EXPECT_EQ(stray_files(), std::vector<std::string>{}) << b.args;
+  }
+  // With their own method they run.
+  for (const std::string ok :
+       {"--method dc --quads --dc-solver qef", "--method macet --quality max"})
+    EXPECT_EQ(run("extract field:sphere:12 -q -o ok.ply " + ok).code, 0) << ok;
+}
+
 // Two of a run's files that are one file: refused before any work, the files as they were (the
 // stats used to replace the mesh, or the input volume, with exit 0).
 TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {

@@ -43,6 +43,12 @@ void check_distinct_files(const std::vector<std::pair<std::string, std::string>>
     }
 }
 
+CLI::Validator non_empty() {
+  return CLI::Validator(
+      [](std::string& s) { return s.empty() ? std::string("must not be empty") : std::string(); },
+      "");
+}
+
 CLI::Validator positive_number(double max, const std::string& description, bool integer) {
   return CLI::Validator(
       [max, description, integer](std::string& s) {
@@ -93,21 +99,26 @@ void InputArgs::add_to(CLI::App& app) {
       ->required();
   app.add_option("--dims", dims,
                  "Raw input: samples along x,y,z, e.g. 256,256,128 (default: from the file "
-                 "name NAME_XxYxZ_TYPE.raw)");
+                 "name NAME_XxYxZ_TYPE.raw)")
+      ->check(non_empty());
   app.add_option("--type", type,
                  "Raw input: int8|uint8|int16|uint16|int32|uint32|float32|float64 (default: "
-                 "from the file name)");
+                 "from the file name)")
+      ->check(non_empty());
   app.add_option("--spacing", spacing,
                  "Sample spacing x,y,z, finite and above 0 (overrides the file's; default: the "
-                 "file's, 1,1,1 for raw input)");
+                 "file's, 1,1,1 for raw input)")
+      ->check(non_empty());
   app.add_option("--origin", origin,
                  "World position x,y,z of the first sample, finite (overrides the file's; "
-                 "default: the file's, 0,0,0 for raw input)");
+                 "default: the file's, 0,0,0 for raw input)")
+      ->check(non_empty());
   app.add_option("--endian", endian, "Raw input byte order")
       ->check(CLI::IsMember({"little", "big"}));
   app.add_option("--series", series,
                  "DICOM: the SeriesInstanceUID to read where the directory holds several "
-                 "(default: the only one)");
+                 "(default: the only one)")
+      ->check(non_empty());
 }
 
 RawOptions InputArgs::raw_options() const {

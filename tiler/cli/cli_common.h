@@ -39,6 +39,10 @@ extern bool g_distributed;
 // unsigned option).
 CLI::Validator positive_number(double max, const std::string& description, bool integer = false);
 
+// A text option's check: not empty (an unset shell variable, `--memory "$MEM"`, would otherwise
+// read as the option not given: an in-core run, a field's own isovalue).
+CLI::Validator non_empty();
+
 // A run's files, as (what, path) with its `inputs` inputs first: InputError naming both when an
 // output is another output or an input (the later write would replace the first file, or the
 // input, and the run would say it succeeded). "-" and empty paths are skipped.

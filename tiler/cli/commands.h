@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "tiler/cli/cli_common.h"
 
@@ -34,6 +35,9 @@ struct ExtractArgs {
   std::string frame = "world";
   double simplify = 1;  // fraction of faces kept; 1: off
   std::string render;   // --render PICTURE.png: drawn from the written mesh
+  // The method-specific options given on the command line (--quality, --dc-*, --quads): each
+  // with another method is an error, not ignored.
+  std::vector<std::string> given;
 };
 
 CLI::App* add_extract_command(CLI::App& app, ExtractArgs& args);

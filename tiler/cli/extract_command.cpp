@@ -77,6 +77,11 @@ PipelineOptions pipeline_options(const ExtractArgs& args) {
   e.dc_vertices = args.dc_vertices == "cell" ? DcVertices::Cell : DcVertices::Patch;
   e.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
   e.macet_relax = args.macet_relax;
+  for (const std::string& name : args.given) {
+    const bool macet = name == "--quality";
+    if (e.method != (macet ? Method::Macet : Method::DualContouring))
+      throw InputError(name + " applies to --method " + (macet ? "macet" : "dc") + " only");
+  }
   o.world_frame = args.frame == "world";
   o.simplify = args.simplify;
   // A GL backend named by --backend makes its context on a thread of its own from here on, while
@@ -167,11 +172,13 @@ CLI::App* add_extract_command(CLI::App& app, ExtractArgs& ex) {
       ->add_option("-o,--output", ex.output,
                    "Output mesh: .ply (binary; --ascii for text), .obj, .stl (binary) or .off")
       ->required();
-  extract_cmd->add_option(
-      "--iso", ex.iso,
-      "Isovalue; samples >= iso are inside. A finite number, or auto: Otsu's threshold of the "
-      "samples' histogram, printed with their range. Required for files; fields default to "
-      "their own (0; 0.5 for marschner-lobb)");
+  extract_cmd
+      ->add_option(
+          "--iso", ex.iso,
+          "Isovalue; samples >= iso are inside. A finite number, or auto: Otsu's threshold of "
+          "the samples' histogram, printed with their range. Required for files; fields default "
+          "to their own (0; 0.5 for marschner-lobb)")
+      ->check(non_empty());
   extract_cmd->add_flag("--allow-empty", ex.allow_empty,
                         "Write the empty mesh (exit 0) when no pair of samples straddles the "
                         "isovalue, instead of failing with the samples' range");
@@ -179,9 +186,10 @@ CLI::App* add_extract_command(CLI::App& app, ExtractArgs& ex) {
       ->check(CLI::IsMember({"mc", "macet", "dc"}));
   extract_cmd->add_option("--backend", ex.backend, "Where to run it")
       ->check(CLI::IsMember({"cpu", "gs", "hp", "auto"}));
-  extract_cmd->add_option("--stats", ex.stats,
-                          "Write statistics as JSON to this file, any name ('-': stdout; "
-                          "default: none)");
+  extract_cmd
+      ->add_option("--stats", ex.stats,
+                   "Write statistics as JSON to this file, any name ('-': stdout; default: none)")
+      ->check(non_empty());
   extract_cmd->add_flag("--normals", ex.normals, "Compute vertex normals (PLY and OBJ store them)");
   extract_cmd->add_flag("--ascii", ex.ascii, "ASCII PLY instead of binary");
   extract_cmd
@@ -235,13 +243,25 @@ CLI::App* add_extract_command(CLI::App& app, ExtractArgs& ex) {
                    "Mesh coordinates: world (default; the file's orientation, LPS for medical "
                    "images) or grid (origin + spacing x index, no direction cosines)")
       ->check(CLI::IsMember({"world", "grid"}));
-  extract_cmd->add_option("--memory", ex.memory,
-                          "Out of core: extract brick by brick, each brick's working set within "
-                          "SIZE (e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL "
-                          "file identical to an in-core run (default: in core)");
-  extract_cmd->add_option("--render", ex.render,
-                          "Also draw the mesh to this PNG picture (as `isotile render MESH -o "
-                          "PICTURE` with its defaults)");
+  extract_cmd
+      ->add_option("--memory", ex.memory,
+                   "Out of core: extract brick by brick, each brick's working set within SIZE "
+                   "(e.g. 256MiB, 2GB), streaming the mesh to a binary PLY or STL file identical "
+                   "to an in-core run (default: in core)")
+      ->check(non_empty());
+  extract_cmd
+      ->add_option("--render", ex.render,
+                   "Also draw the mesh to this PNG picture (as `isotile render MESH -o PICTURE` "
+                   "with its defaults)")
+      ->check(non_empty());
+  // Which method-specific options were given (pipeline_options() refuses them with another
+  // method).
+  extract_cmd->parse_complete_callback([&ex, extract_cmd] {
+    ex.given.clear();
+    for (const char* name :
+         {"--quality", "--dc-solver", "--dc-hermite", "--dc-vertices", "--quads"})
+      if (extract_cmd->count(name) > 0) ex.given.push_back(name);
+  });
   return extract_cmd;
 }
 
@@ -252,7 +272,8 @@ int run_extract(const ExtractArgs& args) {
   // Fail on a bad output name or an unavailable method before spending time on reading (the
   // pipeline checks the output again, as every caller's).
   check_output(args.output, !args.memory.empty() && args.simplify >= 1);
-  mesh_format_from_path(args.output);
+  if (mesh_format_from_path(args.output) == MeshFormat::Stl && args.ascii)
+    throw InputError("--ascii writes PLY as text; STL is written binary only");
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   check_distinct_files({{"the input", args.in.input},
                         {"the output", args.output},
