@@ -400,6 +400,23 @@ TEST(MeshReader, DoublesRoundToNearestFloat) {
   }
 }
 
+// A coordinate below float's range reads as 0 in every text format, as PLY's doubles did (OBJ,
+// OFF, ASCII STL and float PLY called 1e-50 a bad number).
+TEST(MeshReader, TinyCoordinatesUnderflowToZeroInEveryTextFormat) {
+  TempDir dir;
+  write_bytes(dir / "t.obj", "v 1e-50 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  write_bytes(dir / "t.off", "OFF\n3 1 0\n1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  write_bytes(dir / "t.ply",
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+              "end_header\n1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  for (const char* name : {"t.obj", "t.off", "t.ply"}) {
+    const Mesh m = read_mesh(dir / name);
+    ASSERT_EQ(m.positions.size(), 3u) << name;
+    EXPECT_EQ(m.positions[0][0], 0.0f) << name;
+  }
+}
+
 TEST(MeshReader, ObjHandWritten) {
   TempDir dir;
   const std::string s =

@@ -147,6 +147,16 @@ bool parse_number(std::string_view s, T& out) {
   return ec == std::errc() && ptr == s.data() + s.size();
 }
 
+// A coordinate in text: read as a double and rounded to float as IEEE conversion does, so that
+// a value below float's range becomes 0 (or a subnormal) as the PLY reader's doubles do, where
+// from_chars into a float calls it out of range ("1e-50" was a bad number in OBJ, 0 in PLY).
+bool parse_float(std::string_view s, float& out) {
+  double d;
+  if (!parse_number(s, d)) return false;
+  out = to_float(d);
+  return true;
+}
+
 std::string quoted(std::string_view s) {
   constexpr std::size_t kMax = 40;
   std::string out = "'";
@@ -453,7 +463,7 @@ class PlyReader : Reader {
     const std::string_view s = ascii_token(t, e, index);
     if (type == PlyType::F32) {
       float f;
-      if (!parse_number(s, f)) bad_number(t, s);
+      if (!parse_float(s, f)) bad_number(t, s);
       return f;
     }
     double d;
@@ -747,7 +757,7 @@ class ObjReader : Reader {
   float number() {
     const std::string_view s = text_.line_token();
     float f;
-    if (!parse_number(s, f)) {
+    if (!parse_float(s, f)) {
       fail(at() + (s.empty() ? std::string("missing number") : "bad number " + quoted(s)));
     }
     return f;
@@ -801,7 +811,7 @@ Mesh read_off(const Reader& r, const std::vector<char>& data) {
   if (normals) mesh.normals.resize(nv);
   auto number = [&](std::string_view s, const char* what, std::uint64_t i) {
     float f;
-    if (!parse_number(s, f)) {
+    if (!parse_float(s, f)) {
       r.fail(at() + (s.empty() ? "missing coordinate of " : "bad number " + quoted(s) + " in ") +
              what + " " + std::to_string(i));
     }
@@ -952,7 +962,7 @@ Mesh read_stl_ascii(const Reader& r, const std::vector<char>& data) {
   auto number = [&] {
     const std::string_view s = t.token();
     float f;
-    if (!parse_number(s, f)) r.fail(at() + "bad number " + quoted(s));
+    if (!parse_float(s, f)) r.fail(at() + "bad number " + quoted(s));
     return f;
   };
   Mesh mesh;
