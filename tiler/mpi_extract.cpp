@@ -372,8 +372,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     mpi.phase([&] {
       // No cells, so no face: every rank throws the same error, as below.
       if (!options.allow_empty) {
-        const ValueHistogram h = source_histogram(*source, options.memory);
-        throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+        throw_no_surface(*source, options.memory, options.extract.iso);
       }
       if (me == 0)
         write_mesh(Mesh{}, output,
@@ -425,8 +424,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     // Every rank has the summed counts, so every rank throws the same error; each finds the
     // samples' range for it by one streaming pass (on this error only).
     if (result.faces == 0 && !options.allow_empty) {
-      const ValueHistogram h = source_histogram(*source, options.memory);
-      throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+      throw_no_surface(*source, options.memory, options.extract.iso);
     }
   });
   result.seconds_count = since(t0);

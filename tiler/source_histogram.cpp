@@ -56,10 +56,16 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
   return h;
 }
 
+void throw_no_surface(VolumeSource& source, std::uint64_t memory_budget, double iso) {
+  const ValueHistogram h = source_histogram(source, memory_budget);
+  throw_no_surface(iso, std::pair(h.min, h.max));
+}
+
 void throw_no_surface(double iso, const std::optional<std::pair<double, double>>& range) {
   std::ostringstream f;
   f.precision(10);
-  if (range && range->first < iso && iso <= range->second)  // straddled, yet no face
+  const bool inside = range && range->first < iso && iso <= range->second;
+  if (inside)  // straddled, yet no face
     f << "the samples range from " << range->first << " to " << range->second
       << " but no face crosses it (a volume one sample thick has no cells; Dual Contouring makes "
          "no face where the surface meets only the volume's border)";
@@ -70,7 +76,6 @@ void throw_no_surface(double iso, const std::optional<std::pair<double, double>>
     f << "every sample lies on one side of it";
   std::ostringstream s;
   s.precision(10);
-  const bool inside = range && range->first < iso && iso <= range->second;
   s << "no surface at iso " << iso << ": " << f.str()
     << (range ? "" : " (`isotile info` shows the range)")
     << (inside ? "; choose another isovalue or method" : "; choose an isovalue inside the range")

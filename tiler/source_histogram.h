@@ -41,5 +41,8 @@ struct NoSurfaceError : InputError {
 // out (--iso auto, --allow-empty).
 [[noreturn]] void throw_no_surface(double iso,
                                    const std::optional<std::pair<double, double>>& range);
+// The same for a streamed run, the range found by one pass over `source` (the out-of-core
+// paths' no-face error, whatever the reason: no cells, or a count of no face).
+[[noreturn]] void throw_no_surface(VolumeSource& source, std::uint64_t memory_budget, double iso);
 
 }  // namespace isotile

@@ -29,8 +29,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   if (bricks.empty_volume()) {
     // No cells (a volume one sample thick), so no face.
     if (!options.allow_empty) {
-      const ValueHistogram h = source_histogram(source, options.memory);
-      throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+      throw_no_surface(source, options.memory, options.extract.iso);
     }
     write_mesh(Mesh{}, output, {.format = options.format, .ascii = false, .write_normals = false});
     return result;
@@ -73,8 +72,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   bricks.scan(result);
   result.seconds_count = since(t0);
   if (result.faces == 0 && !options.allow_empty) {
-    const ValueHistogram h = source_histogram(source, options.memory);
-    throw_no_surface(options.extract.iso, std::pair(h.min, h.max));
+    throw_no_surface(source, options.memory, options.extract.iso);
   }
 
   AtomicFile file(output);

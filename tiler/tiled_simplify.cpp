@@ -168,8 +168,7 @@ class TiledSimplification {
     for (int a = 0; a < 3; ++a)
       if (n_[a] < 2) {  // no cells, so no face
         if (!opt_.allow_empty) {
-          const ValueHistogram h = source_histogram(src_, opt_.memory);
-          throw_no_surface(opt_.extract.iso, std::pair(h.min, h.max));
+          throw_no_surface(src_, opt_.memory, opt_.extract.iso);
         }
         write_mesh(Mesh{}, output, {.format = opt_.format, .ascii = false});
         return result;
@@ -195,8 +194,7 @@ class TiledSimplification {
     }
     if (!opt_.allow_empty && std::all_of(brick_faces.begin(), brick_faces.end(),
                                          [](std::uint64_t n) { return n == 0; })) {
-      const ValueHistogram h = source_histogram(src_, opt_.memory);
-      throw_no_surface(opt_.extract.iso, std::pair(h.min, h.max));
+      throw_no_surface(src_, opt_.memory, opt_.extract.iso);
     }
     result.plan = plan_;
     result.backend = reader_.extract().backend;

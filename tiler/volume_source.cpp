@@ -72,18 +72,17 @@ class RawFileSource final : public VolumeSource {
     dims = layout.dims;
     fd_ = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw IoError("cannot open " + name + ": " + std::strerror(errno));
-    const std::size_t need = checked_volume_bytes(type, dims);
     struct stat st {};
-    if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode) &&
-        (layout.bytes_after ? static_cast<std::uint64_t>(st.st_size) < need + offset_
-                            : static_cast<std::uint64_t>(st.st_size) != need + offset_))
-      throw InputError(name + ": file holds " + std::to_string(st.st_size) + " bytes but " +
-                       std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                       std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
-                       " samples need " + std::to_string(need) +
-                       (offset_ ? " after " + std::to_string(offset_) + " header bytes" : "") +
-                       (static_cast<std::uint64_t>(st.st_size) < need + offset_ ? " (too short)"
-                                                                                : " (too long)"));
+    try {  // a throwing constructor runs no destructor: the descriptor is closed here
+      if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode))
+        check_plain_size(name, static_cast<std::uint64_t>(st.st_size), offset_, type, dims,
+                         layout.bytes_after);
+      else
+        checked_volume_bytes(type, dims);
+    } catch (...) {
+      ::close(fd_);
+      throw;
+    }
   }
   ~RawFileSource() override {
     if (fd_ >= 0) ::close(fd_);

@@ -93,7 +93,7 @@ int cell_vertex_count(const Classified& c, int64_t x, int64_t y, int64_t z, int 
   if (patches) return patch_count(c, x, y, z, cs);
   const int64_t cell[3] = {x, y, z};
   const unsigned open = dc::border_faces(cell, c.n);
-  return open && dc::live_edges(cs, open) == 0 ? 0 : 1;
+  return dc::has_vertex(cs, open) ? 1 : 0;
 }
 
 template <class Fn>

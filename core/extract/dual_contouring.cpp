@@ -401,7 +401,7 @@ class Extractor {
           const int64_t global[3] = {view_.box.lo[0] + w * 64 + bit, view_.box.lo[1] + j,
                                      view_.box.lo[2] + k};
           const unsigned open = dc::border_faces(global, view_.global_dims);
-          if (open && dc::live_edges(cw.cell_case(bit), open) == 0) m &= ~(uint64_t{1} << bit);
+          if (!dc::has_vertex(cw.cell_case(bit), open)) m &= ~(uint64_t{1} << bit);
         }
       }
       out[w].mask = m;

@@ -61,7 +61,7 @@ CellPatches cell_patches(int cs, unsigned flips, unsigned open) {
   // A piece whose edges all lie on the border gets no quad: it joins the first piece that does,
   // so it leaves no stray vertex; a cell where none does has no patch at all (live_edges()).
   if (open) {
-    if (live_edges(cs, open) == 0) {
+    if (!has_vertex(cs, open)) {
       CellPatches none;
       none.patch.fill(-1);
       return none;

@@ -46,6 +46,10 @@ CellPatches cell_patches(int cs, unsigned flips, unsigned open);
 // it; cell_patches() then has no patch.
 unsigned border_edges(unsigned open);
 unsigned live_edges(int cs, unsigned open);
+// Whether a mixed cell of case `cs` with border faces `open` gets a vertex at all.
+inline bool has_vertex(int cs, unsigned open) {
+  return open == 0 || live_edges(cs, open) != 0;
+}
 
 // The same, from the table where nothing flips and no face is on the border (almost every cell).
 inline CellPatches cell_patches_or_table(int cs, unsigned flips, unsigned open) {

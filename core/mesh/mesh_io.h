@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
@@ -39,6 +40,10 @@ void write_mesh(const Mesh& mesh, const std::filesystem::path& path,
                 const MeshWriteOptions& options = {});
 
 Mesh read_mesh(const std::filesystem::path& path);
+
+// InputError naming `file` and the vertex where a position is not a finite number (every mesh
+// reader's check: such a position is no place).
+void check_finite_positions(const std::string& file, const std::vector<Vec3f>& positions);
 
 // Record layouts shared with the tiler's streamed writer, which places every record at its final
 // offset brick by brick; using the same pieces keeps its files byte-identical to write_mesh's.

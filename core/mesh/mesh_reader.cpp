@@ -1045,14 +1045,19 @@ Mesh read_mesh(const std::filesystem::path& path) {
       mesh = read_stl(r, data);
       break;
   }
-  // A position that is not a number is no place: refused here, naming the file, rather than
-  // by whatever reads the mesh next (simplify, render and the intersection test named none).
-  for (std::size_t v = 0; v < mesh.positions.size(); ++v)
-    for (const float c : mesh.positions[v])
-      if (!std::isfinite(c))
-        r.fail("vertex " + std::to_string(v) + " has a coordinate that is not a finite number (" +
-               std::to_string(c) + ")");
+  // Refused here, naming the file, rather than by whatever reads the mesh next (simplify,
+  // render and the intersection test named none).
+  check_finite_positions(name, mesh.positions);
   return mesh;
+}
+
+void check_finite_positions(const std::string& file, const std::vector<Vec3f>& positions) {
+  for (std::size_t v = 0; v < positions.size(); ++v)
+    for (const float c : positions[v])
+      if (!std::isfinite(c))
+        throw InputError(file + ": vertex " + std::to_string(v) +
+                         " has a coordinate that is not a finite number (" + std::to_string(c) +
+                         ")");
 }
 
 }  // namespace isotile

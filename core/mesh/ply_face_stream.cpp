@@ -2,13 +2,13 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <sstream>
 #include <string>
 
 #include "core/errors.h"
+#include "core/mesh/mesh_io.h"
 
 namespace isotile {
 
@@ -140,15 +140,9 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
     if (std::fread(block.data(), sizeof(float) * props, n, f) != n)
       throw InputError(path.string() + ": the vertices are cut short");
     for (std::uint64_t k = 0; k < n; ++k)
-      for (int a = 0; a < 3; ++a) {
-        const float c = block[k * props + xyz[a]];
-        if (!std::isfinite(c))  // as read_mesh() refuses it
-          throw InputError(path.string() + ": vertex " + std::to_string(v + k) +
-                           " has a coordinate that is not a finite number (" + std::to_string(c) +
-                           ")");
-        s.positions_[v + k][a] = c;
-      }
+      for (int a = 0; a < 3; ++a) s.positions_[v + k][a] = block[k * props + xyz[a]];
   }
+  check_finite_positions(path.string(), s.positions_);  // as read_mesh() does
   return s;
 }
 

@@ -252,17 +252,11 @@ Volume read_nrrd(const std::string& path) {
   // Raw data must be exactly the samples, as out of core (teem reads a longer file with a warning
   // on stderr).
   if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(path); d && !d->gzip) {
-    const std::uint64_t need = checked_volume_bytes(d->type, d->dims);
     std::error_code ec;
     const std::uintmax_t size = std::filesystem::file_size(d->data_file, ec);
-    if (!ec && size != d->offset + need)
-      throw InputError(d->data_file + ": file holds " + std::to_string(size) + " bytes but " +
-                       std::to_string(d->dims[0]) + "x" + std::to_string(d->dims[1]) + "x" +
-                       std::to_string(d->dims[2]) + " " + std::string(scalar_name(d->type)) +
-                       " samples need " + std::to_string(need) +
-                       (d->offset ? " after " + std::to_string(d->offset) + " header bytes" : "") +
-                       (size < d->offset + need ? " (too short)" : " (too long)"));
+    if (!ec) check_plain_size(d->data_file, size, d->offset, d->type, d->dims);
   }
+
   std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
   {
     std::lock_guard lock(teem_mutex());

@@ -356,6 +356,18 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
   return h;
 }
 
+void check_plain_size(const std::string& file, std::uint64_t size, std::uint64_t offset,
+                      ScalarType type, const Index3& dims, bool bytes_after) {
+  const std::uint64_t need = checked_volume_bytes(type, dims);
+  if (size == offset + need || (bytes_after && size > offset + need)) return;
+  throw InputError(file + ": file holds " + std::to_string(size) + " bytes but " +
+                   std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                   std::to_string(dims[2]) + " " + std::string(scalar_name(type)) +
+                   " samples need " + std::to_string(need) +
+                   (offset ? " after " + std::to_string(offset) + " header bytes" : "") +
+                   (size < offset + need ? " (too short)" : " (too long)"));
+}
+
 Volume read_volume(const std::string& input, const RawOptions& raw) {
   if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
     reject_raw_only_options(input, raw, "procedural field");

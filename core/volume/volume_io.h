@@ -82,6 +82,12 @@ struct PlainData {
   std::vector<Plane> planes = {};
 };
 
+// InputError naming `file` when its `size` bytes are not `offset` + the samples of `type` and
+// `dims` (shorter, or longer unless `bytes_after`): the check of every plainly stored input, in
+// core (NRRD's raw data) and out of core (the tiler's raw source).
+void check_plain_size(const std::string& file, std::uint64_t size, std::uint64_t offset,
+                      ScalarType type, const Index3& dims, bool bytes_after = false);
+
 // An input's header: what `isotile info` shows besides the samples, and how the tiler can read
 // it. Reading the header only costs little for every format (a DICOM series reads each file's
 // header).

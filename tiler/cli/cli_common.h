@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/mesh/mesh_io.h"
 #include "core/progress.h"
 #include "core/volume/volume_io.h"
 #ifdef ISOTILE_HAVE_MPI
@@ -42,6 +43,10 @@ CLI::Validator positive_number(double max, const std::string& description, bool 
 // A text option's check: not empty (an unset shell variable, `--memory "$MEM"`, would otherwise
 // read as the option not given: an in-core run, a field's own isovalue).
 CLI::Validator non_empty();
+
+// The mesh format of an output path (by its extension), refusing --ascii where the format has
+// no text form isotile writes (STL is written binary).
+MeshFormat output_format(const std::string& path, bool ascii);
 
 // A run's files, as (what, path) with its `inputs` inputs first: InputError naming both when an
 // output is another output or an input (the later write would replace the first file, or the

@@ -272,8 +272,7 @@ int run_extract(const ExtractArgs& args) {
   // Fail on a bad output name or an unavailable method before spending time on reading (the
   // pipeline checks the output again, as every caller's).
   check_output(args.output, !args.memory.empty() && args.simplify >= 1);
-  if (mesh_format_from_path(args.output) == MeshFormat::Stl && args.ascii)
-    throw InputError("--ascii writes PLY as text; STL is written binary only");
+  output_format(args.output, args.ascii);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   check_distinct_files({{"the input", args.in.input},
                         {"the output", args.output},

@@ -81,9 +81,7 @@ CLI::App* add_simplify_command(CLI::App& app, SimplifyArgs& sa) {
 int run_simplify(const SimplifyArgs& args) {
   const auto t_total = Clock::now();
   check_output(args.output);
-  const MeshFormat format = mesh_format_from_path(args.output);
-  if (format == MeshFormat::Stl && args.ascii)
-    throw InputError("--ascii writes PLY as text; STL is written binary only");
+  const MeshFormat format = output_format(args.output, args.ascii);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   check_distinct_files(
       {{"the input", args.input}, {"the output", args.output}, {"--stats", args.stats}}, 1);
