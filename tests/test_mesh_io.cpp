@@ -511,6 +511,90 @@ TEST(MeshReader, StlBinaryStartingWithSolid) {
   EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
 }
 
+// Keywords in capitals, as some CAD exporters write them, read as the lower-case file does.
+TEST(MeshReader, StlAsciiInCapitals) {
+  TempDir dir;
+  const std::string s =
+      "SOLID PART\n"
+      "FACET NORMAL 0 0 1\n"
+      "OUTER LOOP\n"
+      "VERTEX 0 0 0\n"
+      "Vertex 1 0 0\n"
+      "VERTEX 0 1 0\n"
+      "ENDLOOP\n"
+      "ENDFACET\n"
+      "EndSolid PART\n";
+  write_bytes(dir / "c.stl", s);
+  const Mesh m = read_mesh(dir / "c.stl");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+// 64-bit face indices and counts (isotile's tiler writes uint64 indices past 2^32 - 1
+// vertices); an index beyond int64's range is named as too large, not as negative.
+TEST(MeshReader, Ply64BitIndices) {
+  TempDir dir;
+  for (const char* type : {"uint64", "int64"}) {
+    SCOPED_TRACE(type);
+    std::string s = std::string("ply\nformat binary_big_endian 1.0\nelement vertex 4\n") +
+                    "property float x\nproperty float y\nproperty float z\nelement face 2\n" +
+                    "property list uint64 " + type + " vertex_indices\nend_header\n";
+    for (int v = 0; v < 4; ++v)
+      for (int k = 0; k < 3; ++k) put_be(s, static_cast<float>(v == k + 1));
+    put_be(s, std::uint64_t{3});
+    for (std::uint64_t c : {0, 1, 2}) put_be(s, c);
+    put_be(s, std::uint64_t{4});
+    for (std::uint64_t c : {0, 1, 2, 3}) put_be(s, c);
+    write_bytes(dir / "i64.ply", s);
+    const Mesh m = read_mesh(dir / "i64.ply");
+    EXPECT_EQ(m.positions.size(), 4u);
+    EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+    EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
+  }
+  std::string s =
+      "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\n"
+      "property float y\nproperty float z\nelement face 1\n"
+      "property list uchar uint64 vertex_indices\nend_header\n";
+  for (int k = 0; k < 9; ++k) put_be(s, 0.0f);
+  put_be(s, std::uint8_t{3});
+  for (std::uint64_t c : {std::uint64_t{0}, std::uint64_t{1}, ~std::uint64_t{0}}) put_be(s, c);
+  write_bytes(dir / "huge.ply", s);
+  EXPECT_THROW(
+      {
+        try {
+          read_mesh(dir / "huge.ply");
+        } catch (const InputError& e) {
+          EXPECT_NE(std::string(e.what()).find("references vertex 9223372036854775807"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      InputError);
+}
+
+// Two properties of one name: which holds the value is each reader's guess, so none is taken.
+TEST(MeshReader, PlyPropertyTwiceIsRefused) {
+  TempDir dir;
+  write_bytes(dir / "xx.ply",
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nproperty float x\nelement face 1\n"
+              "property list uchar int vertex_indices\nend_header\n"
+              "0 0 0 5\n1 0 0 6\n0 1 0 7\n3 0 1 2\n");
+  EXPECT_THROW(
+      {
+        try {
+          read_mesh(dir / "xx.ply");
+        } catch (const InputError& e) {
+          EXPECT_NE(std::string(e.what()).find("element 'vertex' has a second property 'x'"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      InputError);
+}
+
 std::string error_of(const fs::path& path) {
   try {
     read_mesh(path);

@@ -277,6 +277,19 @@ TEST_F(Render, PlyFacesReadInPiecesGiveTheSamePicture) {
   std::memcpy(bad.data() + bad.size() - 4, &past, 4);
   std::ofstream(dir_ / "bad.ply", std::ios::binary) << bad;
   EXPECT_THROW(gl::render_mesh_file(dir_ / "bad.ply", o), InputError);
+  // A second x: the reader of the whole file refuses it, so the streamed one must not pick one.
+  std::string twice =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+      "property float y\nproperty float z\nproperty float x\nelement face 1\n"
+      "property list uchar uint vertex_indices\nend_header\n";
+  const float corners[3][4] = {{0, 0, 0, 9}, {1, 0, 0, 9}, {0, 1, 0, 9}};
+  twice.append(reinterpret_cast<const char*>(corners), sizeof(corners));
+  const std::uint32_t face[3] = {0, 1, 2};
+  twice += '\3';
+  twice.append(reinterpret_cast<const char*>(face), sizeof(face));
+  std::ofstream(dir_ / "twice.ply", std::ios::binary) << twice;
+  EXPECT_THROW(read_mesh(dir_ / "twice.ply"), InputError);
+  EXPECT_THROW(gl::render_mesh_file(dir_ / "twice.ply", o), InputError);
 }
 
 // Same inputs, same bytes; and the same picture from the mesh in every format the reader takes.

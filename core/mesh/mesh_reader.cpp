@@ -187,7 +187,9 @@ void add_polygon(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
 // ---------------------------------------------------------------------------------------------
 // PLY
 
-enum class PlyType { I8, U8, I16, U16, I32, U32, F32, F64 };
+// I64 and U64 are not in the PLY specification, but isotile's tiler writes uint64 face indices
+// for meshes past 2^32 - 1 vertices, and other writers use both.
+enum class PlyType { I8, U8, I16, U16, I32, U32, I64, U64, F32, F64 };
 
 std::optional<PlyType> ply_type(std::string_view s) {
   if (s == "char" || s == "int8") return PlyType::I8;
@@ -196,6 +198,8 @@ std::optional<PlyType> ply_type(std::string_view s) {
   if (s == "ushort" || s == "uint16") return PlyType::U16;
   if (s == "int" || s == "int32") return PlyType::I32;
   if (s == "uint" || s == "uint32") return PlyType::U32;
+  if (s == "int64") return PlyType::I64;
+  if (s == "uint64") return PlyType::U64;
   if (s == "float" || s == "float32") return PlyType::F32;
   if (s == "double" || s == "float64") return PlyType::F64;
   return std::nullopt;
@@ -213,6 +217,8 @@ std::size_t ply_size(PlyType t) {
     case PlyType::U32:
     case PlyType::F32:
       return 4;
+    case PlyType::I64:
+    case PlyType::U64:
     case PlyType::F64:
       return 8;
   }
@@ -278,6 +284,10 @@ float load_float(PlyType t, const unsigned char* p, bool swap) {
       return static_cast<float>(load<std::int32_t>(p, swap));
     case PlyType::U32:
       return static_cast<float>(load<std::uint32_t>(p, swap));
+    case PlyType::I64:
+      return static_cast<float>(load<std::int64_t>(p, swap));
+    case PlyType::U64:
+      return static_cast<float>(load<std::uint64_t>(p, swap));
     case PlyType::F32:
       return load<float>(p, swap);
     case PlyType::F64:
@@ -301,6 +311,13 @@ std::int64_t load_int(PlyType t, const unsigned char* p, bool swap) {
       return load<std::int32_t>(p, swap);
     case PlyType::U32:
       return load<std::uint32_t>(p, swap);
+    case PlyType::I64:
+      return load<std::int64_t>(p, swap);
+    case PlyType::U64:
+      // Past int64's range is no index or count a file can hold; kept positive so that the
+      // callers' range checks name it as too large, not as negative.
+      return static_cast<std::int64_t>(std::min<std::uint64_t>(
+          load<std::uint64_t>(p, swap), std::numeric_limits<std::int64_t>::max()));
     default:
       return 0;
   }
@@ -408,6 +425,10 @@ class PlyReader : Reader {
         prop.type = *type;
         prop.name = std::string(words.token());
         if (prop.name.empty()) fail(where() + "property without a name");
+        // Which of two same-named properties holds the value is anyone's guess (readers differ).
+        if (elements_.back().find(prop.name) >= 0)
+          fail(where() + "element '" + elements_.back().name + "' has a second property " +
+               quoted(std::string_view(prop.name)));
         elements_.back().properties.push_back(std::move(prop));
       } else if (kw == "end_header") {
         done = true;
@@ -949,12 +970,21 @@ Mesh read_stl_binary(const Reader& r, const std::vector<char>& data) {
   return mesh;
 }
 
+// ASCII STL's keywords in any case: some CAD exporters write "SOLID" and "FACET NORMAL", and
+// other readers (MeshLab's, Assimp's) take them.
+bool stl_keyword(std::string_view s, std::string_view word) {
+  return s.size() == word.size() &&
+         std::equal(s.begin(), s.end(), word.begin(), [](char a, char b) {
+           return (a >= 'A' && a <= 'Z' ? static_cast<char>(a - 'A' + 'a') : a) == b;
+         });
+}
+
 Mesh read_stl_ascii(const Reader& r, const std::vector<char>& data) {
   Text t(data.data(), data.data() + data.size(), false);
   auto at = [&] { return "line " + std::to_string(t.line()) + ": "; };
   auto expect = [&](std::string_view word) {
     const std::string_view s = t.token();
-    if (s != word) {
+    if (!stl_keyword(s, word)) {
       r.fail(at() + "expected '" + std::string(word) + "' but found " +
              (s.empty() ? std::string("the end of the file") : quoted(s)));
     }
@@ -972,15 +1002,15 @@ Mesh read_stl_ascii(const Reader& r, const std::vector<char>& data) {
   t.skip_line();  // the solid's name
   for (;;) {
     const std::string_view kw = t.token();
-    if (kw == "endsolid") {
+    if (stl_keyword(kw, "endsolid")) {
       t.skip_line();
       const std::string_view next = t.token();
       if (next.empty()) break;
-      if (next != "solid") r.fail(at() + "expected 'solid' but found " + quoted(next));
+      if (!stl_keyword(next, "solid")) r.fail(at() + "expected 'solid' but found " + quoted(next));
       t.skip_line();
       continue;
     }
-    if (kw != "facet") {
+    if (!stl_keyword(kw, "facet")) {
       r.fail(at() + "expected 'facet' or 'endsolid' but found " +
              (kw.empty() ? std::string("the end of the file") : quoted(kw)));
     }
@@ -1015,7 +1045,7 @@ Mesh read_stl(const Reader& r, const std::vector<char>& data) {
   // whose size is off is named as binary, not read as text that ends too soon.
   const bool text =
       std::memchr(data.data(), '\0', std::min<std::size_t>(data.size(), 4096)) == nullptr;
-  if (text && data.size() - i >= 5 && std::memcmp(data.data() + i, "solid", 5) == 0 &&
+  if (text && data.size() - i >= 5 && stl_keyword({data.data() + i, 5}, "solid") &&
       (data.size() - i == 5 || is_space(data[i + 5]))) {
     return read_stl_ascii(r, data);
   }

@@ -83,9 +83,13 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
         std::string name;
         in >> name;
         if (type != "float" && type != "float32") return std::nullopt;
-        if (name == "x") xyz[0] = props;
-        if (name == "y") xyz[1] = props;
-        if (name == "z") xyz[2] = props;
+        // A second x, y or z: the full reader names the file's fault.
+        static const char* const kAxes[3] = {"x", "y", "z"};
+        for (int k = 0; k < 3; ++k)
+          if (name == kAxes[k]) {
+            if (xyz[k] >= 0) return std::nullopt;
+            xyz[k] = props;
+          }
         ++props;
       } else if (at == Face && !face_list && type == "list") {
         std::string count_type, index_type, name;
