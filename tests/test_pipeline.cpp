@@ -370,6 +370,27 @@ TEST_F(Pipeline, BadOptionsFailBeforeAnyOutput) {
   o.iso = 0;
   o.extract.macet_relax = 0.2;
   fails(input("field:sphere:16"), o, "--macet-relax applies to --method macet only");
+  o.extract.macet_relax = 0;
+  // Every method's own options away from their defaults, with another method.
+  o.extract.keep_quads = true;
+  fails(input("field:sphere:16"), o, "--quads applies to --method dc only");
+  o.extract.method = Method::Macet;
+  fails(input("field:sphere:16"), o, "--quads applies to --method dc only");
+  o.extract.keep_quads = false;
+  o.extract.dc_solver = DcSolver::Qef;
+  fails(input("field:sphere:16"), o, "--dc-solver applies to --method dc only");
+  o.extract.dc_solver = DcSolver::MassPoint;
+  o.extract.dc_hermite = DcHermite::Eno;
+  fails(input("field:sphere:16"), o, "--dc-hermite applies to --method dc only");
+  o.extract.dc_hermite = DcHermite::Central;
+  o.extract.dc_vertices = DcVertices::Cell;
+  fails(input("field:sphere:16"), o, "--dc-vertices applies to --method dc only");
+  o.extract.dc_vertices = DcVertices::Patch;
+  o.extract.method = Method::DualContouring;
+  o.extract.quality = MacetQuality::Max;
+  fails(input("field:sphere:16"), o, "--quality applies to --method macet only");
+  o.extract.quality = MacetQuality::Fast;
+  o.extract.method = Method::MarchingCubes;
   o.extract.macet_relax = 0.7;
   fails(input("field:sphere:16"), o, "macet_relax must be in [0, 0.5)");
   o = {};

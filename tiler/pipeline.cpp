@@ -216,8 +216,21 @@ void check_pipeline_options(const PipelineOptions& options) {
   const ExtractOptions& eo = options.extract;
   if (!(eo.macet_relax >= 0 && eo.macet_relax < 0.5))
     throw InputError("macet_relax must be in [0, 0.5), got " + std::to_string(eo.macet_relax));
-  if (eo.macet_relax > 0 && eo.method != Method::Macet)
-    throw InputError("--macet-relax applies to --method macet only");
+  // A method's own options set away from their defaults with another method would be dropped
+  // without a word (the CLI also refuses them given at their defaults).
+  const auto only = [](const char* option, const char* method) {
+    throw InputError(std::string(option) + " applies to --method " + method + " only");
+  };
+  if (eo.method != Method::Macet) {
+    if (eo.macet_relax > 0) only("--macet-relax", "macet");
+    if (eo.quality != MacetQuality::Fast) only("--quality", "macet");
+  }
+  if (eo.method != Method::DualContouring) {
+    if (eo.keep_quads) only("--quads", "dc");
+    if (eo.dc_solver != DcSolver::MassPoint) only("--dc-solver", "dc");
+    if (eo.dc_hermite != DcHermite::Central) only("--dc-hermite", "dc");
+    if (eo.dc_vertices != DcVertices::Patch) only("--dc-vertices", "dc");
+  }
   choose_backend(eo);  // InputError when the method cannot run on the backend asked for
 }
 

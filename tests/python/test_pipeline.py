@@ -171,6 +171,13 @@ def test_errors_are_the_clis(tmp_path, ball):
         isotile.extract(ball, 100, memory="1MiB")
     with pytest.raises(ValueError, match="macet-relax applies to --method macet only"):
         isotile.extract(ball, 100, macet_relax=0.2)
+    # Another method's options are refused, not dropped.
+    with pytest.raises(ValueError, match="--quads applies to --method dc only"):
+        isotile.extract(ball, 100, quads=True)
+    with pytest.raises(ValueError, match="--dc-solver applies to --method dc only"):
+        isotile.extract(ball, 100, method="macet", dc_solver="qef")
+    with pytest.raises(ValueError, match="--quality applies to --method macet only"):
+        isotile.extract(ball, 100, method="dc", quality="max")
     with pytest.raises(ValueError, match="method must be"):
         isotile.extract(ball, 100, method="marching")
     with pytest.raises(ValueError, match="iso must be a number or 'auto'"):
