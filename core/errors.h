@@ -5,6 +5,7 @@
 // problem and, where possible, what to do about it. The CLI prints what() on one line.
 #pragma once
 
+#include <charconv>
 #include <stdexcept>
 #include <string>
 
@@ -30,5 +31,13 @@ struct IoError : Error {
 struct CapacityError : Error {
   using Error::Error;
 };
+
+// A number in a message: the shortest text that reads back as the same double (std::to_string's
+// six decimals show -1e-9 as "-0.000000" and 0.6 as "0.600000").
+inline std::string number_text(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+  return std::string(buf, r.ptr);
+}
 
 }  // namespace isotile

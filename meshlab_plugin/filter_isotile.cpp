@@ -403,6 +403,11 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
   if (p.simplify < 1)
     Log("isotile: simplified from %llu triangles",
         static_cast<unsigned long long>(r.triangles_extracted));
+  if (!r.unused_fields.empty()) {
+    std::string fields;
+    for (const std::string& f : r.unused_fields) fields += (fields.empty() ? "" : ", ") + f;
+    Log("isotile: not used by %s: %s", ml::kMethodNames[p.method], fields.c_str());
+  }
   for (const std::string& line : r.warnings)
     Log(GLLogStream::WARNING, "isotile: warning: %s", line.c_str());
   return true;

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -68,12 +69,6 @@ struct PrivateFolder {
   PrivateFolder& operator=(const PrivateFolder&) = delete;
 };
 
-std::string format_iso(double iso) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", iso);
-  return buf;
-}
-
 std::string format_value(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.10g", v);
@@ -96,6 +91,26 @@ std::string file_stem(const std::string& file) {
                                ".tif", ".mrc", ".mrcs", ".map", ".ccp4", ".dcm", ".ima"})
     if (strip(ext)) break;
   return name;
+}
+
+// Another method's fields away from their defaults, reset to them: their labels.
+std::vector<std::string> drop_other_methods_fields(Method method, ExtractOptions& o) {
+  std::vector<std::string> unused;
+  const ExtractOptions defaults;
+  auto drop = [&](auto& field, auto value, const char* label) {
+    if (field != value) unused.push_back(label);
+    field = value;
+  };
+  if (method != Method::Macet) {
+    drop(o.quality, defaults.quality, "Macet quality");
+    drop(o.macet_relax, defaults.macet_relax, "Macet relax");
+  }
+  if (method != Method::DualContouring) {
+    drop(o.dc_solver, defaults.dc_solver, "DC solver");
+    drop(o.dc_hermite, defaults.dc_hermite, "DC Hermite");
+    drop(o.dc_vertices, defaults.dc_vertices, "DC vertices");
+  }
+  return unused;
 }
 
 // The fields as the pipeline's options. The enum indices are checked here (scripts carry
@@ -203,7 +218,7 @@ std::string layer_name(const std::string& file, const std::string& series_descri
   std::string base = series_description;
   if (base.empty()) base = file_stem(file);
   if (base.empty()) base = "volume";
-  std::string name = base + " " + std::string(method) + " iso" + format_iso(iso);
+  std::string name = base + " " + std::string(method) + " iso" + format_value(iso);
   for (char& c : name)
     if (c == '.' || c == '/' || c == '\\') c = '_';
   return name;
@@ -218,8 +233,66 @@ std::string unique_name(const std::string& name,
   }
 }
 
+static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,
+                                               const std::string& temp_dir,
+                                               const Progress& progress);
+
 IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& temp_dir,
                                 const Progress& progress) {
+  try {
+    return run_isosurface_checked(p, temp_dir, progress);
+  } catch (const NoSurfaceError&) {
+    throw;  // already in the dialog's terms
+  } catch (const InputError& e) {
+    throw InputError(in_dialog_terms(e.what()));
+  } catch (const CapacityError& e) {
+    throw CapacityError(in_dialog_terms(e.what()));
+  }
+}
+
+std::string in_dialog_terms(std::string message) {
+  // Longest first: "--method macet" before "--method", "--iso auto" before "--iso".
+  static const std::pair<std::string_view, std::string_view> kTerms[] = {
+      {"--method macet", "Method Macet"},
+      {"--method dc", "Method Dual Contouring"},
+      {"--method mc", "Method Marching Cubes"},
+      {"--iso auto", "'Isovalue' nan"},
+      {"--macet-relax", "'Macet relax'"},
+      {"--quality", "'Macet quality'"},
+      {"--dc-solver", "'DC solver'"},
+      {"--dc-hermite", "'DC Hermite'"},
+      {"--dc-vertices", "'DC vertices'"},
+      {"--series", "'DICOM series'"},
+      {"--dims X,Y,Z", "'Raw dims'"},
+      {"--dims", "'Raw dims'"},
+      {"--type T", "'Raw type'"},
+      {"--type", "'Raw type'"},
+      {"--endian", "'Raw byte order'"},
+      {"--spacing", "'Spacing'"},
+      {"--memory", "'Memory'"},
+      {"--simplify", "'Simplify'"},
+      {"--backend", "'Backend'"},
+      {"--normals", "'Gradient normals'"},
+      {"--iso", "'Isovalue'"},
+  };
+  for (const auto& [flag, label] : kTerms)
+    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;) {
+      // Whole options only: --dims is not the start of --dimsx.
+      const std::size_t end = at + flag.size();
+      if (end < message.size() && (std::isalnum(static_cast<unsigned char>(message[end])) ||
+                                   message[end] == '-' || message[end] == '_')) {
+        at = end;
+        continue;
+      }
+      message.replace(at, flag.size(), label);
+      at += label.size();
+    }
+  return message;
+}
+
+static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,
+                                               const std::string& temp_dir,
+                                               const Progress& progress) {
   const auto t0 = Clock::now();
   if (p.file.empty())
     throw InputError(
@@ -232,6 +305,8 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
       throw IoError(p.file + ": no such file");
   }
   PipelineOptions options = pipeline_options(p);
+  std::vector<std::string> unused =
+      drop_other_methods_fields(options.extract.method, options.extract);
   PipelineInput input;
   input.path = p.file;
   input.raw = parse_input_text(
@@ -262,9 +337,12 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
     run = run_pipeline(input, options);
   } catch (const NoSurfaceError& e) {
     // The library's finding (where the samples lie), with the ways out this dialog offers.
-    throw InputError("no surface at isovalue " + format_value(e.iso) + " in " + p.file + ": " +
-                     e.finding +
-                     "; set iso inside the range, or to nan for the automatic isovalue");
+    throw NoSurfaceError("no surface at isovalue " + format_value(e.iso) + " in " + p.file + ": " +
+                             e.finding +
+                             (e.straddled ? "; choose another isovalue (nan: automatic) or method"
+                                          : "; set the isovalue inside the range, or to nan for "
+                                            "the automatic isovalue"),
+                         e.iso, e.range, e.finding, e.straddled);
   }
 
   if (!mesh_file.empty()) {
@@ -279,6 +357,7 @@ IsosurfaceResult run_isosurface(const IsosurfaceParams& p, const std::string& te
   r.bricks = run.bricks;
   r.triangles_extracted = run.triangles_extracted;
   r.quality = run.quality;
+  r.unused_fields = std::move(unused);
   r.layer_name = layer_name(p.file, run.series_description, method, run.iso);
   r.description = p.file;
   if (!run.series_description.empty() || !run.series_uid.empty())

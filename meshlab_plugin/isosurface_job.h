@@ -66,6 +66,10 @@ struct IsosurfaceResult {
   std::uint64_t triangles_extracted = 0;
   QualityStats quality;
   double seconds = 0;
+  // The fields of another method than the one chosen that were set away from their defaults
+  // and so not used ("DC solver"): the dialog shows every method's fields at once and keeps
+  // their last values, so they are left out with a line in the log rather than refused.
+  std::vector<std::string> unused_fields;
   // The run's warnings (PipelineOptions::warn: a GPU backend's failure under auto, a memory
   // budget the surface overflows), in order, for the log: not on MeshLab's stderr, which a GUI
   // user never sees.
@@ -74,6 +78,10 @@ struct IsosurfaceResult {
 
 // Progress: what is being done (the stage) and the fraction of the whole run done, in [0, 1].
 using Progress = std::function<void(const std::string& stage, double fraction)>;
+
+// A library message in the dialog's terms: the CLI's option names (--dc-solver, --method macet,
+// --dims) become the fields' labels ('DC solver', Method Macet, 'Raw dims').
+std::string in_dialog_terms(std::string message);
 
 // The layer's name: the file's name without its extensions (a DICOM series: its description,
 // else its folder's name), the method and the isovalue, with every '.' (MeshLab's layer list cuts

@@ -89,6 +89,8 @@ TEST_F(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
   EXPECT_EQ(layer_name("/d/scan.v2.nrrd", "", "dc", 3), "scan_v2 dc iso3");
   EXPECT_EQ(layer_name("/d/1-001.dcm", "T1 3D/SAG 1.0mm", "mc", 300), "T1 3D_SAG 1_0mm mc iso300");
   EXPECT_EQ(layer_name("/d/series/", "", "mc", 1), "series mc iso1");
+  // Ten digits: 1234567.5 and 1234570 are other layers' names (%g made both iso1_23457e+06).
+  EXPECT_EQ(layer_name("big.raw", "", "mc", 1234567.5), "big mc iso1234567_5");
   const std::vector<std::string> layers = {"a mc iso1", "a mc iso1 (2)"};
   auto taken = [&](const std::string& n) {
     return std::find(layers.begin(), layers.end(), n) != layers.end();
@@ -126,13 +128,22 @@ TEST_F(MeshlabJob, NoSurfaceNamesTheRangeInCoreAndBrickByBrick) {
   IsosurfaceParams p = nucleon();
   p.iso = 1000;
   EXPECT_EQ(message_of(p), "no surface at isovalue 1000 in " + kNucleon + ": " + range +
-                               ", all below it; set iso inside the range, or to nan for the "
-                               "automatic isovalue");
+                               ", all below it; set the isovalue inside the range, or to nan "
+                               "for the automatic isovalue");
   p.memory = "256KiB";
   EXPECT_NE(message_of(p).find(range + ", all below it"), std::string::npos) << message_of(p);
   p.memory = "0";
   p.iso = -1;
   EXPECT_NE(message_of(p).find(range + ", all at or above it"), std::string::npos) << message_of(p);
+  // Samples on both sides, yet no face (Dual Contouring's border cells, a volume one sample
+  // thick): moving the isovalue into the range is no advice.
+  const std::filesystem::path thin = dir_ / "thin_4x4x1_uint8.raw";
+  std::ofstream(thin, std::ios::binary) << std::string(8, '\0') << std::string(8, '\xff');
+  p.file = thin.string();
+  p.iso = 100;
+  const std::string m = message_of(p);
+  EXPECT_NE(m.find("but no face crosses it"), std::string::npos) << m;
+  EXPECT_NE(m.find("; choose another isovalue (nan: automatic) or method"), std::string::npos) << m;
 }
 
 TEST_F(MeshlabJob, BricksAndSimplification) {
@@ -258,7 +269,7 @@ TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
       {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown type 'uint12'"},
       {[](IsosurfaceParams& p) { p.endian = "middle"; }, "endian must be"},
       {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "spacing must be three"},
-      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "series applies to DICOM only"},
+      {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "'DICOM series' applies to DICOM only"},
       {[](IsosurfaceParams& p) { p.method = 3; }, "method must be one of 0 Marching Cubes"},
       {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
       {[](IsosurfaceParams& p) {
@@ -266,8 +277,13 @@ TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
          p.dc_vertices = 2;
        },
        "dc_vertices must be one of 0 patch, 1 cell"},
-      {[](IsosurfaceParams& p) { p.macet_relax = 0.2; }, "applies to --method macet only"},
-      {[](IsosurfaceParams& p) { p.macet_relax = 0.7; }, "macet_relax must be in [0, 0.5)"},
+      {[](IsosurfaceParams& p) {
+         p.method = 1;
+         p.macet_relax = 0.7;
+       },
+       "macet_relax must be in [0, 0.5), got 0.7"},
+      {[](IsosurfaceParams& p) { p.simplify = -1e-9; },
+       "simplify must be in (0, 1] (1: off), got -1e-09"},
       {[](IsosurfaceParams& p) { p.memory = "much"; }, "much"},
       {[](IsosurfaceParams& p) { p.simplify = 1.5; }, "simplify must be in (0, 1]"},
       {[](IsosurfaceParams& p) { p.iso = INFINITY; }, "iso must be a finite number"},
@@ -278,6 +294,50 @@ TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
     const std::string m = message_of(p);
     EXPECT_NE(m.find(c.says), std::string::npos) << "wanted '" << c.says << "', got: " << m;
   }
+}
+
+// The dialog shows every method's fields and keeps their last values: another method's fields
+// away from their defaults are left out (and named for the log), the mesh the chosen method's.
+TEST_F(MeshlabJob, AnotherMethodsFieldsAreLeftOutAndNamed) {
+  const IsosurfaceResult plain = run_isosurface(nucleon(), "", {});
+  EXPECT_TRUE(plain.unused_fields.empty());
+  IsosurfaceParams p = nucleon();
+  p.macet_quality = 1;
+  p.macet_relax = 0.2;
+  p.dc_solver = 2;
+  p.dc_hermite = 1;
+  p.dc_vertices = 1;
+  const IsosurfaceResult mc = run_isosurface(p, "", {});
+  EXPECT_EQ(mc.unused_fields, (std::vector<std::string>{"Macet quality", "Macet relax", "DC solver",
+                                                        "DC Hermite", "DC vertices"}));
+  EXPECT_EQ(mc.mesh.positions, plain.mesh.positions);
+  EXPECT_EQ(mc.mesh.triangles, plain.mesh.triangles);
+  p.method = 2;
+  const IsosurfaceResult dc = run_isosurface(p, "", {});
+  EXPECT_EQ(dc.unused_fields, (std::vector<std::string>{"Macet quality", "Macet relax"}));
+  IsosurfaceParams q = nucleon();
+  q.method = 2;
+  q.dc_solver = 2;
+  q.dc_hermite = 1;
+  q.dc_vertices = 1;
+  const IsosurfaceResult dc_only = run_isosurface(q, "", {});
+  EXPECT_TRUE(dc_only.unused_fields.empty());
+  EXPECT_EQ(dc.mesh.positions, dc_only.mesh.positions);
+  EXPECT_EQ(dc.mesh.triangles, dc_only.mesh.triangles);
+}
+
+// Library messages name the dialog's fields, not the CLI's options.
+TEST_F(MeshlabJob, MessagesNameTheDialogsFields) {
+  EXPECT_EQ(in_dialog_terms("--quality applies to --method macet only"),
+            "'Macet quality' applies to Method Macet only");
+  EXPECT_EQ(in_dialog_terms("pass --dims X,Y,Z and --type T; --iso auto or --iso 3"),
+            "pass 'Raw dims' and 'Raw type'; 'Isovalue' nan or 'Isovalue' 3");
+  EXPECT_EQ(in_dialog_terms("--dims-x, --ascii"), "--dims-x, --ascii");
+  IsosurfaceParams p = nucleon();
+  p.series = "1.2.3";
+  const std::string m = message_of(p);
+  EXPECT_NE(m.find("'DICOM series' applies to DICOM only"), std::string::npos) << m;
+  EXPECT_EQ(m.find("--"), std::string::npos) << m;
 }
 
 TEST_F(MeshlabJob, SimplifyFilterTargets) {
@@ -322,7 +382,7 @@ TEST_F(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
   EXPECT_EQ(whole.mesh.triangles, expected.triangles);
   // The series cannot be read by region: a budget below the whole volume (35 MiB) is refused.
   p.memory = "16MiB";
-  EXPECT_NE(message_of(p).find("does not fit --memory"), std::string::npos);
+  EXPECT_NE(message_of(p).find("does not fit 'Memory'"), std::string::npos) << message_of(p);
   p.memory = "64MiB";
   const IsosurfaceResult bricked = run_isosurface(p, dir_.string(), {});
   EXPECT_TRUE(std::filesystem::is_empty(dir_));

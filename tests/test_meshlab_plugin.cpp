@@ -288,6 +288,21 @@ TEST_F(MeshlabServer, IsoAutoGivesTheCliMeshAndLogsTheValue) {
   }
 }
 
+// A saved script (every field, in full) with another method's fields changed still runs: they
+// are left out, and the log names them.
+TEST_F(MeshlabServer, AnotherMethodsFieldsAreNamedInTheLog) {
+  const ServerRun r = run(script({{"file", kNucleon},
+                                  {"iso", "60.5"},
+                                  {"method", "0"},
+                                  {"dc_solver", "2"},
+                                  {"macet_relax", "0.2"}}));
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_NE(r.out.find("isotile: not used by Marching Cubes: Macet relax, DC solver\n"),
+            std::string::npos)
+      << r.out;
+  expect_same_mesh(isotile::read_mesh(dir_ / "out.ply"), cli(kNucleon + " --iso 60.5"), "mc");
+}
+
 TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
   struct Case {
     std::map<std::string, std::string> values;
@@ -299,7 +314,7 @@ TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
       {{{"file", kNucleon}, {"dc_vertices", "2"}, {"method", "2"}}, "dc_vertices must be one of"},
       {{{"file", kNucleon}, {"memory", "lots"}}, "lots"},
       {{{"file", kNucleon}, {"simplify", "0"}}, "simplify"},
-      {{{"file", kNucleon}, {"series", "1.2.3"}}, "DICOM"},
+      {{{"file", kNucleon}, {"series", "1.2.3"}}, "'DICOM series' applies to DICOM only"},
       {{{"file", kNucleon}, {"iso", "1000"}}, "no surface at isovalue"},
   };
   for (const Case& c : cases) {

@@ -292,7 +292,16 @@ TEST_F(VolumeIo, RawWithoutDimsOrTypeSaysWhatToPass) {
   RawOptions only_dims;
   only_dims.dims = Index3{2, 2, 2};
   msg = message_of<InputError>([&] { read_raw(file, only_dims); });
-  EXPECT_TRUE(contains(msg, "the type of a raw volume")) << msg;
+  EXPECT_TRUE(contains(msg, "the sample type is unknown")) << msg;
+  EXPECT_TRUE(contains(msg, "pass --type T")) << msg;
+  EXPECT_FALSE(contains(msg, "--dims")) << msg;  // given: not asked for again
+
+  RawOptions only_type;
+  only_type.type = ScalarType::UInt8;
+  msg = message_of<InputError>([&] { read_raw(file, only_type); });
+  EXPECT_TRUE(contains(msg, "the dims are unknown")) << msg;
+  EXPECT_TRUE(contains(msg, "pass --dims X,Y,Z")) << msg;
+  EXPECT_FALSE(contains(msg, "--type")) << msg;
 }
 
 TEST_F(VolumeIo, RawTooShortAndTooLong) {

@@ -211,27 +211,10 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
 
 void check_pipeline_options(const PipelineOptions& options) {
   if (!(options.simplify > 0 && options.simplify <= 1))
-    throw InputError("simplify must be in (0, 1] (1: off), got " +
-                     std::to_string(options.simplify));
+    throw InputError("simplify must be in (0, 1] (1: off), got " + number_text(options.simplify));
   const ExtractOptions& eo = options.extract;
-  if (!(eo.macet_relax >= 0 && eo.macet_relax < 0.5))
-    throw InputError("macet_relax must be in [0, 0.5), got " + std::to_string(eo.macet_relax));
-  // A method's own options set away from their defaults with another method would be dropped
-  // without a word (the CLI also refuses them given at their defaults).
-  const auto only = [](const char* option, const char* method) {
-    throw InputError(std::string(option) + " applies to --method " + method + " only");
-  };
-  if (eo.method != Method::Macet) {
-    if (eo.macet_relax > 0) only("--macet-relax", "macet");
-    if (eo.quality != MacetQuality::Fast) only("--quality", "macet");
-  }
-  if (eo.method != Method::DualContouring) {
-    if (eo.keep_quads) only("--quads", "dc");
-    if (eo.dc_solver != DcSolver::MassPoint) only("--dc-solver", "dc");
-    if (eo.dc_hermite != DcHermite::Central) only("--dc-hermite", "dc");
-    if (eo.dc_vertices != DcVertices::Patch) only("--dc-vertices", "dc");
-  }
-  choose_backend(eo);  // InputError when the method cannot run on the backend asked for
+  check_method_options(eo);  // the CLI also refuses them given at their defaults
+  choose_backend(eo);        // InputError when the method cannot run on the backend asked for
 }
 
 ExtractOptions pipeline_extract_options(const PipelineInput& input,
@@ -275,7 +258,7 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   MeshFormat format = MeshFormat::Ply;
   if (!options.output.empty()) {
     check_output(options.output, tiled && options.simplify >= 1);
-    format = mesh_format_from_path(options.output);
+    format = mesh_output_format(options.output, options.ascii);
     if (!input.volume && !input.path.empty() && same_file(options.output, input.path))
       throw InputError("the output " + options.output +
                        " is the input's file (it would be replaced)");
@@ -363,7 +346,7 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   SimplifyStats sstats;
   double t_simplify = 0;
   if (simplifying) {
-    log("simplifying to " + std::to_string(options.simplify) + " of the faces");
+    log("simplifying to " + number_text(options.simplify) + " of the faces");
     t0 = Clock::now();
     SimplifyOptions so;
     so.ratio = options.simplify;

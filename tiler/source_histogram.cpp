@@ -80,7 +80,7 @@ void throw_no_surface(double iso, const std::optional<std::pair<double, double>>
     << (range ? "" : " (`isotile info` shows the range)")
     << (inside ? "; choose another isovalue or method" : "; choose an isovalue inside the range")
     << ", or --iso auto (or --allow-empty to write the empty mesh)";
-  throw NoSurfaceError(s.str(), iso, range, f.str());
+  throw NoSurfaceError(s.str(), iso, range, f.str(), inside);
 }
 
 }  // namespace isotile

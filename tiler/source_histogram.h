@@ -28,12 +28,19 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
 // the library's finding instead of measuring the samples again.
 struct NoSurfaceError : InputError {
   NoSurfaceError(std::string message, double iso_, std::optional<std::pair<double, double>> range_,
-                 std::string finding_)
-      : InputError(std::move(message)), iso(iso_), range(range_), finding(std::move(finding_)) {}
+                 std::string finding_, bool straddled_)
+      : InputError(std::move(message)),
+        iso(iso_),
+        range(range_),
+        finding(std::move(finding_)),
+        straddled(straddled_) {}
   double iso;
   std::optional<std::pair<double, double>> range;  // the samples' range, where known
   // Where the samples lie: "the samples range from 0 to 255, all below it".
   std::string finding;
+  // Samples lie on both sides of iso, yet no face was made (a volume one sample thick, Dual
+  // Contouring's border cells): another isovalue inside the range may not help either.
+  bool straddled;
 };
 
 // NoSurfaceError: the run made no face, most often because no pair of samples straddles `iso`

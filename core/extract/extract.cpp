@@ -120,6 +120,24 @@ MacetOptions macet_options(const ExtractOptions& o) {
   return m;
 }
 
+void check_method_options(const ExtractOptions& o) {
+  if (!(o.macet_relax >= 0 && o.macet_relax < 0.5))
+    throw InputError("macet_relax must be in [0, 0.5), got " + number_text(o.macet_relax));
+  const auto only = [](const char* option, const char* method) {
+    throw InputError(std::string(option) + " applies to --method " + method + " only");
+  };
+  if (o.method != Method::Macet) {
+    if (o.macet_relax > 0) only("--macet-relax", "macet");
+    if (o.quality != MacetQuality::Fast) only("--quality", "macet");
+  }
+  if (o.method != Method::DualContouring) {
+    if (o.keep_quads) only("--quads", "dc");
+    if (o.dc_solver != DcSolver::MassPoint) only("--dc-solver", "dc");
+    if (o.dc_hermite != DcHermite::Central) only("--dc-hermite", "dc");
+    if (o.dc_vertices != DcVertices::Patch) only("--dc-vertices", "dc");
+  }
+}
+
 std::string_view method_name(Method m) {
   return kMethodNames[static_cast<int>(m)];
 }

@@ -57,6 +57,11 @@ struct ExtractOptions {
   Warn warn{};
 };
 
+// InputError when macet_relax is out of [0, 0.5), or a method's own options are set away from
+// their defaults with another method (they would be dropped without a word). Messages name the
+// CLI's options, which front ends may rename.
+void check_method_options(const ExtractOptions& options);
+
 // Samples beyond a brick's cells that `options` needs the view to hold.
 int extract_halo(const ExtractOptions& options);
 

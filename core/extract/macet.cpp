@@ -573,7 +573,7 @@ void check_macet_options(const MacetOptions& options) {
                      std::to_string(options.max_sweeps));
   if (!(options.relax >= 0 && options.relax < 0.5))
     throw InputError("macet: relax must lie in [0, 0.5) edge lengths, got " +
-                     std::to_string(options.relax));
+                     number_text(options.relax));
 }
 
 Mesh macet(const VolumeView& view, const MacetOptions& options) {

@@ -27,6 +27,10 @@ enum class MeshFormat { Ply, Obj, Stl, Off };
 // From the extension (.ply, .obj, .stl, .off; case-insensitive); InputError otherwise.
 MeshFormat mesh_format_from_path(const std::filesystem::path& path);
 
+// The format of an output path (by its extension), refusing `ascii` where the format has no text
+// form isotile writes (STL is written binary): InputError, before any work.
+MeshFormat mesh_output_format(const std::filesystem::path& path, bool ascii);
+
 struct MeshWriteOptions {
   std::optional<MeshFormat> format;  // default: from the extension
   bool ascii = false;                // PLY only: ASCII instead of binary little-endian

@@ -396,9 +396,24 @@ void write_stl(const Mesh& mesh, AtomicFile& file, Progress* progress) {
 
 }  // namespace
 
+namespace {
+
+MeshFormat text_form_checked(MeshFormat format, bool ascii) {
+  if (format == MeshFormat::Stl && ascii)
+    throw InputError("--ascii writes PLY as text; STL is written binary only");
+  return format;
+}
+
+}  // namespace
+
+MeshFormat mesh_output_format(const std::filesystem::path& path, bool ascii) {
+  return text_form_checked(mesh_format_from_path(path), ascii);
+}
+
 void write_mesh(const Mesh& mesh, const std::filesystem::path& path,
                 const MeshWriteOptions& options) {
-  const MeshFormat format = options.format ? *options.format : mesh_format_from_path(path);
+  const MeshFormat format = text_form_checked(
+      options.format ? *options.format : mesh_format_from_path(path), options.ascii);
   check_mesh(mesh, path);
   if (format == MeshFormat::Stl) {
     const std::uint64_t count =

@@ -653,7 +653,7 @@ Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& op
 
 void check_options(const SimplifyOptions& options) {
   if (!(options.ratio >= 0) || options.ratio > 1)
-    throw InputError("simplify: the ratio must be in (0, 1], got " + std::to_string(options.ratio));
+    throw InputError("simplify: the ratio must be in (0, 1], got " + number_text(options.ratio));
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw InputError("simplify: the maximum error must be a finite number >= 0");
   if (!(options.min_quality >= 0) || options.min_quality > 1)

@@ -322,11 +322,16 @@ Layout resolve_layout(const std::string& path, const RawOptions& options) {
     }
   }
   if (!dims || !type) {
-    std::string missing = !dims && !type ? "dims and type" : !dims ? "dims" : "type";
-    throw InputError(path + ": the " + missing + " of a raw volume " +
-                     (!dims && !type ? "are" : "is") +
-                     " unknown (name is not NAME_XxYxZ_TYPE.raw[.gz]); pass --dims X,Y,Z and "
-                     "--type T");
+    // Ask for what is missing only: the other was given.
+    const std::string missing = !dims && !type ? "dims and sample type are"
+                                : !dims        ? "dims are"
+                                               : "sample type is";
+    const std::string pass = !dims && !type ? "--dims X,Y,Z and --type T"
+                             : !dims        ? "--dims X,Y,Z"
+                                            : "--type T";
+    throw InputError(path + ": the " + missing +
+                     " unknown (a raw volume's name is not NAME_XxYxZ_TYPE.raw[.gz]); pass " +
+                     pass);
   }
   return {*dims, *type};
 }

@@ -227,6 +227,7 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
   if (quality != "fast" && quality != "max")
     throw py::value_error("quality must be fast or max, not '" + quality + "'");
   options.quality = quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
+  check_method_options(options);
   Warnings warnings;
   options.warn = warnings.sink();
   auto* result = new Result;
@@ -542,14 +543,20 @@ PipelineOptions pipeline_options_of(const py::dict& o) {
   p.simplify = has("simplify") ? option_as<double>(o["simplify"], "simplify", "a number") : 1.0;
   p.check_intersections = flag("check_intersections");
   p.allow_empty = flag("allow_empty");
+  // An empty text is None's stand-in nowhere: as the CLI's empty --memory "$MEM", it would run
+  // in core (or write nothing) without a word.
+  const auto not_empty = [](std::string v, const char* key) {
+    if (v.empty()) throw py::value_error(std::string(key) + " must not be empty (None: not given)");
+    return v;
+  };
   if (has("memory")) {
     const py::object m = o["memory"];
     p.memory = py::isinstance<py::str>(m)
-                   ? m.cast<std::string>()
+                   ? not_empty(m.cast<std::string>(), "memory")
                    : std::to_string(option_as<std::uint64_t>(
                          m, "memory", "a byte count (an int above 0) or a size such as '256MiB'"));
   }
-  if (has("output")) p.output = py::str(o["output"]).cast<std::string>();
+  if (has("output")) p.output = not_empty(py::str(o["output"]).cast<std::string>(), "output");
   p.ascii = flag("ascii");
   p.stats = !o.contains("stats") || o["stats"].cast<bool>();
   return p;

@@ -178,6 +178,17 @@ def test_errors_are_the_clis(tmp_path, ball):
         isotile.extract(ball, 100, method="macet", dc_solver="qef")
     with pytest.raises(ValueError, match="--quality applies to --method macet only"):
         isotile.extract(ball, 100, method="dc", quality="max")
+    # Empty texts are not None: they would run in core or write nothing.
+    with pytest.raises(ValueError, match="memory must not be empty"):
+        isotile.extract(ball, 100, memory="", output=tmp_path / "e.ply")
+    with pytest.raises(ValueError, match="output must not be empty"):
+        isotile.extract(ball, 100, output="")
+    # STL has no text form isotile writes: refused before the run, nothing written.
+    with pytest.raises(ValueError, match="STL is written binary only"):
+        isotile.extract(ball, 100, output=tmp_path / "a.stl", ascii=True)
+    assert not (tmp_path / "a.stl").exists()
+    with pytest.raises(ValueError, match="STL is written binary only"):
+        isotile.write_mesh(tmp_path / "w.stl", isotile.extract(ball, 100), ascii=True)
     with pytest.raises(ValueError, match="method must be"):
         isotile.extract(ball, 100, method="marching")
     with pytest.raises(ValueError, match="iso must be a number or 'auto'"):

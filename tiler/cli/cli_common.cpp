@@ -29,13 +29,6 @@ void progress(const std::string& message) {
   if (!g_quiet) std::fprintf(stderr, "isotile: %s\n", message.c_str());
 }
 
-MeshFormat output_format(const std::string& path, bool ascii) {
-  const MeshFormat format = mesh_format_from_path(path);
-  if (format == MeshFormat::Stl && ascii)
-    throw InputError("--ascii writes PLY as text; STL is written binary only");
-  return format;
-}
-
 void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files,
                           std::size_t inputs) {
   for (std::size_t i = inputs; i < files.size(); ++i)

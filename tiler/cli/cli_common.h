@@ -44,10 +44,6 @@ CLI::Validator positive_number(double max, const std::string& description, bool 
 // read as the option not given: an in-core run, a field's own isovalue).
 CLI::Validator non_empty();
 
-// The mesh format of an output path (by its extension), refusing --ascii where the format has
-// no text form isotile writes (STL is written binary).
-MeshFormat output_format(const std::string& path, bool ascii);
-
 // A run's files, as (what, path) with its `inputs` inputs first: InputError naming both when an
 // output is another output or an input (the later write would replace the first file, or the
 // input, and the run would say it succeeded). "-" and empty paths are skipped.

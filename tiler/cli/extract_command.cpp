@@ -272,7 +272,7 @@ int run_extract(const ExtractArgs& args) {
   // Fail on a bad output name or an unavailable method before spending time on reading (the
   // pipeline checks the output again, as every caller's).
   check_output(args.output, !args.memory.empty() && args.simplify >= 1);
-  output_format(args.output, args.ascii);
+  mesh_output_format(args.output, args.ascii);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   check_distinct_files({{"the input", args.in.input},
                         {"the output", args.output},

@@ -81,7 +81,7 @@ CLI::App* add_simplify_command(CLI::App& app, SimplifyArgs& sa) {
 int run_simplify(const SimplifyArgs& args) {
   const auto t_total = Clock::now();
   check_output(args.output);
-  const MeshFormat format = output_format(args.output, args.ascii);
+  const MeshFormat format = mesh_output_format(args.output, args.ascii);
   if (!args.stats.empty() && args.stats != "-") check_output(args.stats);
   check_distinct_files(
       {{"the input", args.input}, {"the output", args.output}, {"--stats", args.stats}}, 1);
