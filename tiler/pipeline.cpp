@@ -232,6 +232,9 @@ ExtractOptions pipeline_extract_options(const PipelineInput& input,
     eo.iso = *options.iso;
   } else if (field && !options.iso_auto) {
     eo.iso = field_default_iso(field->kind);
+  } else if (!options.iso_auto && input.volume) {
+    // Samples in memory (an array from a front end): no file for `isotile info` to read.
+    throw InputError("--iso is required: a number, or 'auto' for Otsu's threshold of the samples");
   } else if (!options.iso_auto) {
     throw InputError(
         "--iso is required for a volume file: a number, or 'auto' for Otsu's "

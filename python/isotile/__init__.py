@@ -20,6 +20,7 @@ own the library's buffers (no copy).
 """
 
 import json as _json
+import numbers as _numbers
 import os as _os
 
 import numpy as _np
@@ -143,6 +144,7 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
             raise ValueError("volume and mask must have the same shape.")
         if mask.dtype != _np.bool_:
             mask = mask.astype(_np.bool_)
+    _check_threads(threads)
     whole = _readable(volume, "volume")
     vol = whole
     if step_size > 1:
@@ -179,6 +181,7 @@ def quality(vertices, faces, *, check_intersections=False, threads=None):
     arrays carry no volume box to tell border edges from holes. The arrays are copied into the
     library's mesh.
     """
+    _check_threads(threads)
     return _isotile.quality(_np.asarray(vertices), _np.asarray(faces), bool(check_intersections),
                             threads)
 
@@ -195,6 +198,15 @@ def simplify(vertices, triangles, /, *, ratio=None, faces=None, max_error=None, 
     """
     if ratio is None and faces is None and max_error is None:
         raise ValueError("simplify needs ratio, faces or max_error")
+    _check_threads(threads)
+    # 0 stands for "not given" below: an explicit 0 (or less) is refused here, naming it.
+    if ratio is not None and not 0 < ratio <= 1:
+        raise ValueError(f"ratio must be in (0, 1], not {ratio!r}")
+    if faces is not None and (isinstance(faces, bool) or not isinstance(faces, _numbers.Integral)
+                              or faces < 1):
+        raise ValueError(f"faces must be an int of at least 1, not {faces!r}")
+    if max_error is not None and not max_error > 0:
+        raise ValueError(f"max_error must be above 0, not {max_error!r}")
     return _isotile.simplify(_np.asarray(vertices), _np.asarray(triangles),
                              0.0 if ratio is None else float(ratio),
                              0 if faces is None else int(faces),
@@ -316,6 +328,21 @@ _EXTRACT_OPTIONS = ("method", "quality", "macet_relax", "dc_solver", "dc_hermite
 _FILE_OPTIONS = ("dims", "type", "spacing", "origin", "endian", "series")
 
 
+def _refuse(given, applies):
+    """ValueError naming the keywords given (``given``: name -> bool) that apply elsewhere."""
+    names = [name for name, was_given in given.items() if was_given]
+    if names:
+        raise ValueError(f"{', '.join(names)} appl{'ies' if len(names) == 1 else 'y'} only "
+                         f"{applies}")
+
+
+def _check_threads(threads):
+    if threads is not None and (isinstance(threads, bool)
+                                or not isinstance(threads, _numbers.Integral) or threads < 1):
+        raise ValueError(f"threads must be an int of at least 1, or None (every core), not "
+                         f"{threads!r}")
+
+
 def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, dc_solver="mass",
             dc_hermite="central", dc_vertices="patch", quads=False, backend="auto",
             normals=False, frame="world", simplify=1.0, check_intersections=False,
@@ -373,6 +400,32 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         that failed (the CPU took over). Made an error by a
         warnings filter, it stops the run and leaves no file.
     """
+    _check_threads(threads)
+    if isinstance(memory, bool):
+        raise ValueError("memory must be a byte count (an int above 0) or a size such as "
+                         f"'256MiB', not {memory!r}")
+    if ascii and output is None:
+        raise ValueError("ascii applies to the output file; give output")
+    # Keywords that the kind of source has no use for are refused, not dropped.
+    file_only = {"dims": dims is not None, "type": type is not None,
+                 "endian": endian != "little", "series": series is not None}
+    if isinstance(source, Volume):
+        _refuse({"spacing": spacing is not None, "origin": origin is not None,
+                 "direction": direction is not None, **file_only},
+                "to a path or an array; a Volume has its own (read_volume(path, spacing=...) "
+                "or Volume(samples, spacing=...))")
+        if source._handle is not None and (
+                tuple(source.spacing) != tuple(source._handle.spacing)
+                or tuple(source.origin) != tuple(source._handle.world_origin)
+                or source.direction != [list(r) for r in source._handle.direction]):
+            raise ValueError("this Volume's spacing, origin or direction was changed after "
+                             "read_volume, and its file's are what the run uses: read it with "
+                             "read_volume(path, spacing=..., origin=...)")
+    elif isinstance(source, (str, bytes, _os.PathLike)):
+        _refuse({"direction": direction is not None},
+                "to an array (a file's direction is its own)")
+    else:
+        _refuse(file_only, "to files (an array's samples are given)")
     options = {"iso": iso}
     local = locals()
     for key in _EXTRACT_OPTIONS:

@@ -10,6 +10,7 @@
 #include <tbb/task_arena.h>
 
 #include <array>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -20,6 +21,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -777,6 +779,42 @@ py::object read_mesh_py(const std::string& path) {
 
 }  // namespace
 
+// A library message in Python's terms: the CLI's options (--macet-relax, --iso auto,
+// --allow-empty) become the keywords that say the same (macet_relax, iso="auto",
+// allow_empty=True).
+std::string in_python_terms(std::string message) {
+  static const std::pair<std::string_view, std::string_view> kTerms[] = {
+      {"--iso auto", "iso=\"auto\""},
+      {"--allow-empty", "allow_empty=True"},
+      {"--method macet", "method=\"macet\""},
+      {"--method dc", "method=\"dc\""},
+      {"--method mc", "method=\"mc\""},
+      {"--dims X,Y,Z", "dims=(x, y, z)"},
+      {"--type T", "type=..."},
+  };
+  for (const auto& [flag, keyword] : kTerms)
+    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;
+         at += keyword.size())
+      message.replace(at, flag.size(), keyword);
+  // Any other option: its keyword (--dc-solver: dc_solver). A "--" not starting a word (a range
+  // "1--2") is left.
+  for (std::size_t at = 0; (at = message.find("--", at)) != std::string::npos;) {
+    const std::size_t name = at + 2;
+    if ((at > 0 && std::isalnum(static_cast<unsigned char>(message[at - 1]))) ||
+        name >= message.size() || !std::islower(static_cast<unsigned char>(message[name]))) {
+      at = name;
+      continue;
+    }
+    message.erase(at, 2);
+    for (std::size_t c = at;
+         c < message.size() &&
+         (std::isalnum(static_cast<unsigned char>(message[c])) || message[c] == '-');
+         ++c)
+      if (message[c] == '-') message[c] = '_';
+  }
+  return message;
+}
+
 PYBIND11_MODULE(_isotile, m) {
   m.doc() = "isotile's C++ libraries for NumPy arrays (use the isotile package, not this module)";
 #ifdef ISOTILE_PYTHON_GL
@@ -789,11 +827,11 @@ PYBIND11_MODULE(_isotile, m) {
     } catch (const Cancelled& e) {
       PyErr_SetString(cancelled.ptr(), e.what());
     } catch (const InputError& e) {
-      PyErr_SetString(PyExc_ValueError, e.what());
+      PyErr_SetString(PyExc_ValueError, in_python_terms(e.what()).c_str());
     } catch (const IoError& e) {
       PyErr_SetString(PyExc_OSError, e.what());
     } catch (const CapacityError& e) {
-      PyErr_SetString(PyExc_MemoryError, e.what());
+      PyErr_SetString(PyExc_MemoryError, in_python_terms(e.what()).c_str());
     } catch (const Error& e) {
       PyErr_SetString(PyExc_RuntimeError, e.what());
     }

@@ -161,22 +161,23 @@ def test_out_of_core_gives_the_in_core_file(tmp_path):
     assert (tmp_path / "ooc.ply").read_bytes() == (tmp_path / "in.ply").read_bytes()
 
 
-def test_errors_are_the_clis(tmp_path, ball):
-    with pytest.raises(ValueError, match="--iso is required for a volume file"):
+def test_errors_are_the_clis_in_keywords(tmp_path, ball):
+    # The CLI's checks and messages, its options named as the keywords that say the same.
+    with pytest.raises(ValueError, match="^iso is required for a volume file"):
         isotile.extract(ball)
     with pytest.raises(ValueError, match="no pair of samples|range"):
         isotile.extract(ball, 300)
     assert isotile.extract(ball, 300, allow_empty=True).faces.shape == (0, 3)
     with pytest.raises(ValueError, match="streams the mesh into a file"):
         isotile.extract(ball, 100, memory="1MiB")
-    with pytest.raises(ValueError, match="macet-relax applies to --method macet only"):
+    with pytest.raises(ValueError, match="^macet_relax applies to method=\"macet\" only$"):
         isotile.extract(ball, 100, macet_relax=0.2)
     # Another method's options are refused, not dropped.
-    with pytest.raises(ValueError, match="--quads applies to --method dc only"):
+    with pytest.raises(ValueError, match="^quads applies to method=\"dc\" only$"):
         isotile.extract(ball, 100, quads=True)
-    with pytest.raises(ValueError, match="--dc-solver applies to --method dc only"):
+    with pytest.raises(ValueError, match="^dc_solver applies to method=\"dc\" only$"):
         isotile.extract(ball, 100, method="macet", dc_solver="qef")
-    with pytest.raises(ValueError, match="--quality applies to --method macet only"):
+    with pytest.raises(ValueError, match="^quality applies to method=\"macet\" only$"):
         isotile.extract(ball, 100, method="dc", quality="max")
     # Empty texts are not None: they would run in core or write nothing.
     with pytest.raises(ValueError, match="memory must not be empty"):
@@ -200,13 +201,67 @@ def test_errors_are_the_clis(tmp_path, ball):
         isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, spacing="1,1,2")
     with pytest.raises(ValueError, match="simplify must be a number"):
         isotile.extract("field:sphere:16", simplify="half")
-    with pytest.raises(ValueError, match="--simplify gives triangles"):
+    with pytest.raises(ValueError, match="^simplify gives triangles; drop quads$"):
         isotile.extract("field:sphere:16", method="dc", quads=True, simplify=0.5)
     with pytest.raises(OSError):
         isotile.extract(tmp_path / "missing.nrrd", 1)
     with pytest.raises(ValueError):
         isotile.extract(ball, 100, output=tmp_path / "mesh.xyz")
     assert not (tmp_path / "mesh.xyz").exists()
+    # No surface: the ways out as keywords.
+    with pytest.raises(ValueError, match='or iso="auto" \\(or allow_empty=True to write'):
+        isotile.extract(ball, 300)
+
+
+def test_keywords_the_source_has_no_use_for_are_refused(tmp_path, ball):
+    array = np.zeros((4, 4, 4), np.float32)
+    array[1:3, 1:3, 1:3] = 1
+    # An array has no file to say how it is stored, and no `isotile info` to run on.
+    with pytest.raises(ValueError, match="^dims, endian apply only to files"):
+        isotile.extract(array, 0.5, dims=(4, 4, 4), endian="big")
+    with pytest.raises(ValueError, match="^iso is required: a number, or 'auto'"):
+        isotile.extract(array)
+    # A file says its own direction.
+    with pytest.raises(ValueError, match="^direction applies only to an array"):
+        isotile.extract(ball, 100, direction=np.eye(3))
+    # A Volume has its own geometry, from its file or its constructor.
+    volume = isotile.read_volume(ball)
+    with pytest.raises(ValueError, match="^spacing, series apply only to a path or an array"):
+        isotile.extract(volume, 100, spacing=(2, 2, 2), series="1.2")
+    with pytest.raises(ValueError, match="^spacing applies only to a path or an array"):
+        isotile.extract(isotile.Volume(array), 0.5, spacing=(3, 3, 3))
+    volume.spacing = (2.0, 2.0, 2.0)
+    with pytest.raises(ValueError, match="changed after read_volume"):
+        isotile.extract(volume, 100)
+    # Values of the wrong kind: a ValueError naming the keyword, not pybind11's TypeError that
+    # prints the arguments (the whole volume).
+    for bad in (1.5, "2", True, 0):
+        with pytest.raises(ValueError, match="^threads must be an int of at least 1"):
+            isotile.extract(array, 0.5, threads=bad)
+        with pytest.raises(ValueError, match="^threads must be an int of at least 1"):
+            isotile.marching_cubes(array, 0.5, threads=bad)
+    assert isotile.extract(array, 0.5, threads=np.int64(1), stats=False).faces.shape[0] > 0
+    with pytest.raises(ValueError, match="^memory must be a byte count"):
+        isotile.extract(ball, 100, memory=True, output=tmp_path / "m.ply")
+    with pytest.raises(ValueError, match="^ascii applies to the output file"):
+        isotile.extract(ball, 100, ascii=True)
+    # marching_cubes refuses Macet's quality with another method, as extract does.
+    with pytest.raises(ValueError, match="^quality applies to method=\"macet\" only"):
+        isotile.marching_cubes(array, 0.5, method="lorensen", quality="max")
+
+
+def test_simplify_names_a_bad_target():
+    mesh = isotile.extract("field:sphere:16", stats=False)
+    v, f = mesh.vertices, mesh.faces
+    with pytest.raises(ValueError, match="^ratio must be in \\(0, 1\\], not 0$"):
+        isotile.simplify(v, f, ratio=0)
+    with pytest.raises(ValueError, match="^faces must be an int of at least 1, not -1$"):
+        isotile.simplify(v, f, faces=-1)
+    with pytest.raises(ValueError, match="^faces must be an int of at least 1, not 0$"):
+        isotile.simplify(v, f, faces=0)
+    with pytest.raises(ValueError, match="^max_error must be above 0, not 0$"):
+        isotile.simplify(v, f, max_error=0)
+    assert len(isotile.simplify(v, f, faces=np.int64(100))[1]) <= 100
 
 
 def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
