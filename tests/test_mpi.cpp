@@ -187,9 +187,9 @@ TEST_F(MpiCli, MacetMatchesSingleProcess) {
 
 TEST_F(MpiCli, DualContouringMatchesSingleProcess) {
   expect_same_as_single_process("field:gyroid:40", "--method dc --memory 96KiB", {2, 4});
-  // Quads into binary STL (two triangles a record).
-  expect_same_as_single_process("field:gyroid:40", "--method dc --quads --memory 96KiB", {3},
-                                "stl");
+  // Binary STL (fixed-size records), and quads into PLY (polygons of four corners).
+  expect_same_as_single_process("field:gyroid:40", "--method dc --memory 96KiB", {3}, "stl");
+  expect_same_as_single_process("field:gyroid:40", "--method dc --quads --memory 96KiB", {3});
 }
 
 TEST_F(MpiCli, GlBackendRunsOnEveryRank) {

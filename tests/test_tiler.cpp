@@ -158,7 +158,10 @@ TEST(BrickPlan, MemorySizesParseWithUnits) {
   EXPECT_EQ(parse_memory_size("2GB"), 2000000000ull);
   EXPECT_EQ(parse_memory_size("1.5g"), 3ull << 29);
   EXPECT_EQ(parse_memory_size("4096"), 4096ull);
-  for (const char* bad : {"", "MiB", "-5MiB", "0", "12XB", "1e30GB", "nan"})
+  EXPECT_EQ(parse_memory_size(".5K"), 512ull);
+  // Only digits and one point: std::stod took hex, exponents and blanks; below a byte is none.
+  for (const char* bad : {"", "MiB", "-5MiB", "0", "12XB", "1e30GB", "nan", "0x1000", "1e3K", " 1M",
+                          "1M ", "0.5", ".", "1.2.3M", "+4K", "inf"})
     EXPECT_THROW(parse_memory_size(bad), InputError) << bad;
 }
 

@@ -88,12 +88,25 @@ BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
 }
 
 std::uint64_t parse_memory_size(const std::string& text) {
+  // Digits with at most one decimal point, then the unit: std::stod alone also took hex
+  // ("0x1000"), exponents ("1e3K") and leading blanks.
   std::size_t used = 0;
+  bool point = false, digit = false;
+  for (; used < text.size(); ++used) {
+    const char c = text[used];
+    if (c >= '0' && c <= '9') {
+      digit = true;
+    } else if (c == '.' && !point) {
+      point = true;
+    } else {
+      break;
+    }
+  }
   double value = 0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
+  if (!digit) {
     used = 0;
+  } else {
+    value = std::strtod(text.substr(0, used).c_str(), nullptr);
   }
   std::string unit = text.substr(used);
   std::transform(unit.begin(), unit.end(), unit.begin(),
@@ -117,11 +130,12 @@ std::uint64_t parse_memory_size(const std::string& text) {
     scale = 1e9;
   else if (unit == "tb")
     scale = 1e12;
-  if (used == 0 || scale == 0 || !(value > 0) || !std::isfinite(value * scale) ||
+  // Below one byte ("0.5") is no budget either, rather than one of 0 bytes.
+  if (used == 0 || scale == 0 || !(value * scale >= 1) || !std::isfinite(value * scale) ||
       value * scale >= 1.8e19)
     throw InputError("bad memory size '" + text +
-                     "': expected a positive number with an optional unit (B, KiB, MiB, GiB, TiB, "
-                     "KB, MB, GB, TB), e.g. 256MiB");
+                     "': expected a positive number with an optional unit (B, K or KiB, M or MiB, "
+                     "G or GiB, T or TiB; KB, MB, GB, TB), e.g. 256MiB");
   return static_cast<std::uint64_t>(value * scale);
 }
 

@@ -262,6 +262,12 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   if (!options.output.empty()) {
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_output_format(options.output, options.ascii);
+    // STL holds triangles only: its writer would cut each quad on a fixed diagonal, worse
+    // triangles than the stats measure and than Dual Contouring's own split makes.
+    if (format == MeshFormat::Stl && options.extract.keep_quads)
+      throw InputError(
+          "--quads keeps quads in PLY, OBJ and OFF; STL holds triangles only: drop "
+          "--quads");
     if (!input.volume && !input.path.empty() && same_file(options.output, input.path))
       throw InputError("the output " + options.output +
                        " is the input's file (it would be replaced)");

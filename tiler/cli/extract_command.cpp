@@ -229,8 +229,10 @@ CLI::App* add_extract_command(CLI::App& app, ExtractArgs& ex) {
             return ok ? std::string() : "must be a number in [0, 0.5), got '" + s + "'";
           },
           "in [0, 0.5)"));
-  extract_cmd->add_flag("--quads", ex.quads,
-                        "Dual Contouring: keep quads (PLY and OBJ polygons) instead of splitting");
+  extract_cmd->add_flag(
+      "--quads", ex.quads,
+      "Dual Contouring: keep quads (PLY, OBJ and OFF polygons; not STL) instead of "
+      "splitting");
   extract_cmd->add_flag("--check-intersections", ex.check_intersections,
                         "Count self-intersecting triangle pairs (stats key self_intersections)");
   extract_cmd
