@@ -21,6 +21,7 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
 
 namespace isotile {
 namespace {
@@ -279,6 +280,22 @@ TEST(MeshRoundTrip, StlWeldsAndSplitsQuads) {
   const Mesh big = big_mesh(false, true);
   const Mesh big_back = round_trip(big, dir / "big.stl");
   EXPECT_EQ(big_back.triangles.size(), big.triangles.size() + 2 * big.quads.size());
+}
+
+// STL holds triangles: a quad is cut on the diagonal the quality measure takes (the better worst
+// triangle), not always on 0-2, so the file holds the triangles its stats described.
+TEST(MeshRoundTrip, StlCutsQuadsOnTheBetterDiagonal) {
+  TempDir dir;
+  Mesh m;  // a flat kite: 0-2 is its long diagonal, which would leave two slivers
+  m.positions = {{0, 0, 0}, {1, -0.2f, 0}, {2, 0, 0}, {1, 0.2f, 0}};
+  m.quads = {{0, 1, 2, 3}};
+  const Mesh back = round_trip(m, dir / "kite.stl");
+  EXPECT_EQ(back.triangles, (std::vector<Tri>{{0, 1, 2}, {1, 3, 2}}));  // welded: 0 1 3, 1 2 3
+  EXPECT_EQ(back.positions,
+            (std::vector<Vec3f>{{0, 0, 0}, {1, -0.2f, 0}, {1, 0.2f, 0}, {2, 0, 0}}));
+  const QuadSplit split = split_quad(m.positions, m.quads[0]);
+  EXPECT_EQ(split.triangles, (std::array<Tri, 2>{Tri{0, 1, 3}, Tri{1, 2, 3}}));
+  EXPECT_EQ(triangle_quality(back).min, triangle_quality(m).min);
 }
 
 TEST(MeshRoundTrip, ExplicitFormatOverridesExtension) {

@@ -15,6 +15,7 @@
 #include "core/errors.h"
 #include "core/extract/brick_sites.h"
 #include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
 
 namespace isotile {
 
@@ -25,15 +26,6 @@ char* put_le(char* p, T v) {
   static_assert(std::endian::native == std::endian::little, "little-endian hosts only");
   std::memcpy(p, &v, sizeof(T));
   return p + sizeof(T);
-}
-
-// The two triangles of a quad along the diagonal whose worse triangle is better (0-2 on ties), as
-// core/mesh/mesh_quality.h counts them.
-std::array<double, 2> quad_quality(const Vec3f& a, const Vec3f& b, const Vec3f& c, const Vec3f& d) {
-  const double a0 = radius_ratio(a, b, c), a1 = radius_ratio(a, c, d);
-  const double b0 = radius_ratio(a, b, d), b1 = radius_ratio(b, c, d);
-  if (std::min(b0, b1) > std::min(a0, a1)) return {b0, b1};
-  return {a0, a1};
 }
 
 using Clock = std::chrono::steady_clock;
@@ -421,16 +413,19 @@ void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std:
       if (quads_) {
         Quad v = mesh.quads[f];
         if (!q.empty()) {
-          const auto pair = quad_quality(P[v[0]], P[v[1]], P[v[2]], P[v[3]]);
+          const auto pair = split_quad(P, v).quality;
           q[2 * f] = pair[0];
           q[2 * f + 1] = pair[1];
         }
         if (fr.flip) std::swap(v[1], v[3]);
-        if (opt_.format == MeshFormat::Ply)
+        if (opt_.format == MeshFormat::Ply) {
           put_face(p, v.data(), 4, index);
-        else
-          put_stl_triangle(put_stl_triangle(p, W(v[0]), W(v[1]), W(v[2])), W(v[0]), W(v[2]),
-                           W(v[3]));
+        } else {
+          // As the in-core writer cuts the mirrored quad: the same diagonal, the other winding.
+          const auto [s, t] = split_quad(P, v).triangles;
+          put_stl_triangle(put_stl_triangle(p, W(s[0]), W(s[1]), W(s[2])), W(t[0]), W(t[1]),
+                           W(t[2]));
+        }
       } else {
         Tri t = mesh.triangles[f];
         if (!q.empty()) q[f] = radius_ratio(P[t[0]], P[t[1]], P[t[2]]);

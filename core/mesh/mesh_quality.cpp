@@ -44,16 +44,14 @@ struct ChunkStats {
   std::array<std::uint64_t, 20> histogram{};
 };
 
-// Quality of a quad split along diagonal 0-2 or 1-3, whichever leaves the better worst triangle
-// (0-2 on a tie).
-std::array<double, 2> quad_quality(const Mesh& mesh, const Quad& q) {
-  const auto& p = mesh.positions;
+inline QuadSplit split_quad_inline(const std::vector<Vec3f>& p, const Quad& q) {
   const double a0 = radius_ratio_inline(p[q[0]], p[q[1]], p[q[2]]);
   const double a1 = radius_ratio_inline(p[q[0]], p[q[2]], p[q[3]]);
   const double b0 = radius_ratio_inline(p[q[0]], p[q[1]], p[q[3]]);
   const double b1 = radius_ratio_inline(p[q[1]], p[q[2]], p[q[3]]);
-  if (std::min(b0, b1) > std::min(a0, a1)) return {b0, b1};
-  return {a0, a1};
+  if (std::min(b0, b1) > std::min(a0, a1))
+    return {{Tri{q[0], q[1], q[3]}, Tri{q[1], q[2], q[3]}}, {b0, b1}};
+  return {{Tri{q[0], q[1], q[2]}, Tri{q[0], q[2], q[3]}}, {a0, a1}};
 }
 
 // Calls f(v) for the quality of triangles [begin, end) in order (quads as their two triangles).
@@ -67,7 +65,7 @@ void for_each_quality(const Mesh& mesh, std::size_t begin, std::size_t end, F&& 
       continue;
     }
     // A chunk border may split a quad's pair; each side then recomputes the quad.
-    const auto pair = quad_quality(mesh, mesh.quads[(i - ntri) / 2]);
+    const auto pair = split_quad_inline(mesh.positions, mesh.quads[(i - ntri) / 2]).quality;
     if ((i - ntri) % 2 == 1) {
       f(pair[1]);
       continue;
@@ -104,6 +102,10 @@ using FineBin = std::uint16_t;
 static_assert(kFineBins <= std::numeric_limits<FineBin>::max() + std::size_t{1});
 
 }  // namespace
+
+QuadSplit split_quad(const std::vector<Vec3f>& positions, const Quad& q) {
+  return split_quad_inline(positions, q);
+}
 
 QualityStats triangle_quality(const Mesh& mesh) {
   QualityStats stats;

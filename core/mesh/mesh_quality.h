@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <vector>
 
 #include "core/mesh/mesh.h"
 
@@ -22,6 +23,15 @@ inline double radius_ratio_of_lengths(double la, double lb, double lc) {
   if (!(q > 0)) return 0;
   return q < 1 ? q : 1;
 }
+
+// A quad as two triangles along the diagonal whose worse triangle is better (0-2 on a tie), as
+// every part of isotile takes quads where triangles are needed: the quality measures,
+// simplification and STL, which holds triangles only.
+struct QuadSplit {
+  std::array<Tri, 2> triangles;
+  std::array<double, 2> quality;  // their radius ratios
+};
+QuadSplit split_quad(const std::vector<Vec3f>& positions, const Quad& q);
 
 struct QualityStats {
   std::uint64_t triangles = 0;   // quads count as their two triangles (better diagonal)

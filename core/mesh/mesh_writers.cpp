@@ -16,6 +16,7 @@
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
+#include "core/mesh/mesh_quality.h"
 
 namespace isotile {
 
@@ -385,11 +386,9 @@ void write_stl(const Mesh& mesh, AtomicFile& file, Progress* progress) {
     return p;
   });
   emit_chunks(file, progress, quads.size(), 100, [&](std::size_t b, std::size_t e, char* p) {
-    for (std::size_t i = b; i < e; ++i) {
-      const Quad& q = quads[i];
-      p = put_stl_triangle(p, pos[q[0]], pos[q[1]], pos[q[2]]);
-      p = put_stl_triangle(p, pos[q[0]], pos[q[2]], pos[q[3]]);
-    }
+    for (std::size_t i = b; i < e; ++i)
+      for (const Tri& t : split_quad(pos, quads[i]).triangles)
+        p = put_stl_triangle(p, pos[t[0]], pos[t[1]], pos[t[2]]);
     return p;
   });
 }

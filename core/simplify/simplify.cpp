@@ -67,20 +67,8 @@ struct VertexFaces {
 std::vector<Tri> input_triangles(const Mesh& mesh) {
   std::vector<Tri> tris = mesh.triangles;
   tris.reserve(mesh.triangles.size() + 2 * mesh.quads.size());
-  const auto& p = mesh.positions;
-  for (const Quad& q : mesh.quads) {
-    const double a =
-        std::min(radius_ratio(p[q[0]], p[q[1]], p[q[2]]), radius_ratio(p[q[0]], p[q[2]], p[q[3]]));
-    const double b =
-        std::min(radius_ratio(p[q[0]], p[q[1]], p[q[3]]), radius_ratio(p[q[1]], p[q[2]], p[q[3]]));
-    if (b > a) {
-      tris.push_back({q[0], q[1], q[3]});
-      tris.push_back({q[1], q[2], q[3]});
-    } else {
-      tris.push_back({q[0], q[1], q[2]});
-      tris.push_back({q[0], q[2], q[3]});
-    }
-  }
+  for (const Quad& q : mesh.quads)
+    for (const Tri& t : split_quad(mesh.positions, q).triangles) tris.push_back(t);
   return tris;
 }
 
