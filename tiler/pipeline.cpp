@@ -262,8 +262,7 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   if (!options.output.empty()) {
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_output_format(options.output, options.ascii);
-    // STL holds triangles only: its writer would cut each quad on a fixed diagonal, worse
-    // triangles than the stats measure and than Dual Contouring's own split makes.
+    // STL holds triangles only: --quads would be dropped without a word.
     if (format == MeshFormat::Stl && options.extract.keep_quads)
       throw InputError(
           "--quads keeps quads in PLY, OBJ and OFF; STL holds triangles only: drop "
