@@ -244,6 +244,11 @@ TEST_F(Cli, QualityMeasuresAWrittenMesh) {
   const Result text = run("quality t.ply");
   ASSERT_EQ(text.code, 0) << text.err;
   EXPECT_NE(text.out.find("watertight            cannot tell"), std::string::npos) << text.out;
+  // Nor which boundary edges lie on it (it said 0 for an open gyroid's 1,000-odd).
+  ASSERT_EQ(run("extract field:gyroid:32 -q -o g.ply").code, 0);
+  const auto g = nlohmann::json::parse(run("quality g.ply --json").out);
+  EXPECT_GT(g["boundary_edges"].get<int>(), 100);
+  EXPECT_TRUE(g["border_boundary_edges"].is_null()) << g["border_boundary_edges"];
 }
 
 // The watertight key means the same for every method: an open gyroid leaves the volume, and only

@@ -331,6 +331,10 @@ TEST_F(GlCli, GlInfoDescribesTheDevice) {
   if (j["software"].get<bool>()) {
     EXPECT_EQ(j["auto"], "cpu");
   }
+  // Device memory: a number of KiB where the driver says it, else null (never the -1 that stood
+  // for "not told"; llvmpipe tells nothing).
+  for (const char* key : {"memory_total_kib", "memory_free_kib"})
+    EXPECT_TRUE(j[key].is_null() || j[key].get<std::int64_t>() > 0) << key << ": " << j[key];
   // Which GPU, of how many and why: only on EGL's device platform.
   if (j["platform"] == "egl-device") {
     EXPECT_NE(j["egl_device"].get<std::string>().find(" of "), std::string::npos)

@@ -39,7 +39,9 @@ StatsJson quality_json(const QualityStats& q) {
 StatsJson topology_json(const TopologyStats& t, bool border_known) {
   StatsJson j;
   j["boundary_edges"] = t.boundary_edges;
-  j["border_boundary_edges"] = t.border_boundary_edges;
+  // Without the volume's box (a mesh read from a file) there is no border to count edges on.
+  j["border_boundary_edges"] =
+      border_known ? StatsJson(t.border_boundary_edges) : StatsJson(nullptr);
   j["nonmanifold_edges"] = t.nonmanifold_edges;
   j["nonmanifold_vertices"] = t.nonmanifold_vertices;
   j["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;

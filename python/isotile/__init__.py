@@ -177,8 +177,8 @@ def quality(vertices, faces, *, check_intersections=False, threads=None):
     Radius ratio (2 r_in / R_circ: 1 equilateral, 0 degenerate) min, mean, median, 0.1% and 1%
     quantiles and histogram; degenerate triangles; boundary, non-manifold and inconsistently
     oriented edges; non-manifold vertices; Euler characteristic; components; closed; and with
-    check_intersections, the number of self-intersecting triangle pairs. ``watertight`` is None:
-    arrays carry no volume box to tell border edges from holes. The arrays are copied into the
+    check_intersections, the number of self-intersecting triangle pairs. ``watertight`` and
+    ``border_boundary_edges`` are None: arrays carry no volume box to tell border edges from holes. The arrays are copied into the
     library's mesh.
     """
     _check_threads(threads)

@@ -325,7 +325,7 @@ py::dict quality_of(const py::array& vertices, const py::array& faces, bool chec
       py::cast(std::vector<std::uint64_t>(q.histogram.begin(), q.histogram.end()));
   d["degenerate_triangles"] = q.degenerate;
   d["boundary_edges"] = t.boundary_edges;
-  d["border_boundary_edges"] = t.border_boundary_edges;
+  d["border_boundary_edges"] = py::none();  // no volume box, no border (as for `isotile quality`)
   d["nonmanifold_edges"] = t.nonmanifold_edges;
   d["nonmanifold_vertices"] = t.nonmanifold_vertices;
   d["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;

@@ -45,8 +45,10 @@ int run_gl_info(bool as_json) {
   j["version"] = d.version;
   j["glsl_version"] = d.glsl_version;
   j["software"] = d.software;
-  j["memory_total_kib"] = d.memory_total_kib;
-  j["memory_free_kib"] = d.memory_free_kib;
+  // null where the driver does not say (no NVX or ATI memory query: llvmpipe), not its -1.
+  const auto kib = [](auto v) { return v >= 0 ? json(v) : json(nullptr); };
+  j["memory_total_kib"] = kib(d.memory_total_kib);
+  j["memory_free_kib"] = kib(d.memory_free_kib);
   j["max_shader_storage_block_bytes"] = d.max_ssbo_bytes;
   j["max_compute_work_group_count"] = d.max_compute_groups;
   j["max_geometry_output_vertices"] = d.max_gs_output_vertices;
