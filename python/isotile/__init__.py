@@ -236,7 +236,7 @@ def _raw_options(dims, type, spacing, origin, endian, series):
 class Volume:
     """Samples on a uniform grid: ``samples`` indexed [z, y, x] (x fastest, as files store them),
     ``spacing`` and ``origin`` (x, y, z) and ``direction`` (3x3, column a the world direction of
-    index axis a; the identity for a plain grid).
+    index axis a; None for an array's Volume: the identity, a plain grid).
 
     ``isotile.read_volume`` makes one from a file, with the samples in the library's buffer
     (read-only, no copy); ``Volume(samples, spacing, origin, direction)`` wraps an array.
