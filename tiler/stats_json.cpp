@@ -52,6 +52,19 @@ StatsJson topology_json(const TopologyStats& t, bool border_known) {
   return j;
 }
 
+StatsJson mesh_measures_json(const Mesh& mesh, const QualityStats& q, const TopologyStats& t,
+                             std::optional<std::uint64_t> crossing) {
+  StatsJson j;
+  j["triangles"] = q.triangles;
+  j["vertices"] = mesh.positions.size();
+  j.update(quality_json(q));
+  j.update(topology_json(t, false));
+  j["edges"] = t.edges;
+  j["unreferenced_vertices"] = t.unreferenced_vertices;
+  if (crossing) j["self_intersections"] = *crossing;
+  return j;
+}
+
 StatsJson simplify_json(const SimplifyStats& s, const Mesh& before, const Mesh& after,
                         const Vec3d& scale) {
   StatsJson j;

@@ -4,7 +4,9 @@
 #pragma once
 
 #include <chrono>
+#include <cstdint>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "core/mesh/mesh.h"
@@ -26,6 +28,12 @@ StatsJson quality_json(const QualityStats& q);
 // volume border cannot be told: watertight is null. A mesh without faces is neither closed nor
 // open: both are null.
 StatsJson topology_json(const TopologyStats& t, bool border_known);
+
+// What `isotile quality --json` reports of a mesh without its volume (a file, arrays): its
+// triangle and vertex counts, quality_json, topology_json without a border, `edges`,
+// `unreferenced_vertices`, and `self_intersections` where `crossing` holds their count.
+StatsJson mesh_measures_json(const Mesh& mesh, const QualityStats& q, const TopologyStats& t,
+                             std::optional<std::uint64_t> crossing);
 
 // Keys of a simplification; `scale` turns mesh units into voxels where known. Measures the
 // two-way distance between `before` and `after`.

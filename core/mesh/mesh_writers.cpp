@@ -140,6 +140,8 @@ void check_mesh(const Mesh& mesh, const std::filesystem::path& path) {
   }
   try {
     check_face_indices(mesh);
+    // A NaN or infinite position is no place; every reader refuses it, so none is written.
+    check_finite_positions("the mesh", mesh.positions);
   } catch (const InputError& e) {
     throw InputError("cannot write " + path.string() + ": " + e.what());
   }

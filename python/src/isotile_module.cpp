@@ -39,6 +39,7 @@
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
 #include "tiler/pipeline.h"
+#include "tiler/stats_json.h"
 #ifdef ISOTILE_PYTHON_GL
 #include "shaders/gl_backends.h"
 #endif
@@ -271,6 +272,19 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
                         out_values);
 }
 
+// A face's corner as a vertex index, or a ValueError naming the row and what is wrong with it.
+std::uint32_t vertex_index(std::int64_t idx, py::ssize_t vertices, const std::string& row,
+                           py::ssize_t i) {
+  if (idx < 0)
+    throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
+                          std::to_string(idx) + ": indices count from 0");
+  if (idx >= vertices)
+    throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
+                          std::to_string(idx) + ", past the " + std::to_string(vertices) +
+                          " vertices");
+  return static_cast<std::uint32_t>(idx);
+}
+
 // A mesh from (V, 3) vertices and (F, 3) faces: copied, since Mesh owns its arrays.
 Mesh mesh_of(const py::array& vertices, const py::array& faces) {
   if (vertices.ndim() != 2 || vertices.shape(1) != 3)
@@ -290,18 +304,13 @@ Mesh mesh_of(const py::array& vertices, const py::array& faces) {
   mesh.triangles.resize(static_cast<std::size_t>(fr.shape(0)));
   for (py::ssize_t i = 0; i < fr.shape(0); ++i)
     for (int c = 0; c < 3; ++c) {
-      const std::int64_t idx = fr(i, c);
-      if (idx < 0 || idx >= vr.shape(0))
-        throw py::value_error("face " + std::to_string(i) + " refers to vertex " +
-                              std::to_string(idx) + ", past the " + std::to_string(vr.shape(0)) +
-                              " vertices");
-      mesh.triangles[i][c] = static_cast<std::uint32_t>(idx);
+      mesh.triangles[i][c] = vertex_index(fr(i, c), vr.shape(0), "face", i);
     }
   return mesh;
 }
 
-py::dict quality_of(const py::array& vertices, const py::array& faces, bool check_intersections,
-                    std::optional<int> threads) {
+py::object quality_of(const py::array& vertices, const py::array& faces, bool check_intersections,
+                      std::optional<int> threads) {
   const Mesh mesh = mesh_of(vertices, faces);
   QualityStats q;
   TopologyStats t;
@@ -312,31 +321,8 @@ py::dict quality_of(const py::array& vertices, const py::array& faces, bool chec
     if (check_intersections) crossing = self_intersections(mesh).pairs;
     return 0;
   });
-  // The keys of `isotile quality --json` (tiler/cli/quality_command.cpp).
-  py::dict d;
-  d["triangles"] = q.triangles;
-  d["vertices"] = mesh.positions.size();
-  d["radius_ratio_min"] = q.min;
-  d["radius_ratio_mean"] = q.mean;
-  d["radius_ratio_q001"] = q.q001;
-  d["radius_ratio_q01"] = q.q01;
-  d["radius_ratio_median"] = q.median;
-  d["radius_ratio_histogram"] =
-      py::cast(std::vector<std::uint64_t>(q.histogram.begin(), q.histogram.end()));
-  d["degenerate_triangles"] = q.degenerate;
-  d["boundary_edges"] = t.boundary_edges;
-  d["border_boundary_edges"] = py::none();  // no volume box, no border (as for `isotile quality`)
-  d["nonmanifold_edges"] = t.nonmanifold_edges;
-  d["nonmanifold_vertices"] = t.nonmanifold_vertices;
-  d["inconsistently_oriented_edges"] = t.inconsistently_oriented_edges;
-  d["euler"] = t.euler;
-  d["components"] = t.components;
-  d["closed"] = t.closed;
-  d["watertight"] = py::none();  // arrays carry no volume box (as for `isotile quality`)
-  d["edges"] = t.edges;
-  d["unreferenced_vertices"] = t.unreferenced_vertices;
-  if (crossing) d["self_intersections"] = *crossing;
-  return d;
+  // The keys and values of `isotile quality --json`, built by the same function.
+  return py::module_::import("json").attr("loads")(mesh_measures_json(mesh, q, t, crossing).dump());
 }
 
 py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, double ratio,
@@ -740,12 +726,8 @@ Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py:
     out.resize(static_cast<std::size_t>(f.shape(0)));
     for (py::ssize_t i = 0; i < f.shape(0); ++i)
       for (int c = 0; c < width; ++c) {
-        const std::int64_t idx = f.data()[i * width + c];
-        if (idx < 0 || idx >= v.shape(0))
-          throw py::value_error(std::string(what) + " row " + std::to_string(i) +
-                                " refers to vertex " + std::to_string(idx) + ", past the " +
-                                std::to_string(v.shape(0)) + " vertices");
-        out[i][c] = static_cast<std::uint32_t>(idx);
+        out[i][c] =
+            vertex_index(f.data()[i * width + c], v.shape(0), std::string(what) + " row", i);
       }
   };
   indices(faces, 3, "faces", mesh.triangles);

@@ -61,3 +61,20 @@ def test_mesh_tools_errors():
         isotile.simplify(p, np.array([[0, 1, 2]]))
     with pytest.raises(ValueError, match="ratio"):
         isotile.simplify(p, np.array([[0, 1, 2]]), ratio=1.5)
+    # A negative index is not "past" the vertices.
+    with pytest.raises(ValueError, match="refers to vertex -1: indices count from 0"):
+        isotile.quality(p, np.array([[0, 1, -1]]))
+    with pytest.raises(ValueError, match="faces row 0 refers to vertex -1: indices count from 0"):
+        isotile.write_mesh("never.ply", (p, np.array([[0, 1, -1]])))
+
+
+def test_quality_of_no_faces_and_nan_positions(tmp_path):
+    p = np.zeros((3, 3), np.float32)
+    # No face: neither closed nor open, no radius ratio (null in the CLI's JSON, None here).
+    q = isotile.quality(p, np.zeros((0, 3), np.int32))
+    assert q["triangles"] == 0 and q["closed"] is None and q["radius_ratio_min"] is None
+    # A NaN position is written by no writer (every reader refuses it).
+    p[1, 2] = np.nan
+    with pytest.raises(ValueError, match="vertex 1 has a coordinate that is not a finite number"):
+        isotile.write_mesh(tmp_path / "nan.ply", (p, np.array([[0, 1, 2]])))
+    assert not (tmp_path / "nan.ply").exists()

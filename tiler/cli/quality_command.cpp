@@ -45,16 +45,11 @@ int run_quality(const QualityArgs& args) {
   const Mesh mesh = read_mesh(path);
   const QualityStats q = triangle_quality(mesh);
   const TopologyStats t = mesh_topology(mesh);
+  std::optional<std::uint64_t> crossing;
+  if (check_intersections) crossing = self_intersections(mesh).pairs;
   json j;
   j["mesh"] = path;
-  j["triangles"] = q.triangles;
-  j["vertices"] = mesh.positions.size();
-  j.update(quality_json(q));
-  j.update(topology_json(t, false));
-  j["edges"] = t.edges;
-  j["unreferenced_vertices"] = t.unreferenced_vertices;
-  std::optional<std::uint64_t> crossing;
-  if (check_intersections) j["self_intersections"] = *(crossing = self_intersections(mesh).pairs);
+  j.update(mesh_measures_json(mesh, q, t, crossing));
   std::optional<SurfaceDistance> distance;
   if (!reference.empty()) {
     distance = surface_distance(read_mesh(reference), mesh);
