@@ -28,9 +28,12 @@ import numpy as _np
 from . import _isotile
 
 __all__ = ["marching_cubes", "quality", "simplify", "backends", "extract", "read_volume",
-           "Volume", "Mesh", "read_mesh", "write_mesh", "Cancelled"]
+           "Volume", "Mesh", "read_mesh", "write_mesh", "Cancelled", "NoSurface"]
 
 Cancelled = _isotile.Cancelled
+# No face at the isovalue: both a ValueError (extract's bad inputs) and a RuntimeError (what
+# scikit-image's marching_cubes raises).
+NoSurface = _isotile.NoSurface
 
 _IN_PLACE = {_np.dtype(t) for t in ("int8", "uint8", "int16", "uint16", "int32", "uint32",
                                    "float32", "float64", "bool")}
@@ -160,7 +163,7 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         vol, whole, None if level is None else float(level), spacing_xyz, _METHODS[method],
         quality, backend, bool(normals), True, mask, threads)
     if len(faces) == 0:
-        raise RuntimeError("No surface found at the given iso value.")
+        raise NoSurface("No surface found at the given iso value.")
     # Views, no copies: columns reversed into the array's axis order (a mirror, which turns the
     # library's winding into scikit-image's for "descent"); "ascent" reverses the winding.
     verts = verts[:, ::-1]

@@ -39,6 +39,7 @@
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
 #include "tiler/pipeline.h"
+#include "tiler/source_histogram.h"
 #include "tiler/stats_json.h"
 #ifdef ISOTILE_PYTHON_GL
 #include "shaders/gl_backends.h"
@@ -803,11 +804,20 @@ PYBIND11_MODULE(_isotile, m) {
   isotile::gl::register_gl_backends();
 #endif
   static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_Exception);
+  // No face at the isovalue: a ValueError as extract's other bad inputs, and the RuntimeError
+  // scikit-image's marching_cubes raises, so code written for either catches it.
+  static PyObject* const no_surface = PyErr_NewException(
+      "isotile.NoSurface",
+      py::make_tuple(py::handle(PyExc_ValueError), py::handle(PyExc_RuntimeError)).release().ptr(),
+      nullptr);
+  m.attr("NoSurface") = py::handle(no_surface);
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const Cancelled& e) {
       PyErr_SetString(cancelled.ptr(), e.what());
+    } catch (const NoSurfaceError& e) {
+      PyErr_SetString(no_surface, in_python_terms(e.what()).c_str());
     } catch (const InputError& e) {
       PyErr_SetString(PyExc_ValueError, in_python_terms(e.what()).c_str());
     } catch (const IoError& e) {

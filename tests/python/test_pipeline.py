@@ -211,6 +211,12 @@ def test_errors_are_the_clis_in_keywords(tmp_path, ball):
     # No surface: the ways out as keywords.
     with pytest.raises(ValueError, match='or iso="auto" \\(or allow_empty=True to write'):
         isotile.extract(ball, 300)
+    # One type for "no surface" from extract and marching_cubes, caught as either's.
+    with pytest.raises(RuntimeError, match="no surface at iso 300"):
+        isotile.extract(ball, 300)
+    with pytest.raises(isotile.NoSurface):
+        isotile.marching_cubes(np.zeros((2, 2, 2)), 0.0)
+    assert issubclass(isotile.NoSurface, ValueError) and issubclass(isotile.NoSurface, RuntimeError)
 
 
 def test_keywords_the_source_has_no_use_for_are_refused(tmp_path, ball):
