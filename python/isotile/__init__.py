@@ -254,6 +254,14 @@ class Volume:
         self.origin = tuple(float(v) for v in origin)
         self.direction = None if direction is None else [[float(v) for v in row]
                                                          for row in direction]
+        # Checked here, not at the first extract: the mistake is made here.
+        for name in ("spacing", "origin"):
+            if len(getattr(self, name)) != 3:
+                raise ValueError(f"{name} must be three numbers (x, y, z), not "
+                                 f"{getattr(self, name)!r}")
+        if self.direction is not None and (len(self.direction) != 3
+                                           or any(len(row) != 3 for row in self.direction)):
+            raise ValueError("direction must be 3x3")
         self.name = "array"
 
     @classmethod
