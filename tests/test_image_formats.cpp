@@ -1086,6 +1086,13 @@ TEST_F(DamagedInputs, ForeignFormatsAreNamedByTheirContent) {
   fs::create_directories(dir_ / "v.zarr");
   write("v.zarr/.zarray", "{}");
   expect_refused("v.zarr", "a Zarr store", false);
+  // A mesh where a volume belongs: by its extension, or a PLY or OFF header under any name
+  // (it was taken for raw samples whose dims and type the name did not give).
+  expect_refused(write("m.stl", std::string(84, '\0')), "a mesh, not a volume", false);
+  expect_refused(write("m.obj", "v 0 0 0\n"), "a mesh, not a volume", false);
+  expect_refused(write("mesh_4x4x4_uint8.raw", "ply\nformat ascii 1.0\n" + std::string(60, ' ')),
+                 "a mesh, not a volume: extraction reads samples on a grid", false);
+  expect_refused(write("m.dat", "OFF\n3 1 0\n"), "a mesh, not a volume", false);
 }
 
 TEST_F(DamagedInputs, DicomSliceCutShort) {

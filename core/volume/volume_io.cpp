@@ -102,6 +102,15 @@ void refuse_foreign_content(const std::string& path) {
            "convert it to MetaImage or NIfTI (e.g. ParaView's Save Data as .mha, or VTK's "
            "vtkMetaImageWriter)");
   const std::string_view head(b, n);
+  // A mesh chosen where a volume belongs (the MeshLab filter's file dialog shows every file):
+  // by its PLY or OFF header, or a mesh format's extension.
+  const bool mesh_name = ends_with_ci(path, ".ply") || ends_with_ci(path, ".obj") ||
+                         ends_with_ci(path, ".stl") || ends_with_ci(path, ".off");
+  if (mesh_name || head.starts_with("ply\n") || head.starts_with("ply\r\n") ||
+      head.starts_with("OFF\n") || head.starts_with("OFF\r\n"))
+    throw InputError(path +
+                     ": a mesh, not a volume: extraction reads samples on a grid (`isotile "
+                     "quality`, `simplify` and `render` read meshes)");
   if ((head.starts_with("<?xml") || head.starts_with("<VTKFile")) &&
       head.find("<VTKFile") != std::string_view::npos)
     refuse("a VTK XML file",
