@@ -63,7 +63,7 @@ TEST_F(CliSimplify, BadArgumentsFailWithOneLineAndNoOutput) {
     const char* says;
   };
   for (const Case& c : {
-           Case{"simplify s.ply o.ply", 1, "exactly one of --ratio, --faces and --max-error"},
+           Case{"simplify s.ply o.ply", 2, "give one of --ratio, --faces and --max-error"},
            Case{"simplify s.ply o.ply --ratio 0.5 --faces 10", 2, "excludes"},
            // Values out of range are usage errors naming the option (a bad value used to read
            // as a missing one, and --faces -1 wrapped to 2^64 - 1: nothing done, exit 0).

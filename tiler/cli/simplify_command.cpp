@@ -65,6 +65,11 @@ CLI::App* add_simplify_command(CLI::App& app, SimplifyArgs& sa) {
   for (CLI::Option* o : {ratio_opt, faces_opt, error_opt}) o->default_str("");
   ratio_opt->excludes(faces_opt)->excludes(error_opt);
   faces_opt->excludes(error_opt);
+  // None of them is a usage error too (exit 2, as two of them are), not a failed run.
+  simplify_cmd->parse_complete_callback([=] {
+    if (ratio_opt->count() + faces_opt->count() + error_opt->count() == 0)
+      throw CLI::ValidationError("give one of --ratio, --faces and --max-error");
+  });
   simplify_cmd
       ->add_option("--min-quality", sa.min_quality,
                    "Radius ratio (0..1) below which collapses may not create triangles (default "
