@@ -90,8 +90,9 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
     backend : "cpu", "gs", "hp" or "auto"
         Where to extract: the CPU, or OpenGL (geometry shaders, HistoPyramids).
     threads : int, optional
-        At most this many threads for this call (None: all cores). The result does not depend
-        on it.
+        At most this many threads while the call runs (None: all cores): a limit on the
+        process's thread pool, which other isotile calls running meanwhile share. The result
+        does not depend on it.
     normals : bool
         Compute per-vertex normals (True, as scikit-image does); False returns None for them.
 
@@ -384,7 +385,9 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         Measure the result: the dict of ``--stats`` (the same keys and values; "output" is None
         without an output file).
     threads : int, optional
-        At most this many worker threads (None: every core); the result does not depend on it.
+        At most this many worker threads while the call runs (None: every core), as the
+        process's limit (other isotile calls running meanwhile share it); the result does not
+        depend on it.
     progress : callable, optional
         ``progress(stage, brick, bricks, fraction)`` during the run ("count", "extract",
         "simplify", ...); a false return value cancels the run (``isotile.Cancelled``) and an
