@@ -11,6 +11,8 @@
 #include <cstring>
 #include <filesystem>
 #include <mutex>
+#include <string_view>
+#include <utility>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
@@ -275,12 +277,22 @@ std::string in_dialog_terms(std::string message) {
       {"--normals", "'Gradient normals'"},
       {"--iso", "'Isovalue'"},
   };
+  // Whole options standing as words of the text only: not --dimsx, not in a path
+  // ("/data/--type/"), not in a command quoted for the shell (`isotile info FILE --json`).
+  const auto quoted = [&](std::size_t at) {
+    return std::count(message.begin(), message.begin() + static_cast<std::ptrdiff_t>(at), '`') %
+               2 ==
+           1;
+  };
   for (const auto& [flag, label] : kTerms)
     for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;) {
-      // Whole options only: --dims is not the start of --dimsx.
       const std::size_t end = at + flag.size();
-      if (end < message.size() && (std::isalnum(static_cast<unsigned char>(message[end])) ||
-                                   message[end] == '-' || message[end] == '_')) {
+      const bool word_start =
+          at == 0 || std::string_view(" (,'\"").find(message[at - 1]) != std::string_view::npos;
+      const bool word_end =
+          end == message.size() || !(std::isalnum(static_cast<unsigned char>(message[end])) ||
+                                     message[end] == '-' || message[end] == '_');
+      if (!word_start || !word_end || quoted(at)) {
         at = end;
         continue;
       }

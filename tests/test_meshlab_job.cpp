@@ -333,6 +333,9 @@ TEST_F(MeshlabJob, MessagesNameTheDialogsFields) {
   EXPECT_EQ(in_dialog_terms("pass --dims X,Y,Z and --type T; --iso auto or --iso 3"),
             "pass 'Raw dims' and 'Raw type'; 'Isovalue' nan or 'Isovalue' 3");
   EXPECT_EQ(in_dialog_terms("--dims-x, --ascii"), "--dims-x, --ascii");
+  // Not in a path, nor in a command quoted for the shell.
+  EXPECT_EQ(in_dialog_terms("/d/--type/v.raw: bad; `isotile info v.raw --iso 3`"),
+            "/d/--type/v.raw: bad; `isotile info v.raw --iso 3`");
   IsosurfaceParams p = nucleon();
   p.series = "1.2.3";
   const std::string m = message_of(p);

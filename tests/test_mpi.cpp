@@ -190,6 +190,11 @@ TEST_F(MpiCli, DualContouringMatchesSingleProcess) {
   // Binary STL (fixed-size records), and quads into PLY (polygons of four corners).
   expect_same_as_single_process("field:gyroid:40", "--method dc --memory 96KiB", {3}, "stl");
   expect_same_as_single_process("field:gyroid:40", "--method dc --quads --memory 96KiB", {3});
+  // Quads into STL are refused on the ranks' path too (STL holds triangles only).
+  const CliResult r = run_mpi(2, "field:gyroid:16 --method dc --quads --memory 64KiB -o q.stl");
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_NE(r.err.find("STL holds triangles only"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "q.stl"));
 }
 
 TEST_F(MpiCli, GlBackendRunsOnEveryRank) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <string>
 
@@ -103,11 +104,10 @@ std::uint64_t parse_memory_size(const std::string& text) {
     }
   }
   double value = 0;
-  if (!digit) {
+  // from_chars, not strtod: the C locale's point whatever the process's locale (Qt sets the
+  // user's in MeshLab, where a comma-point locale made strtod stop at the '.').
+  if (!digit || std::from_chars(text.data(), text.data() + used, value).ptr != text.data() + used)
     used = 0;
-  } else {
-    value = std::strtod(text.substr(0, used).c_str(), nullptr);
-  }
   std::string unit = text.substr(used);
   std::transform(unit.begin(), unit.end(), unit.begin(),
                  [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });

@@ -214,7 +214,13 @@ void check_pipeline_options(const PipelineOptions& options) {
     throw InputError("simplify must be in (0, 1] (1: off), got " + number_text(options.simplify));
   const ExtractOptions& eo = options.extract;
   check_method_options(eo);  // the CLI also refuses them given at their defaults
-  choose_backend(eo);        // InputError when the method cannot run on the backend asked for
+  // STL holds triangles only: --quads would be dropped without a word (checked here, where the
+  // distributed run's checks pass too).
+  if (eo.keep_quads && !options.output.empty() &&
+      mesh_format_from_path(options.output) == MeshFormat::Stl)
+    throw InputError(
+        "--quads keeps quads in PLY, OBJ and OFF; STL holds triangles only: drop --quads");
+  choose_backend(eo);  // InputError when the method cannot run on the backend asked for
 }
 
 ExtractOptions pipeline_extract_options(const PipelineInput& input,
@@ -262,11 +268,6 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
   if (!options.output.empty()) {
     check_output(options.output, tiled && options.simplify >= 1);
     format = mesh_output_format(options.output, options.ascii);
-    // STL holds triangles only: --quads would be dropped without a word.
-    if (format == MeshFormat::Stl && options.extract.keep_quads)
-      throw InputError(
-          "--quads keeps quads in PLY, OBJ and OFF; STL holds triangles only: drop "
-          "--quads");
     if (!input.volume && !input.path.empty() && same_file(options.output, input.path))
       throw InputError("the output " + options.output +
                        " is the input's file (it would be replaced)");

@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <chrono>
@@ -766,6 +767,7 @@ py::object read_mesh_py(const std::string& path) {
 // --allow-empty) become the keywords that say the same (macet_relax, iso="auto",
 // allow_empty=True).
 std::string in_python_terms(std::string message) {
+  // Longest first: "--iso auto" before "--iso".
   static const std::pair<std::string_view, std::string_view> kTerms[] = {
       {"--iso auto", "iso=\"auto\""},
       {"--allow-empty", "allow_empty=True"},
@@ -774,27 +776,52 @@ std::string in_python_terms(std::string message) {
       {"--method mc", "method=\"mc\""},
       {"--dims X,Y,Z", "dims=(x, y, z)"},
       {"--type T", "type=..."},
+      {"--macet-relax", "macet_relax"},
+      {"--dc-solver", "dc_solver"},
+      {"--dc-hermite", "dc_hermite"},
+      {"--dc-vertices", "dc_vertices"},
+      {"--check-intersections", "check_intersections"},
+      {"--quality", "quality"},
+      {"--quads", "quads"},
+      {"--backend", "backend"},
+      {"--normals", "normals"},
+      {"--frame", "frame"},
+      {"--simplify", "simplify"},
+      {"--memory", "memory"},
+      {"--ascii", "ascii"},
+      {"--stats", "stats"},
+      {"--dims", "dims"},
+      {"--type", "type"},
+      {"--spacing", "spacing"},
+      {"--origin", "origin"},
+      {"--endian", "endian"},
+      {"--series", "series"},
+      {"--threads", "threads"},
+      {"--method", "method"},
+      {"--iso", "iso"},
+  };
+  // Only where an option stands as a word of the text: not in a path ("/data/--scans/") and not
+  // in a command quoted for the shell (`isotile quality --check-intersections`).
+  const auto quoted = [&](std::size_t at) {
+    return std::count(message.begin(), message.begin() + static_cast<std::ptrdiff_t>(at), '`') %
+               2 ==
+           1;
   };
   for (const auto& [flag, keyword] : kTerms)
-    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;
-         at += keyword.size())
+    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;) {
+      const std::size_t end = at + flag.size();
+      const bool word_start =
+          at == 0 || std::string_view(" (,'\"").find(message[at - 1]) != std::string_view::npos;
+      const bool word_end =
+          end == message.size() || !(std::isalnum(static_cast<unsigned char>(message[end])) ||
+                                     message[end] == '-' || message[end] == '_');
+      if (!word_start || !word_end || quoted(at)) {
+        at = end;
+        continue;
+      }
       message.replace(at, flag.size(), keyword);
-  // Any other option: its keyword (--dc-solver: dc_solver). A "--" not starting a word (a range
-  // "1--2") is left.
-  for (std::size_t at = 0; (at = message.find("--", at)) != std::string::npos;) {
-    const std::size_t name = at + 2;
-    if ((at > 0 && std::isalnum(static_cast<unsigned char>(message[at - 1]))) ||
-        name >= message.size() || !std::islower(static_cast<unsigned char>(message[name]))) {
-      at = name;
-      continue;
+      at += keyword.size();
     }
-    message.erase(at, 2);
-    for (std::size_t c = at;
-         c < message.size() &&
-         (std::isalnum(static_cast<unsigned char>(message[c])) || message[c] == '-');
-         ++c)
-      if (message[c] == '-') message[c] = '_';
-  }
   return message;
 }
 

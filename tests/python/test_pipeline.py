@@ -211,6 +211,14 @@ def test_errors_are_the_clis_in_keywords(tmp_path, ball):
     # No surface: the ways out as keywords.
     with pytest.raises(ValueError, match='or iso="auto" \\(or allow_empty=True to write'):
         isotile.extract(ball, 300)
+    # A path and a shell command keep their dashes.
+    (tmp_path / "--scans").mkdir()
+    (tmp_path / "--scans" / "ct.raw").write_bytes(b"abc")
+    with pytest.raises(ValueError, match="/--scans/ct.raw: the dims and sample type are unknown"):
+        isotile.read_volume(tmp_path / "--scans" / "ct.raw")
+    with pytest.raises(ValueError, match="`isotile quality --check-intersections`"):
+        isotile.extract("field:sphere:16", memory="1MiB", output=tmp_path / "c.ply",
+                        check_intersections=True)
     # One type for "no surface" from extract and marching_cubes, caught as either's.
     with pytest.raises(RuntimeError, match="no surface at iso 300"):
         isotile.extract(ball, 300)
