@@ -421,7 +421,8 @@ void BrickExtraction::fill_face_records(const Mesh& mesh, const std::vector<std:
         if (opt_.format == MeshFormat::Ply) {
           put_face(p, v.data(), 4, index);
         } else {
-          // As the in-core writer cuts the mirrored quad: the same diagonal, the other winding.
+          // The better diagonal by the grid-frame positions (the pipeline refuses quads with
+          // STL; a caller of the tiler alone may still ask for them).
           const auto [s, t] = split_quad(P, v).triangles;
           put_stl_triangle(put_stl_triangle(p, W(s[0]), W(s[1]), W(s[2])), W(t[0]), W(t[1]),
                            W(t[2]));

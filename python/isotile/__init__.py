@@ -182,8 +182,8 @@ def quality(vertices, faces, *, check_intersections=False, threads=None):
     quantiles and histogram; degenerate triangles; boundary, non-manifold and inconsistently
     oriented edges; non-manifold vertices; Euler characteristic; components; closed; and with
     check_intersections, the number of self-intersecting triangle pairs. ``watertight`` and
-    ``border_boundary_edges`` are None: arrays carry no volume box to tell border edges from holes. The arrays are copied into the
-    library's mesh.
+    ``border_boundary_edges`` are None: arrays carry no volume box to tell border edges from
+    holes. The arrays are copied into the library's mesh.
     """
     _check_threads(threads)
     return _isotile.quality(_np.asarray(vertices), _np.asarray(faces), bool(check_intersections),

@@ -242,7 +242,8 @@ def test_keywords_the_source_has_no_use_for_are_refused(tmp_path, ball):
     volume = isotile.read_volume(ball)
     with pytest.raises(ValueError, match="^spacing, series apply only to a path or an array"):
         isotile.extract(volume, 100, spacing=(2, 2, 2), series="1.2")
-    with pytest.raises(ValueError, match=r"^spacing must be three numbers \(x, y, z\), not \(1.0, 1.0\)"):
+    with pytest.raises(ValueError,
+                       match=r"^spacing must be three numbers \(x, y, z\), not \(1.0, 1.0\)"):
         isotile.Volume(array, spacing=(1, 1))
     with pytest.raises(ValueError, match="^direction must be 3x3"):
         isotile.Volume(array, direction=np.eye(2))
