@@ -114,6 +114,7 @@ isotile_export_library(isotile_tiler NAME tiler
   HEADERS
     tiler/brick_plan.h
     tiler/input_options.h
+    tiler/option_names.h
     tiler/pipeline.h
     tiler/stats_json.h
     tiler/tiled_extract.h

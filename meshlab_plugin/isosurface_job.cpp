@@ -19,6 +19,7 @@
 #include "core/mesh/mesh_io.h"
 #include "core/progress.h"
 #include "tiler/input_options.h"
+#include "tiler/option_names.h"
 #include "tiler/pipeline.h"
 #include "tiler/source_histogram.h"
 
@@ -277,29 +278,7 @@ std::string in_dialog_terms(std::string message) {
       {"--normals", "'Gradient normals'"},
       {"--iso", "'Isovalue'"},
   };
-  // Whole options standing as words of the text only: not --dimsx, not in a path
-  // ("/data/--type/"), not in a command quoted for the shell (`isotile info FILE --json`).
-  const auto quoted = [&](std::size_t at) {
-    return std::count(message.begin(), message.begin() + static_cast<std::ptrdiff_t>(at), '`') %
-               2 ==
-           1;
-  };
-  for (const auto& [flag, label] : kTerms)
-    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;) {
-      const std::size_t end = at + flag.size();
-      const bool word_start =
-          at == 0 || std::string_view(" (,'\"").find(message[at - 1]) != std::string_view::npos;
-      const bool word_end =
-          end == message.size() || !(std::isalnum(static_cast<unsigned char>(message[end])) ||
-                                     message[end] == '-' || message[end] == '_');
-      if (!word_start || !word_end || quoted(at)) {
-        at = end;
-        continue;
-      }
-      message.replace(at, flag.size(), label);
-      at += label.size();
-    }
-  return message;
+  return rename_options(std::move(message), kTerms);
 }
 
 static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,

@@ -39,6 +39,7 @@
 #include "core/volume/finite_range.h"
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
+#include "tiler/option_names.h"
 #include "tiler/pipeline.h"
 #include "tiler/source_histogram.h"
 #include "tiler/stats_json.h"
@@ -800,29 +801,7 @@ std::string in_python_terms(std::string message) {
       {"--method", "method"},
       {"--iso", "iso"},
   };
-  // Only where an option stands as a word of the text: not in a path ("/data/--scans/") and not
-  // in a command quoted for the shell (`isotile quality --check-intersections`).
-  const auto quoted = [&](std::size_t at) {
-    return std::count(message.begin(), message.begin() + static_cast<std::ptrdiff_t>(at), '`') %
-               2 ==
-           1;
-  };
-  for (const auto& [flag, keyword] : kTerms)
-    for (std::size_t at = 0; (at = message.find(flag, at)) != std::string::npos;) {
-      const std::size_t end = at + flag.size();
-      const bool word_start =
-          at == 0 || std::string_view(" (,'\"").find(message[at - 1]) != std::string_view::npos;
-      const bool word_end =
-          end == message.size() || !(std::isalnum(static_cast<unsigned char>(message[end])) ||
-                                     message[end] == '-' || message[end] == '_');
-      if (!word_start || !word_end || quoted(at)) {
-        at = end;
-        continue;
-      }
-      message.replace(at, flag.size(), keyword);
-      at += keyword.size();
-    }
-  return message;
+  return rename_options(std::move(message), kTerms);
 }
 
 PYBIND11_MODULE(_isotile, m) {
