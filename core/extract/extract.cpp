@@ -123,19 +123,25 @@ MacetOptions macet_options(const ExtractOptions& o) {
 void check_method_options(const ExtractOptions& o) {
   if (!(o.macet_relax >= 0 && o.macet_relax < 0.5))
     throw InputError("macet_relax must be in [0, 0.5), got " + number_text(o.macet_relax));
-  const auto only = [](const char* option, const char* method) {
-    throw InputError(std::string(option) + " applies to --method " + method + " only");
+  const ExtractOptions d;
+  const std::pair<bool, std::string_view> set[] = {
+      {o.macet_relax != d.macet_relax, "--macet-relax"},
+      {o.quality != d.quality, "--quality"},
+      {o.keep_quads != d.keep_quads, "--quads"},
+      {o.dc_solver != d.dc_solver, "--dc-solver"},
+      {o.dc_hermite != d.dc_hermite, "--dc-hermite"},
+      {o.dc_vertices != d.dc_vertices, "--dc-vertices"},
   };
-  if (o.method != Method::Macet) {
-    if (o.macet_relax > 0) only("--macet-relax", "macet");
-    if (o.quality != MacetQuality::Fast) only("--quality", "macet");
-  }
-  if (o.method != Method::DualContouring) {
-    if (o.keep_quads) only("--quads", "dc");
-    if (o.dc_solver != DcSolver::MassPoint) only("--dc-solver", "dc");
-    if (o.dc_hermite != DcHermite::Central) only("--dc-hermite", "dc");
-    if (o.dc_vertices != DcVertices::Patch) only("--dc-vertices", "dc");
-  }
+  for (const auto& [away, option] : set)
+    if (away) check_option_method(option, o.method);
+}
+
+void check_option_method(std::string_view option, Method method) {
+  const Method owner =
+      option == "--quads" || option.starts_with("--dc-") ? Method::DualContouring : Method::Macet;
+  if (method != owner)
+    throw InputError(std::string(option) + " applies to --method " +
+                     std::string(method_name(owner)) + " only");
 }
 
 std::string_view method_name(Method m) {

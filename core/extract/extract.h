@@ -62,6 +62,12 @@ struct ExtractOptions {
 // CLI's options, which front ends may rename.
 void check_method_options(const ExtractOptions& options);
 
+// InputError "OPTION applies to --method M only" when the method-specific CLI option `option`
+// (--quality, --macet-relax: Macet; --quads, --dc-*: Dual Contouring) is not `method`'s: the
+// rule check_method_options() applies to values, for a front end that refuses such an option
+// whenever it is given.
+void check_option_method(std::string_view option, Method method);
+
 // Samples beyond a brick's cells that `options` needs the view to hold.
 int extract_halo(const ExtractOptions& options);
 

@@ -395,10 +395,6 @@ void write_stl(const Mesh& mesh, AtomicFile& file, Progress* progress) {
   });
 }
 
-}  // namespace
-
-namespace {
-
 MeshFormat text_form_checked(MeshFormat format, bool ascii) {
   if (format == MeshFormat::Stl && ascii)
     throw InputError("--ascii writes PLY as text; STL is written binary only");

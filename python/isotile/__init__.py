@@ -420,6 +420,12 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
                          f"'256MiB', not {memory!r}")
     if ascii and output is None:
         raise ValueError("ascii applies to the output file; give output")
+    options = {"iso": iso}
+    local = locals()
+    for key in _EXTRACT_OPTIONS:
+        options[key] = local[key]
+    if options["output"] is not None:
+        options["output"] = _os.fsdecode(_os.fspath(options["output"]))
     # Keywords that the kind of source has no use for are refused, not dropped.
     file_only = {"dims": dims is not None, "type": type is not None,
                  "endian": endian != "little", "series": series is not None}
@@ -428,35 +434,25 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
                  "direction": direction is not None, **file_only},
                 "to a path or an array; a Volume has its own (read_volume(path, spacing=...) "
                 "or Volume(samples, spacing=...))")
-        if source._handle is not None and (
-                tuple(source.spacing) != tuple(source._handle.spacing)
-                or tuple(source.origin) != tuple(source._handle.world_origin)
-                or source.direction != [list(r) for r in source._handle.direction]):
-            raise ValueError("this Volume's spacing, origin or direction was changed after "
-                             "read_volume, and its file's are what the run uses: read it with "
-                             "read_volume(path, spacing=..., origin=...)")
-    elif isinstance(source, (str, bytes, _os.PathLike)):
-        _refuse({"direction": direction is not None},
-                "to an array (a file's direction is its own)")
-    else:
-        _refuse(file_only, "to files (an array's samples are given)")
-    options = {"iso": iso}
-    local = locals()
-    for key in _EXTRACT_OPTIONS:
-        options[key] = local[key]
-    if options["output"] is not None:
-        options["output"] = _os.fsdecode(_os.fspath(options["output"]))
-    if isinstance(source, Volume):
         if source._handle is not None:
+            if (tuple(source.spacing) != tuple(source._handle.spacing)
+                    or tuple(source.origin) != tuple(source._handle.world_origin)
+                    or source.direction != [list(r) for r in source._handle.direction]):
+                raise ValueError("this Volume's spacing, origin or direction was changed after "
+                                 "read_volume, and its file's are what the run uses: read it "
+                                 "with read_volume(path, spacing=..., origin=...)")
             src = source._handle
         else:
             src = _readable(source.samples, "samples")
             options.update(spacing=source.spacing, origin=source.origin,
                            direction=source.direction, name=source.name)
     elif isinstance(source, (str, bytes, _os.PathLike)):
+        _refuse({"direction": direction is not None},
+                "to an array (a file's direction is its own)")
         src = _os.fsdecode(_os.fspath(source))
         options.update(_raw_options(dims, type, spacing, origin, endian, series))
     else:
+        _refuse(file_only, "to files (an array's samples are given)")
         src = _readable(source, "source")
         options.update(spacing=spacing, origin=origin, direction=direction)
     mesh, stats_text = _isotile.run_pipeline(src, options, progress, threads)

@@ -77,11 +77,7 @@ PipelineOptions pipeline_options(const ExtractArgs& args) {
   e.dc_vertices = args.dc_vertices == "cell" ? DcVertices::Cell : DcVertices::Patch;
   e.quality = args.quality == "max" ? MacetQuality::Max : MacetQuality::Fast;
   e.macet_relax = args.macet_relax;
-  for (const std::string& name : args.given) {
-    const bool macet = name == "--quality";
-    if (e.method != (macet ? Method::Macet : Method::DualContouring))
-      throw InputError(name + " applies to --method " + (macet ? "macet" : "dc") + " only");
-  }
+  for (const std::string& name : args.given) check_option_method(name, e.method);
   o.world_frame = args.frame == "world";
   o.simplify = args.simplify;
   // A GL backend named by --backend makes its context on a thread of its own from here on, while
