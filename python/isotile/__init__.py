@@ -302,7 +302,7 @@ class Mesh:
     def __init__(self, vertices, faces, quads=None, normals=None, stats=None):
         self.vertices = vertices
         self.faces = faces
-        self.quads = quads if quads is not None else _np.zeros((0, 4), _np.uint32)
+        self.quads = quads if quads is not None else _np.zeros((0, 4), _np.int32)
         self.normals = normals
         self.stats = stats
 

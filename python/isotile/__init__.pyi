@@ -68,7 +68,7 @@ class Volume:
 class Mesh:
     vertices: npt.NDArray[np.float32]
     faces: npt.NDArray[np.integer]
-    quads: npt.NDArray[np.uint32]
+    quads: npt.NDArray[np.integer]
     normals: Optional[npt.NDArray[np.float32]]
     stats: Optional[Dict[str, Any]]
     def __init__(

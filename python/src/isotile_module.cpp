@@ -182,16 +182,21 @@ py::array vec3_array(const std::vector<Vec3f>& rows, const py::capsule& owner) {
                    rows.empty() ? nullptr : rows.data()->data(), owner);
 }
 
-// (n, 3) faces; int32 as scikit-image gives them while the vertex count allows, else uint32.
-py::array face_array(const std::vector<Tri>& tris, std::size_t vertices, const py::capsule& owner) {
-  const auto n = static_cast<py::ssize_t>(tris.size());
+// (n, 3) faces or (n, 4) quads; int32 as scikit-image gives faces while the vertex count allows,
+// else uint32.
+template <class Row>
+py::array index_array(const std::vector<Row>& rows, std::size_t vertices,
+                      const py::capsule& owner) {
+  constexpr auto width = static_cast<py::ssize_t>(std::tuple_size_v<Row>);
+  const auto n = static_cast<py::ssize_t>(rows.size());
   const py::dtype dt =
       vertices <= static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())
           ? py::dtype::of<std::int32_t>()
           : py::dtype::of<std::uint32_t>();
-  return py::array(dt, {n, py::ssize_t{3}},
-                   {py::ssize_t{3 * sizeof(std::uint32_t)}, py::ssize_t{sizeof(std::uint32_t)}},
-                   tris.empty() ? nullptr : tris.data()->data(), owner);
+  return py::array(
+      dt, {n, width},
+      {py::ssize_t{width * py::ssize_t{sizeof(std::uint32_t)}}, py::ssize_t{sizeof(std::uint32_t)}},
+      rows.empty() ? nullptr : rows.data()->data(), owner);
 }
 
 Method parse_method(const std::string& s) {
@@ -271,7 +276,7 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
                   {py::ssize_t{sizeof(float)}},
                   result->values.empty() ? nullptr : result->values.data(), owner);
   return py::make_tuple(vec3_array(m.positions, owner),
-                        face_array(m.triangles, m.positions.size(), owner), out_normals,
+                        index_array(m.triangles, m.positions.size(), owner), out_normals,
                         out_values);
 }
 
@@ -345,7 +350,7 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
     return 0;
   });
   return py::make_tuple(vec3_array(result->mesh.positions, owner),
-                        face_array(result->mesh.triangles, result->mesh.positions.size(), owner));
+                        index_array(result->mesh.triangles, result->mesh.positions.size(), owner));
 }
 
 // For tests/benchmarks/bench_python.py: the library calls marching_cubes makes (the samples'
@@ -569,14 +574,11 @@ py::object make_mesh_tuple(Mesh&& mesh) {
   result->mesh = std::move(mesh);
   py::capsule owner = owner_of(result);
   const Mesh& m = result->mesh;
-  const auto q = static_cast<py::ssize_t>(m.quads.size());
-  py::array quads(py::dtype::of<std::uint32_t>(), {q, py::ssize_t{4}},
-                  {py::ssize_t{4 * sizeof(std::uint32_t)}, py::ssize_t{sizeof(std::uint32_t)}},
-                  m.quads.empty() ? nullptr : m.quads.data()->data(), owner);
   py::object normals = py::none();
   if (!m.normals.empty()) normals = vec3_array(m.normals, owner);
   return py::make_tuple(vec3_array(m.positions, owner),
-                        face_array(m.triangles, m.positions.size(), owner), quads, normals);
+                        index_array(m.triangles, m.positions.size(), owner),
+                        index_array(m.quads, m.positions.size(), owner), normals);
 }
 
 // Runs the pipeline on `source` (a path, a VolumeHandle, or a 3-D array [z, y, x] with spacing,

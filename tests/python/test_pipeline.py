@@ -78,6 +78,19 @@ def test_extract_matches_the_cli(tmp_path, monkeypatch, source, options, flags, 
     assert saved == (tmp_path / "py" / name).read_bytes()
 
 
+def test_faces_and_quads_share_one_index_type(tmp_path):
+    # Indices are int32 (as scikit-image gives faces) for quads too, whether the mesh comes from
+    # extract, has no quads, or is read back from a file.
+    quads = isotile.extract("field:csg-box:16", method="dc", quads=True)
+    plain = isotile.extract("field:sphere:16")
+    quads.save(tmp_path / "q.ply")
+    read = isotile.read_mesh(tmp_path / "q.ply")
+    for mesh in (quads, plain, read):
+        assert mesh.faces.dtype == np.int32 and mesh.quads.dtype == np.int32, mesh
+    assert len(quads.quads) > 0 and np.array_equal(read.quads, quads.quads)
+    assert isotile.Mesh(plain.vertices, plain.faces).quads.dtype == np.int32
+
+
 def test_a_file_and_iso_auto_match_the_cli(tmp_path, monkeypatch, ball):
     for iso, flags in ((100.5, ["--iso", "100.5", "--method", "dc"]), ("auto", ["--iso", "auto"])):
         r = run_cli_in(tmp_path / "cli", ball, "-o", "m.ply", "--stats", "s.json", *flags)
