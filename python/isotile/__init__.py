@@ -394,7 +394,8 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         exception it raises cancels it and propagates. Ctrl-C raises KeyboardInterrupt within a
         fraction of a second at the library's next report; a cancelled run leaves no file.
     dims, type, spacing, origin, endian, series
-        For files: the CLI's raw-input options (a tuple or the CLI's text).
+        For files: the CLI's raw-input options (a tuple or the CLI's text). Arrays take
+        ``spacing`` and ``origin`` (x, y, z) too, as a tuple or the same text.
     direction : 3x3, optional
         For arrays: the world direction of each index axis (columns).
 

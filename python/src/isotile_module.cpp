@@ -410,10 +410,18 @@ struct VolumeHandle {
 
 // The raw-input options as the CLI takes them (text: "256,256,128", "uint16", ...), with the
 // CLI's checks and messages (tiler/input_options.h).
+// An empty text is None's stand-in nowhere: as the CLI's empty --memory "$MEM" or --spacing
+// "$S", it would run in core, write nothing or take the file's value without a word.
+std::string not_empty(std::string v, const char* key) {
+  if (v.empty()) throw py::value_error(std::string(key) + " must not be empty (None: not given)");
+  return v;
+}
+
 RawOptions raw_options_of(const py::dict& o) {
   const auto text = [&](const char* key) {
-    return o.contains(key) && !o[key].is_none() ? py::str(o[key]).cast<std::string>()
-                                                : std::string();
+    return o.contains(key) && !o[key].is_none()
+               ? not_empty(py::str(o[key]).cast<std::string>(), key)
+               : std::string();
   };
   RawOptions raw = parse_input_text({.dims = text("dims"),
                                      .type = text("type"),
@@ -539,12 +547,6 @@ PipelineOptions pipeline_options_of(const py::dict& o) {
   p.simplify = has("simplify") ? option_as<double>(o["simplify"], "simplify", "a number") : 1.0;
   p.check_intersections = flag("check_intersections");
   p.allow_empty = flag("allow_empty");
-  // An empty text is None's stand-in nowhere: as the CLI's empty --memory "$MEM", it would run
-  // in core (or write nothing) without a word.
-  const auto not_empty = [](std::string v, const char* key) {
-    if (v.empty()) throw py::value_error(std::string(key) + " must not be empty (None: not given)");
-    return v;
-  };
   if (has("memory")) {
     const py::object m = o["memory"];
     p.memory = py::isinstance<py::str>(m)
@@ -601,6 +603,13 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     const py::array a = source.cast<py::array>();
     const auto triple = [&](const char* key, Vec3d fallback) {
       if (!options.contains(key) || options[key].is_none()) return fallback;
+      if (py::isinstance<py::str>(options[key])) {  // the CLI's text "x,y,z", read as for a path
+        const std::string t = not_empty(options[key].cast<std::string>(), key);
+        const bool spacing = std::string_view(key) == "spacing";
+        const RawOptions r = parse_input_text(
+            {.spacing = spacing ? t : std::string(), .origin = spacing ? std::string() : t}, "");
+        if (const auto& v = spacing ? r.spacing : r.origin) return *v;
+      }
       const auto v = option_as<std::vector<double>>(options[key], key, "three numbers");
       if (v.size() != 3) throw py::value_error(std::string(key) + " must be three numbers");
       return Vec3d{v[0], v[1], v[2]};

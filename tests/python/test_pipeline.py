@@ -78,6 +78,17 @@ def test_extract_matches_the_cli(tmp_path, monkeypatch, source, options, flags, 
     assert saved == (tmp_path / "py" / name).read_bytes()
 
 
+def test_an_arrays_spacing_and_origin_take_the_clis_text_too():
+    # As for a path: "x,y,z" gives the tuple's mesh.
+    samples = np.zeros((6, 7, 8), np.float32)
+    samples[1:5, 2:5, 2:6] = 1
+    text = isotile.extract(samples, 0.5, spacing="0.5,1,2", origin="-1,0,3.25")
+    tuple_ = isotile.extract(samples, 0.5, spacing=(0.5, 1, 2), origin=(-1, 0, 3.25))
+    plain = isotile.extract(samples, 0.5)
+    assert np.array_equal(text.vertices, tuple_.vertices)
+    assert not np.array_equal(text.vertices, plain.vertices)
+
+
 def test_faces_and_quads_share_one_index_type(tmp_path):
     # Indices are int32 (as scikit-image gives faces) for quads too, whether the mesh comes from
     # extract, has no quads, or is read back from a file.
@@ -197,6 +208,14 @@ def test_errors_are_the_clis_in_keywords(tmp_path, ball):
         isotile.extract(ball, 100, memory="", output=tmp_path / "e.ply")
     with pytest.raises(ValueError, match="output must not be empty"):
         isotile.extract(ball, 100, output="")
+    for key in ("spacing", "origin", "dims", "type", "series"):
+        with pytest.raises(ValueError, match=f"^{key} must not be empty"):
+            isotile.extract(ball, 100, **{key: ""})
+        with pytest.raises(ValueError, match=f"^{key} must not be empty"):
+            isotile.read_volume(ball, **{key: ""})
+    for key in ("spacing", "origin"):
+        with pytest.raises(ValueError, match=f"^{key} must not be empty"):
+            isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, **{key: ""})
     # STL has no text form isotile writes: refused before the run, nothing written.
     with pytest.raises(ValueError, match="STL is written binary only"):
         isotile.extract(ball, 100, output=tmp_path / "a.stl", ascii=True)
@@ -210,8 +229,10 @@ def test_errors_are_the_clis_in_keywords(tmp_path, ball):
     # Values of the wrong kind name their option (not pybind11's "Unable to cast").
     with pytest.raises(ValueError, match="memory must be a byte count .* not -1"):
         isotile.extract("field:sphere:16", memory=-1, output="never.ply")
-    with pytest.raises(ValueError, match="spacing must be three numbers, not '1,1,2'"):
-        isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, spacing="1,1,2")
+    with pytest.raises(ValueError, match="spacing must be three numbers, not 2"):
+        isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, spacing=2)
+    with pytest.raises(ValueError, match="spacing must be three comma-separated numbers, got '1,2'"):
+        isotile.extract(np.zeros((4, 4, 4), np.float32), 0.5, spacing="1,2")
     with pytest.raises(ValueError, match="simplify must be a number"):
         isotile.extract("field:sphere:16", simplify="half")
     with pytest.raises(ValueError, match="^simplify gives triangles; drop quads$"):
