@@ -77,8 +77,9 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
     step_size : int
         Use every step_size-th sample along each axis (a strided view, no copy).
     allow_degenerate : bool
-        Accepted for compatibility and ignored: degenerate triangles are kept (isotile's
-        Macet and Dual Contouring, and an isovalue between sample values, avoid them).
+        False removes what scikit-image removes: triangles with two corners at one point
+        (vertices at one position are merged first, unused ones dropped). They arise where
+        samples equal the level; an isovalue between sample values avoids them.
     method : "lewiner", "lorensen", "mc", "macet" or "dc"
         "lewiner" and "lorensen" run isotile's Marching Cubes (VTK's case table, so triangle
         counts may differ slightly from scikit-image's), "macet" Macet, "dc" Dual Contouring.
@@ -165,6 +166,8 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         quality, backend, bool(normals), True, mask, threads)
     if len(faces) == 0:
         raise NoSurface("No surface found at the given iso value.")
+    if not allow_degenerate:
+        verts, faces, norms, values = _without_repeated_points(verts, faces, norms, values)
     # Views, no copies: columns reversed into the array's axis order (a mirror, which turns the
     # library's winding into scikit-image's for "descent"); "ascent" reverses the winding.
     verts = verts[:, ::-1]
@@ -173,6 +176,21 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
     if gradient_direction == "ascent":
         faces = faces[:, ::-1]
     return verts, faces, norms, values
+
+
+def _without_repeated_points(verts, faces, norms, values):
+    """What scikit-image's allow_degenerate=False removes: vertices at one position become the
+    first of them, the triangles that then repeat a vertex go (their area is zero), and so do
+    the vertices no triangle uses. Zero-area triangles with three distinct corners stay, as
+    there."""
+    _, first, inverse = _np.unique(verts, axis=0, return_index=True, return_inverse=True)
+    f = first[inverse.reshape(-1)][faces]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    used = _np.zeros(len(verts), bool)
+    used[f.reshape(-1)] = True
+    renumber = _np.cumsum(used) - 1
+    return (verts[used], renumber[f].astype(faces.dtype), None if norms is None else norms[used],
+            values[used])
 
 
 def quality(vertices, faces, *, check_intersections=False, threads=None):

@@ -303,6 +303,36 @@ def test_threads_do_not_change_the_result():
             assert np.array_equal(a, b)
 
 
+def test_allow_degenerate_false_drops_the_triangles_that_repeat_a_point():
+    # Integer samples at an integer level: samples equal to it put several crossings on one
+    # point, and the triangles between them have no area.
+    vol = np.random.default_rng(3).integers(0, 4, (12, 13, 14)).astype(np.float32)
+    v, f, n, val = isotile.marching_cubes(vol, 2)
+    kv, kf, kn, kval = isotile.marching_cubes(vol, 2, allow_degenerate=False)
+
+    def corners(verts, faces):
+        return verts[faces]
+
+    def repeats(p):
+        return (np.all(p[:, 0] == p[:, 1], 1) | np.all(p[:, 1] == p[:, 2], 1)
+                | np.all(p[:, 0] == p[:, 2], 1))
+
+    p, kp = corners(v, f), corners(kv, kf)
+    assert repeats(p).sum() > 100 and not repeats(kp).any()
+    # The same triangles otherwise, corner for corner, in the same order.
+    assert np.array_equal(kp, p[~repeats(p)])
+    # One vertex per point, each used, its normal and value those of a vertex at that point.
+    assert len(np.unique(kv, axis=0)) == len(kv) and np.array_equal(np.unique(kf), np.arange(len(kv)))
+    first = {tuple(x): i for i, x in reversed(list(enumerate(v)))}
+    at = np.array([first[tuple(x)] for x in kv])
+    assert np.array_equal(kn, n[at]) and np.array_equal(kval, val[at])
+    assert kf.dtype == f.dtype
+    # Nothing to drop: the mesh is unchanged.
+    s = sphere((20, 21, 22), radius=7.3)
+    a, b = isotile.marching_cubes(s, 0.5), isotile.marching_cubes(s, 0.5, allow_degenerate=False)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
 def test_step_size_is_a_strided_view():
     vol = sphere((41, 45, 49), radius=15.0)
     a = isotile.marching_cubes(vol, 0.0, step_size=2, spacing=(1.5, 1, 1))
