@@ -33,6 +33,7 @@ std::string macet_defines() {
   s += d("MACET_GUARD", detail::kMacetGuard);
   s += d("MACET_SMOOTH_GUARD", detail::kMacetSmoothGuard);
   s += d("MACET_TIE_OFFSET", detail::kTieOffset);
+  s += d("MACET_ROOT_TOLERANCE", detail::kRootTolerance);
   s += "#define MACET_HALVINGS " + std::to_string(detail::kMacetHalvings) + "\n";
   return s;
 }

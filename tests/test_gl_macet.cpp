@@ -91,6 +91,19 @@ TEST_P(GlMacet, IntegerSamplesWithTiesMatchCpu) {
   }
 }
 
+// A label map at iso 1: ties moved along the level set get their crossings spread as on the CPU
+// (macet_field.h's edge_crossing; the old rule collapses them on this volume, seed 5).
+TEST_P(GlMacet, TiesMovedAlongTheLevelSetMatchCpu) {
+  REQUIRE_GL();
+  const Index3 n{24, 24, 24};
+  const std::vector<std::uint8_t> samples = testing::random_labels(n, 5);
+  const VolumeView view = dense_view(samples.data(), ScalarType::UInt8, n);
+  const MacetOptions m{.iso = 1, .normals = true};
+  const Mesh cpu = macet(view, m);
+  ASSERT_GT(cpu.triangles.size(), 1000u);
+  expect_same_mesh(run(GetParam(), view, opts(m)), cpu, view, "labels");
+}
+
 // Slabs along z (a volume larger than the device's memory): each slab's region holds its cells
 // plus macet_halo(), so the mesh is the whole volume's.
 TEST_P(GlMacet, SlabsMatchWholeVolume) {

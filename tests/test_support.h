@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <random>
 #include <set>
 #include <sstream>
 #include <string>
@@ -180,6 +181,16 @@ inline void expect_bricks_equal_whole(const VolumeView& whole, const KeyedExtrac
   std::sort(want.begin(), want.end());
   std::sort(got.begin(), got.end());
   EXPECT_EQ(got, want);
+}
+
+// Labels 0, 1, 2 at random, x fastest (a label map at iso 1: ties everywhere, most with a free
+// side, many moved along the level set by Macet; isovalue_ties.h).
+inline std::vector<std::uint8_t> random_labels(const Index3& n, unsigned seed) {
+  std::vector<std::uint8_t> samples(static_cast<std::size_t>(n[0] * n[1] * n[2]));
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> u(0, 2);
+  for (std::uint8_t& s : samples) s = static_cast<std::uint8_t>(u(rng));
+  return samples;
 }
 
 }  // namespace isotile::testing

@@ -11,9 +11,12 @@
 // Where crossings would coincide, Macet and DC put a tie's crossing kTieOffset edge lengths from
 // it along its edge, toward the outside sample, so the surface moves by at most kTieOffset voxels,
 // and only there:
-//   Macet: a grid vertex still exactly at the isovalue after its displacement, with two or more
-//          crossed edges (the crossings on them would be one point; a tie with a free side is
-//          usually pushed off the isovalue first and keeps its crossings on the interpolant).
+//   Macet: a grid vertex still at the isovalue after its displacement, with two or more crossed
+//          edges (the crossings on them would be one point; a tie with a free side is usually
+//          pushed off the isovalue first and keeps its crossings on the interpolant). "Still at
+//          the isovalue": exactly, or a tie moved along the level set to within the root
+//          search's tolerance of it (label maps: the interpolant there is the isovalue up to
+//          rounding, or nearly).
 //   DC:    a pinned tie. Two cells' vertices coincide only where every crossing of both cells
 //          lies on one tie they share, which needs a pinned tie; other ties keep their exact
 //          crossings, so surfaces and sharp edges through sample planes stay exact.

@@ -190,6 +190,9 @@ struct Field {
   std::int64_t step[3];                 // stride to the next sample, 0 along a 1-sample axis
 };
 
+// find_root stops at a point whose |f - iso| is at most this fraction of the ends' difference.
+inline constexpr double kRootTolerance = 1e-5;
+
 // The crossing of f = iso on the segment p0 -> p1 whose ends have f - iso = f0 >= 0 > f1 or
 // f0 < 0 <= f1: Illinois-modified regula falsi on the trilinear interpolant, which converges
 // superlinearly and never leaves the bracket. Returns the parameter t in [0, 1].
@@ -200,7 +203,7 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
                  typename Field<T>::Corners* cache = nullptr) {
   if (p0 == p1) return 0.5;
   double lo = 0, hi = 1, flo = f0, fhi = f1;
-  const double tol = 1e-5 * std::abs(f0 - f1);
+  const double tol = kRootTolerance * std::abs(f0 - f1);
   int side = 0;
   double t = 0.5;
   typename Field<T>::Corners own;
@@ -247,14 +250,22 @@ inline bool spreading_tie(const BitGrid& grid, const std::int64_t s[3]) {
 // The parameter of the crossing on the segment p0 -> p1 between the displaced grid vertices at
 // local samples s0 and s1, where f - iso is f0 and f1 (one >= 0, the other < 0). `straight`:
 // both are undisplaced, so the trilinear interpolant is linear along the segment (also used for
-// Fast's linear estimates). An end still exactly at the isovalue whose sample has two or more
-// crossed edges gets its crossing kTieOffset from it (core/extract/isovalue_ties.h).
+// Fast's linear estimates). An end still at the isovalue whose sample has two or more crossed
+// edges gets its crossing kTieOffset from it (core/extract/isovalue_ties.h). "Still at the
+// isovalue": exactly, or, for a tie (a sample at the isovalue) moved along the level set, within
+// find_root's tolerance of it, where the root search would stop at the end point itself: on label
+// maps a tie moved by the push or the smoothing lands where the interpolant is the isovalue up to
+// rounding (4.4e-16) or nearly, and all its crossings would then fall on it or within 1e-6 of it.
 template <class T>
 double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int64_t s0[3],
                      const std::int64_t s1[3], const P3& p0, const P3& p1, double f0, double f1,
                      bool straight, typename Field<T>::Corners* cache = nullptr) {
-  if (f0 == 0 && spreading_tie(grid, s0)) return kTieOffset;
-  if (f1 == 0 && spreading_tie(grid, s1)) return 1 - kTieOffset;
+  const double tol = kRootTolerance * std::abs(f0 - f1);
+  const auto at_tie = [&](double f, const std::int64_t s[3]) {
+    return f == 0 || (std::abs(f) <= tol && field.sample(s[0], s[1], s[2]) == field.iso);
+  };
+  if (at_tie(f0, s0) && spreading_tie(grid, s0)) return kTieOffset;
+  if (at_tie(f1, s1) && spreading_tie(grid, s1)) return 1 - kTieOffset;
   return straight ? f0 / (f0 - f1) : find_root(field, p0, p1, f0, f1, cache);
 }
 

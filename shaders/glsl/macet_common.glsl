@@ -100,7 +100,7 @@ bool spreading_tie(ivec3 s) {
 double find_root(dvec3 p0, dvec3 p1, double f0, double f1) {
   if (p0 == p1) return 0.5LF;
   precise double lo = 0.0LF, hi = 1.0LF, flo = f0, fhi = f1;
-  precise double tol = 1e-5LF * abs(f0 - f1);
+  precise double tol = MACET_ROOT_TOLERANCE * abs(f0 - f1);
   int side = 0;
   precise double t = 0.5LF;
   for (int it = 0; it < 24; ++it) {
@@ -131,6 +131,13 @@ double find_root(dvec3 p0, dvec3 p1, double f0, double f1) {
 
 dvec4 disp_at(ivec3 g) { return disp_in[region_index(g)]; }
 
+// edge_crossing's end "still at the isovalue": exactly, or a tie moved to within find_root's
+// tolerance of it. `f`: this end's value, `g`: the other end's.
+bool at_tie(double f, double g, ivec3 s) {
+  precise double tol = MACET_ROOT_TOLERANCE * abs(f - g);
+  return f == 0.0LF || (abs(f) <= tol && sample_at(s) == u_iso);
+}
+
 // The linear estimate of the crossing on edge (s, axis) between its displaced end points (the
 // smoothing's x and t, macet.cpp's smooth_all), in global coordinates.
 void linear_crossing(ivec3 s, int axis, out double t, out dvec3 x) {
@@ -138,9 +145,9 @@ void linear_crossing(ivec3 s, int axis, out double t, out dvec3 x) {
   s1[axis] += 1;
   dvec4 a = disp_at(s), b = disp_at(s1);
   precise double lin = a.w / (a.w - b.w);
-  if (a.w == 0.0LF && spreading_tie(s))
+  if (at_tie(a.w, b.w, s) && spreading_tie(s))
     t = MACET_TIE_OFFSET;
-  else if (b.w == 0.0LF && spreading_tie(s1))
+  else if (at_tie(b.w, a.w, s1) && spreading_tie(s1))
     t = 1.0LF - MACET_TIE_OFFSET;
   else
     t = lin;
@@ -160,9 +167,9 @@ dvec3 macet_crossing(ivec3 s, int axis) {
   precise dvec3 p1 = dvec3(s1) + b.xyz;
   bool straight = all(equal(a.xyz, dvec3(0.0LF))) && all(equal(b.xyz, dvec3(0.0LF)));
   precise double t;
-  if (a.w == 0.0LF && spreading_tie(s))
+  if (at_tie(a.w, b.w, s) && spreading_tie(s))
     t = MACET_TIE_OFFSET;
-  else if (b.w == 0.0LF && spreading_tie(s1))
+  else if (at_tie(b.w, a.w, s1) && spreading_tie(s1))
     t = 1.0LF - MACET_TIE_OFFSET;
   else if (straight)
     t = a.w / (a.w - b.w);
