@@ -408,8 +408,6 @@ struct VolumeHandle {
   std::string name;  // the path it was read from
 };
 
-// The raw-input options as the CLI takes them (text: "256,256,128", "uint16", ...), with the
-// CLI's checks and messages (tiler/input_options.h).
 // An empty text is None's stand-in nowhere: as the CLI's empty --memory "$MEM" or --spacing
 // "$S", it would run in core, write nothing or take the file's value without a word.
 std::string not_empty(std::string v, const char* key) {
@@ -417,6 +415,8 @@ std::string not_empty(std::string v, const char* key) {
   return v;
 }
 
+// The raw-input options as the CLI takes them (text: "256,256,128", "uint16", ...), with the
+// CLI's checks and messages (tiler/input_options.h).
 RawOptions raw_options_of(const py::dict& o) {
   const auto text = [&](const char* key) {
     return o.contains(key) && !o[key].is_none()
