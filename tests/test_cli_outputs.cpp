@@ -297,6 +297,13 @@ TEST_F(CliOutputs, OptionsThatWouldBeDroppedAreErrors) {
     EXPECT_NE(r.err.find(b.says), std::string::npos) << b.args << ": " << r.err;
     EXPECT_EQ(stray_files(), std::vector<std::string>{}) << b.args;
   }
+  // simplify's --stats too (it wrote no stats, exit 0).
+  ASSERT_EQ(run("extract field:sphere:12 -q -o in.ply").code, 0);
+  const CliResult r = run("simplify in.ply s.ply --ratio 0.5 --stats ''");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--stats: must not be empty"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "s.ply"));
+  fs::remove(dir_ / "in.ply");
   // With their own method they run.
   for (const std::string ok :
        {"--method dc --quads --dc-solver qef", "--method macet --quality max"})
@@ -331,6 +338,22 @@ TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {
     EXPECT_EQ(fs::file_size(dir_ / "v_8x8x8_uint8.raw"), 512u) << b.args;
     EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << b.args;
   }
+}
+
+// "-" is standard output, which the shell may point at an output (`--stats - > m.ply`): the
+// stats and the mesh would share one file (exit 0 before, the mesh replacing the stats).
+TEST_F(CliOutputs, StatsOnAStandardOutputThatIsTheOutputAreRefused) {
+  for (const std::string& cmd : {std::string("extract field:sphere:12 -o m.ply --stats - >m.ply"),
+                                 std::string("extract field:sphere:12 -o m.ply --stats - >>m.ply"),
+                                 std::string("demo >isotile-demo.ply")}) {
+    const CliResult r = shell("\"$ISOTILE\" -q " + cmd);
+    EXPECT_EQ(r.code, 1) << cmd;
+    EXPECT_TRUE(says(r, "- is the same file as the output")) << cmd << ": " << r.err;
+  }
+  // Elsewhere it is written there.
+  const CliResult r = shell("\"$ISOTILE\" -q extract field:sphere:12 -o m.ply --stats - >s.json");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(json_of(dir_ / "s.json")["triangles"].get<int>(), 0);
 }
 
 // The stats' "threads" is what ran: --threads, or the cores where there are fewer (it said the

@@ -310,6 +310,20 @@ TEST_F(Render, SameBytesTwiceAndFromEveryFormat) {
   }
 }
 
+// The picture would replace the mesh it draws: refused, the mesh kept (through a link, it was
+// replaced with exit 0).
+TEST_F(Render, AnOutputThatIsTheInputIsRefused) {
+  REQUIRE_GL_CLI();
+  sphere();
+  fs::copy_file(dir_ / "sphere.ply", dir_ / "mesh.png");
+  fs::create_symlink("mesh.png", dir_ / "link.ply");
+  const std::string before = slurp(dir_ / "mesh.png");
+  const CliResult r = run("render link.ply -q -o mesh.png");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("is the same file as the input"), std::string::npos) << r.err;
+  EXPECT_EQ(slurp(dir_ / "mesh.png"), before);
+}
+
 // Bad inputs: one error line, a non-zero exit, and no picture (nor a temporary) left.
 TEST_F(Render, BadInputsAreOneLineErrorsWithNoFileLeft) {
   REQUIRE_GL_CLI();

@@ -31,12 +31,15 @@ void progress(const std::string& message) {
 
 void check_distinct_files(const std::vector<std::pair<std::string, std::string>>& files,
                           std::size_t inputs) {
+  // "-" is standard output, which the shell may have pointed at one of the files
+  // (`--stats - > mesh.ply`): compared as the file it is.
+  const auto file = [](const std::string& p) { return p == "-" ? std::string("/dev/stdout") : p; };
   for (std::size_t i = inputs; i < files.size(); ++i)
     for (std::size_t j = 0; j < i; ++j) {
       const auto& [what, path] = files[i];
       const auto& [other, other_path] = files[j];
-      if (path.empty() || path == "-" || other_path.empty() || other_path == "-") continue;
-      if (same_file(path, other_path))
+      if (path.empty() || other_path.empty()) continue;
+      if (same_file(file(path), file(other_path)))
         throw InputError(
             what + " " + path + " is the same file as " + other +
             (j < inputs ? " (it would be replaced)" : " (one would replace the other)"));

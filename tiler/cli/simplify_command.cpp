@@ -77,9 +77,11 @@ CLI::App* add_simplify_command(CLI::App& app, SimplifyArgs& sa) {
       ->check(CLI::Range(0.0, 1.0));
   simplify_cmd->add_flag("--no-relax", sa.no_relax, "Skip the flips and tangential relaxation");
   simplify_cmd->add_flag("--ascii", sa.ascii, "ASCII PLY instead of binary");
-  simplify_cmd->add_option("--stats", sa.stats,
-                           "Write statistics as JSON to this file, any name ('-': stdout; "
-                           "default: none)");
+  simplify_cmd
+      ->add_option("--stats", sa.stats,
+                   "Write statistics as JSON to this file, any name ('-': stdout; "
+                   "default: none)")
+      ->check(non_empty());
   return simplify_cmd;
 }
 
