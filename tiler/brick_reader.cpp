@@ -190,6 +190,7 @@ void QualityAccumulator::add(double q) {
   if (sum_lo_ < fixed) ++sum_hi_;
   const int n = static_cast<int>(bins_.size());
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
+  ++histogram_[std::min<std::size_t>(static_cast<std::size_t>(q * 20), 19)];
 }
 
 // Lower-tail quantile p, at the upper edge of the bin that reaches it.
@@ -218,15 +219,14 @@ QualityStats QualityAccumulator::stats() const {
   s.q001 = quantile(0.001);
   s.q01 = quantile(0.01);
   s.median = quantile(0.5);
-  const std::size_t n = bins_.size();
-  for (std::size_t i = 0; i < n; ++i)
-    s.histogram[std::min<std::size_t>(19, i * 20 / n)] += bins_[i];
+  s.histogram = histogram_;
   return s;
 }
 
 std::vector<std::uint64_t> QualityAccumulator::counters() const {
   std::vector<std::uint64_t> c{triangles_,    degenerate_,           sum_lo_ & 0xffffffffu,
                                sum_lo_ >> 32, sum_hi_ & 0xffffffffu, sum_hi_ >> 32};
+  c.insert(c.end(), histogram_.begin(), histogram_.end());
   c.insert(c.end(), bins_.begin(), bins_.end());
   return c;
 }
@@ -257,7 +257,8 @@ QualityAccumulator QualityAccumulator::from_parts(const std::vector<std::uint64_
   a.sum_hi_ = limb[2] | (limb[3] << 32);
   a.min_ = std::bit_cast<double>(min_bits);
   a.max_ = std::bit_cast<double>(max_bits);
-  std::copy(c.begin() + 6, c.end(), a.bins_.begin());
+  std::copy(c.begin() + 6, c.begin() + 26, a.histogram_.begin());
+  std::copy(c.begin() + 26, c.end(), a.bins_.begin());
   return a;
 }
 

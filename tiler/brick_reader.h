@@ -3,6 +3,7 @@
 // accumulator. Internal to the tiler (tiled_extract.cpp, tiled_simplify.cpp).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -99,9 +100,9 @@ class QualityAccumulator {
   QualityStats stats() const;
 
   // For adding accumulators of several processes: the counters (triangles, degenerate, the sum
-  // in four 32-bit limbs, the bins), to be added element by element, and the bits of the
-  // minimum and maximum (non-negative doubles order like their bits), to be reduced by min and
-  // max.
+  // in four 32-bit limbs, the 20 histogram bins, the fine bins), to be added element by element,
+  // and the bits of the minimum and maximum (non-negative doubles order like their bits), to be
+  // reduced by min and max.
   std::vector<std::uint64_t> counters() const;
   std::uint64_t min_bits() const;
   std::uint64_t max_bits() const;
@@ -114,6 +115,9 @@ class QualityAccumulator {
   double min_ = 1, max_ = 0;
   std::uint64_t sum_lo_ = 0, sum_hi_ = 0;  // sum of q in 2^-60 units
   std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(1 << 16);
+  // The 20 bins of QualityStats::histogram, counted as in core: a fine bin straddles a 0.05 edge
+  // (2^16 is not a multiple of 20), so they cannot be summed from bins_.
+  std::array<std::uint64_t, 20> histogram_{};
 };
 
 }  // namespace isotile
