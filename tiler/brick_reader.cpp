@@ -182,7 +182,7 @@ std::vector<BrickReader::Slicing> slice_bricks(
 
 void QualityAccumulator::add(double q) {
   ++triangles_;
-  if (q < 1e-6) ++degenerate_;
+  if (degenerate_ratio(q)) ++degenerate_;
   min_ = std::min(min_, q);
   max_ = std::max(max_, q);
   const auto fixed = static_cast<std::uint64_t>(std::clamp(q, 0.0, 8.0) * 0x1p60);
@@ -190,7 +190,7 @@ void QualityAccumulator::add(double q) {
   if (sum_lo_ < fixed) ++sum_hi_;
   const int n = static_cast<int>(bins_.size());
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
-  ++histogram_[std::min<std::size_t>(static_cast<std::size_t>(q * 20), 19)];
+  ++histogram_[histogram_bin(q)];
 }
 
 // Lower-tail quantile p, at the upper edge of the bin that reaches it.

@@ -115,8 +115,9 @@ class QualityAccumulator {
   double min_ = 1, max_ = 0;
   std::uint64_t sum_lo_ = 0, sum_hi_ = 0;  // sum of q in 2^-60 units
   std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(1 << 16);
-  // The 20 bins of QualityStats::histogram, counted as in core: a fine bin straddles a 0.05 edge
-  // (2^16 is not a multiple of 20), so they cannot be summed from bins_.
+  // The 20 bins of QualityStats::histogram, counted per triangle (histogram_bin) as in core: a
+  // fine bin straddles a 0.05 edge (2^16 is not a multiple of 20), so they cannot be summed from
+  // bins_.
   std::array<std::uint64_t, 20> histogram_{};
 };
 

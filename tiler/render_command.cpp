@@ -6,8 +6,8 @@
 #include <cstdlib>
 
 #include "core/errors.h"
-#include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
+#include "tiler/cli/cli_common.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/mesh_render.h"
 #endif
@@ -127,8 +127,7 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
 int run_render(const RenderArgs& a, bool quiet) {
 #ifdef ISOTILE_HAVE_GL
   check_picture_path(a.output);
-  if (same_file(a.input, a.output))
-    throw InputError("-o " + a.output + " is the same file as the input (it would be replaced)");
+  cli::check_distinct_files({{"the input", a.input}, {"the output", a.output}}, 1);
   const gl::RenderOptions o = render_options(a);
   say(quiet, "drawing " + a.input);
   draw([&](const gl::RenderOptions& ro,

@@ -131,8 +131,8 @@ QualityStats triangle_quality(const Mesh& mesh) {
             s.sum += v;
             s.min = std::min(s.min, v);
             s.max = std::max(s.max, v);
-            if (v < 1e-6) ++s.degenerate;
-            s.histogram[std::min<std::size_t>(static_cast<std::size_t>(v * 20), 19)]++;
+            if (degenerate_ratio(v)) ++s.degenerate;
+            s.histogram[histogram_bin(v)]++;
             const std::size_t b = fine_bin(v);
             ++fine[b];
             bins[i++] = static_cast<FineBin>(b);

@@ -3,7 +3,9 @@
 // "radius ratio" is the inverse R/r).
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -41,6 +43,15 @@ struct QualityStats {
   double median = 0;
   std::array<std::uint64_t, 20> histogram{};  // 20 bins of width 0.05 over [0, 1]
 };
+
+// How one triangle of radius ratio q counts in QualityStats (in core and in the tiler's stream
+// alike): degenerate below 1e-6, and its histogram bin.
+inline bool degenerate_ratio(double q) {
+  return q < 1e-6;
+}
+inline std::size_t histogram_bin(double q) {
+  return std::min<std::size_t>(static_cast<std::size_t>(q * 20), 19);
+}
 
 // Deterministic for any thread count (per-chunk partial sums are combined in a fixed order).
 QualityStats triangle_quality(const Mesh& mesh);
