@@ -185,9 +185,7 @@ void QualityAccumulator::add(double q) {
   if (degenerate_ratio(q)) ++degenerate_;
   min_ = std::min(min_, q);
   max_ = std::max(max_, q);
-  const auto fixed = static_cast<std::uint64_t>(std::clamp(q, 0.0, 8.0) * 0x1p60);
-  sum_lo_ += fixed;
-  if (sum_lo_ < fixed) ++sum_hi_;
+  sum_.add(q);
   const int n = static_cast<int>(bins_.size());
   ++bins_[std::min(n - 1, static_cast<int>(q * n))];
   ++histogram_[histogram_bin(q)];
@@ -213,9 +211,7 @@ QualityStats QualityAccumulator::stats() const {
   if (triangles_ == 0) return s;
   s.min = min_;
   s.max = max_;
-  const double sum =
-      std::ldexp(static_cast<double>(sum_hi_), 4) + std::ldexp(static_cast<double>(sum_lo_), -60);
-  s.mean = sum / static_cast<double>(triangles_);
+  s.mean = sum_.value() / static_cast<double>(triangles_);
   s.q001 = quantile(0.001);
   s.q01 = quantile(0.01);
   s.median = quantile(0.5);
@@ -224,8 +220,8 @@ QualityStats QualityAccumulator::stats() const {
 }
 
 std::vector<std::uint64_t> QualityAccumulator::counters() const {
-  std::vector<std::uint64_t> c{triangles_,    degenerate_,           sum_lo_ & 0xffffffffu,
-                               sum_lo_ >> 32, sum_hi_ & 0xffffffffu, sum_hi_ >> 32};
+  std::vector<std::uint64_t> c{triangles_,    degenerate_,           sum_.lo & 0xffffffffu,
+                               sum_.lo >> 32, sum_.hi & 0xffffffffu, sum_.hi >> 32};
   c.insert(c.end(), histogram_.begin(), histogram_.end());
   c.insert(c.end(), bins_.begin(), bins_.end());
   return c;
@@ -253,8 +249,8 @@ QualityAccumulator QualityAccumulator::from_parts(const std::vector<std::uint64_
     limb[i] = low & 0xffffffffu;
     carry = (v >> 32) + (carry >> 32) + (low >> 32);
   }
-  a.sum_lo_ = limb[0] | (limb[1] << 32);
-  a.sum_hi_ = limb[2] | (limb[3] << 32);
+  a.sum_.lo = limb[0] | (limb[1] << 32);
+  a.sum_.hi = limb[2] | (limb[3] << 32);
   a.min_ = std::bit_cast<double>(min_bits);
   a.max_ = std::bit_cast<double>(max_bits);
   std::copy(c.begin() + 6, c.begin() + 26, a.histogram_.begin());

@@ -92,8 +92,8 @@ std::vector<BrickReader::Slicing> slice_bricks(
 
 // Radius-ratio statistics of a stream of triangles: min, mean and the degenerate count are
 // exact; q001, q01 and the median come from a histogram of 2^16 bins (within 1.6e-5). The sum
-// behind the mean is kept in 2^-60 units in 128 bits: integer addition does not depend on the
-// order, so the statistics come out the same whichever process counted which triangles.
+// behind the mean is core's RatioSum (integer), so min, mean, the degenerate count and the
+// histogram are the same bits as in core, whichever process counted which triangles.
 class QualityAccumulator {
  public:
   void add(double q);
@@ -113,7 +113,7 @@ class QualityAccumulator {
   double quantile(double p) const;
   std::uint64_t triangles_ = 0, degenerate_ = 0;
   double min_ = 1, max_ = 0;
-  std::uint64_t sum_lo_ = 0, sum_hi_ = 0;  // sum of q in 2^-60 units
+  RatioSum sum_;
   std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(1 << 16);
   // The 20 bins of QualityStats::histogram, counted per triangle (histogram_bin) as in core: a
   // fine bin straddles a 0.05 edge (2^16 is not a multiple of 20), so they cannot be summed from

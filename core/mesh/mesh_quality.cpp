@@ -34,11 +34,11 @@ double radius_ratio(const Vec3f& a, const Vec3f& b, const Vec3f& c) {
 
 namespace {
 
-// Fixed chunking is what makes the floating-point sum independent of the thread count.
+// Work is split in fixed chunks, each with its own partial statistics.
 constexpr std::size_t kChunk = 1 << 14;
 
 struct ChunkStats {
-  double sum = 0;
+  RatioSum sum;
   double min = 1, max = 0;
   std::uint64_t degenerate = 0;
   std::array<std::uint64_t, 20> histogram{};
@@ -128,7 +128,7 @@ QualityStats triangle_quality(const Mesh& mesh) {
           const std::size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
           std::size_t i = begin;
           for_each_quality(mesh, begin, end, [&](double v) {
-            s.sum += v;
+            s.sum.add(v);
             s.min = std::min(s.min, v);
             s.max = std::max(s.max, v);
             if (degenerate_ratio(v)) ++s.degenerate;
@@ -141,17 +141,17 @@ QualityStats triangle_quality(const Mesh& mesh) {
       },
       tbb::simple_partitioner());
 
-  double sum = 0;
+  RatioSum sum;
   stats.min = 1;
   stats.max = 0;
   for (const ChunkStats& s : partial) {
-    sum += s.sum;
+    sum.add(s.sum);
     stats.min = std::min(stats.min, s.min);
     stats.max = std::max(stats.max, s.max);
     stats.degenerate += s.degenerate;
     for (std::size_t b = 0; b < s.histogram.size(); ++b) stats.histogram[b] += s.histogram[b];
   }
-  stats.mean = sum / static_cast<double>(n);
+  stats.mean = sum.value() / static_cast<double>(n);
 
   FineHistogram fine(kFineBins, 0);
   for (const FineHistogram& h : fine_local) {

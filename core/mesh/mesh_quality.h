@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -53,7 +54,26 @@ inline std::size_t histogram_bin(double q) {
   return std::min<std::size_t>(static_cast<std::size_t>(q * 20), 19);
 }
 
-// Deterministic for any thread count (per-chunk partial sums are combined in a fixed order).
+// The sum of radius ratios behind QualityStats::mean, in 2^-60 units in 128 bits: integer
+// addition does not depend on the order, so the mean comes out the same bits for any thread
+// count, in core and in the tiler's stream of bricks alike, whichever process added which
+// triangle (a double sum depends on the grouping, and the stream's grouping is the bricks').
+struct RatioSum {
+  std::uint64_t lo = 0, hi = 0;
+  void add(double q) { add_fixed(static_cast<std::uint64_t>(std::clamp(q, 0.0, 8.0) * 0x1p60), 0); }
+  void add(const RatioSum& o) { add_fixed(o.lo, o.hi); }
+  double value() const {
+    return std::ldexp(static_cast<double>(hi), 4) + std::ldexp(static_cast<double>(lo), -60);
+  }
+
+ private:
+  void add_fixed(std::uint64_t l, std::uint64_t h) {
+    lo += l;
+    hi += h + (lo < l ? 1 : 0);
+  }
+};
+
+// Deterministic for any thread count (integer counts and RatioSum).
 QualityStats triangle_quality(const Mesh& mesh);
 
 }  // namespace isotile
