@@ -1,10 +1,12 @@
-// Ctrl-C: the first SIGINT (or SIGTERM) cancels the run through the library's Progress; the CLI
-// says "isotile: cancelled", exits 128 + the signal (130 for SIGINT) and leaves no output and no
-// temporary file. The signal is sent once stderr shows progress, so the run is inside a long loop.
+// Ctrl-C: the first SIGINT (or SIGTERM, SIGHUP) cancels the run through the library's Progress;
+// the CLI says "isotile: cancelled", exits 128 + the signal (130 for SIGINT) and leaves no output
+// and no temporary file. The signal is sent once stderr shows progress, so the run is inside a
+// long loop. Other signals that end the process (SIGPIPE) remove the temporaries too.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,10 +26,13 @@ struct Cancelled {
   int status = -1;
   std::string err;
   std::vector<std::string> left;  // names in the work directory afterwards
+  double seconds = 0;             // from the start to the end of the process
 };
 
-// Runs `isotile ARGS...` in `dir`, waits until its stderr holds `marker`, sends `sig` and
-// collects the exit status and stderr. Gives up (killing it) after 120 s.
+// Runs `isotile ARGS...` in `dir`, waits until its stderr holds `marker` (an empty marker: for
+// half a second), sends `sig` and collects the exit status and stderr. SIGPIPE is "sent" by
+// closing the pipe its stderr goes to, so that its next progress line meets it. Gives up
+// (killing it) after 120 s.
 Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& args,
                          const std::string& marker, int sig) {
   int pipe_fd[2];
@@ -60,9 +65,12 @@ Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& ar
       if (n <= 0) break;  // the process closed stderr: it ended
       r.err.append(buf, static_cast<std::size_t>(n));
     }
-    if (!sent && r.err.find(marker) != std::string::npos) {
-      ::kill(pid, sig);
+    const bool due = marker.empty() ? Clock::now() - t0 > std::chrono::milliseconds(500)
+                                    : r.err.find(marker) != std::string::npos;
+    if (!sent && due) {
       sent = true;
+      if (sig == SIGPIPE) break;
+      ::kill(pid, sig);
     }
     if (Clock::now() - t0 > std::chrono::seconds(120)) {
       ::kill(pid, SIGKILL);
@@ -70,9 +78,14 @@ Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& ar
     }
   }
   ::close(pipe_fd[0]);
-  ::waitpid(pid, &r.status, 0);
+  // After SIGPIPE's close the process runs on until it writes to stderr: bounded too.
+  for (int waited = 0; ::waitpid(pid, &r.status, WNOHANG) == 0; ++waited) {
+    if (waited == 1200) ::kill(pid, SIGKILL);
+    ::usleep(100000);
+  }
   EXPECT_TRUE(sent) << "no progress line '" << marker << "' on stderr:\n" << r.err;
   for (const auto& e : fs::directory_iterator(dir)) r.left.push_back(e.path().filename().string());
+  r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return r;
 }
 
@@ -114,6 +127,41 @@ TEST_F(CliCancel, SigintOutOfCoreExits130AndLeavesNothing) {
                                       "macet", "--memory", "64MiB", "-o", "out.ply"},
                                      "isotile: count: 1/", SIGINT);
   expect_cancelled(r, 130);
+}
+
+// A closed terminal (SIGHUP) cancels as SIGINT and SIGTERM do.
+TEST_F(CliCancel, SighupCancelsAndExits129) {
+  const Cancelled r = run_and_signal(dir_,
+                                     {"extract", "field:gyroid:256", "--iso", "0", "--method",
+                                      "macet", "--quality", "max", "-o", "out.ply"},
+                                     "isotile: macet search: ", SIGHUP);
+  expect_cancelled(r, 129);
+}
+
+// A run blocked reading its input (a FIFO nobody writes: open() waits for a writer) never reaches
+// its next unit of work, and the call is restarted after the handler: one SIGTERM (what timeout(1)
+// and batch schedulers send) still ends it, a few seconds later, leaving nothing.
+TEST_F(CliCancel, OneSigtermEndsARunBlockedOnItsInput) {
+  const fs::path in = dir_.parent_path() / (dir_.filename().string() + "-in");
+  fs::create_directories(in);
+  const fs::path fifo = in / "blocked_32x32x32_uint8.raw";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const Cancelled r = run_and_signal(
+      dir_, {"extract", fifo.string(), "--iso", "100", "-o", "out.ply"}, "", SIGTERM);
+  fs::remove_all(in);
+  expect_cancelled(r, 143);
+  EXPECT_LT(r.seconds, 30) << "ended by the test's own SIGKILL?";
+}
+
+// stderr piped into a reader that stops (`2>&1 | head`): the progress line that meets the closed
+// pipe ends the process by SIGPIPE, and the temporary goes with it.
+TEST_F(CliCancel, SigpipeOnStderrLeavesNoTemporary) {
+  const Cancelled r = run_and_signal(
+      dir_, {"extract", "field:gyroid:384", "--iso", "0", "--ascii", "-o", "out.ply"},
+      "isotile: write: 10%", SIGPIPE);
+  ASSERT_TRUE(WIFSIGNALED(r.status)) << "status " << r.status << ":\n" << r.err;
+  EXPECT_EQ(WTERMSIG(r.status), SIGPIPE);
+  EXPECT_TRUE(r.left.empty()) << "left behind: " << r.left.front();
 }
 
 }  // namespace

@@ -12,10 +12,13 @@
 // tiler/cli/*_command.cpp, and the extraction's work in the library (tiler/pipeline.h).
 #include <tbb/global_control.h>
 #include <tbb/info.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -36,6 +39,15 @@ namespace {
 using namespace isotile;
 using namespace isotile::cli;
 
+// Where a worker thread cannot be started (a process or memory limit: ulimit -u or -v, a
+// container's pids.max), TBB throws "pthread_create has failed" from whichever call wanted the
+// worker, and tbb::finalize then waits for that worker for ever (oneTBB 2021.8). Once it has been
+// seen, main ends the process without finalize.
+bool g_worker_start_failed = false;
+bool worker_start_failure(const char* what) {
+  return std::strstr(what, "pthread_create has failed") != nullptr;
+}
+
 // One error line. Under MPI only rank 0 prints: an error outside the distributed run comes from
 // the arguments, which every rank shares, and one inside it is agreed on by all ranks, with the
 // failing rank named. An error only this rank has inside the run (not agreed) aborts the job, as
@@ -52,6 +64,14 @@ int fail(const char* what, bool agreed) {
 #else
   (void)agreed;
 #endif
+  if (worker_start_failure(what)) {
+    g_worker_start_failed = true;
+    std::fprintf(stderr,
+                 "isotile: error: %s (a worker thread could not be started: raise the process or "
+                 "memory limits, or give fewer --threads)\n",
+                 what);
+    return 1;
+  }
   std::fprintf(stderr, "isotile: error: %s\n", what);
   return 1;
 }
@@ -62,19 +82,48 @@ extern "C" void on_signal(int sig) {
   std::raise(sig);
 }
 
-// The first SIGINT or SIGTERM (extract, simplify, demo) cancels the run through g_progress (only
-// a lock-free atomic store here: async-signal-safe); the work stops at its next unit, its files
-// are removed as the exception unwinds, and main prints "isotile: cancelled" and exits 128 + the
-// signal. A second one ends the process at once (on_signal).
+// The signals that end a run: Ctrl-C, kill, a closed terminal.
+constexpr int kCancelSignals[] = {SIGINT, SIGTERM, SIGHUP};
+
+// Every signal that ends the process removes the temporaries first (on_signal), then takes its
+// default action: the cancel signals, SIGQUIT (its core dump) and SIGPIPE (stderr or stdout
+// piped into a reader that stopped, as `2>&1 | head` does). SIGXFSZ is ignored instead: a write
+// past the file-size limit (ulimit -f) then fails with EFBIG, which the writers report as an
+// error ("File too large") and clean up after, as after a full disk.
+void install_signal_handlers() {
+  for (int sig : kCancelSignals) std::signal(sig, on_signal);
+  std::signal(SIGQUIT, on_signal);
+  std::signal(SIGPIPE, on_signal);
+  std::signal(SIGXFSZ, SIG_IGN);
+}
+
 volatile std::sig_atomic_t g_cancel_signal = 0;
+
+// A run blocked in a system call (reading a FIFO, a stalled network file system) does not reach
+// its next unit of work, and glibc restarts the call after the handler: the cancel would never be
+// seen. Seconds after the first signal the process ends as a second signal would end it.
+constexpr unsigned kCancelGraceSeconds = 3;
+extern "C" void on_cancel_timeout(int) {
+  remove_pending_temporaries();
+  static const char kMessage[] = "isotile: cancelled\n";
+  [[maybe_unused]] const ssize_t n = ::write(2, kMessage, sizeof kMessage - 1);
+  ::_exit(128 + static_cast<int>(g_cancel_signal));
+}
+
+// The first cancel signal (extract, simplify, demo) cancels the run through g_progress (only a
+// lock-free atomic store here: async-signal-safe); the work stops at its next unit, its files are
+// removed as the exception unwinds, and main prints "isotile: cancelled" and exits 128 + the
+// signal. A second one ends the process at once (on_signal), as does the grace period's end.
 extern "C" void on_cancel_signal(int sig) {
   g_cancel_signal = sig;
   g_progress.cancel();
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  for (int s : kCancelSignals) std::signal(s, on_signal);
+  std::signal(SIGALRM, on_cancel_timeout);
+  ::alarm(kCancelGraceSeconds);
 }
 
 int cancelled() {
+  ::alarm(0);
   std::fprintf(stderr, "isotile: cancelled\n");
   return 128 + (g_cancel_signal ? static_cast<int>(g_cancel_signal) : SIGINT);
 }
@@ -82,8 +131,7 @@ int cancelled() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
+  install_signal_handlers();
   if (launched_by_mpi()) {
 #ifdef ISOTILE_HAVE_MPI
     try {
@@ -171,9 +219,16 @@ int main(int argc, char** argv) {
   }
 #endif
 
-  std::optional<tbb::global_control> limit;
-  if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
-  tbb::task_scheduler_handle workers{tbb::attach{}};
+  // Never destroyed: lifting the limit at the end can start workers, and where a worker cannot
+  // start (see g_worker_start_failed) the destructor's exception ends in std::terminate (seen
+  // with --threads 1 under ulimit -v). tbb::finalize joins the workers with the limit in place.
+  tbb::task_scheduler_handle workers;
+  try {
+    if (threads > 0) new tbb::global_control(tbb::global_control::max_allowed_parallelism, threads);
+    workers = tbb::task_scheduler_handle{tbb::attach{}};
+  } catch (const std::bad_alloc&) {
+    return fail("out of memory", false);
+  }
 
   // Whatever went to standard output must have reached it: a failed write is exit 1.
   const auto finished = [](int rc) {
@@ -184,8 +239,7 @@ int main(int argc, char** argv) {
   // others end at it, as before. Under MPI each rank ends at the signal (mpirun forwards it to
   // every rank): a rank cancelling alone would leave the others waiting in a collective.
   if ((*extract_cmd || *simplify_cmd || *demo_cmd) && !launched_by_mpi()) {
-    std::signal(SIGINT, on_cancel_signal);
-    std::signal(SIGTERM, on_cancel_signal);
+    for (int sig : kCancelSignals) std::signal(sig, on_cancel_signal);
   }
   const int rc = [&]() -> int {
     try {
@@ -221,10 +275,17 @@ int main(int argc, char** argv) {
     }
     return 0;
   }();
+  // The work is over (a cancel that came too late for it changes nothing now).
+  ::alarm(0);
 
   // A known order at the end (docs/gl.md): TBB's workers joined, then the GL context and what was
   // made on it deleted, before exit() runs static destructors and the drivers' own exit handlers.
-  limit.reset();
+  if (g_worker_start_failed) {
+    // The outputs are complete or removed already; only finalize's endless wait is skipped.
+    std::fflush(stdout);
+    std::fflush(stderr);
+    std::_Exit(rc);
+  }
   tbb::finalize(workers, std::nothrow);
 #ifdef ISOTILE_HAVE_GL
   isotile::gl::shutdown();

@@ -1,0 +1,77 @@
+// Process limits that shared machines and batch systems set: a file-size limit (ulimit -f) and an
+// address-space limit that leaves no room for a worker thread's stack (ulimit -v; a process limit,
+// ulimit -u or a container's pids.max, fails the same call). Each ends in one error line and exit
+// 1 with no temporary left and an existing output kept, or in a complete run: never a death by
+// signal, an abort or a hang.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "cli_support.h"
+
+namespace {
+
+using isotile::testing::CliResult;
+using isotile::testing::slurp;
+
+class CliLimits : public isotile::testing::CliTest {
+ protected:
+  void write_old_output() { std::ofstream(dir_ / "out.ply") << "old\n"; }
+};
+
+// SIGXFSZ would kill the process with its temporary beside the output; ignored, the write fails
+// with EFBIG and the writer reports it. In core, out of core (records placed with pwrite) and the
+// --stats file.
+TEST_F(CliLimits, AFileSizeLimitIsAnErrorAndKeepsTheOldOutput) {
+  for (const std::string extra : {"", "--memory 1MiB"}) {
+    write_old_output();
+    const CliResult r = run("-q extract field:gyroid:64 -o out.ply " + extra, "ulimit -f 64 &&");
+    EXPECT_EQ(r.code, 1) << extra << ": " << r.err;
+    EXPECT_NE(r.err.find("isotile: error: cannot write out.ply: File too large"), std::string::npos)
+        << extra << ": " << r.err;
+    EXPECT_EQ(slurp(dir_ / "out.ply"), "old\n") << extra;
+    EXPECT_EQ(stray_files({"out.ply"}), std::vector<std::string>{}) << extra;
+  }
+}
+
+// Steps the address-space limit up from where the program loads at all: at the low end a worker
+// thread's stack no longer fits (pthread_create fails), higher up the run completes. Before, the
+// failure printed TBB's message and then waited in tbb::finalize for ever (or, with --threads 1,
+// aborted after writing the mesh).
+TEST_F(CliLimits, AWorkerThreadThatCannotStartIsAnErrorNotAHang) {
+#ifdef ISOTILE_SANITIZED
+  GTEST_SKIP() << "sanitizer runtimes reserve terabytes of address space: ulimit -v cannot apply";
+#endif
+  int worker_failures = 0, completed = 0;
+  for (int kib = 16000; kib <= 96000 && completed < 4; kib += 2000) {
+    const std::string limit = "ulimit -v " + std::to_string(kib) + " &&";
+    if (run("--version", limit).code != 0) continue;  // the loader itself does not fit yet
+    for (const std::string threads : {"", "--threads 1 "}) {
+      const CliResult r = run("-q " + threads + "extract field:sphere:16 -o out.ply",
+                              limit + " timeout -s KILL 60");
+      const std::string where = std::to_string(kib) + " KiB " + threads;
+      ASSERT_TRUE(r.code == 0 || r.code == 1)
+          << where << ": exit " << r.code << " (137: a hang, killed; 134: an abort)\n"
+          << r.err;
+      if (r.code == 0) {
+        ++completed;
+        EXPECT_GT(std::filesystem::file_size(dir_ / "out.ply"), 1000u) << where;
+        std::filesystem::remove(dir_ / "out.ply");
+        continue;
+      }
+      EXPECT_EQ(r.err.rfind("isotile: error: ", 0), 0u) << where << ": " << r.err;
+      EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << where << ": one line\n" << r.err;
+      if (r.err.find("a worker thread could not be started") != std::string::npos)
+        ++worker_failures;
+      EXPECT_EQ(stray_files(), std::vector<std::string>{}) << where;
+    }
+  }
+  EXPECT_GT(completed, 0) << "no limit up to 96000 KiB let the run complete";
+  if (worker_failures == 0)
+    GTEST_SKIP() << "no address-space limit here stopped a worker thread and nothing else";
+}
+
+}  // namespace
