@@ -198,6 +198,50 @@ TEST_F(CliOutputs, ALinkToARegularFileKeepsTheLinkAndReplacesTheTarget) {
   EXPECT_EQ(stray_files({"real", "s.json", "m.ply", "dangling.ply"}), std::vector<std::string>{});
 }
 
+// A replaced file keeps its permission bits (a private 0600 mesh did not stay private: the rename
+// put a new 0644 file in its place), in core and out of core, the stats file too.
+TEST_F(CliOutputs, AReplacedFileKeepsItsPermissions) {
+  for (const std::string extra : {"", " --memory 1MiB"}) {
+    { std::ofstream(dir_ / "m.ply") << "old"; }
+    { std::ofstream(dir_ / "s.json") << "old"; }
+    fs::permissions(dir_ / "m.ply", fs::perms::owner_read | fs::perms::owner_write);
+    fs::permissions(dir_ / "s.json",
+                    fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read);
+    const CliResult r = run("extract field:sphere:16 -o m.ply -q --stats s.json" + extra);
+    ASSERT_EQ(r.code, 0) << extra << ": " << r.err;
+    EXPECT_GT(isotile::read_mesh(dir_ / "m.ply").triangles.size(), 0u) << extra;
+    EXPECT_EQ(fs::status(dir_ / "m.ply").permissions(),
+              fs::perms::owner_read | fs::perms::owner_write)
+        << extra;
+    EXPECT_EQ(fs::status(dir_ / "s.json").permissions(),
+              fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read)
+        << extra;
+  }
+}
+
+// A file its owner made read-only is refused, as `>` would refuse it, before any work; it was
+// replaced. Root may write anything, so as root the command runs as nobody (setpriv).
+TEST_F(CliOutputs, AReadOnlyOutputIsRefused) {
+  { std::ofstream(dir_ / "ro.ply") << "old"; }
+  fs::permissions(dir_ / "ro.ply",
+                  fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  fs::permissions(dir_, fs::perms::all);  // the folder is writable: only the file is not
+  const std::string as_user =
+      ::geteuid() == 0 ? "setpriv --reuid=65534 --regid=65534 --clear-groups" : "";
+  for (const std::string args : {"extract field:sphere:16 -o ro.ply -q",
+                                 "extract field:sphere:16 -o m.ply -q --stats ro.ply",
+                                 "extract field:sphere:16 -o ro.ply -q --memory 1MiB"}) {
+    const CliResult r = run(args, as_user);
+    EXPECT_EQ(r.code, 1) << args << ": " << r.err;
+    EXPECT_EQ(r.err,
+              "isotile: error: cannot write ro.ply: the file is not writable (Permission "
+              "denied)\n")
+        << args;
+    EXPECT_EQ(slurp(dir_ / "ro.ply"), "old") << args;
+    EXPECT_EQ(stray_files({"ro.ply"}), std::vector<std::string>{}) << args;
+  }
+}
+
 TEST_F(CliOutputs, ADescriptorLinkAppendsToTheRedirectedLog) {
   // Links of our own into /proc/self/fd, as /dev/stdout is.
   fs::create_symlink("/proc/self/fd/1", dir_ / "out.json");

@@ -136,6 +136,9 @@ OutputTarget resolve_output(const std::filesystem::path& path) {
     t.path = p;
     if (S_ISREG(st.st_mode)) {
       check_folder(path, p);
+      // The rename would replace a file its owner made read-only, as `>` would not.
+      if (::access(p.c_str(), W_OK) != 0)
+        refuse(path, "the file is not writable (" + describe(errno) + ")");
       t.kind = OutputTarget::Kind::RegularFile;
       return t;
     }
@@ -215,6 +218,12 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
     const int err = errno;
     throw IoError("cannot write " + target_.string() + ": " + describe(err));
   }
+  // A replaced file keeps its permissions (a private 0600 file must not become world-readable
+  // 0644): the temporary takes them before any data goes in. Set-id bits are not carried over.
+  // Best effort, as on a file system without modes.
+  struct stat old {};
+  if (t.kind == OutputTarget::Kind::RegularFile && ::stat(final_.c_str(), &old) == 0)
+    (void)::fchmod(fileno(file_), old.st_mode & 01777);
   slot_ = claim_slot(temp_.string());
   if (slot_ >= 0) {
     g_buffers[slot_] = static_cast<char*>(std::malloc(kBufferSize));

@@ -6,7 +6,8 @@
 // from the CLI's SIGINT/SIGTERM handler; async-signal-safe) can delete them on Ctrl-C.
 //
 // Only a regular file is ever renamed over (resolve_output below says what a path is):
-// - a path that does not exist yet, or a regular file: the temporary-then-rename write;
+// - a path that does not exist yet, or a regular file: the temporary-then-rename write (a
+//   replaced file's permission bits are kept; a file the process may not write is refused);
 // - a symbolic link is followed (link by link), and what it leads to is written as above: a
 //   regular file's target is replaced atomically and the link itself stays a link;
 // - a link into /proc/self/fd (/dev/stdout, /dev/stderr, /dev/fd/N) is written in place through
