@@ -459,7 +459,8 @@ TEST_F(Tiler, RealVolumeWithASmallBudget) {
   EXPECT_GT(r.plan.count[2], 1);
 }
 
-// NRRD with raw data attached, detached, after skipped bytes, and gzip'd: read box by box.
+// NRRD with raw data attached, detached, after skipped bytes, and gzip'd (detached, and attached
+// after the header: that one was read whole): read box by box.
 TEST_F(Tiler, NrrdInputsStreamExactly) {
   const Volume f = make_field_volume({FieldKind::Torus, 29});
   std::string bytes;
@@ -486,9 +487,11 @@ TEST_F(Tiler, NrrdInputsStreamExactly) {
   gzwrite(g, bytes.data(), static_cast<unsigned>(bytes.size()));
   gzclose(g);
   put(dir_ / "gzip.nhdr", head + "encoding: gzip\ndata file: data.raw.gz\n");
+  put(dir_ / "gzip.nrrd", head + "encoding: gzip\n\n" + slurp(dir_ / "data.raw.gz"));
   ExtractOptions o = options(Method::MarchingCubes, true);
   o.iso = 50;
-  for (const char* name : {"attached.nrrd", "detached.nhdr", "skipped.nhdr", "gzip.nhdr"}) {
+  for (const char* name :
+       {"attached.nrrd", "detached.nhdr", "skipped.nhdr", "gzip.nhdr", "gzip.nrrd"}) {
     const std::string input = (dir_ / name).string();
     EXPECT_FALSE(open_volume_source(input, {})->in_memory()) << name;
     const std::string want = whole(input, o, MeshFormat::Ply);

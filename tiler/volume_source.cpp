@@ -163,7 +163,8 @@ class PlaneFilesSource final : public VolumeSource {
 
 // gzip'd raw: one pass decompresses the stream once, front to back, with a bounded buffer: the
 // planner asks for whole x-y slabs in ascending z, which may overlap by their halos, so the last
-// planes read are kept for the next box.
+// planes read are kept for the next box. The stream starts at the layout's offset (an NRRD's
+// attached gzip data follows its header).
 class GzipRawSource final : public VolumeSource {
  public:
   explicit GzipRawSource(const PlainLayout& layout) : file_name_(layout.file), swap_(layout.swap) {
@@ -171,8 +172,19 @@ class GzipRawSource final : public VolumeSource {
     type = layout.type;
     dims = layout.dims;
     checked_volume_bytes(type, dims);
-    file_ = gzopen(name.c_str(), "rb");
-    if (!file_) throw IoError("cannot open " + name + ": " + std::strerror(errno));
+    const int fd = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw IoError("cannot open " + name + ": " + std::strerror(errno));
+    // zlib takes the descriptor's position as the stream's start (gzrewind returns there).
+    if (::lseek(fd, static_cast<off_t>(layout.offset), SEEK_SET) < 0) {
+      const int err = errno;
+      ::close(fd);
+      throw IoError("cannot read " + name + ": " + std::strerror(err));
+    }
+    file_ = gzdopen(fd, "rb");
+    if (!file_) {
+      ::close(fd);
+      throw IoError("cannot open " + name + ": out of memory");
+    }
     if (gzdirect(file_))
       throw InputError(name + ": not gzip data (the name ends in .gz); rename it or recompress it");
     plane_bytes_ = static_cast<std::size_t>(dims[0] * dims[1]) * scalar_size(type);

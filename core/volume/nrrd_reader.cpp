@@ -309,9 +309,11 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
   const bool attached = nio->dataFNArr->len == 0;
   const std::uint64_t start = data->offset;
   if (out.gzip) {
-    if (nio->byteSkip != 0) return std::nullopt;
+    // The gzip stream starts where the header ends (attached) or at the data file's start; a
+    // byte skip counts within the decompressed data, which cannot be streamed from an offset.
+    if (nio->byteSkip != 0 || (!attached && start != 0)) return std::nullopt;
     out.offset = start;
-    return start == 0 ? std::optional<NrrdDataLayout>(out) : std::nullopt;
+    return out;
   }
   if (nio->byteSkip == -1) {
     // The samples are the file's last bytes.

@@ -137,7 +137,7 @@ std::unique_ptr<VdbVolume> open_vdb(const std::string& path);
 // read box by box; nullopt otherwise (several data files, other encodings, line skips).
 struct NrrdDataLayout {
   std::string data_file;     // the file holding the samples (the NRRD itself when attached)
-  std::uint64_t offset = 0;  // byte offset of the first sample (raw encoding)
+  std::uint64_t offset = 0;  // byte offset of the first sample (raw) or of the gzip stream
   bool gzip = false;
   Endian endian = Endian::Little;
   ScalarType type = ScalarType::UInt8;
