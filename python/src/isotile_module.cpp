@@ -606,8 +606,9 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
       if (py::isinstance<py::str>(options[key])) {  // the CLI's text "x,y,z", read as for a path
         const std::string t = not_empty(options[key].cast<std::string>(), key);
         const bool spacing = std::string_view(key) == "spacing";
-        const RawOptions r = parse_input_text(
-            {.spacing = spacing ? t : std::string(), .origin = spacing ? std::string() : t}, "");
+        InputText text;
+        (spacing ? text.spacing : text.origin) = t;
+        const RawOptions r = parse_input_text(text, "");
         if (const auto& v = spacing ? r.spacing : r.origin) return *v;
       }
       const auto v = option_as<std::vector<double>>(options[key], key, "three numbers");
