@@ -250,8 +250,29 @@ std::string series_tag(itk::GDCMImageIO& io, const char* key) {
   return value;
 }
 
+// GDCM's scan of a folder stumbles on an entry that is not a file it can open (a dangling link,
+// a FIFO: opening one waits for a writer): its sorting then gives up, and the slices come back
+// in another order, which the gap check below reported as missing slices. Such an entry is named
+// instead. Subfolders are not scanned (SetRecursive(false)).
+void check_series_folder(const std::string& dir) {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    std::error_code status_ec;
+    const std::filesystem::file_status st = std::filesystem::status(entry.path(), status_ec);
+    if (st.type() == std::filesystem::file_type::not_found)
+      throw InputError(entry.path().string() +
+                       ": a link to nothing in the DICOM folder; remove it (a folder's files "
+                       "are read as one series)");
+    if (std::filesystem::is_directory(st) || std::filesystem::is_regular_file(st)) continue;
+    throw InputError(entry.path().string() +
+                     ": not a regular file (a FIFO, socket or device) in the DICOM folder; "
+                     "remove it (a folder's files are read as one series)");
+  }
+}
+
 itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
   quiet_itk();
+  check_series_folder(dir);
   auto names = itk::GDCMSeriesFileNames::New();
   names->SetUseSeriesDetails(false);
   names->SetRecursive(false);
