@@ -502,6 +502,53 @@ TEST_F(Tiler, NrrdInputsStreamExactly) {
   }
 }
 
+// An input that changes while an out-of-core run reads it twice (count, then extract) is named
+// before anything is committed. Here the raw file's samples are scaled by 1.01 in place once the
+// extraction has begun: the signs, so the counts, stay, and the mesh mixed bricks of both
+// versions without an error.
+TEST_F(Tiler, AnInputThatChangesDuringTheRunIsAnError) {
+  const Volume f = make_field_volume({FieldKind::Sphere, 40});
+  std::vector<float> samples(40 * 40 * 40);
+  for (std::int64_t k = 0, i = 0; k < 40; ++k)
+    for (std::int64_t j = 0; j < 40; ++j)
+      for (std::int64_t x = 0; x < 40; ++x)
+        samples[i++] = static_cast<float>(f.view().value(x, j, k));
+  const fs::path file = dir_ / "s_40x40x40_float32.raw";
+  auto put = [&](float scale) {
+    std::vector<float> v = samples;
+    for (float& x : v) x *= scale;
+    std::ofstream out(file, std::ios::binary | std::ios::in | std::ios::out);
+    if (!out) out.open(file, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(4 * v.size()));
+  };
+  put(1);
+  TiledOptions to;
+  to.extract = options(Method::MarchingCubes);
+  to.extract.iso = field_default_iso(FieldKind::Sphere);
+  to.memory = 60000;
+  bool changed = false;
+  Progress progress([&](const ProgressUpdate& u) {
+    if (u.stage == Stage::Extract && !changed) {
+      changed = true;
+      put(1.01f);
+    }
+    return true;
+  });
+  to.progress = &progress;
+  const fs::path out = dir_ / "out.ply";
+  try {
+    const TiledResult r = extract_tiled(*open_volume_source(file.string(), {}), to, out);
+    ADD_FAILURE() << "no error; " << r.plan.total() << " bricks";
+  } catch (const InputError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("s_40x40x40_float32.raw: the input changed during the run"),
+        std::string::npos)
+        << e.what();
+  }
+  EXPECT_TRUE(changed);
+  EXPECT_FALSE(fs::exists(out));
+}
+
 TEST_F(Tiler, VdbInputStreamsExactly) {
   openvdb::initialize();
   auto grid = openvdb::FloatGrid::create(1.0f);

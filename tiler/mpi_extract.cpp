@@ -503,6 +503,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   mpi.sum(written);
   result.bricks_extracted = static_cast<std::int64_t>(written[1]);
   mpi.phase([&] {
+    source->check_unchanged();
     if (written[0] != result.faces)
       throw Error("distributed extraction wrote " + std::to_string(written[0]) + " faces of " +
                   std::to_string(result.faces) + " counted");

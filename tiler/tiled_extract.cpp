@@ -9,6 +9,7 @@
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
+#include "core/progress.h"
 #include "tiler/brick_extraction.h"
 #include "tiler/source_histogram.h"
 #include "tiler/tiled_simplify.h"
@@ -142,6 +143,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   if (bricks.written_faces() != result.faces)
     throw Error("tiled extraction wrote " + std::to_string(bricks.written_faces()) + " faces of " +
                 std::to_string(result.faces) + " counted");
+  source.check_unchanged();
   file.commit();
   if (options.quality) result.quality = quality.stats();
   return result;
@@ -154,8 +156,17 @@ TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
   // Before the first pass: the streamed writer places each brick's records at their offsets
   // (positioned writes); the simplifying one writes its file front to back at the end.
   check_output(output, options.simplify >= 1);
-  if (options.simplify < 1) return extract_tiled_simplified(source, options, output);
-  return run(source, options, output);
+  try {
+    if (options.simplify < 1) return extract_tiled_simplified(source, options, output);
+    return run(source, options, output);
+  } catch (const Cancelled&) {
+    throw;
+  } catch (const Error&) {
+    // A changed input breaks the passes' agreement ("brick contract broken", a short read):
+    // that is the error to give.
+    source.check_unchanged();
+    throw;
+  }
 }
 
 }  // namespace isotile

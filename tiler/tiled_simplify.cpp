@@ -250,7 +250,8 @@ class TiledSimplification {
     }
     result.seconds_seams = since(t0);
 
-    // 4. The file.
+    // 4. The file, once the input is known to have stayed as it was read.
+    src_.check_unchanged();
     assemble(output, result);
     result.quality = quality_.stats();
     result.simplify.target_faces = target;

@@ -8,8 +8,10 @@
 #include <algorithm>
 #include <bit>
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <vector>
 
 #include "core/errors.h"
@@ -55,6 +57,33 @@ void read_exactly(int fd, const std::string& name, char* dst, std::int64_t bytes
 }
 
 // Samples stored plainly in one file from byte `offset` on (raw files, NRRD's raw data).
+// What says that a file changed: its identity, size and modification time.
+struct FileStamp {
+  dev_t dev = 0;
+  ino_t ino = 0;
+  off_t size = 0;
+  std::int64_t mtime_ns = 0;
+  static FileStamp of(const struct stat& st) {
+    return {st.st_dev, st.st_ino, st.st_size,
+            std::int64_t{st.st_mtim.tv_sec} * 1000000000 + st.st_mtim.tv_nsec};
+  }
+  bool operator==(const FileStamp&) const = default;
+};
+
+[[noreturn]] void throw_changed(const std::string& file) {
+  throw InputError(file +
+                   ": the input changed during the run (its size or modification time): an "
+                   "out-of-core run reads it twice, and the mesh would mix old and new samples; "
+                   "run it again once the file stays as it is");
+}
+
+// The stamp of an open descriptor; nullopt for what is not a regular file.
+std::optional<FileStamp> stamp_of(int fd) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) return std::nullopt;
+  return FileStamp::of(st);
+}
+
 struct PlainLayout {
   std::string file;
   std::uint64_t offset = 0;
@@ -72,10 +101,10 @@ class RawFileSource final : public VolumeSource {
     dims = layout.dims;
     fd_ = ::open(name.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw IoError("cannot open " + name + ": " + std::strerror(errno));
-    struct stat st {};
+    stamp_ = stamp_of(fd_);
     try {  // a throwing constructor runs no destructor: the descriptor is closed here
-      if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode))
-        check_plain_size(name, static_cast<std::uint64_t>(st.st_size), offset_, type, dims,
+      if (stamp_)
+        check_plain_size(name, static_cast<std::uint64_t>(stamp_->size), offset_, type, dims,
                          layout.bytes_after);
       else
         checked_volume_bytes(type, dims);
@@ -86,6 +115,11 @@ class RawFileSource final : public VolumeSource {
   }
   ~RawFileSource() override {
     if (fd_ >= 0) ::close(fd_);
+  }
+
+  // The open descriptor's file: a file renamed over the name later is not what is read.
+  void check_unchanged() const override {
+    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(name);
   }
 
   void read(const Box3& box, void* out) override {
@@ -114,6 +148,7 @@ class RawFileSource final : public VolumeSource {
 
  private:
   int fd_ = -1;
+  std::optional<FileStamp> stamp_;
   std::uint64_t offset_ = 0;
   bool swap_ = false;
 };
@@ -128,6 +163,14 @@ class PlaneFilesSource final : public VolumeSource {
     type = data.type;
     dims = data.dims;
     checked_volume_bytes(type, dims);
+    stamps_.reserve(planes_.size());
+    for (const PlainData::Plane& plane : planes_) stamps_.push_back(stamp_of(plane.file));
+  }
+
+  // Each read opens the files by name: a file renamed over one counts as a change too.
+  void check_unchanged() const override {
+    for (std::size_t k = 0; k < planes_.size(); ++k)
+      if (stamp_of(planes_[k].file) != stamps_[k]) throw_changed(planes_[k].file);
   }
 
   void read(const Box3& box, void* out) override {
@@ -157,7 +200,13 @@ class PlaneFilesSource final : public VolumeSource {
   }
 
  private:
+  static std::optional<FileStamp> stamp_of(const std::string& file) {
+    struct stat st {};
+    if (::stat(file.c_str(), &st) != 0) return std::nullopt;
+    return FileStamp::of(st);
+  }
   std::vector<PlainData::Plane> planes_;
+  std::vector<std::optional<FileStamp>> stamps_;
   bool swap_ = false;
 };
 
@@ -180,11 +229,13 @@ class GzipRawSource final : public VolumeSource {
       ::close(fd);
       throw IoError("cannot read " + name + ": " + std::strerror(err));
     }
+    stamp_ = stamp_of(fd);
     file_ = gzdopen(fd, "rb");
     if (!file_) {
       ::close(fd);
       throw IoError("cannot open " + name + ": out of memory");
     }
+    fd_ = fd;
     if (gzdirect(file_))
       throw InputError(name + ": not gzip data (the name ends in .gz); rename it or recompress it");
     plane_bytes_ = static_cast<std::size_t>(dims[0] * dims[1]) * scalar_size(type);
@@ -194,6 +245,10 @@ class GzipRawSource final : public VolumeSource {
   }
   ~GzipRawSource() override {
     if (file_) gzclose(file_);
+  }
+
+  void check_unchanged() const override {
+    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(name);
   }
 
   bool sequential() const override { return true; }
@@ -240,6 +295,8 @@ class GzipRawSource final : public VolumeSource {
   // (bonsai with --memory 64MiB: 0.16-0.19 s in all with 256 KiB and with 1 MiB) and count
   // against the memory budget; small volumes keep small ones, so small budgets still hold a slab.
   static constexpr std::size_t kMaxBuffer = std::size_t{1} << 18;
+  int fd_ = -1;  // zlib's (gzdopen): closed by gzclose
+  std::optional<FileStamp> stamp_;
   unsigned buffer_ = 1u << 14;
   // Planes the next box may share with this one (set_overlap: 2 halo + 1, so 9 for DC's Eno
   // Hermite data and 103 for Macet max).

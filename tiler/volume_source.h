@@ -47,6 +47,11 @@ class VolumeSource {
   // Reads global box `box` into `out` (box extent samples of `type`, x fastest). Throws IoError
   // or InputError (e.g. NaN samples) naming the input.
   virtual void read(const Box3& box, void* out) = 0;
+  // Throws InputError naming a file the source reads from that changed since it was opened (its
+  // size or modification time; or, for files opened anew at each read, which file the name
+  // holds). An out-of-core run reads its input twice (count, then extract): a change between or
+  // within the passes would mix old and new samples in one mesh, or break its counts.
+  virtual void check_unchanged() const {}
 
   std::string name;
   std::string series_uid, series_description;  // a DICOM series' (VolumeHeader's); else empty
