@@ -102,6 +102,13 @@ TEST_F(CliOutputs, AMeshDeviceIsWrittenInPlaceInCoreAndRefusedOutOfCore) {
   r = run("extract field:sphere:24 -o null.ply -q --memory 1MiB --simplify 0.5");
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(is_char_device("null.ply"));
+  // Its scratch files then go to TMPDIR: one that is missing is named (it was std::filesystem's
+  // "temp_directory_path: No such file or directory").
+  r = run("extract field:sphere:24 -o null.ply -q --memory 1MiB --simplify 0.5",
+          "TMPDIR=/nonexistent");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "the temporary folder TMPDIR=/nonexistent: No such file or directory"))
+      << r.err;
   EXPECT_EQ(stray_files({"null.ply"}), std::vector<std::string>{});
 }
 
@@ -387,13 +394,20 @@ TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {
 // "-" is standard output, which the shell may point at an output (`--stats - > m.ply`): the
 // stats and the mesh would share one file (exit 0 before, the mesh replacing the stats).
 TEST_F(CliOutputs, StatsOnAStandardOutputThatIsTheOutputAreRefused) {
-  for (const std::string& cmd : {std::string("extract field:sphere:12 -o m.ply --stats - >m.ply"),
-                                 std::string("extract field:sphere:12 -o m.ply --stats - >>m.ply"),
-                                 std::string("demo >isotile-demo.ply")}) {
+  for (const std::string& cmd :
+       {std::string("extract field:sphere:12 -o m.ply --stats - >m.ply"),
+        std::string("extract field:sphere:12 -o m.ply --stats - >>m.ply")}) {
     const CliResult r = shell("\"$ISOTILE\" -q " + cmd);
     EXPECT_EQ(r.code, 1) << cmd;
     EXPECT_TRUE(says(r, "- is the same file as the output")) << cmd << ": " << r.err;
   }
+  // demo has no --stats to name.
+  const CliResult demo = shell("\"$ISOTILE\" -q demo >isotile-demo.ply");
+  EXPECT_EQ(demo.code, 1);
+  EXPECT_TRUE(says(demo,
+                   "standard output, where demo prints its statistics, is the output "
+                   "isotile-demo.ply (one would replace the other)"))
+      << demo.err;
   // Elsewhere it is written there.
   const CliResult r = shell("\"$ISOTILE\" -q extract field:sphere:12 -o m.ply --stats - >s.json");
   EXPECT_EQ(r.code, 0) << r.err;

@@ -254,6 +254,12 @@ int main(int argc, char** argv) {
         d.in.input = "field:gyroid:128";
         d.output = demo_output;
         d.stats = "-";
+        // Said here in demo's words: it has no --stats option to name.
+        if (same_file("/dev/stdout", demo_output))
+          throw InputError("standard output, where demo prints its statistics, is the output " +
+                           demo_output +
+                           " (one would replace the other): redirect it elsewhere, or write the "
+                           "mesh elsewhere with -o");
         const int rc = finished(run_extract(d));
         if (rc == 0 && !g_quiet)
           std::fprintf(stderr, "isotile: demo mesh written to %s\n",

@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -47,7 +48,17 @@ constexpr double kSeamBytesPerFace = 800;
 // (TMPDIR): not into /dev or /proc.
 std::filesystem::path scratch_folder(const std::filesystem::path& output) {
   const OutputTarget t = resolve_output(output);
-  return t.in_place() ? std::filesystem::temp_directory_path() : t.path.parent_path();
+  if (!t.in_place()) return t.path.parent_path();
+  std::error_code ec;
+  const std::filesystem::path dir = std::filesystem::temp_directory_path(ec);
+  if (ec) {
+    const char* env = std::getenv("TMPDIR");
+    throw IoError("cannot keep scratch files for " + output.string() +
+                  " (written in place, so not beside it): the temporary folder" +
+                  (env ? std::string(" TMPDIR=") + env : std::string(" /tmp")) + ": " +
+                  ec.message());
+  }
+  return dir;
 }
 
 class ScratchFile {
