@@ -381,8 +381,9 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     return out;
   }
   const std::int64_t total = result.plan.total();
+  // Numbered from 1, as the progress lines count bricks.
   auto brick_error = [&](std::int64_t b, const std::exception& e) {
-    return "brick " + std::to_string(b) + " of " + std::to_string(total) + " (" +
+    return "brick " + std::to_string(b + 1) + " of " + std::to_string(total) + " (" +
            describe(result.plan.cells(b)) + "): " + e.what();
   };
   std::vector<double> count_seconds(static_cast<std::size_t>(total)),
