@@ -24,6 +24,7 @@
 #include "core/volume/volume_io.h"
 #include "test_support.h"
 #include "tiler/brick_plan.h"
+#include "tiler/brick_reader.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"
 
@@ -57,6 +58,8 @@ class Tiler : public testing::TempDirTest {
     to.memory = memory;
     to.format = format;
     to.overlap_min_memory = ~std::uint64_t{0};
+    // Bricks of a few cells stress the seams, however many times over they read the volume.
+    to.max_read_amplification = 0;
     const TiledResult r = extract_tiled(*open_volume_source(input, raw), to, out);
     if (result) *result = r;
     const std::string one_at_a_time = slurp(out);
@@ -416,6 +419,7 @@ TEST_F(Tiler, ABudgetTheSurfaceOverflowsIsSaidBeforeExtracting) {
     TiledOptions to;
     to.extract = o;
     to.memory = memory;
+    to.max_read_amplification = 0;
     std::vector<std::string> said;
     bool extracting_before = false;  // an extraction report before the warning
     Progress progress([&](const ProgressUpdate& u) {
@@ -547,6 +551,76 @@ TEST_F(Tiler, AnInputThatChangesDuringTheRunIsAnError) {
   }
   EXPECT_TRUE(changed);
   EXPECT_FALSE(fs::exists(out));
+}
+
+// Macet max's halo (138 samples) against a budget for one-cell bricks of nucleon (41^3): 64,000
+// bricks, each reading the whole volume, ran for ever. Refused, naming the smallest budget whose
+// bricks read the volume at most 64 times over; that budget plans, one byte less does not.
+TEST(BrickPlan, BricksThatWouldReadTheVolumeTooManyTimesOverAreRefused) {
+  BrickPlanOptions o;
+  o.halo = 138;
+  o.state_bytes_per_sample = 4;
+  o.volume_dims = {41, 41, 41};
+  o.memory = brick_bytes({1, 1, 1}, o);
+  std::string message;
+  try {
+    plan_bricks(o.volume_dims, o);
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("bricks of 1x1x1 cells, each read with its halo, would read the volume "
+                         "64000 times over (at most 64); give at least "),
+            std::string::npos)
+      << message;
+  const std::string given = "give at least ";
+  ASSERT_NE(message.find(given), std::string::npos);
+  const std::uint64_t least = std::stoull(message.substr(message.find(given) + given.size()));
+  o.memory = least;
+  EXPECT_LE(read_amplification(plan_bricks(o.volume_dims, o), o.halo), 64);
+  o.memory = least - 1;
+  EXPECT_THROW(plan_bricks(o.volume_dims, o), InputError);
+  o.max_read_amplification = 0;  // no limit
+  o.memory = brick_bytes({1, 1, 1}, o);
+  EXPECT_EQ(plan_bricks(o.volume_dims, o).total(), 64000);
+  // One brick reads the volume once; bricks of MC's halo (1) far from the limit.
+  o.halo = 1;
+  o.memory = ~std::uint64_t{0} >> 8;
+  EXPECT_EQ(read_amplification(plan_bricks(o.volume_dims, o), o.halo), 1);
+}
+
+// A brick whose one-cell z-slices still overflow the budget (the run goes over it, said once):
+// cut into the fewest slices within a quarter above the one-cell slices' need, not into one-cell
+// slices, each of which re-reads the halo (Macet max's 138 samples: 329 parts of nucleon's 64
+// bricks took 25 s, 131 parts 10.5 s).
+TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed) {
+  auto source = open_volume_source("field:torus:33", {});
+  ExtractOptions e = options(Method::Macet);
+  e.quality = MacetQuality::Max;
+  const BrickReader reader(*source, e);
+  const Box3 cells{{0, 0, 0}, {32, 32, 32}};
+  const std::uint64_t vertices = 400000, faces = 800000;
+  const std::int64_t depth = cells.extent(2);
+  const BrickReader::Slicing s = reader.slice(cells, vertices, faces, 1000);
+  // What one-cell slices would need: the least.
+  Box3 one = cells;
+  one.hi[2] = one.lo[2] + 1;
+  const auto n = static_cast<std::uint64_t>(depth);
+  EXPECT_EQ(s.least, reader.estimate(one, (vertices + n - 1) / n, (faces + n - 1) / n));
+  EXPECT_GT(s.least, 1000u);
+  EXPECT_LE(static_cast<double>(s.bytes), 1.25 * static_cast<double>(s.least));
+  EXPECT_LT(s.count, depth);
+  if (s.count > 1) {
+    Box3 thicker = cells;
+    const auto fewer = static_cast<std::uint64_t>(s.count - 1);
+    thicker.hi[2] = cells.lo[2] + (depth + s.count - 2) / (s.count - 1);
+    EXPECT_GT(static_cast<double>(reader.estimate(thicker, (vertices + fewer - 1) / fewer,
+                                                  (faces + fewer - 1) / fewer)),
+              1.25 * static_cast<double>(s.least));
+  }
+  // Where slices fit, the fewest that fit, as before.
+  const BrickReader::Slicing fits = reader.slice(cells, vertices, faces, ~std::uint64_t{0} >> 8);
+  EXPECT_EQ(fits.count, 1);
+  EXPECT_EQ(fits.least, 0u);
 }
 
 TEST_F(Tiler, VdbInputStreamsExactly) {

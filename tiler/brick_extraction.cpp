@@ -53,13 +53,18 @@ bool BrickExtraction::empty_volume() const {
 }
 
 const BrickPlan& BrickExtraction::plan() {
+  const auto options = [&] {
+    BrickPlanOptions po = reader_.plan_options(opt_.memory);
+    po.max_read_amplification = opt_.max_read_amplification;
+    return po;
+  };
   try {
-    plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
+    plan_ = plan_bricks(n_, options());
   } catch (const InputError&) {
     // Too small a budget for a second brick's samples: one brick at a time.
     if (!overlap_) throw;
     set_overlap(false);
-    plan_ = plan_bricks(n_, reader_.plan_options(opt_.memory));
+    plan_ = plan_bricks(n_, options());
   }
   vseg_ = std::make_unique<SegmentTable>(n_, plan_.count[0]);
   fseg_ = std::make_unique<SegmentTable>(n_, plan_.count[0]);

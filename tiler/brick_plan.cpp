@@ -44,7 +44,9 @@ namespace {
 constexpr std::int64_t kMinRowBrick = 64;
 }  // namespace
 
-BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
+namespace {
+
+BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
   BrickPlan plan;
   plan.dims = dims;
   Index3 cells;
@@ -86,6 +88,60 @@ BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
     plan.count[a] = (cells[a] + plan.brick[a] - 1) / plan.brick[a];
   }
   return plan;
+}
+
+bool fits_amplification(const Index3& dims, BrickPlanOptions options, std::uint64_t memory) {
+  options.memory = memory;
+  try {
+    return read_amplification(plan_within(dims, options), options.halo) <=
+           options.max_read_amplification;
+  } catch (const InputError&) {
+    return false;
+  }
+}
+
+}  // namespace
+
+BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
+  const BrickPlan plan = plan_within(dims, options);
+  if (options.max_read_amplification <= 0) return plan;
+  const double amplification = read_amplification(plan, options.halo);
+  if (amplification <= options.max_read_amplification) return plan;
+  // The smallest budget whose plan reads the volume at most that many times over (a budget for
+  // the whole volume reads it once, so there is one).
+  Index3 cells;
+  for (int a = 0; a < 3; ++a) cells[a] = std::max<std::int64_t>(dims[a] - 1, 1);
+  std::uint64_t lo = options.memory, hi = std::max(brick_bytes(cells, options), options.memory);
+  while (lo + 1 < hi) {
+    const std::uint64_t mid = lo + (hi - lo) / 2;
+    (fits_amplification(dims, options, mid) ? hi : lo) = mid;
+  }
+  auto text = [](const Index3& v) {
+    return std::to_string(v[0]) + "x" + std::to_string(v[1]) + "x" + std::to_string(v[2]);
+  };
+  throw InputError("memory budget of " + std::to_string(options.memory) +
+                   " bytes is too small for a halo of " + std::to_string(options.halo) +
+                   " samples: its " + std::to_string(plan.total()) + " bricks of " +
+                   text(plan.brick) + " cells, each read with its halo, would read the volume " +
+                   std::to_string(static_cast<std::int64_t>(std::ceil(amplification))) +
+                   " times over (at most " +
+                   std::to_string(static_cast<std::int64_t>(options.max_read_amplification)) +
+                   "); give at least " + std::to_string(hi) + " bytes");
+}
+
+double read_amplification(const BrickPlan& plan, int halo) {
+  double total = 1;
+  for (int a = 0; a < 3; ++a) {
+    double read = 0;
+    for (std::int64_t i = 0; i < plan.count[a]; ++i) {
+      const std::int64_t lo = i * plan.brick[a];
+      const std::int64_t hi = std::min(lo + plan.brick[a], plan.dims[a] - 1);
+      read += static_cast<double>(std::min(hi + 1 + halo, plan.dims[a]) -
+                                  std::max<std::int64_t>(lo - halo, 0));
+    }
+    total *= read / static_cast<double>(plan.dims[a]);
+  }
+  return total;
 }
 
 std::uint64_t parse_memory_size(const std::string& text) {

@@ -63,6 +63,9 @@ class BrickReader {
   struct Slicing {
     std::int64_t count;
     std::uint64_t bytes;
+    // Where even one-cell slices overflow the budget: what they would need, the least this brick
+    // can; 0 where the slices fit.
+    std::uint64_t least = 0;
   };
   Slicing slice(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
                 std::uint64_t memory, double extra_per_face = 0, bool odd = false) const;

@@ -37,6 +37,9 @@ struct TiledOptions {
   // extracted (two in flight, each planned to fit the budget together). Below it, where a few
   // MiB of allocator slack between two bricks matter, one brick at a time.
   std::uint64_t overlap_min_memory = std::uint64_t{256} << 20;
+  // BrickPlanOptions::max_read_amplification: a budget whose bricks would read the volume more
+  // times over is refused, naming the budget that keeps to it. 0: no limit.
+  double max_read_amplification = 64;
   MeshFormat format = MeshFormat::Ply;  // binary PLY or binary STL (fixed-size records)
   bool quality = true;                  // accumulate radius-ratio statistics of the faces
   // Below 1: simplify to this fraction of the faces, brick by brick (tiler/tiled_simplify.h).
