@@ -31,10 +31,11 @@ struct Cancelled {
 
 // Runs `isotile ARGS...` in `dir`, waits until its stderr holds `marker` (an empty marker: for
 // half a second), sends `sig` and collects the exit status and stderr. SIGPIPE is "sent" by
-// closing the pipe its stderr goes to, so that its next progress line meets it. Gives up
-// (killing it) after 120 s.
+// closing the pipe its stderr goes to, so that its next progress line meets it. `ignored`: a
+// signal the process starts with ignored (as nohup leaves SIGHUP). Gives up (killing it) after
+// 120 s.
 Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& args,
-                         const std::string& marker, int sig) {
+                         const std::string& marker, int sig, int ignored = 0) {
   int pipe_fd[2];
   if (::pipe(pipe_fd) != 0) return {};
   const pid_t pid = ::fork();
@@ -43,6 +44,7 @@ Cancelled run_and_signal(const fs::path& dir, const std::vector<std::string>& ar
     ::close(pipe_fd[0]);
     ::close(pipe_fd[1]);
     if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    if (ignored) ::signal(ignored, SIG_IGN);
     std::vector<char*> argv;
     std::string cli = ISOTILE_CLI;
     argv.push_back(cli.data());
@@ -136,6 +138,17 @@ TEST_F(CliCancel, SighupCancelsAndExits129) {
                                       "macet", "--quality", "max", "-o", "out.ply"},
                                      "isotile: macet search: ", SIGHUP);
   expect_cancelled(r, 129);
+}
+
+// Under nohup (SIGHUP ignored when it starts) a closed terminal does not end the run.
+TEST_F(CliCancel, ASighupIgnoredOnEntryStaysIgnored) {
+  const Cancelled r = run_and_signal(dir_,
+                                     {"extract", "field:gyroid:128", "--iso", "0", "--method",
+                                      "macet", "--quality", "max", "-o", "out.ply"},
+                                     "isotile: macet search: ", SIGHUP, SIGHUP);
+  ASSERT_TRUE(WIFEXITED(r.status)) << "ended by signal " << WTERMSIG(r.status) << ":\n" << r.err;
+  EXPECT_EQ(WEXITSTATUS(r.status), 0) << r.err;
+  EXPECT_EQ(r.left, std::vector<std::string>{"out.ply"});
 }
 
 // A run blocked reading its input (a FIFO nobody writes: open() waits for a writer) never reaches

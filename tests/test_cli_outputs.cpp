@@ -224,6 +224,16 @@ TEST_F(CliOutputs, AReplacedFileKeepsItsPermissions) {
               fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read)
         << extra;
   }
+  // The owner (now whoever ran isotile) keeps reading and writing it: a file writable only
+  // through its group gave a file its new owner could not replace. Root may write any file.
+  if (::geteuid() == 0) {
+    fs::permissions(dir_ / "m.ply", fs::perms::group_read | fs::perms::group_write);
+    const CliResult r = run("extract field:sphere:16 -o m.ply -q");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(fs::status(dir_ / "m.ply").permissions(),
+              fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read |
+                  fs::perms::group_write);
+  }
 }
 
 // A file its owner made read-only is refused, as `>` would refuse it, before any work; it was

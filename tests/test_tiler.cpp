@@ -589,7 +589,8 @@ TEST(BrickPlan, BricksThatWouldReadTheVolumeTooManyTimesOverAreRefused) {
 }
 
 // A brick whose one-cell z-slices still overflow the budget (the run goes over it, said once):
-// cut into the fewest slices within a quarter above the one-cell slices' need, not into one-cell
+// cut into the fewest slices within a quarter above the one-cell slices' need (where that need is
+// twice the budget or more; else no more than it), not into one-cell
 // slices, each of which re-reads the halo (Macet max's 138 samples: 329 parts of nucleon's 64
 // bricks took 25 s, 131 parts 10.5 s).
 TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed) {
@@ -617,6 +618,15 @@ TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed)
                                                   (faces + fewer - 1) / fewer)),
               1.25 * static_cast<double>(s.least));
   }
+  // A budget less than twice below the least (MC, whose estimate grows with a slice's
+  // thickness): no slice above the least, so a hard limit the user counted on is passed by as
+  // little as it can be.
+  ExtractOptions mc = options(Method::MarchingCubes);
+  const BrickReader mc_reader(*source, mc);
+  const std::uint64_t mc_least = mc_reader.slice(cells, vertices, faces, 1).least;
+  const BrickReader::Slicing near = mc_reader.slice(cells, vertices, faces, mc_least * 3 / 4);
+  EXPECT_EQ(near.least, mc_least);
+  EXPECT_LE(near.bytes, mc_least);
   // Where slices fit, the fewest that fit, as before.
   const BrickReader::Slicing fits = reader.slice(cells, vertices, faces, ~std::uint64_t{0} >> 8);
   EXPECT_EQ(fits.count, 1);

@@ -44,6 +44,12 @@ using namespace isotile::cli;
 // worker, and tbb::finalize then waits for that worker for ever (oneTBB 2021.8). Once it has been
 // seen, main ends the process without finalize.
 bool g_worker_start_failed = false;
+
+// --threads: never destroyed (held here, so that it is not a leak): lifting the limit at the end
+// can start workers, and where a worker cannot start the destructor's exception ends in
+// std::terminate (seen with --threads 1 under ulimit -v). tbb::finalize joins the workers with
+// the limit in place.
+tbb::global_control* g_thread_limit = nullptr;
 bool worker_start_failure(const char* what) {
   return std::strstr(what, "pthread_create has failed") != nullptr;
 }
@@ -53,6 +59,8 @@ bool worker_start_failure(const char* what) {
 // failing rank named. An error only this rank has inside the run (not agreed) aborts the job, as
 // the other ranks wait for this one.
 int fail(const char* what, bool agreed) {
+  // On every rank: each one's finalize would wait.
+  if (worker_start_failure(what)) g_worker_start_failed = true;
 #ifdef ISOTILE_HAVE_MPI
   if (g_mpi) {
     if (g_distributed && !agreed && g_mpi->size > 1) {
@@ -65,7 +73,6 @@ int fail(const char* what, bool agreed) {
   (void)agreed;
 #endif
   if (worker_start_failure(what)) {
-    g_worker_start_failed = true;
     std::fprintf(stderr,
                  "isotile: error: %s (a worker thread could not be started: raise the process or "
                  "memory limits, or give fewer --threads)\n",
@@ -85,15 +92,28 @@ extern "C" void on_signal(int sig) {
 // The signals that end a run: Ctrl-C, kill, a closed terminal.
 constexpr int kCancelSignals[] = {SIGINT, SIGTERM, SIGHUP};
 
+// A signal the parent set to be ignored stays ignored (nohup's SIGHUP, a script's background
+// job's SIGINT and SIGQUIT, a parent's ignored SIGPIPE, whose writes then fail as errors).
+bool ignored_on_entry(int sig) {
+  struct sigaction current {};
+  return ::sigaction(sig, nullptr, &current) == 0 && current.sa_handler == SIG_IGN;
+}
+bool g_ignored[NSIG] = {};
+void handle(int sig, void (*handler)(int)) {
+  if (!g_ignored[sig]) std::signal(sig, handler);
+}
+
 // Every signal that ends the process removes the temporaries first (on_signal), then takes its
 // default action: the cancel signals, SIGQUIT (its core dump) and SIGPIPE (stderr or stdout
 // piped into a reader that stopped, as `2>&1 | head` does). SIGXFSZ is ignored instead: a write
 // past the file-size limit (ulimit -f) then fails with EFBIG, which the writers report as an
 // error ("File too large") and clean up after, as after a full disk.
 void install_signal_handlers() {
-  for (int sig : kCancelSignals) std::signal(sig, on_signal);
-  std::signal(SIGQUIT, on_signal);
-  std::signal(SIGPIPE, on_signal);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE})
+    g_ignored[sig] = ignored_on_entry(sig);
+  for (int sig : kCancelSignals) handle(sig, on_signal);
+  handle(SIGQUIT, on_signal);
+  handle(SIGPIPE, on_signal);
   std::signal(SIGXFSZ, SIG_IGN);
 }
 
@@ -117,7 +137,7 @@ extern "C" void on_cancel_timeout(int) {
 extern "C" void on_cancel_signal(int sig) {
   g_cancel_signal = sig;
   g_progress.cancel();
-  for (int s : kCancelSignals) std::signal(s, on_signal);
+  for (int s : kCancelSignals) handle(s, on_signal);
   std::signal(SIGALRM, on_cancel_timeout);
   ::alarm(kCancelGraceSeconds);
 }
@@ -219,12 +239,11 @@ int main(int argc, char** argv) {
   }
 #endif
 
-  // Never destroyed: lifting the limit at the end can start workers, and where a worker cannot
-  // start (see g_worker_start_failed) the destructor's exception ends in std::terminate (seen
-  // with --threads 1 under ulimit -v). tbb::finalize joins the workers with the limit in place.
   tbb::task_scheduler_handle workers;
   try {
-    if (threads > 0) new tbb::global_control(tbb::global_control::max_allowed_parallelism, threads);
+    if (threads > 0)
+      g_thread_limit =
+          new tbb::global_control(tbb::global_control::max_allowed_parallelism, threads);
     workers = tbb::task_scheduler_handle{tbb::attach{}};
   } catch (const std::bad_alloc&) {
     return fail("out of memory", false);
@@ -239,7 +258,7 @@ int main(int argc, char** argv) {
   // others end at it, as before. Under MPI each rank ends at the signal (mpirun forwards it to
   // every rank): a rank cancelling alone would leave the others waiting in a collective.
   if ((*extract_cmd || *simplify_cmd || *demo_cmd) && !launched_by_mpi()) {
-    for (int sig : kCancelSignals) std::signal(sig, on_cancel_signal);
+    for (int sig : kCancelSignals) handle(sig, on_cancel_signal);
   }
   const int rc = [&]() -> int {
     try {

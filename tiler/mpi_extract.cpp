@@ -359,7 +359,8 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     if (source->sequential())
       throw InputError(source->name +
                        ": gzip'd data can only be read front to back, so ranks cannot read their "
-                       "own bricks; decompress it first (gunzip) for a distributed run");
+                       "own bricks; decompress it first for a distributed run (gunzip a .gz "
+                       "file; save a gzip NRRD with raw encoding, e.g. unu save -f nrrd -e raw)");
     bricks = std::make_unique<BrickExtraction>(*source, options);
     out.dims = source->dims;
     out.type = source->type;

@@ -161,10 +161,14 @@ TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
     return run(source, options, output);
   } catch (const Cancelled&) {
     throw;
-  } catch (const Error&) {
-    // A changed input breaks the passes' agreement ("brick contract broken", a short read):
-    // that is the error to give.
-    source.check_unchanged();
+  } catch (const Error& e) {
+    // A changed input breaks the passes' agreement ("brick contract broken", a short read): that
+    // is the error to give first, with the one that stopped the run.
+    try {
+      source.check_unchanged();
+    } catch (const InputError& changed) {
+      throw InputError(std::string(changed.what()) + " (the run stopped at: " + e.what() + ")");
+    }
     throw;
   }
 }

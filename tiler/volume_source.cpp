@@ -95,7 +95,8 @@ struct PlainLayout {
 
 class RawFileSource final : public VolumeSource {
  public:
-  explicit RawFileSource(const PlainLayout& layout) : offset_(layout.offset), swap_(layout.swap) {
+  explicit RawFileSource(const PlainLayout& layout)
+      : file_(layout.file), offset_(layout.offset), swap_(layout.swap) {
     name = layout.file;
     type = layout.type;
     dims = layout.dims;
@@ -119,7 +120,7 @@ class RawFileSource final : public VolumeSource {
 
   // The open descriptor's file: a file renamed over the name later is not what is read.
   void check_unchanged() const override {
-    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(name);
+    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(file_);
   }
 
   void read(const Box3& box, void* out) override {
@@ -147,6 +148,7 @@ class RawFileSource final : public VolumeSource {
   }
 
  private:
+  std::string file_;  // the file holding the samples (a NRRD header's data file), for messages
   int fd_ = -1;
   std::optional<FileStamp> stamp_;
   std::uint64_t offset_ = 0;
@@ -216,7 +218,9 @@ class PlaneFilesSource final : public VolumeSource {
 // attached gzip data follows its header).
 class GzipRawSource final : public VolumeSource {
  public:
-  explicit GzipRawSource(const PlainLayout& layout) : file_name_(layout.file), swap_(layout.swap) {
+  // `why_gzip`: what says the data is gzip'd, for the error where it is not.
+  GzipRawSource(const PlainLayout& layout, const std::string& why_gzip)
+      : file_name_(layout.file), swap_(layout.swap) {
     name = layout.file;
     type = layout.type;
     dims = layout.dims;
@@ -236,19 +240,23 @@ class GzipRawSource final : public VolumeSource {
       throw IoError("cannot open " + name + ": out of memory");
     }
     fd_ = fd;
-    if (gzdirect(file_))
-      throw InputError(name + ": not gzip data (the name ends in .gz); rename it or recompress it");
     plane_bytes_ = static_cast<std::size_t>(dims[0] * dims[1]) * scalar_size(type);
     buffer_ = static_cast<unsigned>(
         std::clamp<std::size_t>(std::bit_ceil(plane_bytes_), 1u << 14, kMaxBuffer));
+    // Before the first read, which gzdirect() is: later zlib keeps its default 8 KiB (it did
+    // until 2026-11-28).
     gzbuffer(file_, buffer_);
+    if (gzdirect(file_)) {
+      gzclose(file_);
+      throw InputError(name + ": not gzip data (" + why_gzip + "); rename it or recompress it");
+    }
   }
   ~GzipRawSource() override {
     if (file_) gzclose(file_);
   }
 
   void check_unchanged() const override {
-    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(name);
+    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(file_name_);
   }
 
   bool sequential() const override { return true; }
@@ -468,7 +476,7 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
       const PlainLayout layout{d->data_file, d->offset, d->type, d->dims,
                                (d->endian == Endian::Big) != native_big};
       if (d->gzip)
-        source = std::make_unique<GzipRawSource>(layout);
+        source = std::make_unique<GzipRawSource>(layout, "the NRRD header says encoding: gzip");
       else
         source = std::make_unique<RawFileSource>(layout);
       source->spacing = d->spacing;
@@ -492,7 +500,7 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
     const RawLayout r = resolve_raw_layout(input, raw);
     const PlainLayout layout{input, 0, r.type, r.dims, (raw.endian == Endian::Big) != native_big};
     if (ends_with(input, ".gz"))
-      source = std::make_unique<GzipRawSource>(layout);
+      source = std::make_unique<GzipRawSource>(layout, "the name ends in .gz");
     else
       source = std::make_unique<RawFileSource>(layout);
   }

@@ -219,11 +219,13 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
     throw IoError("cannot write " + target_.string() + ": " + describe(err));
   }
   // A replaced file keeps its permissions (a private 0600 file must not become world-readable
-  // 0644): the temporary takes them before any data goes in. Set-id bits are not carried over.
-  // Best effort, as on a file system without modes.
+  // 0644): the temporary takes them before any data goes in. Set-id bits are not carried over;
+  // the owner (now this user, as after any rename) keeps reading and writing it, as another
+  // user's file writable through its group gave a file its new owner could not replace, nor MPI
+  // ranks open. Best effort, as on a file system without modes.
   struct stat old {};
   if (t.kind == OutputTarget::Kind::RegularFile && ::stat(final_.c_str(), &old) == 0)
-    (void)::fchmod(fileno(file_), old.st_mode & 01777);
+    (void)::fchmod(fileno(file_), (old.st_mode & 01777) | S_IRUSR | S_IWUSR);
   slot_ = claim_slot(temp_.string());
   if (slot_ >= 0) {
     g_buffers[slot_] = static_cast<char*>(std::malloc(kBufferSize));

@@ -264,6 +264,10 @@ void check_series_folder(const std::string& dir) {
                        ": a link to nothing in the DICOM folder; remove it (a folder's files "
                        "are read as one series)");
     if (std::filesystem::is_directory(st) || std::filesystem::is_regular_file(st)) continue;
+    if (status_ec)
+      throw InputError(entry.path().string() + ": cannot be examined in the DICOM folder (" +
+                       status_ec.message() +
+                       "); remove it (a folder's files are read as one series)");
     throw InputError(entry.path().string() +
                      ": not a regular file (a FIFO, socket or device) in the DICOM folder; "
                      "remove it (a folder's files are read as one series)");
