@@ -13,6 +13,7 @@
 #include <chrono>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "test_support.h"
@@ -105,13 +106,16 @@ void expect_cancelled(const Cancelled& r, int code) {
   EXPECT_TRUE(r.left.empty()) << "left behind: " << r.left.front();
 }
 
-// Macet max on a 256^3 gyroid runs for seconds; SIGINT during its search.
+// Macet max on a 256^3 gyroid runs for seconds; SIGINT during its search, and SIGHUP (a closed
+// terminal), which cancels as SIGINT and SIGTERM do.
 TEST_F(CliCancel, SigintDuringExtractionExits130AndLeavesNothing) {
-  const Cancelled r = run_and_signal(dir_,
-                                     {"extract", "field:gyroid:256", "--iso", "0", "--method",
-                                      "macet", "--quality", "max", "-o", "out.ply"},
-                                     "isotile: macet search: ", SIGINT);
-  expect_cancelled(r, 130);
+  for (const auto& [sig, code] : {std::pair{SIGINT, 130}, std::pair{SIGHUP, 129}}) {
+    const Cancelled r = run_and_signal(dir_,
+                                       {"extract", "field:gyroid:256", "--iso", "0", "--method",
+                                        "macet", "--quality", "max", "-o", "out.ply"},
+                                       "isotile: macet search: ", sig);
+    expect_cancelled(r, code);
+  }
 }
 
 // SIGTERM while the mesh is being written: the temporary file goes too.
@@ -129,15 +133,6 @@ TEST_F(CliCancel, SigintOutOfCoreExits130AndLeavesNothing) {
                                       "macet", "--memory", "64MiB", "-o", "out.ply"},
                                      "isotile: count: 1/", SIGINT);
   expect_cancelled(r, 130);
-}
-
-// A closed terminal (SIGHUP) cancels as SIGINT and SIGTERM do.
-TEST_F(CliCancel, SighupCancelsAndExits129) {
-  const Cancelled r = run_and_signal(dir_,
-                                     {"extract", "field:gyroid:256", "--iso", "0", "--method",
-                                      "macet", "--quality", "max", "-o", "out.ply"},
-                                     "isotile: macet search: ", SIGHUP);
-  expect_cancelled(r, 129);
 }
 
 // Under nohup (SIGHUP ignored when it starts) a closed terminal does not end the run.
