@@ -45,11 +45,6 @@ using namespace isotile::cli;
 // seen, main ends the process without finalize.
 bool g_worker_start_failed = false;
 
-// --threads: never destroyed (held here, so that it is not a leak): lifting the limit at the end
-// can start workers, and where a worker cannot start the destructor's exception ends in
-// std::terminate (seen with --threads 1 under ulimit -v). tbb::finalize joins the workers with
-// the limit in place.
-tbb::global_control* g_thread_limit = nullptr;
 bool worker_start_failure(const char* what) {
   return std::strstr(what, "pthread_create has failed") != nullptr;
 }
@@ -150,6 +145,13 @@ int cancelled() {
 
 }  // namespace
 
+// --threads: never destroyed: lifting the limit at the end can start workers, and where a worker
+// cannot start the destructor's exception ends in std::terminate (seen with --threads 1 under
+// ulimit -v). tbb::finalize joins the workers with the limit in place. Held by a pointer of
+// external linkage, so that the store is kept and LeakSanitizer finds the object from it (in the
+// anonymous namespace the optimizer dropped the unread store, and it counted as a leak).
+tbb::global_control* g_isotile_thread_limit = nullptr;
+
 int main(int argc, char** argv) {
   install_signal_handlers();
   if (launched_by_mpi()) {
@@ -242,7 +244,7 @@ int main(int argc, char** argv) {
   tbb::task_scheduler_handle workers;
   try {
     if (threads > 0)
-      g_thread_limit =
+      g_isotile_thread_limit =
           new tbb::global_control(tbb::global_control::max_allowed_parallelism, threads);
     workers = tbb::task_scheduler_handle{tbb::attach{}};
   } catch (const std::bad_alloc&) {
