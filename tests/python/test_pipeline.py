@@ -323,16 +323,16 @@ def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
     error by a warnings filter, it stops the run and leaves no file."""
     torus = dict(method="macet", stats=False)
     isotile.extract("field:torus:33", output=tmp_path / "in.ply", **torus)
-    with pytest.warns(RuntimeWarning, match="memory budget of 6000 bytes is too small") as said:
-        isotile.extract("field:torus:33", memory=6000, output=tmp_path / "ooc.ply", **torus)
+    with pytest.warns(RuntimeWarning, match="memory budget of 12000 bytes is too small") as said:
+        isotile.extract("field:torus:33", memory=12000, output=tmp_path / "ooc.ply", **torus)
     assert len(said) == 1
     assert said[0].filename == __file__
     assert (tmp_path / "ooc.ply").read_bytes() == (tmp_path / "in.ply").read_bytes()
     assert "warning" not in capfd.readouterr().err
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        with pytest.raises(RuntimeWarning, match="memory budget of 6000 bytes"):
-            isotile.extract("field:torus:33", memory=6000, output=tmp_path / "err.ply", **torus)
+        with pytest.raises(RuntimeWarning, match="memory budget of 12000 bytes"):
+            isotile.extract("field:torus:33", memory=12000, output=tmp_path / "err.ply", **torus)
     assert not (tmp_path / "err.ply").exists()
 
 
