@@ -615,7 +615,7 @@ TEST(BrickPlan, RowsGiveWayToCubesWhereTheHaloMakesThemReadMuchMore) {
 // cut into the fewest slices within a quarter above the one-cell slices' need (where that need is
 // twice the budget or more; else no more than it), not into one-cell
 // slices, each of which re-reads the halo (Macet max's 138 samples: 329 parts of nucleon's 64
-// bricks took 25 s, 131 parts 10.5 s).
+// bricks took 9.6-10.1 s, 131 parts 3.5-3.8 s).
 TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed) {
   auto source = open_volume_source("field:torus:33", {});
   ExtractOptions e = options(Method::Macet);

@@ -54,9 +54,7 @@ bool BrickExtraction::empty_volume() const {
 
 const BrickPlan& BrickExtraction::plan() {
   const auto options = [&] {
-    BrickPlanOptions po = reader_.plan_options(opt_.memory);
-    po.max_read_amplification = opt_.max_read_amplification;
-    return po;
+    return reader_.plan_options(opt_.memory, opt_.max_read_amplification);
   };
   try {
     plan_ = plan_bricks(n_, options());

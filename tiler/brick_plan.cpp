@@ -77,13 +77,14 @@ BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
                      (options.slabs ? "slab of one cell layer" : "brick of one cell") + " needs " +
                      std::to_string(brick_bytes(shape(1, false), options)) + " bytes");
   const auto plan_of = [&](const Index3& c) {
+    BrickPlan p = plan;
     for (int a = 0; a < 3; ++a) {
-      plan.count[a] = (cells[a] + c[a] - 1) / c[a];
+      p.count[a] = (cells[a] + c[a] - 1) / c[a];
       // Even out: the same number of bricks, each as equal as possible (never larger than c).
-      plan.brick[a] = (cells[a] + plan.count[a] - 1) / plan.count[a];
-      plan.count[a] = (cells[a] + plan.brick[a] - 1) / plan.brick[a];
+      p.brick[a] = (cells[a] + p.count[a] - 1) / p.count[a];
+      p.count[a] = (cells[a] + p.brick[a] - 1) / p.brick[a];
     }
-    return plan;
+    return p;
   };
   // Whole rows when that still leaves bricks thick enough for a small halo overhead (or whole
   // y-z extents); cubes otherwise, which have the least halo per cell.

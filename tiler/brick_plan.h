@@ -35,10 +35,10 @@ struct BrickPlanOptions {
   // reads no halo there).
   Index3 volume_dims{0, 0, 0};
   // A plan whose bricks, grown by their halo, read the volume more times over than this is
-  // refused (read_amplification): its run would take as many times the in-core work (Macet max's
-  // halo of 138 samples made 64,000 one-cell bricks of a 41^3 volume: no end after 300 s, under
-  // 1 s in core; gyroid 512 with Macet max reads 9.1 times over at 1 GiB, 63.6 at 512 MiB).
-  // 0: no limit (the tests' tiny bricks, which stress the seams).
+  // refused (read_amplification): its run would take as many times the in-core work. Macet max's
+  // halo of 138 samples made 64,000 one-cell bricks of a 41^3 volume (killed unfinished after
+  // 300 s; under 1 s in core); gyroid 512 with Macet max reads 9.1 times over at 1 GiB, 63.6 at
+  // 512 MiB. 0: no limit (the tests' tiny bricks, which stress the seams).
   double max_read_amplification = 64;
 };
 

@@ -37,9 +37,10 @@ BrickReader::BrickReader(VolumeSource& source, const ExtractOptions& extract)
   halo_ = extract_halo(ex_);
 }
 
-BrickPlanOptions BrickReader::plan_options(std::uint64_t memory) {
+BrickPlanOptions BrickReader::plan_options(std::uint64_t memory, double max_read_amplification) {
   BrickPlanOptions po;
   po.memory = memory;
+  po.max_read_amplification = max_read_amplification;
   po.halo = halo_;
   po.sample_bytes = sample_bytes();
   po.sample_buffers = read_ahead_ ? 2 : 1;

@@ -38,9 +38,9 @@ class BrickReader {
   // Whether the next brick's samples are read while this one is worked on: every brick's working
   // set then counts a second sample buffer. Set before plan_options().
   void set_read_ahead(bool on) { read_ahead_ = on; }
-  // The planner's options for `memory` bytes a brick; tells the source how much consecutive
-  // bricks overlap.
-  BrickPlanOptions plan_options(std::uint64_t memory);
+  // The planner's options for `memory` bytes a brick (and BrickPlanOptions::
+  // max_read_amplification); tells the source how much consecutive bricks overlap.
+  BrickPlanOptions plan_options(std::uint64_t memory, double max_read_amplification);
   // A view of global box `box`, read into the shared buffer (valid until the next read).
   VolumeView read(const Box3& box);
   // The same into `buffer` (grown as needed, never shrunk; valid until its next use).

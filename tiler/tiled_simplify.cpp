@@ -189,8 +189,7 @@ class TiledSimplification {
     // plan once, count, and plan again with the densest z-plane's faces per cell (what a slab
     // of a gzip'd source must hold), counting again if the bricks changed.
     auto t0 = Clock::now();
-    BrickPlanOptions po = reader_.plan_options(opt_.memory);
-    po.max_read_amplification = opt_.max_read_amplification;
+    BrickPlanOptions po = reader_.plan_options(opt_.memory, opt_.max_read_amplification);
     plan_ = plan_bricks(n_, po);
     std::vector<std::uint64_t> brick_vertices, brick_faces, plane_faces;
     count(brick_vertices, brick_faces, plane_faces);

@@ -56,7 +56,6 @@ void read_exactly(int fd, const std::string& name, char* dst, std::int64_t bytes
   }
 }
 
-// Samples stored plainly in one file from byte `offset` on (raw files, NRRD's raw data).
 // What says that a file changed: its identity, size and modification time.
 struct FileStamp {
   dev_t dev = 0;
@@ -77,13 +76,20 @@ struct FileStamp {
                    "run it again once the file stays as it is");
 }
 
-// The stamp of an open descriptor; nullopt for what is not a regular file.
+// The stamp of an open descriptor, or of the file a name holds; nullopt for what is not a
+// regular file.
 std::optional<FileStamp> stamp_of(int fd) {
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) return std::nullopt;
   return FileStamp::of(st);
 }
+std::optional<FileStamp> stamp_of(const std::string& file) {
+  struct stat st {};
+  if (::stat(file.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return std::nullopt;
+  return FileStamp::of(st);
+}
 
+// Samples stored plainly in one file from byte `offset` on (raw files, NRRD's raw data).
 struct PlainLayout {
   std::string file;
   std::uint64_t offset = 0;
@@ -96,7 +102,7 @@ struct PlainLayout {
 class RawFileSource final : public VolumeSource {
  public:
   explicit RawFileSource(const PlainLayout& layout)
-      : file_(layout.file), offset_(layout.offset), swap_(layout.swap) {
+      : file_name_(layout.file), offset_(layout.offset), swap_(layout.swap) {
     name = layout.file;
     type = layout.type;
     dims = layout.dims;
@@ -120,7 +126,7 @@ class RawFileSource final : public VolumeSource {
 
   // The open descriptor's file: a file renamed over the name later is not what is read.
   void check_unchanged() const override {
-    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(file_);
+    if (stamp_ && stamp_of(fd_) != stamp_) throw_changed(file_name_);
   }
 
   void read(const Box3& box, void* out) override {
@@ -148,7 +154,7 @@ class RawFileSource final : public VolumeSource {
   }
 
  private:
-  std::string file_;  // the file holding the samples (a NRRD header's data file), for messages
+  std::string file_name_;  // the file holding the samples (a NRRD header's data file)
   int fd_ = -1;
   std::optional<FileStamp> stamp_;
   std::uint64_t offset_ = 0;
@@ -202,11 +208,6 @@ class PlaneFilesSource final : public VolumeSource {
   }
 
  private:
-  static std::optional<FileStamp> stamp_of(const std::string& file) {
-    struct stat st {};
-    if (::stat(file.c_str(), &st) != 0) return std::nullopt;
-    return FileStamp::of(st);
-  }
   std::vector<PlainData::Plane> planes_;
   std::vector<std::optional<FileStamp>> stamps_;
   bool swap_ = false;

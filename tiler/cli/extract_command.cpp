@@ -123,8 +123,7 @@ int run_extract_distributed(const ExtractArgs& args, PipelineOptions o, Clock::t
         to.extract.iso, progress);
   progress("extracting " + args.in.input + " brick by brick within " + args.memory + " on " +
            std::to_string(g_mpi->size) +
-           " MPI ranks (the progress lines count rank 0's share of "
-           "the bricks)");
+           " MPI ranks (the progress lines count rank 0's share of the bricks)");
   g_distributed = true;
   const DistributedResult d =
       extract_distributed(args.in.input, args.in.raw_options(), to, o.world_frame, args.output);
