@@ -400,7 +400,25 @@ void verify_compressed(const ImageHeaderCheck& check) {
   std::uint64_t total = 0, left = c.limit ? c.limit : UINT64_MAX;  // compressed bytes to read
   bool ended = false;
   int code = Z_OK;
-  const auto more = [&] { return left > 0 && f.peek() != std::ifstream::traits_type::eof(); };
+  // After a gzip member: whether another follows, i.e. the next two bytes are gzip's magic. Other
+  // bytes end the stream unread, as zlib's gz* reads (and gzip -d, with a warning) take them: the
+  // raw .gz reader, every reader out of core and teem read them so, and an in-core check that
+  // refused them would refuse a file the same run accepts with --memory. The sample count still
+  // catches a member lost in them (too short) or one more volume (too long).
+  const auto next_member = [&] {
+    unsigned char next[2];
+    std::size_t have = std::min<std::size_t>(z.avail_in, 2);
+    if (have > 0) std::memcpy(next, z.next_in, have);
+    if (have < 2 && left > 0) {
+      const auto at = f.tellg();
+      f.read(reinterpret_cast<char*>(next + have),
+             static_cast<std::streamsize>(std::min<std::uint64_t>(2 - have, left)));
+      have += static_cast<std::size_t>(f.gcount());
+      f.clear();
+      f.seekg(at);
+    }
+    return have == 2 && next[0] == 0x1f && next[1] == 0x8b;
+  };
   for (;;) {
     if (z.avail_in == 0) {
       f.read(reinterpret_cast<char*>(in.data()),
@@ -418,7 +436,7 @@ void verify_compressed(const ImageHeaderCheck& check) {
       // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip, and
       // so is NRRD's data.
       if (c.whole_gzip || c.members) {
-        if (z.avail_in == 0 && !more()) {
+        if (!next_member()) {
           ended = true;
           break;
         }
