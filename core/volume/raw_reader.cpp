@@ -1,4 +1,5 @@
 // Raw volumes: plain or gzip'd samples, x fastest, dims and type from the options or the name.
+#include <fcntl.h>
 #include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -138,10 +139,11 @@ void read_stream(const std::string& path, std::FILE* file, Volume& volume, Progr
 // stream copies from the page cache and faults the volume's fresh pages in on one thread only.
 constexpr std::size_t kSliceBytes = std::size_t{16} << 20;
 
-// Bytes [at, end) of the open file into out + at.
-void read_range(const std::string& path, int fd, std::byte* out, std::size_t at, std::size_t end) {
+// Bytes [base + at, base + end) of the open file into out + at.
+void read_range(const std::string& path, int fd, std::byte* out, std::size_t at, std::size_t end,
+                std::uint64_t base = 0) {
   while (at < end) {
-    const ssize_t got = ::pread(fd, out + at, end - at, static_cast<off_t>(at));
+    const ssize_t got = ::pread(fd, out + at, end - at, static_cast<off_t>(base + at));
     if (got < 0) {
       if (errno == EINTR) continue;
       throw IoError("cannot read " + path + ": " + std::strerror(errno));
@@ -355,6 +357,30 @@ std::optional<RawNameInfo> parse_raw_name(const std::string& path) {
   if (!type) return std::nullopt;
   info.type = *type;
   return info;
+}
+
+void read_plain_data(const PlainData& plain, Volume& volume) {
+  const auto read = [](const std::string& file, std::uint64_t offset, std::byte* out,
+                       std::size_t bytes) {
+    const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw IoError("cannot open " + file + ": " + std::strerror(errno));
+    try {
+      read_range(file, fd, out, 0, bytes, offset);
+    } catch (...) {
+      ::close(fd);
+      throw;
+    }
+    ::close(fd);
+  };
+  if (plain.planes.empty()) {
+    read(plain.file, plain.offset, volume.bytes(), volume.byte_size());
+  } else {
+    const std::size_t plane = volume.byte_size() / plain.planes.size();
+    for (std::size_t z = 0; z < plain.planes.size(); ++z)
+      read(plain.planes[z].file, plain.planes[z].offset, volume.bytes() + z * plane, plane);
+  }
+  const bool native_big = std::endian::native == std::endian::big;
+  if ((plain.endian == Endian::Big) != native_big) byte_swap(volume);
 }
 
 Volume read_raw(const std::string& path, const RawOptions& options) {

@@ -3,6 +3,7 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <cstring>
 #include <optional>
 #include <string>
 #include <vector>
@@ -31,6 +32,36 @@ std::optional<ScalarType> tiff_sample_type(std::uint64_t bits, std::uint64_t for
   if (bits == 16) return sign ? ScalarType::Int16 : ScalarType::UInt16;
   if (bits == 32) return sign ? ScalarType::Int32 : ScalarType::UInt32;
   return std::nullopt;
+}
+
+// ImageJ's description of a hyperstack ("ImageJ=1.54f\nimages=20\nchannels=2\nslices=10\n...")
+// as far as a volume cares: its channels and time points (frames), 1 where it does not say.
+struct ImageJShape {
+  std::uint64_t channels = 1, frames = 1;
+};
+ImageJShape imagej_shape(const std::string& description) {
+  ImageJShape shape;
+  if (description.rfind("ImageJ=", 0) != 0) return shape;
+  std::size_t at = 0;
+  while (at < description.size()) {
+    std::size_t end = description.find('\n', at);
+    if (end == std::string::npos) end = description.size();
+    const std::string line = description.substr(at, end - at);
+    const auto number = [&](const char* key) -> std::optional<std::uint64_t> {
+      const std::string k = std::string(key) + "=";
+      if (line.rfind(k, 0) != 0) return std::nullopt;
+      std::uint64_t v = 0;
+      for (std::size_t i = k.size(); i < line.size() && v < (1u << 30); ++i) {
+        if (line[i] < '0' || line[i] > '9') break;
+        v = v * 10 + static_cast<std::uint64_t>(line[i] - '0');
+      }
+      return v;
+    };
+    if (const auto c = number("channels")) shape.channels = *c;
+    if (const auto f = number("frames")) shape.frames = *f;
+    at = end + 1;
+  }
+  return shape;
 }
 
 }  // namespace
@@ -88,6 +119,7 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                   tile_w = 0, tile_h = 0, subfile = 0, photometric = 1, planar = 1, format = 1,
                   orientation = 1;
     std::vector<std::uint64_t> offsets, counts;
+    std::string description;
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
       const std::uint64_t at = ifd + count_size + e * entry_size;
@@ -169,6 +201,13 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
         case 323:
           tile_h = value(0);
           break;
+        case 270:  // ImageDescription, where ImageJ says what its pages are
+          if (page == 1 && size == 1 && n <= (1u << 20)) {
+            description.resize(n);
+            file.read(where, description.data(), n);
+            description.resize(std::strlen(description.c_str()));
+          }
+          break;
         case 273:
         case 324:
           if (n > (std::uint64_t{1} << 24))
@@ -239,6 +278,39 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
       throw InputError(path + ": TIFF page " + std::to_string(page) +
                        " is a reduced-resolution or mask image (NewSubfileType " +
                        std::to_string(subfile) + "); a volume is a stack of full pages");
+    // What ITK 5.2's TIFF reader reads as a volume: one gray sample per pixel (it reads the first
+    // `width` samples of each row of several, interleaved), of 8 or 16-bit integers or 32-bit
+    // floats (it takes 32-bit integers, reads none of their samples, and isotile reads them
+    // itself where they lie plainly: volume_io.cpp), in strips (tiled pages it reads as colour).
+    if (tile_w || tile_h)
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " is stored in tiles of " +
+                       std::to_string(tile_w) + "x" + std::to_string(tile_h) +
+                       ", which ITK's TIFF reader reads as colour; save the pages in strips (as "
+                       "ImageJ and most tools do by default)");
+    if (page == 1) {
+      if (spp != 1)
+        throw InputError(
+            path + ": TIFF pages hold " + std::to_string(spp) + " samples per pixel (" +
+            (photometric == 2 || photometric == 6 ? "colour" : "channels, or gray and alpha") +
+            "); a volume needs one gray sample per pixel");
+      if (!type || type == ScalarType::Float64)
+        throw InputError(path + ": " + std::to_string(bps) + "-bit" +
+                         (format == 3   ? " floating-point"
+                          : format == 2 ? " signed"
+                                        : "") +
+                         " TIFF samples cannot be read as a volume (8, 16 or 32-bit integers, or "
+                         "32-bit floats; ITK's TIFF reader has no other)");
+      const ImageJShape shape = imagej_shape(description);
+      if (shape.channels > 1 || shape.frames > 1)
+        throw InputError(
+            path + ": an ImageJ hyperstack of " +
+            (shape.channels > 1 ? std::to_string(shape.channels) + " channels" : "") +
+            (shape.channels > 1 && shape.frames > 1 ? " and " : "") +
+            (shape.frames > 1 ? std::to_string(shape.frames) + " time points" : "") +
+            ", not one volume: a volume is one channel at one time point (split it in ImageJ "
+            "first: Image > Color > Split Channels, Image > Hyperstacks > Reduce "
+            "Dimensionality)");
+    }
     if (page == 1) {
       first = {width, height, bps, spp};
       first_kind = {photometric, planar, format};

@@ -196,6 +196,27 @@ std::optional<PlainData> stacked_slices(const std::vector<PlainData>& slices,
   return out;
 }
 
+// Where the samples of an ITK input lie plainly (for the tiler to read box by box, and for TIFF
+// to be read so in core too), from the checks made before ITK and ITK's own header.
+std::optional<PlainData> plain_layout(const std::string& input, InputKind kind,
+                                      const ImageHeaderCheck& check, const ItkImageInfo& info) {
+  std::optional<PlainData> plain;
+  if (check.plain && check.plain->type == info.type && check.plain->dims == info.dims)
+    plain = check.plain;
+  if (kind == InputKind::TiffStack) plain = stacked_slices(check.plain_slices, info);
+  // ITK 5.2's TIFF reader takes 32-bit integer pages for a volume but reads none of their samples
+  // (it has no code for them): the buffer stays as it was, a different mesh on each run. isotile
+  // reads them itself where they are stored plainly.
+  if ((kind == InputKind::Tiff || kind == InputKind::TiffStack) && !plain &&
+      (info.type == ScalarType::Int32 || info.type == ScalarType::UInt32))
+    throw InputError(input +
+                     ": 32-bit integer TIFF samples are read only when stored "
+                     "uncompressed, in strips that follow each other (as ImageJ writes "
+                     "them), and alike in every file of a stack; ITK's TIFF reader cannot "
+                     "read them otherwise. Save them so, or as 16-bit or 32-bit float");
+  return plain;
+}
+
 // Options that only a raw file can use would otherwise be dropped without a word.
 void reject_raw_only_options(const std::string& input, const RawOptions& raw, const char* kind) {
   if (raw.dims || raw.type || raw.endian == Endian::Big)
@@ -333,9 +354,7 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     h.rescale_intercept = check.rescaled ? check.rescale_intercept : info.rescale_intercept;
     h.series_uid = info.series_uid;
     h.series_description = info.series_description;
-    if (check.plain && check.plain->type == info.type && check.plain->dims == info.dims)
-      h.plain = check.plain;
-    if (kind == InputKind::TiffStack) h.plain = stacked_slices(check.plain_slices, info);
+    h.plain = plain_layout(input, kind, check, info);
   } else if (kind == InputKind::Nrrd) {
     if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(input)) {
       h.type = d->type;
@@ -403,13 +422,20 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   } else if (kind == InputKind::Vdb) {
     volume = read_vdb(input);
   } else {
-    verify_compressed(check_before_itk(input, kind));
+    const ImageHeaderCheck check = check_before_itk(input, kind);
+    verify_compressed(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
     volume = Volume(info.type, info.dims, info.spacing, info.origin);
     volume.set_world(WorldFrame{info.origin, info.direction});
     volume.set_series(info.series_uid, info.series_description);
-    read_itk_data(in, info, volume.bytes());
+    const std::optional<PlainData> plain = plain_layout(input, kind, check, info);
+    // A plainly stored TIFF is read as out of core reads it (ITK's reader cannot read all of
+    // them, above); the other formats' plain samples are ITK's to read.
+    if (plain && (kind == InputKind::Tiff || kind == InputKind::TiffStack))
+      read_plain_data(*plain, volume);
+    else
+      read_itk_data(in, info, volume.bytes());
     check_finite(volume.view(), input);
   }
   if (kind != InputKind::Mrc) progress_advance(raw.progress);

@@ -88,6 +88,11 @@ struct PlainData {
 void check_plain_size(const std::string& file, std::uint64_t size, std::uint64_t offset,
                       ScalarType type, const Index3& dims, bool bytes_after = false);
 
+// Reads plainly stored samples (one file at an offset, or a stack of planes) into `volume`, of
+// the layout's type and dims, in native byte order: the samples of a TIFF ITK's reader would not
+// read right (32-bit integers), as the tiler reads them box by box.
+void read_plain_data(const PlainData& plain, Volume& volume);
+
 // An input's header: what `isotile info` shows besides the samples, and how the tiler can read
 // it. Reading the header only costs little for every format (a DICOM series reads each file's
 // header).
