@@ -702,8 +702,25 @@ TEST_F(VolumeIo, NrrdAxisCountsAndTypes) {
   EXPECT_EQ(v.dims(), (Index3{2, 2, 2}));
   for (std::size_t i = 0; i < values.size(); ++i) EXPECT_EQ(v.data<std::int8_t>()[i], values[i]);
 
+  // A last axis of size 1 too (as NIfTI and MetaImage take one).
   save_nrrd(file, {nrrdTypeChar, {2, 2, 2, 1}, values.data()});
+  v = read_nrrd(file);
+  EXPECT_EQ(v.dims(), (Index3{2, 2, 2}));
+  for (std::size_t i = 0; i < values.size(); ++i) EXPECT_EQ(v.data<std::int8_t>()[i], values[i]);
+  save_nrrd(file, {nrrdTypeChar, {2, 2, 1, 2}, values.data()});
   EXPECT_TRUE(contains(message_of<InputError>([&] { read_nrrd(file); }), "4 axes"));
+  // Axes of a sample's components (colour, vectors) are not positions: refused, named.
+  const std::string head = "NRRD0004\ntype: int8\ndimension: 3\nencoding: raw\n";
+  for (const char* kinds :
+       {"sizes: 3 2 2\nkinds: RGB-color space space", "sizes: 2 2 2\nkinds: space 2-vector space",
+        "sizes: 2 2 2\nkinds: domain domain list"}) {
+    write_file(file, head + kinds + "\n\n" + std::string(kinds[7] == '3' ? 12 : 8, '\1'));
+    const std::string msg = message_of<InputError>([&] { read_nrrd(file); });
+    EXPECT_TRUE(contains(msg, "a volume needs three axes of space or domain kind")) << msg;
+    EXPECT_TRUE(contains(msg, "components of a sample")) << msg;
+  }
+  write_file(file, head + "sizes: 2 2 2\nkinds: domain space time\n\n" + std::string(8, '\1'));
+  EXPECT_EQ(read_nrrd(file).dims(), (Index3{2, 2, 2}));
   save_nrrd(file, {nrrdTypeChar, {4, 2}, values.data()});
   EXPECT_TRUE(contains(message_of<InputError>([&] { read_nrrd(file); }), "2 axes"));
 

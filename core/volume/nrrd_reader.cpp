@@ -154,9 +154,21 @@ HeaderInfo header_info(const std::string& path, const Nrrd& nrrd) {
   unsigned first = 0;
   if (nrrd.dim == 4 && nrrd.axis[0].size == 1)
     first = 1;
-  else if (nrrd.dim != 3)
+  else if (nrrd.dim != 3 && !(nrrd.dim == 4 && nrrd.axis[3].size == 1))
     throw InputError(path + ": NRRD has " + std::to_string(nrrd.dim) +
-                     " axes; a volume needs 3 (or 4 with the first of size 1)");
+                     " axes; a volume needs 3 (or 4 with the first or the last of size 1)");
+  // An axis of colour, vector, tensor or list kind holds a sample's components, not positions:
+  // read as x (the fastest axis, where NRRD puts them) it made a "volume" of interleaved
+  // channels. Domain kinds (space, time, domain) and none are taken as positions.
+  for (unsigned a = first; a < first + 3; ++a) {
+    const int kind = nrrd.axis[a].kind;
+    if (kind != nrrdKindUnknown && !nrrdKindIsDomain(kind))
+      throw InputError(path + ": NRRD axis " + std::to_string(a + 1) + " of " +
+                       std::to_string(nrrd.dim) + " is of kind '" + airEnumStr(nrrdKind, kind) +
+                       "' (" + std::to_string(nrrd.axis[a].size) +
+                       " components of a sample, not positions); a volume needs three axes of "
+                       "space or domain kind with one scalar per sample");
+  }
   const std::optional<ScalarType> type = scalar_type_of_nrrd(nrrd.type);
   if (!type)
     throw InputError(path + ": NRRD sample type '" + airEnumStr(nrrdType, nrrd.type) +
