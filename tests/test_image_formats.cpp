@@ -523,6 +523,9 @@ struct MrcSpec {
   float cell_scale = 1;  // cell length = n * scale (voxel size = scale with mx = n)
   int nsymbt = 0;
   bool big_endian = false;
+  int ispg = 0;
+  int mz = 0;           // 0: the volume's z size
+  int imod_flags = -1;  // IMOD's stamp with these flags; -1: no stamp
 };
 
 template <class T>
@@ -544,6 +547,12 @@ void write_mrc(const fs::path& path, const Volume& v, const MrcSpec& s) {
   for (int c = 0; c < 3; ++c) put<std::int32_t>(h, 16 + 4 * c, s.start[c], big);
   for (int a = 0; a < 3; ++a)
     put<std::int32_t>(h, 28 + 4 * a, static_cast<std::int32_t>(v.dims()[a]), big);
+  if (s.mz) put<std::int32_t>(h, 36, s.mz, big);
+  put<std::int32_t>(h, 88, s.ispg, big);
+  if (s.imod_flags >= 0) {
+    put<std::int32_t>(h, 152, 1146047817, big);  // "IMOD"
+    put<std::int32_t>(h, 156, s.imod_flags, big);
+  }
   for (int a = 0; a < 3; ++a)
     put<float>(h, 40 + 4 * a, static_cast<float>(v.dims()[a]) * s.cell_scale * (a + 1), big);
   for (int a = 0; a < 3; ++a) put<float>(h, 52 + 4 * a, 90.0f, big);
@@ -640,6 +649,54 @@ TEST(Mrc, HalfFloatsAreWidened) {
   ASSERT_EQ(r.type(), ScalarType::Float32);
   for (std::int64_t i = 0; i < v.sample_count(); ++i)
     EXPECT_EQ(r.data<float>()[i], static_cast<float>(i) - 10);
+  fs::remove_all(dir);
+}
+
+// Mode 0 is signed bytes, unless IMOD's stamp says unsigned (its flags' bit 0 clear), as IMOD
+// writes them; a stack of volumes (ISPG 401) is refused, not read as one volume twice as deep.
+TEST(Mrc, ImodBytesAndVolumeStacks) {
+  const fs::path dir = fs::temp_directory_path() / ("isotile-mrc0-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume v(ScalarType::UInt8, {4, 3, 6});
+  for (std::int64_t i = 0; i < v.sample_count(); ++i)
+    v.data<std::uint8_t>()[i] = static_cast<std::uint8_t>(i * 7 + 100);
+  for (const int flags : {-1, 0, 1}) {
+    MrcSpec s;
+    s.mode = 0;
+    s.imod_flags = flags;
+    s.big_endian = flags == 1;
+    const fs::path p = dir / ("m" + std::to_string(flags) + ".mrc");
+    write_mrc(p, v, s);
+    const Volume r = read_volume(p.string());
+    EXPECT_EQ(r.type(), flags == 0 ? ScalarType::UInt8 : ScalarType::Int8) << flags;
+    ASSERT_EQ(std::memcmp(r.bytes(), v.bytes(), v.byte_size()), 0);  // the same bits either way
+    EXPECT_EQ(read_volume_header(p.string()).type, r.type());
+  }
+  MrcSpec stack;
+  stack.mode = 0;
+  stack.ispg = 401;
+  stack.mz = 3;
+  write_mrc(dir / "stack.mrcs", v, stack);
+  for (const bool header : {false, true}) {
+    try {
+      if (header)
+        read_volume_header((dir / "stack.mrcs").string());
+      else
+        read_volume((dir / "stack.mrcs").string());
+      ADD_FAILURE() << "a stack of two volumes read as one";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("an MRC stack of 2 volumes of 3 sections each"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  stack.mz = 6;  // one volume of the stack's space group
+  write_mrc(dir / "one.mrcs", v, stack);
+  EXPECT_EQ(read_volume((dir / "one.mrcs").string()).dims(), v.dims());
+  stack.ispg = 1;  // a volume whose sampling differs from its size
+  stack.mz = 3;
+  write_mrc(dir / "sampled.mrc", v, stack);
+  EXPECT_EQ(read_volume((dir / "sampled.mrc").string()).dims(), v.dims());
   fs::remove_all(dir);
 }
 

@@ -120,6 +120,9 @@ float half_to_float(std::uint16_t h) {
   return std::bit_cast<float>(bits);
 }
 
+// IMOD's stamp (word 39) in the header's byte order, as an int32: "IMOD" in ASCII.
+constexpr std::int32_t kImodStamp = 1146047817;
+
 MrcLayout mrc_layout(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   if (!f) throw IoError("cannot open " + path + ": " + std::strerror(errno));
@@ -159,7 +162,9 @@ MrcLayout mrc_layout(const std::string& path) {
   std::size_t stored = 0;
   switch (m.mode) {
     case 0:
-      type = ScalarType::Int8;
+      // Signed bytes in MRC2014; IMOD writes its mode 0 maps unsigned and says so by its stamp
+      // with bit 0 of its flags clear (as IMOD, ChimeraX and the MRC2014 notes read them).
+      type = i32(152) == kImodStamp && (i32(156) & 1) == 0 ? ScalarType::UInt8 : ScalarType::Int8;
       stored = 1;
       break;
     case 1:
@@ -206,6 +211,17 @@ MrcLayout mrc_layout(const std::string& path) {
     dims[m.axis[c]] = m.n[c];
     start[m.axis[c]] = i32(16 + 4 * c);
   }
+  // ISPG 401 to 630: a stack of volumes of MZ sections each, NZ = MZ x volumes (MRC2014). Read
+  // as one, they would be laid end to end along z.
+  const std::int32_t ispg = i32(88), mz = i32(36);
+  if (ispg >= 401 && ispg <= 630 && mz > 0 && mz != m.n[2])
+    throw InputError(path + ": an MRC stack of " +
+                     (m.n[2] % mz == 0 ? std::to_string(m.n[2] / mz) + " volumes"
+                                       : "volumes (NZ " + std::to_string(m.n[2]) + ")") +
+                     " of " + std::to_string(mz) + " sections each (space group ISPG " +
+                     std::to_string(ispg) +
+                     "), not one volume; cut the one to extract out first (e.g. IMOD's newstack, "
+                     "or mrcfile)");
   const std::int32_t nsymbt = i32(92);
   if (nsymbt < 0)
     throw InputError(path + ": MRC extended header size NSYMBT is " + std::to_string(nsymbt));
