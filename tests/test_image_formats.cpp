@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -510,6 +511,26 @@ TEST(ItkRegions, NiftiRescaleIsApplied) {
   for (std::int64_t i = 0; i < v.sample_count(); ++i)
     EXPECT_EQ(r.view().value(i % 5, i / 5 % 4, i / 20), 2.5 * (i - 20) - 5) << i;
   EXPECT_TRUE(open_volume_source(p.string(), {})->in_memory());
+  // A slope of 0 or NaN means no scaling, intercept included (NIfTI), where ITK adds the
+  // intercept: refused, naming both. With an intercept of 0, the samples as stored.
+  for (const float zero : {0.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    std::memcpy(bytes.data() + 112, &zero, 4);
+    std::ofstream(p, std::ios::binary) << bytes;
+    try {
+      read_volume(p.string());
+      ADD_FAILURE() << "an intercept without a slope applied";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("with scl_inter -5: NIfTI reads the samples unscaled"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  const float none = 0;
+  std::memcpy(bytes.data() + 116, &none, 4);
+  std::ofstream(p, std::ios::binary) << bytes;
+  const Volume stored = read_volume(p.string());
+  ASSERT_EQ(stored.type(), ScalarType::Int16);
+  EXPECT_EQ(std::memcmp(stored.bytes(), v.bytes(), v.byte_size()), 0);
   fs::remove_all(dir);
 }
 
@@ -964,6 +985,12 @@ TEST_F(BadHeaders, NiftiAndMetaImage) {
   std::memcpy(type.data() + 70, &complex, 2);
   expect_one_line(write("type.nii", type), "datatype 32 is not supported");
   expect_one_line(write("junk.nii", std::string(400, 'x')), "not a NIfTI file");
+  // A NIfTI-2 header (sizeof_hdr 540, magic "n+2"): ITK 5.2 cannot read it, and says so less.
+  std::string v2(560, '\0');
+  const std::int32_t size2 = 540;
+  std::memcpy(v2.data(), &size2, 4);
+  std::memcpy(v2.data() + 4, "n+2\0\r\n\032\n", 8);
+  expect_one_line(write("v2.nii", v2), "a NIfTI-2 file, which ITK 5.2's NIfTI reader cannot read");
   expect_one_line(write("cut.mha", mha.substr(0, mha.size() - 10)), "samples need");
   std::string dims = mha;
   dims.replace(dims.find("DimSize = 12 12 12"), 18, "DimSize = 12 12 99");

@@ -119,6 +119,12 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     throw InputError(path +
                      ": a NIfTI header whose samples are in a separate .img file; "
                      "convert it to a single .nii");
+  // ITK 5.2's NIfTI reader (niftilib's NIfTI-1 code) refuses NIfTI-2 saying only "not a readable
+  // Nifti file". (The checks below read both versions' fields, for a reader that takes both.)
+  if (version == 2)
+    throw InputError(path +
+                     ": a NIfTI-2 file, which ITK 5.2's NIfTI reader cannot read; save it as "
+                     "NIfTI-1 (e.g. with nibabel), NRRD or MetaImage");
   std::array<std::int64_t, 8> dim{};
   int datatype = 0, bitpix = 0;
   double vox_offset = 0, slope = 0, inter = 0;
@@ -210,6 +216,13 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
         path, 0, offset + bytes, true,
         dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples after " +
             std::to_string(offset) + " header bytes"};
+  // A slope of 0 (or not a number) means no scaling in NIfTI, intercept included; ITK 5.2 takes it
+  // for 1 and adds the intercept, shifting every sample. Such a file would read wrong through it.
+  if ((slope == 0 || !std::isfinite(slope)) && std::isfinite(inter) && inter != 0)
+    throw InputError(path + ": NIfTI scl_slope " + (std::ostringstream() << slope).str() +
+                     " with scl_inter " + (std::ostringstream() << inter).str() +
+                     ": NIfTI reads the samples unscaled, ITK's reader would add the intercept; "
+                     "set scl_inter to 0 (or scl_slope to 1, if the intercept is meant)");
   if (std::isfinite(slope) && slope != 0 && (slope != 1 || (std::isfinite(inter) && inter != 0))) {
     out.rescaled = true;
     out.rescale_slope = slope;
