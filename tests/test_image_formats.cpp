@@ -182,20 +182,27 @@ INSTANTIATE_TEST_SUITE_P(Formats, ItkFormats,
                            return n;
                          });
 
-// Single-page TIFFs stacked from a directory (name order) or a numbered pattern.
+// Single-page TIFFs stacked from a directory (name order, numbers as numbers) or a numbered
+// pattern.
 TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
   REQUIRE_ITK();
   const fs::path dir = fs::temp_directory_path() / ("isotile-tiffs-" + std::to_string(::getpid()));
   fs::create_directories(dir / "slices");
   const Volume raw = field_as("field:sphere:16", ScalarType::UInt16);
   const std::size_t plane = static_cast<std::size_t>(16 * 16);
+  fs::create_directories(dir / "unpadded");
   for (int k = 0; k < 16; ++k) {
     char name[32];
     std::snprintf(name, sizeof name, "s_%03d.tif", k + 1);
     write_itk((dir / "slices" / name).string(), raw.data<std::uint16_t>() + k * plane,
               ScalarType::UInt16, {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
+    // Numbers as many programs write them, not padded: img_2 comes before img_10 (in text
+    // order it came after img_19, scrambling the planes).
+    std::snprintf(name, sizeof name, "img_%d_x%d.tif", k, 16 - k);
+    write_itk((dir / "unpadded" / name).string(), raw.data<std::uint16_t>() + k * plane,
+              ScalarType::UInt16, {16, 16, 1}, {1, 1, 1}, {0, 0, 0}, kIdentity3);
   }
-  for (const fs::path& input : {dir / "slices", dir / "slices" / "s_%03d.tif"}) {
+  for (const fs::path& input : {dir / "slices", dir / "slices" / "s_%03d.tif", dir / "unpadded"}) {
     SCOPED_TRACE(input.string());
     const Volume v = read_volume(input.string());
     ASSERT_EQ(v.dims(), raw.dims());
