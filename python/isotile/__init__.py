@@ -214,12 +214,15 @@ def simplify(vertices, triangles, /, *, ratio=None, faces=None, max_error=None, 
 
     ``simplify(verts, faces, ratio=0.1)``, ``faces=N`` or ``max_error=E``, as ``isotile simplify``
     takes ``--ratio``, ``--faces`` and ``--max-error``. Stops at the first target reached: ``faces``
-    faces (or ``ratio`` of the input's faces)
+    faces (or ``ratio`` of the input's faces; one of the two, not both)
     and, with ``max_error``, the error bound in mesh units. At least one must be given. Returns
     (vertices, faces) as new arrays; the result does not depend on ``threads``.
     """
     if ratio is None and faces is None and max_error is None:
         raise ValueError("simplify needs ratio, faces or max_error")
+    if ratio is not None and faces is not None:
+        # Two face counts: the library takes faces and drops ratio, which would go unsaid.
+        raise ValueError("give ratio or faces, not both: both say how many faces to keep")
     _check_threads(threads)
     # 0 stands for "not given" below: an explicit 0 (or less) is refused here, naming it.
     if ratio is not None and not 0 < ratio <= 1:
@@ -227,6 +230,8 @@ def simplify(vertices, triangles, /, *, ratio=None, faces=None, max_error=None, 
     if faces is not None and (isinstance(faces, bool) or not isinstance(faces, _numbers.Integral)
                               or faces < 1):
         raise ValueError(f"faces must be an int of at least 1, not {faces!r}")
+    if faces is not None and faces >= 2**64:
+        raise ValueError(f"faces must be below 2**64, not {faces!r}")
     if max_error is not None and not max_error > 0:
         raise ValueError(f"max_error must be above 0, not {max_error!r}")
     return _isotile.simplify(_np.asarray(vertices), _np.asarray(triangles),

@@ -315,6 +315,11 @@ def test_simplify_names_a_bad_target():
     with pytest.raises(ValueError, match="^max_error must be above 0, not 0$"):
         isotile.simplify(v, f, max_error=0)
     assert len(isotile.simplify(v, f, faces=np.int64(100))[1]) <= 100
+    # Two face counts at once: refused (faces won and ratio was dropped without a word).
+    with pytest.raises(ValueError, match="^give ratio or faces, not both"):
+        isotile.simplify(v, f, ratio=0.2, faces=10)
+    with pytest.raises(ValueError, match="^faces must be below 2\\*\\*64, not 18446744073709551716$"):
+        isotile.simplify(v, f, faces=2**64 + 100)
 
 
 def test_the_runs_warnings_are_python_warnings(tmp_path, capfd):
