@@ -413,7 +413,8 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         depend on it.
     progress : callable, optional
         ``progress(stage, brick, bricks, fraction)`` during the run ("count", "extract",
-        "simplify", ...); a false return value cancels the run (``isotile.Cancelled``) and an
+        "simplify", ...); a false return value other than None cancels the run
+        (``isotile.Cancelled``; a callback that returns nothing goes on) and an
         exception it raises cancels it and propagates. Ctrl-C raises KeyboardInterrupt within a
         fraction of a second at the library's next report; a cancelled run leaves no file.
     dims, type, spacing, origin, endian, series

@@ -568,7 +568,7 @@ PipelineOptions pipeline_options_of(const py::dict& o) {
 struct ProgressBridge {
   py::object callable;                         // None: only signals are watched
   std::optional<py::error_already_set> error;  // under the GIL
-  bool declined = false;                       // the callable returned a false value
+  bool declined = false;                       // the callable returned a false value (not None)
 };
 
 py::object make_mesh_tuple(Mesh&& mesh) {
@@ -646,9 +646,13 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
     try {
       const py::object go =
           bridge.callable(std::string(stage_name(u.stage)), u.brick, u.bricks, u.fraction);
-      const int truth = PyObject_IsTrue(go.ptr());  // any object, as Python's `if` takes it
-      if (truth < 0) throw py::error_already_set();
-      if (truth == 0) bridge.declined = true;
+      // Any false object cancels, as Python's `if` takes it, but None: a callable that returns
+      // nothing (one that prints, or logs) means to watch, and cancelled at its first call.
+      if (!go.is_none()) {
+        const int truth = PyObject_IsTrue(go.ptr());
+        if (truth < 0) throw py::error_already_set();
+        if (truth == 0) bridge.declined = true;
+      }
     } catch (py::error_already_set& e) {
       bridge.error.emplace(std::move(e));
     }

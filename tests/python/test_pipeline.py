@@ -429,6 +429,16 @@ def test_a_false_return_cancels_and_leaves_no_file(tmp_path):
     assert left_in(tmp_path) == []
 
 
+def test_a_callback_that_returns_nothing_goes_on(tmp_path):
+    """None is no answer: a callback that only prints (or logs) watches the run, it does not
+    cancel it at its first call."""
+    calls = []
+    stats = isotile.extract("field:gyroid:96", output=tmp_path / "m.ply",
+                            progress=lambda *a: calls.append(a), **MANY_BRICKS)
+    assert len(calls) >= 2 * stats["bricks"]
+    assert (tmp_path / "m.ply").exists()
+
+
 def test_the_callbacks_exception_cancels_and_propagates(tmp_path):
     class Stop(Exception):
         pass
