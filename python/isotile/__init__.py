@@ -134,15 +134,24 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
     if gradient_direction not in ("descent", "ascent"):
         raise ValueError(f"Incorrect input {gradient_direction} in `gradient_direction`, see "
                          "docstring.")
+    try:
+        spacing = tuple(float(s) for s in spacing) if not isinstance(spacing, str) else ()
+    except (TypeError, ValueError):
+        spacing = ()
     if len(spacing) != 3:
         raise ValueError("`spacing` must consist of three floats.")
     # scikit-image takes any spacing; zero flattens the mesh, a negative one turns it inside
     # out and a non-finite one gives non-finite vertices, so isotile refuses them, as its files do.
-    if not all(_np.isfinite(float(s)) and float(s) > 0 for s in spacing):
-        raise ValueError(f"`spacing` must be finite and positive, got {tuple(spacing)}.")
+    if not all(_np.isfinite(s) and s > 0 for s in spacing):
+        raise ValueError(f"`spacing` must be finite and positive, got {spacing}.")
     step_size = int(step_size)
     if step_size < 1:
         raise ValueError("step_size must be at least one.")
+    # Every step_size-th sample: fewer than 2 along an axis leaves no cell. scikit-image says "no
+    # surface" (RuntimeError, kept for code that catches it); this says why.
+    if any((n - 1) // step_size + 1 < 2 for n in volume.shape):
+        raise NoSurface(f"No surface found: step_size {step_size} leaves fewer than 2 samples "
+                        f"along an axis of the {volume.shape} array.")
     if mask is not None:
         mask = _np.asarray(mask)
         if mask.shape != volume.shape:
@@ -440,6 +449,9 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
         warnings filter, it stops the run and leaves no file.
     """
     _check_threads(threads)
+    if isinstance(simplify, bool):
+        raise ValueError("simplify is the fraction of faces to keep, in (0, 1], not "
+                         f"{simplify!r}")
     if isinstance(memory, bool):
         raise ValueError("memory must be a byte count (an int above 0) or a size such as "
                          f"'256MiB', not {memory!r}")

@@ -250,6 +250,7 @@ def test_errors_match_skimage():
         (lambda f: f(vol, 0.0, gradient_direction="up"), ValueError),
         (lambda f: f(vol, 0.0, step_size=0), ValueError),
         (lambda f: f(vol, 0.0, spacing=(1, 1)), ValueError),
+        (lambda f: f(vol, 0.0, step_size=10), RuntimeError),  # one sample per axis: no cell
         (lambda f: f(vol, 0.0, method="fast"), ValueError),
         (lambda f: f(vol, 0.0, mask=np.ones((9, 10, 10), bool)), ValueError),
     ]
@@ -263,6 +264,14 @@ def test_errors_match_skimage():
 
 def test_errors_of_isotile_own():
     vol = sphere((10, 10, 10), radius=3.0)
+    # Said in its own words where scikit-image's are a NameError, a TypeError or "no surface".
+    for bad in ("abc", 5, (1, "x", 1)):
+        with pytest.raises(ValueError, match="^`spacing` must consist of three floats"):
+            isotile.marching_cubes(vol, 0.0, spacing=bad)
+    with pytest.raises(RuntimeError, match="step_size 10 leaves fewer than 2 samples along an axis"):
+        isotile.marching_cubes(vol, 0.0, step_size=10)
+    with pytest.raises(ValueError, match="^simplify is the fraction of faces to keep"):
+        isotile.extract(vol, 0.0, simplify=True)
     with pytest.raises(ValueError, match="NaN"):
         isotile.marching_cubes(vol, float("nan"))
     bad = vol.copy()
