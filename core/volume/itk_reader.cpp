@@ -168,6 +168,7 @@ const char* format_name(ItkInput::Kind kind) {
 // One file's header as ITK sees it, reduced to at most 3 axes (trailing axes of size 1 dropped).
 struct FileHeader {
   ScalarType type = ScalarType::UInt8;
+  std::string type_name;  // ITK's, e.g. "unsigned_short"
   unsigned axes = 0;
   Index3 dims{1, 1, 1};
   Vec3d spacing{1, 1, 1};
@@ -194,6 +195,7 @@ FileHeader read_header(itk::ImageIOBase& io, const std::string& file) {
                      " components per sample (e.g. colour); a volume needs one");
   FileHeader h;
   h.type = scalar_of(io.GetComponentType(), io.GetComponentSize(), file);
+  h.type_name = itk::ImageIOBase::GetComponentTypeAsString(io.GetComponentType());
   unsigned n = io.GetNumberOfDimensions();
   while (n > 3 && io.GetDimensions(n - 1) == 1) --n;
   if (n > 3 || n == 0)
@@ -316,8 +318,10 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
                          " where " + files[0] + " has " + std::to_string(first.dims[0]) + "x" +
                          std::to_string(first.dims[1]) + "x1");
       if (h[k].type != first.type)
-        throw InputError(files[k] + ": sample type differs from " + files[0] +
-                         "'s (different rescale slopes or pixel formats in one series)");
+        throw InputError(files[k] + ": samples of type " + h[k].type_name + " where " + files[0] +
+                         " holds " + first.type_name +
+                         (dicom ? " (different rescale slopes or pixel formats in one series)"
+                                : " (slices of one stack must hold one sample type)"));
     }
     info.type = first.type;
     info.dims = {first.dims[0], first.dims[1], static_cast<std::int64_t>(files.size())};
