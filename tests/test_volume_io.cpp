@@ -169,6 +169,11 @@ TEST(RawName, ParsesDimsAndType) {
   info = parse_raw_name("x_1x1x1_float64.raw");
   ASSERT_TRUE(info);
   EXPECT_EQ(info->type, ScalarType::Float64);
+
+  info = parse_raw_name("SCAN_64X32X16_UINT16.RAW.GZ");  // in any case, as other extensions
+  ASSERT_TRUE(info);
+  EXPECT_EQ(info->dims, (Index3{64, 32, 16}));
+  EXPECT_EQ(info->type, ScalarType::UInt16);
 }
 
 TEST(RawName, RejectsOtherNames) {

@@ -42,13 +42,17 @@ struct NameMatch {
 // The NAME_XxYxZ_TYPE.raw[.gz] pattern, without judging whether TYPE is known, so that read_raw
 // can say "unknown type" rather than "name has no dims".
 std::optional<NameMatch> match_raw_name(const std::string& path) {
-  static const std::regex kPattern(R"(^.+_([0-9]+)x([0-9]+)x([0-9]+)_([A-Za-z0-9]+)\.raw(\.gz)?$)");
+  // In any case, as other formats' extensions (V_64X64X64_UINT8.RAW).
+  static const std::regex kPattern(R"(^.+_([0-9]+)x([0-9]+)x([0-9]+)_([A-Za-z0-9]+)\.raw(\.gz)?$)",
+                                   std::regex::icase);
   const std::string name = std::filesystem::path(path).filename().string();
   std::smatch m;
   if (!std::regex_match(name, m, kPattern)) return std::nullopt;
   NameMatch out;
   for (int a = 0; a < 3; ++a) out.dims[a] = m[a + 1].str();
   out.type = m[4].str();
+  std::transform(out.type.begin(), out.type.end(), out.type.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return out;
 }
 
