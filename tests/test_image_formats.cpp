@@ -305,14 +305,15 @@ TEST(ItkRegions, PlainFilesAreReadByRegion) {
 // `compression` as tag 259 says (the samples are stored plainly whatever it says: only the
 // check reads them), `orientation` 0 for no tag 274.
 // `tags` replace or add short or long values (tag, type 3 or 4, value) on every page, and
-// `description` is every page's ImageDescription where not empty.
+// `description` is page 1's ImageDescription where not empty (every page's with `on_every_page`).
 struct TiffTag {
   std::uint16_t tag, type;
   std::uint32_t value;
 };
 void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::uint32_t gap = 0,
                       std::uint16_t compression = 1, std::uint16_t orientation = 0,
-                      const std::vector<TiffTag>& tags = {}, const std::string& description = "") {
+                      const std::vector<TiffTag>& tags = {}, const std::string& description = "",
+                      bool on_every_page = false) {
   const bool big = order == 'M';
   std::string out;
   auto put = [&](std::uint64_t x, int bytes) {
@@ -366,7 +367,8 @@ void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::ui
       else
         e.push_back({t.tag, t.type, t.value});
     }
-    if (!description.empty()) e.push_back({270, 2, text_at, text_size});
+    if (!description.empty() && (k == 0 || on_every_page))
+      e.push_back({270, 2, text_at, text_size});
     std::sort(e.begin(), e.end(), [](const Entry& a, const Entry& b) { return a.tag < b.tag; });
     put(e.size(), 2);
     for (const Entry& x : e) {
@@ -448,6 +450,7 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
     const char* name;
     std::vector<TiffTag> tags;
     std::string description, says;
+    bool every_page = false;
   };
   for (const Refused& r :
        {Refused{"two_samples", {{277, 3, 2}, {258, 3, 8}}, "", "2 samples per pixel"},
@@ -460,9 +463,19 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
         Refused{"frames",
                 {},
                 "ImageJ=1.54f\nimages=20\nslices=10\nframes=2\n",
-                "an ImageJ hyperstack of 2 time points, not one volume"}}) {
+                "an ImageJ hyperstack of 2 time points, not one volume"},
+        // tifffile's description of an array of z and channels, and of two series in one file.
+        Refused{"zcyx",
+                {},
+                "{\"shape\": [10, 2, 20, 20]}",
+                "tifffile wrote an array of shape [10, 2, 20, 20] here"},
+        Refused{"series",
+                {},
+                "{\"shape\": [1, 20, 20]}",
+                "TIFF page 2 begins a second series",
+                true}}) {
     const fs::path p = dir / (std::string(r.name) + ".tif");
-    write_tiff_pages(p, u16, 'I', 0, 1, 0, r.tags, r.description);
+    write_tiff_pages(p, u16, 'I', 0, 1, 0, r.tags, r.description, r.every_page);
     try {
       read_volume_header(p.string());
       ADD_FAILURE() << r.name << " accepted";
@@ -470,10 +483,13 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
       EXPECT_NE(std::string(e.what()).find(r.says), std::string::npos) << e.what();
     }
   }
-  // ImageJ's description of a plain stack is no hyperstack.
+  // ImageJ's description of a plain stack is no hyperstack, nor tifffile's of one 3-D array.
   write_tiff_pages(dir / "imagej.tif", u16, 'I', 0, 1, 0, {},
                    "ImageJ=1.54f\nimages=20\nslices=20\nchannels=1\nunit=micron\n");
   EXPECT_EQ(read_volume((dir / "imagej.tif").string()).dims(), u16.dims());
+  write_tiff_pages(dir / "tifffile.tif", u16, 'I', 0, 1, 0, {},
+                   "{\"axes\": \"ZYX\", \"shape\": [20, 20, 20]}");
+  EXPECT_EQ(read_volume((dir / "tifffile.tif").string()).dims(), u16.dims());
   // 32-bit integers stored otherwise: refused (ITK would leave the volume unwritten).
   for (const std::uint32_t gap : {0u, 2u}) {
     const fs::path p = dir / ("i32_" + std::to_string(gap) + ".tif");

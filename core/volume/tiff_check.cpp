@@ -64,6 +64,31 @@ ImageJShape imagej_shape(const std::string& description) {
   return shape;
 }
 
+// The array shape tifffile writes in its description of a series' first page ({"shape": [5, 2,
+// 6, 8], ...}); empty where the description is not one.
+std::vector<std::uint64_t> tifffile_shape(const std::string& description) {
+  std::vector<std::uint64_t> shape;
+  if (description.empty() || description[0] != '{') return shape;
+  std::size_t at = description.find("\"shape\"");
+  if (at == std::string::npos || (at = description.find('[', at)) == std::string::npos)
+    return shape;
+  std::uint64_t v = 0;
+  bool digits = false;
+  for (++at; at < description.size() && description[at] != ']'; ++at) {
+    const char c = description[at];
+    if (c >= '0' && c <= '9' && v < (std::uint64_t{1} << 40)) {
+      v = v * 10 + static_cast<std::uint64_t>(c - '0');
+      digits = true;
+    } else if (c == ',' && digits) {
+      shape.push_back(v);
+      v = 0;
+      digits = false;
+    }
+  }
+  if (digits) shape.push_back(v);
+  return shape;
+}
+
 }  // namespace
 
 std::optional<PlainData> check_tiff_file(const std::string& path) {
@@ -201,8 +226,8 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
         case 323:
           tile_h = value(0);
           break;
-        case 270:  // ImageDescription, where ImageJ says what its pages are
-          if (page == 1 && size == 1 && n <= (1u << 20)) {
+        case 270:  // ImageDescription, where ImageJ and tifffile say what the pages are
+          if (size == 1 && n <= (1u << 20)) {
             description.resize(n);
             file.read(where, description.data(), n);
             description.resize(std::strlen(description.c_str()));
@@ -300,6 +325,20 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                                         : "") +
                          " TIFF samples cannot be read as a volume (8, 16 or 32-bit integers, or "
                          "32-bit floats; ITK's TIFF reader has no other)");
+      // tifffile's own description: an array of more axes than z, y, x laid out as pages (z
+      // and channels interleaved, or time points one after another) is not one volume.
+      if (const std::vector<std::uint64_t> array = tifffile_shape(description); array.size() > 3) {
+        int axes = 0;
+        for (std::size_t a = 0; a + 2 < array.size(); ++a) axes += array[a] > 1;
+        if (axes > 1) {
+          std::string text;
+          for (const std::uint64_t d : array)
+            text += (text.empty() ? "" : ", ") + std::to_string(d);
+          throw InputError(path + ": tifffile wrote an array of shape [" + text +
+                           "] here, whose pages interleave more axes than z (channels or time "
+                           "points); a volume is one 3-D array: save each one on its own");
+        }
+      }
       const ImageJShape shape = imagej_shape(description);
       if (shape.channels > 1 || shape.frames > 1)
         throw InputError(
@@ -311,6 +350,12 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
             "first: Image > Color > Split Channels, Image > Hyperstacks > Reduce "
             "Dimensionality)");
     }
+    // A later page that begins a series of its own (tifffile writes each series' shape on its
+    // first page): two arrays in one file, which ITK would stack as one volume.
+    if (page > 1 && !tifffile_shape(description).empty())
+      throw InputError(path + ": TIFF page " + std::to_string(page) +
+                       " begins a second series (tifffile's description says so); a volume is "
+                       "one series: save each one in a file of its own");
     if (page == 1) {
       first = {width, height, bps, spp};
       first_kind = {photometric, planar, format};
