@@ -828,10 +828,29 @@ TEST(RealData, TiffStackWithImageJTags) {
 class DicomDir : public CliTest {
  protected:
   fs::path series_ = testing::shared_volume("dicom_uih_t1_head_slab");
-  void copy(int number, const std::string& as = "", bool other_series = false) {
+  // `shift_z` moves the slice's ImagePositionPatient along z (within the slice's plane here: its
+  // columns run along -z) by whole millimetres, keeping the value's length.
+  void copy(int number, const std::string& as = "", bool other_series = false, int shift_z = 0) {
     char name[32];
     std::snprintf(name, sizeof name, "%08d.dcm", number);
     std::string bytes = testing::slurp(series_ / name);
+    if (shift_z != 0) {
+      const std::size_t tag =
+          bytes.find(std::string("\x20\x00\x32\x00"
+                                 "DS",
+                                 6));
+      ASSERT_NE(tag, std::string::npos);
+      const std::size_t length =
+          static_cast<unsigned char>(bytes[tag + 6]) |
+          static_cast<std::size_t>(static_cast<unsigned char>(bytes[tag + 7])) << 8;
+      std::string value = bytes.substr(tag + 8, length);
+      const std::size_t z = value.rfind('\\') + 1;
+      const double moved = std::stod(value.substr(z)) + shift_z;
+      std::string text = std::to_string(moved).substr(0, value.size() - z);
+      text.resize(value.size() - z, ' ');
+      value.replace(z, std::string::npos, text);
+      bytes.replace(tag + 8, length, value);
+    }
     if (other_series) {
       // Same length, another UID: a second series in the directory.
       const std::string uid = kDicomUid;
@@ -907,6 +926,23 @@ TEST_F(DicomDir, UnevenOrDuplicateSlicesAreErrors) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("empty: no DICOM series found"), std::string::npos) << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
+
+// One slice whose position moves across the normal, the first and the last on the stack's axis:
+// named (only the last slice's position was compared, and the slice was stacked in place).
+TEST_F(DicomDir, ASliceOffTheStacksAxisIsNamed) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  for (int n = 50; n < 56; ++n) copy(n, "", false, n == 52 ? 3 : 0);
+  const CliResult r = run("extract . -o out.ply --iso 60 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("slice 00000052.dcm lies 3 mm across the stack's axis"), std::string::npos)
+      << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "out.ply"));
+  // In place again, the series reads.
+  copy(52);
+  EXPECT_EQ(run("extract . -o out.ply --iso 60 -q").code, 0);
 }
 
 // An entry GDCM cannot open beside the slices (a dangling link, a FIFO) is named; it made GDCM's

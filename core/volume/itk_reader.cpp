@@ -405,14 +405,30 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
         }
         throw InputError(input.path + ": " + text + "; isotile does not resample");
       }
-      const Vec3d last{h.back().origin[0] - h[0].origin[0], h.back().origin[1] - h[0].origin[1],
-                       h.back().origin[2] - h[0].origin[2]};
-      const double along = dot(last, normal);
-      const double across = std::sqrt(std::max(0.0, dot(last, last) - along * along));
-      if (across > 1e-3 * std::abs(along) + 1e-3)
+      // Every slice on the line through the first along the normal: the last one off it is a
+      // tilted gantry; one in between off it (the others on it) a slice out of place, which the
+      // last one alone did not show.
+      const auto across = [&](std::size_t k) {
+        const Vec3d off{h[k].origin[0] - h[0].origin[0], h[k].origin[1] - h[0].origin[1],
+                        h[k].origin[2] - h[0].origin[2]};
+        return std::sqrt(std::max(0.0, dot(off, off) - d[k] * d[k]));
+      };
+      const auto off_line = [&](std::size_t k) { return across(k) > 1e-3 * std::abs(d[k]) + 1e-3; };
+      const double along = d.back();
+      if (off_line(files.size() - 1))
         throw InputError(input.path + ": the slices are not stacked along their normal (gantry " +
-                         "tilt of " + std::to_string(std::atan2(across, along) * 180 / M_PI) +
+                         "tilt of " +
+                         std::to_string(std::atan2(across(files.size() - 1), along) * 180 / M_PI) +
                          " degrees); isotile does not resample");
+      for (std::size_t k = 1; k + 1 < files.size(); ++k)
+        if (off_line(k)) {
+          char text[256];
+          std::snprintf(text, sizeof text,
+                        " lies %g mm across the stack's axis from where its neighbours put it "
+                        "(its position moves across the slice normal); isotile does not resample",
+                        across(k));
+          throw InputError(input.path + ": slice " + fs::path(files[k]).filename().string() + text);
+        }
       info.spacing[2] = step;
     }
   }
