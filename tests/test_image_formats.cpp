@@ -1382,6 +1382,21 @@ TEST_F(DamagedInputs, DicomSliceCutShort) {
   // 62 missing: the 2 mm step is named by its two files, against the typical 1 mm.
   expect_refused(
       "s", "a gap of 2 mm between 00000063.dcm and 00000061.dcm where the slices lie 1 mm apart");
+  // The slice as a bare explicit-VR data set (no preamble, no meta group), which GDCM reads as a
+  // slice of the series: whole, the series reads; cut short, it is refused (it was read with
+  // zeros for the lost rows).
+  const std::string part10 = testing::slurp(series / "00000062.dcm");
+  ASSERT_EQ(part10.substr(128, 4), "DICM");
+  std::uint32_t meta = 0;
+  std::memcpy(&meta, part10.data() + 140, 4);  // (0002,0000), the meta group's length
+  const std::string bare = part10.substr(144 + meta);
+  write("s/00000062.dcm", bare);
+  const CliResult whole = run("info s");
+  EXPECT_EQ(whole.code, 0) << whole.err;
+  write("s/00000062.dcm", bare.substr(0, bare.size() - 100));
+  expect_refused("s",
+                 "00000062.dcm: not a DICOM file (no DICM marker, and not a readable "
+                 "explicit-VR data set: DICOM pixel data (7FE0,0010) needs");
 }
 
 TEST_F(DamagedInputs, TiffCutShort) {

@@ -50,6 +50,14 @@ const char* expected_vr(std::uint16_t group, std::uint16_t element) {
   return nullptr;
 }
 
+// One of the standard's value representations.
+bool known_vr(const char* vr) {
+  static const char kVrs[] = "AEASATCSDADSDTFLFDISLOLTOBODOFOLOVOWPNSHSLSQSSSTSVTMUCUIULUNURUSUTUV";
+  for (std::size_t i = 0; i + 1 < sizeof kVrs; i += 2)
+    if (kVrs[i] == vr[0] && kVrs[i + 1] == vr[1]) return true;
+  return false;
+}
+
 struct DicomWalk {
   DicomWalk(FileBytes& f, const std::string& p) : file(f), path(p) {}
   FileBytes& file;
@@ -97,12 +105,7 @@ struct DicomWalk {
         vr[1] = static_cast<char>(h[5]);
         // Only the standard's VRs: GDCM reads an element with another as implicit VR, taking
         // the VR's bytes for a length (hundreds of MB), or asserts on it in the meta group.
-        static const char kVrs[] =
-            "AEASATCSDADSDTFLFDISLOLTOBODOFOLOVOWPNSHSLSQSSSTSVTMUCUIULUNURUSUTUV";
-        bool known = false;
-        for (std::size_t i = 0; i + 1 < sizeof kVrs; i += 2)
-          known = known || (kVrs[i] == vr[0] && kVrs[i + 1] == vr[1]);
-        if (!known)
+        if (!known_vr(vr))
           throw InputError(path + ": malformed DICOM: element " + hex_tag(group, element) +
                            " at offset " + std::to_string(at) +
                            " has no valid value representation");
@@ -223,25 +226,34 @@ struct DicomWalk {
   std::uint64_t meta_length_end = 0;
 };
 
+// The checks of a walked data set's pixel description and data.
+void check_pixels(const DicomWalk& w, const std::string& path);
+
 }  // namespace
 
 void check_dicom_file(const std::string& path, bool given) {
   FileBytes file(path);
   unsigned char marker[4];
   if (!file.read(128, marker, 4) || std::memcmp(marker, "DICM", 4) != 0) {
-    if (!given) return;  // other files in a series' directory: GDCM's scanner passes them by
-    // A file given by name without the marker: GDCM would parse it as implicit VR from its first
-    // byte, and size its allocations by whatever lengths it finds there.
+    // A data set without the preamble and meta group. GDCM reads one whose first element is in
+    // explicit VR (a VR after its tag) as a slice of the series, and one in implicit VR when the
+    // file is named; it sizes its allocations by the lengths it finds, and reads pixel data cut
+    // short as zeros. Other files in a series' directory its scanner passes by.
+    unsigned char first[8];
+    const char vr[3] = {static_cast<char>(file.read(0, first, 8) ? first[4] : 0),
+                        static_cast<char>(first[5]), 0};
+    const bool explicit_vr = file.size() >= 8 && known_vr(vr) && (first[0] & 1) == 0;
+    if (!given && !explicit_vr) return;
     DicomWalk w{file, path};
-    w.implicit = true;
+    w.implicit = !explicit_vr;
     try {
       w.dataset(0, file.size(), false, 0, false);
     } catch (const InputError& e) {
-      throw InputError(path +
-                       ": not a DICOM file (no DICM marker, and not a readable implicit-VR "
-                       "data set: " +
-                       std::string(e.what()).substr(path.size() + 2) + ")");
+      throw InputError(path + ": not a DICOM file (no DICM marker, and not a readable " +
+                       (explicit_vr ? "explicit" : "implicit") +
+                       "-VR data set: " + std::string(e.what()).substr(path.size() + 2) + ")");
     }
+    check_pixels(w, path);
     return;
   }
   DicomWalk w{file, path};
@@ -257,6 +269,12 @@ void check_dicom_file(const std::string& path, bool given) {
   w.implicit = w.syntax == "1.2.840.10008.1.2";
   w.big = w.syntax == "1.2.840.10008.1.2.2";
   w.dataset(after_meta, file.size(), false, 0, false);
+  check_pixels(w, path);
+}
+
+namespace {
+
+void check_pixels(const DicomWalk& w, const std::string& path) {
   // GDCM asserts on pixel descriptions outside these.
   if (w.samples != 1 && w.samples != 3 && w.samples != 4)
     throw InputError(path + ": DICOM SamplesPerPixel is " + std::to_string(w.samples) +
@@ -282,6 +300,8 @@ void check_dicom_file(const std::string& path, bool given) {
                      " pixels x " + std::to_string(w.frames) + " frames of " +
                      std::to_string(w.bits) + " bits need " + std::to_string(need));
 }
+
+}  // namespace
 
 void check_dicom_input(const std::string& input) {
   std::error_code ec;
