@@ -142,6 +142,19 @@ int cancelled() {
   return 128 + (g_cancel_signal ? static_cast<int>(g_cancel_signal) : SIGINT);
 }
 
+// An error after a cancel signal comes of it (a system call the signal interrupted: "cannot open
+// ...: Interrupted system call" where the call is not restarted, as under ThreadSanitizer): the
+// run was cancelled, and says so. Under mpirun errors are agreed on by every rank, as before.
+int failed_or_cancelled(const char* what) {
+#ifdef ISOTILE_HAVE_MPI
+  const bool distributed = g_mpi.has_value();
+#else
+  const bool distributed = false;
+#endif
+  if (g_cancel_signal != 0 && !distributed) return cancelled();
+  return fail(what, false);
+}
+
 }  // namespace
 
 // --threads: never destroyed: lifting the limit at the end can start workers, and where a worker
@@ -293,11 +306,11 @@ int main(int argc, char** argv) {
     } catch (const isotile::Cancelled&) {
       return cancelled();
     } catch (const isotile::Error& e) {
-      return fail(e.what(), false);
+      return failed_or_cancelled(e.what());
     } catch (const std::bad_alloc&) {
-      return fail("out of memory", false);
+      return failed_or_cancelled("out of memory");
     } catch (const std::exception& e) {
-      return fail(e.what(), false);
+      return failed_or_cancelled(e.what());
     }
     return 0;
   }();
