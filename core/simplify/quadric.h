@@ -1,6 +1,7 @@
 // A plane quadric (Garland and Heckbert): the sum of squared distances from a point to a set of
 // planes, as a symmetric 4x4 matrix. The simplifier keeps one per vertex, for the input faces the
-// vertex stands for.
+// vertex stands for, together with those faces' area vectors summed (the matrix is the same for a
+// plane and its reverse, so it cannot tell which way the surface faces).
 #pragma once
 
 #include <algorithm>
@@ -13,6 +14,11 @@ namespace isotile {
 // Stored as its upper triangle: sum over planes n.x + d = 0 of (n.x + d)^2 = x^T A x + 2 b.x + c.
 struct Quadric {
   std::array<double, 10> m{};  // a00 a01 a02 a11 a12 a22 b0 b1 b2 c
+  // The input faces' normals times their areas, summed: the direction the surface the vertex
+  // stands for faces, area-weighted so that the slivers and specks extraction makes (Marching
+  // Cubes around samples equal to the isovalue) barely count. Not part of the distance.
+  Vec3d area{0, 0, 0};
+  double area_sum = 0;  // their areas summed: |area| / area_sum says how coherently they face
 
   // The plane n.x + d = 0 (n of unit length), with weight 1.
   static Quadric plane(const Vec3d& n, double d) {
@@ -23,6 +29,14 @@ struct Quadric {
   }
   Quadric& operator+=(const Quadric& o) {
     for (int i = 0; i < 10; ++i) m[i] += o.m[i];
+    for (int i = 0; i < 3; ++i) area[i] += o.area[i];
+    area_sum += o.area_sum;
+    return *this;
+  }
+  Quadric& operator-=(const Quadric& o) {
+    for (int i = 0; i < 10; ++i) m[i] -= o.m[i];
+    for (int i = 0; i < 3; ++i) area[i] -= o.area[i];
+    area_sum -= o.area_sum;
     return *this;
   }
   // The sum of squared distances from x to the planes.

@@ -172,7 +172,7 @@ void split_fans(WorkMesh& m, SimplifyStats& stats) {
   stats.split_copies = copies;
 }
 
-// Every vertex's quadric: the planes of its faces, each with weight 1.
+// Every vertex's quadric: the planes of its faces, each with weight 1, and their area vectors.
 void initial_quadrics(WorkMesh& m) {
   std::vector<Quadric> planes(m.triangles.size());
   tbb::parallel_for(std::size_t{0}, m.triangles.size(), [&](std::size_t f) {
@@ -181,8 +181,11 @@ void initial_quadrics(WorkMesh& m) {
     Vec3d n = cross(sub(m.positions[t[1]], a), sub(m.positions[t[2]], a));
     const double len = std::sqrt(dot(n, n));
     if (!(len > 0)) return;  // a degenerate face has no plane
+    const Vec3d area{n[0] / 2, n[1] / 2, n[2] / 2};
     for (double& c : n) c /= len;
     planes[f] = Quadric::plane(n, -dot(n, a));
+    planes[f].area = area;
+    planes[f].area_sum = len / 2;
   });
   const VertexFaces vf(m.positions.size(), m.triangles);
   m.quadrics.assign(m.positions.size(), Quadric{});
@@ -481,7 +484,9 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
         pos[v] = reg.positions[i];
         quad[v] = reg.quadrics[i];
       } else {
-        for (int k = 0; k < 10; ++k) quad[v].m[k] += reg.quadrics[i].m[k] - in.quadrics[v].m[k];
+        Quadric added = reg.quadrics[i];
+        added -= in.quadrics[v];
+        quad[v] += added;
       }
       used[v] = 1;
     }

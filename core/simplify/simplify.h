@@ -16,6 +16,10 @@
 //     form several fans, or that lies on an edge with more than two faces or with faces of
 //     opposite orientation, is split into one locked copy per fan for the collapses and welded
 //     back afterwards, so no face is dropped and nothing new becomes non-manifold;
+//   * orientation: no change leaves a face facing further than 90 degrees from the input surface
+//     its corners stand for (each vertex's quadric carries those faces' area vectors), unless it
+//     already did and turns no further, or is a speck (Marching Cubes makes zero-area faces and
+//     specks where samples equal the isovalue; see simplify_region.h);
 //   * shape: a radius-ratio floor on new triangles, then flips, tangential relaxation and a
 //     cleanup of what is still below the floor (see simplify_region.h).
 //

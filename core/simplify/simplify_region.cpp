@@ -353,24 +353,62 @@ struct RegionSimplifier::Impl {
     return worst;
   }
 
+  // The area vector of the input surface v stands for (see Quadric::area), and its area.
+  P area(VH v) const { return vec(region.quadrics[v.idx()].area); }
+  double area_sum(VH v) const { return region.quadrics[v.idx()].area_sum; }
+
+  // Whether a face that becomes `after` (unnormalised normals) from `before` faces within the
+  // allowed angle of `ref`, the area vectors of its corners summed (the input surface it stands
+  // for). The check against the face's last shape (max_normal_turn) bounds each step, not their
+  // sum, and says nothing where the face is degenerate (Marching Cubes makes zero-area faces and
+  // specks around samples equal to the isovalue): alone, it lets a face turn over a step at a
+  // time, or grow from a speck turned over, and a vertex fold past the locked border.
+  //
+  // A face beyond the limit may only come from one already beyond it, turning no further from
+  // `ref` and with no more of its (doubled) area beyond the limit (its deficit: its projection
+  // short of the limit's), or be a speck: a deficit within a negligible share (input_slack) of the
+  // corners' input area, which lets collapses among zero-area faces go on. So the input's own
+  // folds may still be worked on, but no face turns over or grows turned over. Where the input
+  // faces in many directions (|ref| below input_coherence times the area `sum`: thin twigs and
+  // sheets, whose two sides the corners share) there is no direction to keep.
+  bool faces_input(const P& after, const P& before, const P& ref, double sum) const {
+    const double lr = ref.norm();
+    if (!(lr > 0) || lr < opt.input_coherence * sum) return true;
+    const P r = ref / lr;
+    const double la = after.norm(), lb = before.norm();
+    const double ca = (after | r) / la;
+    if (ca >= opt.max_input_turn) return true;
+    const double deficit = opt.max_input_turn * la - (after | r);
+    if (deficit <= 2 * opt.input_slack * sum) return true;
+    return lb > 0 && ca >= (before | r) / lb && deficit <= opt.max_input_turn * lb - (before | r);
+  }
+
   // Shape and normals of the faces around v after v moves to x, skipping f0 and f1 (the faces a
   // collapse removes), with `other` (the collapse's other end) also at x. Returns the worst new
-  // radius ratio, or -1 when a face would turn too far.
+  // radius ratio, or -1 when a face would turn too far, from its last shape or from the input.
   double worst_after_move(VH v, VH other, const P& x, FH f0 = FH(), FH f1 = FH()) const {
     double worst = 1;
+    // After a collapse the vertex at x stands for both ends' surface. (Only f0 and f1 hold both.)
+    const P merged = other == v ? area(v) : area(v) + area(other);
+    const double merged_sum = other == v ? area_sum(v) : area_sum(v) + area_sum(other);
     for (FH f : mesh.vf_range(v)) {
       if (f == f0 || f == f1) continue;
-      P p[3], n[3];
+      P p[3], n[3], ref(0, 0, 0);
+      double sum = 0;
       int k = 0;
       for (VH u : mesh.fv_range(f)) {
         p[k] = mesh.point(u);
-        n[k] = (u == v || u == other) ? x : p[k];
+        const bool moved = u == v || u == other;
+        n[k] = moved ? x : p[k];
+        ref += moved ? merged : area(u);
+        sum += moved ? merged_sum : area_sum(u);
         ++k;
       }
       const P before = cross_normal(p[0], p[1], p[2]), after = cross_normal(n[0], n[1], n[2]);
       const double lb = before.norm(), la = after.norm();
       if (la == 0) return -1;
       if (lb > 0 && (before | after) < opt.max_normal_turn * lb * la) return -1;
+      if (!faces_input(after, before, ref, sum)) return -1;
       worst = std::min(worst, quality(n[0], n[1], n[2]));
     }
     return worst;
@@ -555,6 +593,14 @@ struct RegionSimplifier::Impl {
     if (m0.norm() == 0 || m1.norm() == 0) return false;
     const P n = n0 / l0 + n1 / l1;
     if ((m0 | n) <= 0 || (m1 | n) <= 0) return false;
+    // Each new face against its corners' input surface, or no further from it than the worse of
+    // the two it replaces.
+    const P r0 = area(c) + area(d) + area(a), r1 = area(d) + area(c) + area(b);
+    const double s0 = area_sum(c) + area_sum(d) + area_sum(a),
+                 s1 = area_sum(d) + area_sum(c) + area_sum(b);
+    if (!(faces_input(m0, n0, r0, s0) || faces_input(m0, n1, r0, s0)) ||
+        !(faces_input(m1, n0, r1, s1) || faces_input(m1, n1, r1, s1)))
+      return false;
     const double before = std::min(quality(pb, pa, pc), quality(pa, pb, pd));
     const double after = std::min(quality(pc, pd, pa), quality(pd, pc, pb));
     if (after <= before + margin) return false;

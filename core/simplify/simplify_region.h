@@ -19,16 +19,18 @@
 //      length (short edges first where error ties, which keeps triangles round). An edge is
 //      checked only when it reaches the top of the heap: topology (OpenMesh's is_collapse_ok; no
 //      new edge between two locked vertices, which another region could make too; copies of one
-//      split vertex never neighbours), normals (no face turns by more than the allowed angle) and
-//      shape (no new triangle below the quality floor unless the collapse lifts the worst
-//      triangle around it). A refused edge waits outside the heap until its neighbourhood changes.
+//      split vertex never neighbours), normals (no face turns by more than the allowed angle in
+//      one change, nor ends up facing further than 90 degrees from the input surface its corners
+//      stand for: the area vectors their quadrics carry, summed) and shape (no new triangle below
+//      the quality floor unless the collapse lifts the worst triangle around it). A refused edge
+//      waits outside the heap until its neighbourhood changes.
 //      The driver calls collapse() in rounds with a cost ceiling common to all regions, so that
 //      the regions together collapse in nearly the order one heap over the whole mesh would.
 //   2. Shape (finish()). Edge flips where nearly coplanar triangles get a better worst triangle,
 //      then tangential relaxation: each vertex moves toward the centroid of its neighbours within
 //      its tangent plane, then back along the normal to its quadric's minimum, so it stays on the
 //      planes it represents. Moves and flips that would lower the worst triangle around them,
-//      turn a face, or stray too far from the planes are refused.
+//      turn a face (either check above), or stray too far from the planes are refused.
 //   3. Cleanup (finish()). Each triangle still below the quality floor gets, in turn, a flip of
 //      one of its edges, a collapse of its shortest edge, or a small move of its corners (a
 //      pattern search for the position that lifts the worst triangle around the corner, within a
@@ -51,7 +53,11 @@ namespace isotile {
 struct RegionOptions {
   double max_error = 0;            // > 0: no vertex strays further from its planes
   double min_quality = 0.3;        // radius-ratio floor for new triangles and the cleanup
-  double max_normal_turn = 0.5;    // cosine: no face may turn by more than this angle
+  double max_normal_turn = 0.5;    // cosine: no change may turn a face by more than this angle
+  double max_input_turn = 0.0;     // cosine: no face may face further than this angle from the
+                                   // input surface its corners stand for (their area vectors)
+  double input_coherence = 0.5;    // ... where those face this coherently: |sum| / sum of areas
+  double input_slack = 1e-4;       // ... but for this share of their area (specks)
   double length_weight = 0.05;     // weight of the squared edge length in the cost
   double placement_pull = 0.02;    // regularisation of the optimal position toward the midpoint
   int relax_passes = 3;            // 0: no flips and no relaxation
