@@ -100,6 +100,105 @@ inline double max_distance(const FieldSpec& spec, const Mesh& m) {
   return worst;
 }
 
+// The smallest cosine between a face of `out` and the input surface beside it: the normal of the
+// input face nearest to the face's centroid. Faces below a thousandth of the input's mean area
+// (the specks Marching Cubes makes around samples equal to the isovalue) have no meaningful normal
+// and are passed over, in both meshes. Below 0, a face of `out` is turned over against the surface
+// it stands for. Input faces are found in a grid of cells as wide as the input's longest edge,
+// searched one cell around the centroid's: enough for a result within that distance of its input.
+inline double worst_facing(const Mesh& in, const Mesh& out) {
+  using V = std::array<double, 3>;
+  auto at = [](const Mesh& m, std::uint32_t v) {
+    return V{m.positions[v][0], m.positions[v][1], m.positions[v][2]};
+  };
+  auto sub = [](const V& a, const V& b) { return V{a[0] - b[0], a[1] - b[1], a[2] - b[2]}; };
+  auto dot = [](const V& a, const V& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
+  auto cross = [](const V& a, const V& b) {
+    return V{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+  };
+  auto normal = [&](const Mesh& m, const Tri& t) {
+    return cross(sub(at(m, t[1]), at(m, t[0])), sub(at(m, t[2]), at(m, t[0])));
+  };
+  auto centroid = [&](const Mesh& m, const Tri& t) {
+    const V a = at(m, t[0]), b = at(m, t[1]), c = at(m, t[2]);
+    return V{(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3};
+  };
+  // Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection, 5.1.5).
+  auto distance2 = [&](const V& p, const V& a, const V& b, const V& c) {
+    auto at_param = [](const V& o, const V& d, double t) {
+      return V{o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+    };
+    const V ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    V q;
+    const V bp = sub(p, b), cp = sub(p, c);
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp), d5 = dot(ab, cp), d6 = dot(ac, cp);
+    const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+    if (d1 <= 0 && d2 <= 0) {
+      q = a;
+    } else if (d3 >= 0 && d4 <= d3) {
+      q = b;
+    } else if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+      q = at_param(a, ab, d1 / (d1 - d3));
+    } else if (d6 >= 0 && d5 <= d6) {
+      q = c;
+    } else if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+      q = at_param(a, ac, d2 / (d2 - d6));
+    } else if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+      q = at_param(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    } else {
+      const double den = 1 / (va + vb + vc);
+      q = at_param(at_param(a, ab, vb * den), ac, vc * den);
+    }
+    const V d = sub(p, q);
+    return dot(d, d);
+  };
+  double cell = 0, mean_area = 0;
+  for (const Tri& t : in.triangles) {
+    const V n = normal(in, t);
+    mean_area += std::sqrt(dot(n, n)) / static_cast<double>(in.triangles.size());
+    for (int i = 0; i < 3; ++i) {
+      const V e = sub(at(in, t[i]), at(in, t[(i + 1) % 3]));
+      cell = std::max(cell, std::sqrt(dot(e, e)));
+    }
+  }
+  auto key = [&](const V& p, int dx, int dy, int dz) {
+    return std::array<std::int64_t, 3>{static_cast<std::int64_t>(std::floor(p[0] / cell)) + dx,
+                                       static_cast<std::int64_t>(std::floor(p[1] / cell)) + dy,
+                                       static_cast<std::int64_t>(std::floor(p[2] / cell)) + dz};
+  };
+  std::map<std::array<std::int64_t, 3>, std::vector<std::size_t>> grid;
+  for (std::size_t f = 0; f < in.triangles.size(); ++f) {
+    const V n = normal(in, in.triangles[f]);
+    if (std::sqrt(dot(n, n)) >= 1e-3 * mean_area)
+      grid[key(centroid(in, in.triangles[f]), 0, 0, 0)].push_back(f);
+  }
+  double worst = 1;
+  for (const Tri& t : out.triangles) {
+    const V p = centroid(out, t), n = normal(out, t);
+    if (std::sqrt(dot(n, n)) < 1e-3 * mean_area) continue;
+    double best = INFINITY;
+    V near{0, 0, 0};
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = grid.find(key(p, dx, dy, dz));
+          if (it == grid.end()) continue;
+          for (std::size_t f : it->second) {
+            const Tri& u = in.triangles[f];
+            const double d = distance2(p, at(in, u[0]), at(in, u[1]), at(in, u[2]));
+            if (d < best) {
+              best = d;
+              near = normal(in, u);
+            }
+          }
+        }
+    const double len = std::sqrt(dot(n, n) * dot(near, near));
+    if (len > 0) worst = std::min(worst, dot(n, near) / len);
+  }
+  return worst;
+}
+
 // Every run is byte-identical to the first (positions, normals, triangles, quads): the
 // determinism contract across thread counts.
 inline void expect_identical_runs(const std::vector<Mesh>& runs) {
