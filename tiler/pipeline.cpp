@@ -366,6 +366,8 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
     t_simplify = seconds_since(t0) + t_release;
     log("simplified to " + std::to_string(simplified.triangles.size()) + " triangles in " +
         fmt_seconds(t_simplify));
+    if (const std::string missed = target_missed(sstats); !missed.empty())
+      say_warning(options.warn, missed);
     if (options.stats) extracted = std::move(mesh);
     mesh = std::move(simplified);
   }

@@ -261,13 +261,19 @@ class TiledSimplification {
     }
     result.seconds_seams = since(t0);
 
+    result.simplify.target_faces = target;
+    result.simplify.faces_before = result.triangles_extracted;
+    result.simplify.faces_after = result.triangles;
+    // Said before the file is written (a front end may make it an error).
+    if (const std::string missed = target_missed(result.simplify); !missed.empty())
+      say_warning(opt_.warn, missed +
+                                 " (each brick's border is locked until the seams' pass: "
+                                 "larger bricks, a larger --memory, lock fewer vertices)");
+
     // 4. The file, once the input is known to have stayed as it was read.
     src_.check_unchanged();
     assemble(output, result);
     result.quality = quality_.stats();
-    result.simplify.target_faces = target;
-    result.simplify.faces_before = result.triangles_extracted;
-    result.simplify.faces_after = result.triangles;
     return result;
   }
 

@@ -655,6 +655,17 @@ void check_options(const SimplifyOptions& options) {
 
 }  // namespace
 
+std::string target_missed(const SimplifyStats& stats) {
+  const std::uint64_t target = stats.target_faces, got = stats.faces_after;
+  if (target == 0 || got <= target + std::max<std::uint64_t>(target / 10, 10)) return "";
+  const auto over = static_cast<long>(
+      std::lround(100.0 * static_cast<double>(got - target) / static_cast<double>(target)));
+  return "simplification stopped at " + std::to_string(got) + " triangles, " +
+         std::to_string(over) + "% above its target of " + std::to_string(target) +
+         ": no collapse left kept the topology, the border, the surface's orientation and the "
+         "triangles' shape";
+}
+
 Mesh simplify(const Mesh& mesh, const SimplifyOptions& options, SimplifyStats* stats_out) {
   check_options(options);
   if (options.ratio == 0 && options.faces == 0 && options.max_error == 0)

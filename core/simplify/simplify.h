@@ -29,6 +29,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -70,6 +71,11 @@ struct SimplifyStats {
   std::uint64_t split_vertices = 0, split_copies = 0, unlinked_faces = 0;
   std::uint64_t collapses = 0, flips = 0, relaxed = 0, cleanup = 0;
 };
+
+// A warning where the result holds more than a tenth more faces than its target (the checks
+// that keep topology, the border, orientation and shape refused the collapses left: thin parts,
+// a long border, and out of core the bricks' seams hold faces); empty otherwise.
+std::string target_missed(const SimplifyStats& stats);
 
 // Throws InputError for options without a target, a ratio outside (0, 1], or invalid face
 // indices.

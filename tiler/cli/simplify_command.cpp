@@ -110,6 +110,7 @@ int run_simplify(const SimplifyArgs& args) {
   const double t_simplify = seconds_since(t0);
   progress("simplified to " + std::to_string(out.triangles.size()) + " triangles in " +
            fmt_seconds(t_simplify));
+  if (const std::string missed = target_missed(sstats); !missed.empty()) say_warning({}, missed);
   progress("writing " + args.output);
   t0 = Clock::now();
   write_mesh(
