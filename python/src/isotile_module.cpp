@@ -345,10 +345,14 @@ py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, dou
   o.relax = relax;
   auto* result = new Result;
   py::capsule owner = owner_of(result);
+  SimplifyStats stats;
   run_released(threads, [&] {
-    result->mesh = simplify(mesh, o);
+    result->mesh = simplify(mesh, o, &stats);
     return 0;
   });
+  // A target missed by more than a tenth, as extract's warnings are said: a RuntimeWarning.
+  if (const std::string missed = target_missed(stats); !missed.empty())
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, missed.c_str(), 1) != 0) throw py::error_already_set();
   return py::make_tuple(vec3_array(result->mesh.positions, owner),
                         index_array(result->mesh.triangles, result->mesh.positions.size(), owner));
 }
