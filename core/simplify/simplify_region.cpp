@@ -406,6 +406,10 @@ struct RegionSimplifier::Impl {
       }
       const P before = cross_normal(p[0], p[1], p[2]), after = cross_normal(n[0], n[1], n[2]);
       const double lb = before.norm(), la = after.norm();
+      // A face of no area that stays so (Marching Cubes makes fans of them where samples equal
+      // the isovalue, their corners at one point) is not made worse: judged, it refused every
+      // collapse in such a fan (each leaves the others), and the fans stayed whole.
+      if (la == 0 && lb == 0) continue;
       if (la == 0) return -1;
       if (lb > 0 && (before | after) < opt.max_normal_turn * lb * la) return -1;
       if (!faces_input(after, before, ref, sum)) return -1;
