@@ -43,6 +43,22 @@ using testing::CliTest;
     if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK"); \
   } while (0)
 
+// Expects both read_volume and read_volume_header to refuse `path` with an InputError that
+// says `what`.
+void expect_both_refuse(const fs::path& path, const std::string& what) {
+  for (const bool header : {false, true}) {
+    try {
+      if (header)
+        read_volume_header(path.string());
+      else
+        read_volume(path.string());
+      ADD_FAILURE() << path << " accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  }
+}
+
 // A rotation about (1, 2, 3) by 0.4 rad, optionally mirrored in x (determinant -1).
 Mat3 test_direction(bool mirror) {
   Vec3d k{1, 2, 3};
@@ -256,17 +272,7 @@ TEST(ItkRegions, ASlicePatternIsANumberAndEverySliceIsThere) {
   // Slices 0 to 9 and 11 to 14 of a zero-padded stack: refused, naming the missing slice.
   for (int k = 0; k < 15; ++k)
     if (k != 10) write_slice(k, "z_%03d.tif");
-  for (const bool whole : {false, true}) {
-    try {
-      if (whole)
-        read_volume((dir / "z_%03d.tif").string());
-      else
-        read_volume_header((dir / "z_%03d.tif").string());
-      ADD_FAILURE() << "a stack with a gap was read";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("z_010.tif is missing"), std::string::npos) << e.what();
-    }
-  }
+  expect_both_refuse(dir / "z_%03d.tif", "z_010.tif is missing");
   write_slice(10, "z_%03d.tif");
   EXPECT_EQ(read_volume((dir / "z_%03d.tif").string()).dims(), (Index3{16, 16, 15}));
   fs::remove_all(dir);
@@ -494,19 +500,7 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
   for (const std::uint32_t gap : {0u, 2u}) {
     const fs::path p = dir / ("i32_" + std::to_string(gap) + ".tif");
     write_tiff_pages(p, field_as("field:torus:20", ScalarType::Int32), 'I', gap, gap ? 1 : 32773);
-    for (const bool header : {false, true}) {
-      try {
-        if (header)
-          read_volume_header(p.string());
-        else
-          read_volume(p.string());
-        ADD_FAILURE() << p << " accepted";
-      } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("32-bit integer TIFF samples are read only when"),
-                  std::string::npos)
-            << e.what();
-      }
-    }
+    expect_both_refuse(p, "32-bit integer TIFF samples are read only when");
   }
   fs::remove_all(dir);
 }
@@ -721,19 +715,7 @@ TEST(Mrc, ImodBytesAndVolumeStacks) {
   stack.ispg = 401;
   stack.mz = 3;
   write_mrc(dir / "stack.mrcs", v, stack);
-  for (const bool header : {false, true}) {
-    try {
-      if (header)
-        read_volume_header((dir / "stack.mrcs").string());
-      else
-        read_volume((dir / "stack.mrcs").string());
-      ADD_FAILURE() << "a stack of two volumes read as one";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("an MRC stack of 2 volumes of 3 sections each"),
-                std::string::npos)
-          << e.what();
-    }
-  }
+  expect_both_refuse(dir / "stack.mrcs", "an MRC stack of 2 volumes of 3 sections each");
   stack.mz = 6;  // one volume of the stack's space group
   write_mrc(dir / "one.mrcs", v, stack);
   EXPECT_EQ(read_volume((dir / "one.mrcs").string()).dims(), v.dims());

@@ -328,30 +328,37 @@ TEST(SurfaceDistance, IsZeroForTheSameMeshAndTheOffsetOfAPlane) {
   EXPECT_FALSE(surface_distance(Mesh{}, a));  // no face: no distance
 }
 
+// Bonsai extracted by `method` at `iso`, its path checked by the caller.
+Mesh bonsai_mesh(const std::filesystem::path& path, Method method, double iso) {
+  const Volume vol = read_volume(path.string());
+  ExtractOptions o;
+  o.method = method;
+  o.iso = iso;
+  return extract(vol.view(), o);
+}
+
+void expect_same_topology(const Mesh& in, const Mesh& out) {
+  const TopologyStats before = mesh_topology(in), t = mesh_topology(out);
+  EXPECT_EQ(t.nonmanifold_edges, 0u);
+  EXPECT_EQ(t.components, before.components);
+  EXPECT_EQ(t.euler, before.euler);
+  EXPECT_EQ(t.boundary_edges, before.boundary_edges);
+}
+
 // The shape targets on bonsai's Macet mesh (docs/simplify.md): at a tenth of the faces, min
 // radius ratio >= 0.2 and mean >= 0.75, with the surface kept within 3 voxels (MeshLab's
 // quadric decimation, the reference, strays 5.1).
 TEST(SimplifyRealData, BonsaiMacetAtATenth) {
   const auto path = testing::shared_volume("bonsai_256x256x256_uint8.raw.gz");
   ISOTILE_REQUIRE_SHARED(path);
-  const Volume vol = read_volume(path.string());
-  ExtractOptions o;
-  o.method = Method::Macet;
-  o.iso = 49.5;
-  const Mesh in = extract(vol.view(), o);
-  const TopologyStats before = mesh_topology(in);
-  SimplifyStats st;
-  const Mesh out = simplify(in, {.ratio = 0.1}, &st);
+  const Mesh in = bonsai_mesh(path, Method::Macet, 49.5);
+  const Mesh out = simplify(in, {.ratio = 0.1});
   EXPECT_NEAR(static_cast<double>(out.triangles.size()), 0.1 * in.triangles.size(),
               0.02 * 0.1 * in.triangles.size());
   const QualityStats q = triangle_quality(out);
   EXPECT_GE(q.min, 0.2);
   EXPECT_GE(q.mean, 0.75);
-  const TopologyStats t = mesh_topology(out);
-  EXPECT_EQ(t.nonmanifold_edges, 0u);
-  EXPECT_EQ(t.components, before.components);
-  EXPECT_EQ(t.euler, before.euler);
-  EXPECT_EQ(t.boundary_edges, before.boundary_edges);
+  expect_same_topology(in, out);
   const SurfaceDistance d = *surface_distance(in, out);
   EXPECT_LT(d.max(), 3.0);
   EXPECT_LT(d.mean(), 0.2);
@@ -364,23 +371,15 @@ TEST(SimplifyRealData, BonsaiMacetAtATenth) {
 TEST(SimplifyRealData, BonsaiMarchingCubesFansOfNoAreaAreSimplified) {
   const auto path = testing::shared_volume("bonsai_256x256x256_uint8.raw.gz");
   ISOTILE_REQUIRE_SHARED(path);
-  const Volume vol = read_volume(path.string());
-  ExtractOptions o;
-  o.method = Method::MarchingCubes;
-  o.iso = 50;
-  const Mesh in = extract(vol.view(), o);
+  const Mesh in = bonsai_mesh(path, Method::MarchingCubes, 50);
   ASSERT_GT(triangle_quality(in).degenerate, in.triangles.size() / 20);
-  const TopologyStats before = mesh_topology(in);
   SimplifyStats st;
   const Mesh out = simplify(in, {.ratio = 0.1}, &st);
   EXPECT_LE(out.triangles.size(), st.target_faces + st.target_faces / 20);
   const QualityStats q = triangle_quality(out);
   EXPECT_LT(q.degenerate, out.triangles.size() / 20);
   EXPECT_GE(q.mean, 0.7);
-  const TopologyStats t = mesh_topology(out);
-  EXPECT_EQ(t.components, before.components);
-  EXPECT_EQ(t.euler, before.euler);
-  EXPECT_EQ(t.boundary_edges, before.boundary_edges);
+  expect_same_topology(in, out);
   EXPECT_LT(surface_distance(in, out)->mean(), 0.25);
 }
 
