@@ -496,6 +496,15 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
   write_tiff_pages(dir / "tifffile.tif", u16, 'I', 0, 1, 0, {},
                    "{\"axes\": \"ZYX\", \"shape\": [20, 20, 20]}");
   EXPECT_EQ(read_volume((dir / "tifffile.tif").string()).dims(), u16.dims());
+  // A plain stack whatever its one axis is called (tifffile's imagej=True calls z channels), and
+  // tifffile's slices written one by one (a series of one plane each, alike): stacks of planes.
+  for (const char* axis : {"channels", "frames"}) {
+    write_tiff_pages(dir / "one_axis.tif", u16, 'I', 0, 1, 0, {},
+                     "ImageJ=1.11a\nimages=20\n" + std::string(axis) + "=20\nhyperstack=true\n");
+    EXPECT_EQ(read_volume((dir / "one_axis.tif").string()).dims(), u16.dims()) << axis;
+  }
+  write_tiff_pages(dir / "planes.tif", u16, 'I', 0, 1, 0, {}, "{\"shape\": [20, 20]}", true);
+  EXPECT_EQ(read_volume((dir / "planes.tif").string()).dims(), u16.dims());
   // 32-bit integers stored otherwise: refused (ITK would leave the volume unwritten).
   for (const std::uint32_t gap : {0u, 2u}) {
     const fs::path p = dir / ("i32_" + std::to_string(gap) + ".tif");

@@ -657,7 +657,8 @@ void check_options(const SimplifyOptions& options) {
 
 std::string target_missed(const SimplifyStats& stats) {
   const std::uint64_t target = stats.target_faces, got = stats.faces_after;
-  if (target == 0 || got <= target + std::max<std::uint64_t>(target / 10, 10)) return "";
+  if (target == 0 || got <= target || got - target <= std::max<std::uint64_t>(target / 10, 10))
+    return "";
   const auto over = static_cast<long>(
       std::lround(100.0 * static_cast<double>(got - target) / static_cast<double>(target)));
   return "simplification stopped at " + std::to_string(got) + " triangles, " +

@@ -214,10 +214,10 @@ MrcLayout mrc_layout(const std::string& path) {
   // ISPG 401 to 630: a stack of volumes of MZ sections each, NZ = MZ x volumes (MRC2014). Read
   // as one, they would be laid end to end along z.
   const std::int32_t ispg = i32(88), mz = i32(36);
-  if (ispg >= 401 && ispg <= 630 && mz > 0 && mz != m.n[2])
+  if (ispg >= 401 && ispg <= 630 && mz > 0 && mz != dims[2])
     throw InputError(path + ": an MRC stack of " +
-                     (m.n[2] % mz == 0 ? std::to_string(m.n[2] / mz) + " volumes"
-                                       : "volumes (NZ " + std::to_string(m.n[2]) + ")") +
+                     (dims[2] % mz == 0 ? std::to_string(dims[2] / mz) + " volumes"
+                                        : "volumes (" + std::to_string(dims[2]) + " along z)") +
                      " of " + std::to_string(mz) + " sections each (space group ISPG " +
                      std::to_string(ispg) +
                      "), not one volume; cut the one to extract out first (e.g. IMOD's newstack, "

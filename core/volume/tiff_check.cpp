@@ -37,7 +37,10 @@ std::optional<ScalarType> tiff_sample_type(std::uint64_t bits, std::uint64_t for
 // ImageJ's description of a hyperstack ("ImageJ=1.54f\nimages=20\nchannels=2\nslices=10\n...")
 // as far as a volume cares: its channels and time points (frames), 1 where it does not say.
 struct ImageJShape {
-  std::uint64_t channels = 1, frames = 1;
+  std::uint64_t channels = 1, slices = 1, frames = 1;
+  // Pages of more than one of these axes interleave them (one alone, whatever ImageJ or tifffile
+  // calls it, is a stack of planes: tifffile's imagej=True labels a plain stack's z as channels).
+  bool hyperstack() const { return (channels > 1) + (slices > 1) + (frames > 1) > 1; }
 };
 ImageJShape imagej_shape(const std::string& description) {
   ImageJShape shape;
@@ -58,6 +61,7 @@ ImageJShape imagej_shape(const std::string& description) {
       return v;
     };
     if (const auto c = number("channels")) shape.channels = *c;
+    if (const auto z = number("slices")) shape.slices = *z;
     if (const auto f = number("frames")) shape.frames = *f;
     at = end + 1;
   }
@@ -120,6 +124,7 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
   static const std::size_t kTypeSize[19] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4,
                                             8, 4, 8, 4, 0, 0, 8, 8, 8};
   std::vector<std::uint64_t> seen;
+  std::vector<std::uint64_t> first_series;    // tifffile's shape of page 1's series
   std::array<std::uint64_t, 4> first{};       // page 1's width, height, bits and samples
   std::array<std::uint64_t, 3> first_kind{};  // its photometric, planar configuration, format
   // Whether every page so far holds its samples uncompressed, as rows of one gray sample, in
@@ -340,7 +345,7 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
         }
       }
       const ImageJShape shape = imagej_shape(description);
-      if (shape.channels > 1 || shape.frames > 1)
+      if (shape.hyperstack() && (shape.channels > 1 || shape.frames > 1))
         throw InputError(
             path + ": an ImageJ hyperstack of " +
             (shape.channels > 1 ? std::to_string(shape.channels) + " channels" : "") +
@@ -351,8 +356,12 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
             "Dimensionality)");
     }
     // A later page that begins a series of its own (tifffile writes each series' shape on its
-    // first page): two arrays in one file, which ITK would stack as one volume.
-    if (page > 1 && !tifffile_shape(description).empty())
+    // first page) where page 1 began a 3-D one, or of another shape: two arrays in one file,
+    // which ITK would stack as one volume. Series of one plane each, alike, are a stack of planes
+    // (tifffile's TiffWriter writes a loop of slices so).
+    if (page == 1) first_series = tifffile_shape(description);
+    if (const std::vector<std::uint64_t> series = tifffile_shape(description);
+        page > 1 && !series.empty() && (series != first_series || first_series.size() > 2))
       throw InputError(path + ": TIFF page " + std::to_string(page) +
                        " begins a second series (tifffile's description says so); a volume is "
                        "one series: save each one in a file of its own");

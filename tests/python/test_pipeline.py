@@ -317,8 +317,13 @@ def test_simplify_names_a_bad_target():
     assert len(isotile.simplify(v, f, faces=np.int64(100))[1]) <= 100
     # A target the checks do not let it reach, by more than a tenth: a RuntimeWarning.
     g = isotile.extract("field:gyroid:64", stats=False)
-    with pytest.warns(RuntimeWarning, match="^simplification stopped at .* above its target of 3850"):
+    with pytest.warns(RuntimeWarning, match="^simplification stopped at .* above its target of 3850") as said:
         isotile.simplify(g.vertices, g.faces, ratio=0.05)
+    assert said[0].filename == __file__
+    # Not where the error bound, the other target, stopped it first.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        isotile.simplify(g.vertices, g.faces, ratio=0.05, max_error=0.01)
     # Two face counts at once: refused (faces won and ratio was dropped without a word).
     with pytest.raises(ValueError, match="^give ratio or faces, not both"):
         isotile.simplify(v, f, ratio=0.2, faces=10)
