@@ -1317,6 +1317,10 @@ TEST_F(DamagedInputs, GzipMrcIsReadDirectlyAndMustBeWhole) {
                  "are there but the stream's end (CRC and length) is cut off");
   expect_refused(write("short.ccp4.gz", gzip(mrc.substr(0, mrc.size() - 100))), "(too short)");
   expect_refused(write("long.map.gz", gzip(mrc + "xxxx")), "(too long)");
+  // A wrong CRC: zlib's words, without the path it puts first (the message names the file).
+  std::string crc = gzip(mrc);
+  crc[crc.size() - 8] = static_cast<char>(crc[crc.size() - 8] ^ 1);
+  expect_refused(write("crc.map.gz", crc), "crc.map.gz: corrupt gzip data (incorrect data check)");
 }
 
 TEST_F(DamagedInputs, ForeignFormatsAreNamedByTheirContent) {

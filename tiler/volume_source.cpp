@@ -320,7 +320,8 @@ class GzipRawSource final : public VolumeSource {
       int code = Z_OK;
       const char* message = gzerror(file_, &code);
       if (n < 0 || (code != Z_OK && code != Z_BUF_ERROR))
-        throw InputError(file_name_ + ": corrupt gzip data (" + zlib_text(message) + ")");
+        throw InputError(file_name_ + ": corrupt gzip data (" + gzerror_text(file_name_, message) +
+                         ")");
       // Z_BUF_ERROR with the whole chunk: zlib's look-ahead met the file's end, the trailer is
       // missing (check_end() says so after the last plane); with less, the samples are.
       if (n == 0 || (code == Z_BUF_ERROR && static_cast<unsigned>(n) < chunk))
@@ -332,14 +333,6 @@ class GzipRawSource final : public VolumeSource {
     }
     if (swap_) swap_sample_bytes(dst, plane_bytes_ / scalar_size(type), scalar_size(type));
     ++next_plane_;
-  }
-  // gzerror's text, less the "<fd:N>: " zlib puts first for a gzdopen'd file: the message names
-  // the file already.
-  static std::string zlib_text(const char* message) {
-    std::string text = message ? message : "bad gzip data";
-    if (text.rfind("<fd:", 0) == 0 && text.find(">: ") != std::string::npos)
-      text.erase(0, text.find(">: ") + 3);
-    return text;
   }
   std::string volume_text() const {
     return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) +
@@ -364,7 +357,8 @@ class GzipRawSource final : public VolumeSource {
                        " bytes are there but the stream's end (CRC and length) is cut off "
                        "(truncated file)");
     if (n < 0 || code != Z_OK)
-      throw InputError(file_name_ + ": corrupt gzip data (" + zlib_text(message) + ")");
+      throw InputError(file_name_ + ": corrupt gzip data (" + gzerror_text(file_name_, message) +
+                       ")");
     end_checked_ = true;
   }
   bool end_checked_ = false;

@@ -63,7 +63,7 @@ std::size_t gz_read(const std::string& path, gzFile f, void* out, std::size_t n)
     const char* message = gzerror(f, &code);
     if (got < 0 || (code != Z_OK && code != Z_BUF_ERROR)) {
       if (code == Z_ERRNO) throw IoError("cannot read " + path + ": " + std::strerror(errno));
-      throw InputError(path + ": corrupt gzip data (" + std::string(message ? message : "") + ")");
+      throw InputError(path + ": corrupt gzip data (" + gzerror_text(path, message) + ")");
     }
     // zlib says Z_BUF_ERROR where its look-ahead found the file's end, also after handing over
     // every byte asked for (a stream cut in its trailer): the trailer check below says that.
@@ -367,7 +367,7 @@ Volume read_mrc(const std::string& path, Progress* progress) {
                        " bytes are there but the stream's end (CRC and length) is cut off "
                        "(truncated file)");
     if (got < 0 || code != Z_OK)
-      throw InputError(path + ": corrupt gzip data (" + std::string(message ? message : "") + ")");
+      throw InputError(path + ": corrupt gzip data (" + gzerror_text(path, message) + ")");
   }
   check_finite(volume.view(), path);
   return volume;

@@ -179,18 +179,11 @@ struct GzCloser {
   void operator()(gzFile f) const { gzclose_r(f); }
 };
 
-// gzerror's text repeats the path; the message names it once already.
-std::string gz_message(const std::string& path, const char* message) {
-  std::string text = message ? message : "unknown zlib error";
-  if (text.rfind(path + ": ", 0) == 0) text.erase(0, path.size() + 2);
-  return text;
-}
-
 [[noreturn]] void throw_gz_error(const std::string& path, gzFile file) {
   int code = Z_OK;
   const char* message = gzerror(file, &code);
   if (code == Z_ERRNO) throw IoError("cannot read " + path + ": " + std::strerror(errno));
-  throw InputError(path + ": corrupt gzip data: " + gz_message(path, message));
+  throw InputError(path + ": corrupt gzip data: " + gzerror_text(path, message));
 }
 
 using GzFilePtr = std::unique_ptr<gzFile_s, GzCloser>;
@@ -225,10 +218,11 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume, P
       int code = Z_OK;
       const char* message = gzerror(file.get(), &code);
       if (code == Z_BUF_ERROR)
-        throw InputError(
-            path + ": truncated gzip data: it ends after " + std::to_string(done) + " of the " +
-            std::to_string(need) + " bytes " + dims_string(volume.dims()) + " " +
-            std::string(scalar_name(volume.type())) + " needs (" + gz_message(path, message) + ")");
+        throw InputError(path + ": truncated gzip data: it ends after " + std::to_string(done) +
+                         " of the " + std::to_string(need) + " bytes " +
+                         dims_string(volume.dims()) + " " +
+                         std::string(scalar_name(volume.type())) + " needs (" +
+                         gzerror_text(path, message) + ")");
       if (code != Z_OK) throw_gz_error(path, file.get());
       throw InputError(
           size_mismatch(path, "decompresses to", done, volume.dims(), volume.type(), need));
@@ -247,7 +241,7 @@ void read_gzip(const std::string& path, const GzFilePtr& file, Volume& volume, P
   if (code == Z_BUF_ERROR)
     throw InputError(path + ": truncated gzip data: all " + std::to_string(need) +
                      " bytes are there but the stream's end (CRC and length) is cut off (" +
-                     gz_message(path, message) + ")");
+                     gzerror_text(path, message) + ")");
   if (code != Z_OK) throw_gz_error(path, file.get());
 }
 
@@ -361,6 +355,15 @@ std::optional<RawNameInfo> parse_raw_name(const std::string& path) {
   if (!type) return std::nullopt;
   info.type = *type;
   return info;
+}
+
+std::string gzerror_text(const std::string& opened_as, const char* message) {
+  std::string text = message ? message : "unknown zlib error";
+  if (text.rfind(opened_as + ": ", 0) == 0)
+    text.erase(0, opened_as.size() + 2);
+  else if (text.rfind("<fd:", 0) == 0 && text.find(">: ") != std::string::npos)
+    text.erase(0, text.find(">: ") + 3);
+  return text;
 }
 
 void read_plain_data(const PlainData& plain, Volume& volume) {

@@ -88,6 +88,10 @@ struct PlainData {
 void check_plain_size(const std::string& file, std::uint64_t size, std::uint64_t offset,
                       ScalarType type, const Index3& dims, bool bytes_after = false);
 
+// zlib's gzerror() text without the name it puts first (the path the stream was opened by, or
+// "<fd:N>" for a gzdopen'd descriptor): the messages that quote it name the file already.
+std::string gzerror_text(const std::string& opened_as, const char* message);
+
 // Reads plainly stored samples (one file at an offset, or a stack of planes) into `volume`, of
 // the layout's type and dims, in native byte order: the samples of a TIFF ITK's reader would not
 // read right (32-bit integers), as the tiler reads them box by box.
