@@ -18,6 +18,7 @@
 #include "core/mesh/surface_distance.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "facing_support.h"
 #include "test_support.h"
 
 namespace isotile {

@@ -23,6 +23,7 @@
 #include "core/simplify/simplify.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "facing_support.h"
 #include "test_support.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"

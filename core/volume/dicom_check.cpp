@@ -239,10 +239,10 @@ void check_dicom_file(const std::string& path, bool given) {
     // explicit VR (a VR after its tag) as a slice of the series, and one in implicit VR when the
     // file is named; it sizes its allocations by the lengths it finds, and reads pixel data cut
     // short as zeros. Other files in a series' directory its scanner passes by.
-    unsigned char first[8] = {};
-    const char vr[3] = {static_cast<char>(file.read(0, first, 8) ? first[4] : 0),
-                        static_cast<char>(first[5]), 0};
-    const bool explicit_vr = file.size() >= 8 && known_vr(vr) && (first[0] & 1) == 0;
+    unsigned char first[8] = {};  // zeros, no VR, where the file is shorter
+    file.read(0, first, 8);
+    const char vr[3] = {static_cast<char>(first[4]), static_cast<char>(first[5]), 0};
+    const bool explicit_vr = known_vr(vr) && (first[0] & 1) == 0;
     if (!given && !explicit_vr) return;
     DicomWalk w{file, path};
     w.implicit = !explicit_vr;

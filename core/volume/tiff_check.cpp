@@ -317,6 +317,7 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                        std::to_string(tile_w) + "x" + std::to_string(tile_h) +
                        ", which ITK's TIFF reader reads as colour; save the pages in strips (as "
                        "ImageJ and most tools do by default)");
+    const std::vector<std::uint64_t> series = tifffile_shape(description);
     if (page == 1) {
       if (spp != 1)
         throw InputError(
@@ -332,20 +333,16 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                          "32-bit floats; ITK's TIFF reader has no other)");
       // tifffile's own description: an array of more axes than z, y, x laid out as pages (z
       // and channels interleaved, or time points one after another) is not one volume.
-      if (const std::vector<std::uint64_t> array = tifffile_shape(description); array.size() > 3) {
-        int axes = 0;
-        for (std::size_t a = 0; a + 2 < array.size(); ++a) axes += array[a] > 1;
-        if (axes > 1) {
-          std::string text;
-          for (const std::uint64_t d : array)
-            text += (text.empty() ? "" : ", ") + std::to_string(d);
-          throw InputError(path + ": tifffile wrote an array of shape [" + text +
-                           "] here, whose pages interleave more axes than z (channels or time "
-                           "points); a volume is one 3-D array: save each one on its own");
-        }
+      if (std::count_if(series.begin(), series.end() - std::min<std::size_t>(series.size(), 2),
+                        [](std::uint64_t n) { return n > 1; }) > 1) {
+        std::string text;
+        for (const std::uint64_t d : series) text += (text.empty() ? "" : ", ") + std::to_string(d);
+        throw InputError(path + ": tifffile wrote an array of shape [" + text +
+                         "] here, whose pages interleave more axes than z (channels or time "
+                         "points); a volume is one 3-D array: save each one on its own");
       }
       const ImageJShape shape = imagej_shape(description);
-      if (shape.hyperstack() && (shape.channels > 1 || shape.frames > 1))
+      if (shape.hyperstack())
         throw InputError(
             path + ": an ImageJ hyperstack of " +
             (shape.channels > 1 ? std::to_string(shape.channels) + " channels" : "") +
@@ -359,9 +356,8 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
     // first page) where page 1 began a 3-D one, or of another shape: two arrays in one file,
     // which ITK would stack as one volume. Series of one plane each, alike, are a stack of planes
     // (tifffile's TiffWriter writes a loop of slices so).
-    if (page == 1) first_series = tifffile_shape(description);
-    if (const std::vector<std::uint64_t> series = tifffile_shape(description);
-        page > 1 && !series.empty() && (series != first_series || first_series.size() > 2))
+    if (page == 1) first_series = series;
+    if (page > 1 && !series.empty() && (series != first_series || first_series.size() > 2))
       throw InputError(path + ": TIFF page " + std::to_string(page) +
                        " begins a second series (tifffile's description says so); a volume is "
                        "one series: save each one in a file of its own");
