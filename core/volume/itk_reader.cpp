@@ -2,7 +2,9 @@
 // templated reader pipeline: headers and samples go straight into the caller's buffer (no second
 // copy of the volume), and this file stays cheap to compile.
 #include "core/volume/itk_reader.h"
+#include "core/volume/dicom_frames.h"
 #include "core/volume/numbered_files.h"
+#include "core/volume/slice_stack.h"
 
 #include <gdcmTrace.h>
 #include <itkGDCMImageIO.h>
@@ -217,7 +219,10 @@ FileHeader read_header(itk::ImageIOBase& io, const std::string& file) {
   }
   for (int a = 0; a < 3; ++a) {
     if (h.dims[a] <= 0) throw InputError(file + ": an axis of size 0");
-    if (!std::isfinite(h.spacing[a]) || h.spacing[a] <= 0)
+    // A multi-frame DICOM file's step between frames is judged once the frames are placed
+    // (place_frames): GDCM's is negative where they descend along the normal.
+    const bool placed_later = a == 2 && h.dims[2] > 1 && dynamic_cast<itk::GDCMImageIO*>(&io);
+    if ((!std::isfinite(h.spacing[a]) || h.spacing[a] <= 0) && !placed_later)
       throw InputError(file + ": spacing " + std::to_string(h.spacing[a]) + " along axis " +
                        std::to_string(a) + " (must be positive)");
     if (!std::isfinite(h.origin[a])) throw InputError(file + ": the origin is not finite");
@@ -290,13 +295,63 @@ itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
   return names;
 }
 
+// An enhanced multi-frame DICOM file's frames placed by their own positions, checked as a series'
+// slices are; GDCM's geometry is kept for files that give one position and a spacing. True where
+// the functional groups give the pixel spacing.
+bool place_frames(const std::string& input, const std::string& file, ItkImageInfo& info) {
+  const DicomFrames frames = read_dicom_frames(file, info.dims[2]);
+  if (frames.positions.empty()) {
+    if (!std::isfinite(info.spacing[2]) || info.spacing[2] <= 0)
+      throw InputError(file + ": spacing " + std::to_string(info.spacing[2]) +
+                       " between frames (must be positive)");
+    return false;
+  }
+  if (frames.orientation) {
+    const std::array<double, 6>& o = *frames.orientation;
+    const Vec3d row{o[0], o[1], o[2]}, column{o[3], o[4], o[5]};
+    const Vec3d normal{row[1] * column[2] - row[2] * column[1],
+                       row[2] * column[0] - row[0] * column[2],
+                       row[0] * column[1] - row[1] * column[0]};
+    const double length = std::sqrt(dot(normal, normal));
+    if (!(length > 0.5) || std::abs(dot(row, row) - 1) > 1e-3 ||
+        std::abs(dot(column, column) - 1) > 1e-3)
+      throw InputError(file + ": ImageOrientationPatient is not two unit vectors at right angles");
+    for (int r = 0; r < 3; ++r) {
+      info.direction[3 * r] = row[r];
+      info.direction[3 * r + 1] = column[r];
+      info.direction[3 * r + 2] = normal[r] / length;
+    }
+  }
+  if (frames.pixel_spacing) {
+    // PixelSpacing is the distance between rows (along y), then between columns (along x).
+    info.spacing[0] = (*frames.pixel_spacing)[1];
+    info.spacing[1] = (*frames.pixel_spacing)[0];
+  }
+  const SliceStack stack = stack_along_normal(
+      input, frames.positions, {info.direction[2], info.direction[5], info.direction[8]}, "frames",
+      [](std::size_t k) { return std::to_string(k + 1); });
+  info.spacing[2] = stack.step;
+  info.origin = frames.positions[stack.order[0]];
+  if (!std::is_sorted(stack.order.begin(), stack.order.end())) info.frame_order = stack.order;
+  return frames.pixel_spacing.has_value();
+}
+
 // A stack of 2D files (DICOM slices, TIFF pages), ordered in z.
 ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
   const bool dicom = input.kind == ItkInput::Kind::Dicom;
   auto io = make_io(input.kind);
   std::vector<FileHeader> h;
   h.reserve(files.size());
-  for (const std::string& f : files) h.push_back(read_header(*io, f));
+  for (const std::string& f : files) {
+    h.push_back(read_header(*io, f));
+    // GDCM puts a slice without a position at 0, 0, 0: reported as a gap or a tilt.
+    if (dicom && files.size() > 1 && h.back().dims[2] == 1 &&
+        series_tag(static_cast<itk::GDCMImageIO&>(*io), "0020|0032").empty())
+      throw InputError(f +
+                       ": no ImagePositionPatient (0020,0032); the slices of a series cannot be "
+                       "placed without it");
+  }
+  bool spacing_in_groups = false;
   ItkImageInfo info;
   info.format = format_name(input.kind);
   if (files.size() == 1) {
@@ -309,9 +364,14 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.spacing = h[0].spacing;
     info.origin = h[0].origin;
     info.direction = h[0].direction;
+    if (dicom) spacing_in_groups = place_frames(input.path, files[0], info);
   } else {
     const FileHeader first = h[0];
     for (std::size_t k = 0; k < files.size(); ++k) {
+      if (h[k].dims[2] != 1 && dicom)
+        throw InputError(input.path + ": a series of several multi-frame files (" + files[k] +
+                         " holds " + std::to_string(h[k].dims[2]) +
+                         " frames); isotile reads one such file at a time: name it");
       if (h[k].dims[2] != 1 || h[k].dims[0] != first.dims[0] || h[k].dims[1] != first.dims[1])
         throw InputError(files[k] + ": slice of " + std::to_string(h[k].dims[0]) + "x" +
                          std::to_string(h[k].dims[1]) + "x" + std::to_string(h[k].dims[2]) +
@@ -329,107 +389,21 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.direction = first.direction;
     info.origin = first.origin;
     if (dicom) {
-      // Slices must lie evenly along the normal of their planes: other stacks (uneven spacing,
-      // a tilted gantry) would need resampling, which would silently change the data.
-      const Vec3d normal{first.direction[2], first.direction[5], first.direction[8]};
-      std::vector<double> d(files.size());
-      const auto positions = [&] {
-        for (std::size_t k = 0; k < files.size(); ++k) {
-          for (int c = 0; c < 3; ++c)
-            if (std::abs(h[k].direction[3 * c] - first.direction[3 * c]) > 1e-4 ||
-                std::abs(h[k].direction[3 * c + 1] - first.direction[3 * c + 1]) > 1e-4)
-              throw InputError(files[k] + ": slice orientation differs from " + files[0] + "'s");
-          const Vec3d off{h[k].origin[0] - h[0].origin[0], h[k].origin[1] - h[0].origin[1],
-                          h[k].origin[2] - h[0].origin[2]};
-          d[k] = dot(off, normal);
-        }
-      };
-      positions();
-      if (d.back() < d.front()) {
-        // Ordered against the normal: the first slice along it comes first.
-        std::reverse(files.begin(), files.end());
-        std::reverse(h.begin(), h.end());
-        positions();
-        info.origin = h[0].origin;
-      }
-      const double total = d.back() - d.front();
-      const double step = total / static_cast<double>(files.size() - 1);
-      // Two slices at one position: named by position, whatever order GDCM left them in (it
-      // gives up sorting such a series, so the neighbours below would be others).
-      std::vector<std::size_t> by_position(files.size());
-      for (std::size_t k = 0; k < files.size(); ++k) by_position[k] = k;
-      std::stable_sort(by_position.begin(), by_position.end(),
-                       [&](std::size_t a, std::size_t b) { return d[a] < d[b]; });
-      for (std::size_t k = 1; k < files.size(); ++k) {
-        const std::size_t a = by_position[k - 1], b = by_position[k];
-        if (d[b] - d[a] <= 1e-6 * std::max(1.0, std::abs(step)))
-          throw InputError(input.path + ": slices " + files[std::min(a, b)] + " and " +
-                           files[std::max(a, b)] +
-                           " lie at the same position (duplicates or several stacks in one "
-                           "series)");
-      }
-      for (std::size_t k = 1; k < files.size(); ++k) {
-        const double s = d[k] - d[k - 1];
-        if (s <= 1e-6 * std::max(1.0, std::abs(step)))
-          throw InputError(
-              input.path + ": slices " + files[k - 1] + " and " + files[k] +
-              " lie at the same position (duplicates or several stacks in one series)");
-      }
-      // Steps are judged against the typical (median) one: a missing slice makes one step twice
-      // as long, and it is that step, not the first that differs from the mean, that is named.
-      std::vector<double> steps(files.size() - 1);
-      for (std::size_t k = 1; k < files.size(); ++k) steps[k - 1] = d[k] - d[k - 1];
-      std::vector<double> sorted = steps;
-      std::nth_element(sorted.begin(), sorted.begin() + (sorted.size() - 1) / 2, sorted.end());
-      const double typical = sorted[(sorted.size() - 1) / 2];
-      std::size_t worst = 0;
-      for (std::size_t k = 1; k < steps.size(); ++k)
-        if (std::abs(steps[k] - typical) > std::abs(steps[worst] - typical)) worst = k;
-      const double s = steps[worst];
-      if (std::abs(s - typical) > 1e-3 * typical + 1e-4 ||
-          std::abs(step - typical) > 1e-3 * typical + 1e-4) {
-        const std::string a = fs::path(files[worst]).filename().string();
-        const std::string b = fs::path(files[worst + 1]).filename().string();
-        char text[1024];
-        if (s > typical * 1.5) {
-          const long missing = std::lround(s / typical) - 1;
-          std::snprintf(text, sizeof text,
-                        "a gap of %g mm between %s and %s where the slices lie %g mm apart "
-                        "(about %ld slice%s missing)",
-                        s, a.c_str(), b.c_str(), typical, missing, missing == 1 ? "" : "s");
-        } else {
-          std::snprintf(text, sizeof text,
-                        "non-uniform slice spacing: %g mm between %s and %s where the slices lie "
-                        "%g mm apart",
-                        s, a.c_str(), b.c_str(), typical);
-        }
-        throw InputError(input.path + ": " + text + "; isotile does not resample");
-      }
-      // Every slice on the line through the first along the normal: the last one off it is a
-      // tilted gantry; one in between off it (the others on it) a slice out of place, which the
-      // last one alone did not show.
-      const auto across = [&](std::size_t k) {
-        const Vec3d off{h[k].origin[0] - h[0].origin[0], h[k].origin[1] - h[0].origin[1],
-                        h[k].origin[2] - h[0].origin[2]};
-        return std::sqrt(std::max(0.0, dot(off, off) - d[k] * d[k]));
-      };
-      const auto off_line = [&](std::size_t k) { return across(k) > 1e-3 * std::abs(d[k]) + 1e-3; };
-      const double along = d.back();
-      if (off_line(files.size() - 1))
-        throw InputError(input.path + ": the slices are not stacked along their normal (gantry " +
-                         "tilt of " +
-                         std::to_string(std::atan2(across(files.size() - 1), along) * 180 / M_PI) +
-                         " degrees); isotile does not resample");
-      for (std::size_t k = 1; k + 1 < files.size(); ++k)
-        if (off_line(k)) {
-          char text[256];
-          std::snprintf(text, sizeof text,
-                        " lies %g mm across the stack's axis from where its neighbours put it "
-                        "(its position moves across the slice normal); isotile does not resample",
-                        across(k));
-          throw InputError(input.path + ": slice " + fs::path(files[k]).filename().string() + text);
-        }
-      info.spacing[2] = step;
+      for (std::size_t k = 0; k < files.size(); ++k)
+        for (int c = 0; c < 3; ++c)
+          if (std::abs(h[k].direction[3 * c] - first.direction[3 * c]) > 1e-4 ||
+              std::abs(h[k].direction[3 * c + 1] - first.direction[3 * c + 1]) > 1e-4)
+            throw InputError(files[k] + ": slice orientation differs from " + files[0] + "'s");
+      std::vector<Vec3d> origins(files.size());
+      for (std::size_t k = 0; k < files.size(); ++k) origins[k] = h[k].origin;
+      const SliceStack stack = stack_along_normal(
+          input.path, origins, {first.direction[2], first.direction[5], first.direction[8]},
+          "slices", [&](std::size_t k) { return fs::path(files[k]).filename().string(); });
+      std::vector<std::string> sorted(files.size());
+      for (std::size_t k = 0; k < files.size(); ++k) sorted[k] = files[stack.order[k]];
+      files = std::move(sorted);
+      info.origin = h[stack.order[0]].origin;
+      info.spacing[2] = stack.step;
     }
   }
   info.files = std::move(files);
@@ -440,6 +414,18 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.rescale_intercept = gdcm.GetRescaleIntercept();
     info.rescaled = info.rescale_slope != 1 || info.rescale_intercept != 0;
     info.series_description = series_tag(gdcm, "0008|103e");
+    // Without a pixel spacing (the standard's for CT and MR, or a projection's), GDCM takes 1 mm
+    // and says so only in a warning: a mesh of made-up size.
+    if (!spacing_in_groups && !input.spacing_given && series_tag(gdcm, "0028|0030").empty() &&
+        series_tag(gdcm, "0018|1164").empty() && series_tag(gdcm, "0018|2010").empty()) {
+      char step[64] = "";
+      if (info.files.size() > 1)
+        std::snprintf(step, sizeof step, " (the slices lie %g mm apart)", info.spacing[2]);
+      throw InputError(info.files.front() +
+                       ": no PixelSpacing (0028,0030), so the distance between its pixels is "
+                       "unknown; give the spacing with --spacing X,Y,Z" +
+                       std::string(step));
+    }
   }
   return info;
 }
@@ -499,8 +485,14 @@ std::vector<std::string> stack_files(const ItkInput& input) {
     }
     return numbered_files(input.path);
   }
-  // DICOM: the directory, or the directory of the file given.
+  // DICOM: the directory, or the directory of the file given; a multi-frame file given is a
+  // volume of its own (several may share a series: stacks, echoes, time points).
   const bool dir = fs::is_directory(input.path);
+  if (!dir && input.series.empty()) {
+    auto io = make_io(input.kind);
+    const FileHeader h = read_header(*io, input.path);
+    if (h.axes == 3 && h.dims[2] > 1) return {input.path};
+  }
   const std::string where = dir ? input.path : fs::path(input.path).parent_path().string();
   auto names = scan_series(where.empty() ? "." : where);
   const std::vector<std::string> uids = names->GetSeriesUIDs();
@@ -616,6 +608,27 @@ void read_itk_data(const ItkInput& input, const ItkImageInfo& info, void* out) {
         throw InputError(f + ": the file changed while it was read");
       read_samples(*io, f, h, dst);
       dst += plane * static_cast<std::size_t>(h.dims[2]);
+    }
+    if (!info.frame_order.empty()) {
+      // A multi-frame file's frames into their order along the normal, cycle by cycle through
+      // one plane's room.
+      auto* base = static_cast<char*>(out);
+      std::vector<char> held(plane);
+      std::vector<bool> done(info.frame_order.size());
+      for (std::size_t start = 0; start < done.size(); ++start) {
+        if (done[start]) continue;
+        std::memcpy(held.data(), base + start * plane, plane);
+        for (std::size_t k = start;;) {
+          done[k] = true;
+          const std::size_t from = info.frame_order[k];
+          if (from == start) {
+            std::memcpy(base + k * plane, held.data(), plane);
+            break;
+          }
+          std::memcpy(base + k * plane, base + from * plane, plane);
+          k = from;
+        }
+      }
     }
   } catch (const itk::ExceptionObject& e) {
     throw InputError(input.path + ": " + itk_message(e));

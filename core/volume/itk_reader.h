@@ -21,6 +21,8 @@ struct ItkInput {
   Kind kind = Kind::Nifti;
   std::string path;
   std::string series;  // DICOM: the SeriesInstanceUID to read (empty: the only one)
+  // --spacing replaces the file's spacing: a DICOM series without PixelSpacing is then read.
+  bool spacing_given = false;
 };
 
 struct ItkImageInfo {
@@ -34,6 +36,9 @@ struct ItkImageInfo {
   double rescale_slope = 1;
   double rescale_intercept = 0;
   std::vector<std::string> files;  // stacks: the slices in z order
+  // A multi-frame DICOM file whose frames are not in order along their normal: the frame (in
+  // the file) of each z, lowest first; empty where they are.
+  std::vector<std::size_t> frame_order;
   std::string series_uid, series_description;
 };
 

@@ -126,6 +126,7 @@ ItkInput itk_input(const std::string& input, InputKind kind, const RawOptions& r
   ItkInput in;
   in.path = input;
   in.series = raw.series;
+  in.spacing_given = raw.spacing.has_value();
   switch (kind) {
     case InputKind::Nifti:
       in.kind = ItkInput::Kind::Nifti;

@@ -26,6 +26,7 @@
 #include "core/mesh/mesh_io.h"
 #include "core/volume/itk_reader.h"
 #include "core/volume/scalar_type.h"
+#include "tests/dicom_bytes.h"
 #include "tests/fuzz/fuzz_targets.h"
 
 namespace isotile::fuzz {
@@ -684,61 +685,25 @@ namespace {
 // GDCM reads as a volume of `frames` slices.
 std::string dicom_multiframe(const std::vector<std::uint8_t>& pixels, int columns, int rows,
                              int frames) {
-  std::string body;
-  const auto element = [](std::string& out, std::uint16_t group, std::uint16_t elem, const char* vr,
-                          std::string value) {
-    if (value.size() % 2)
-      value += (std::string(vr) == "UI" || std::string(vr) == "OB") ? '\0' : ' ';
-    const auto put16 = [&](std::uint16_t v) {
-      out += static_cast<char>(v & 0xff);
-      out += static_cast<char>(v >> 8);
-    };
-    put16(group);
-    put16(elem);
-    out += vr;
-    if (std::string(vr) == "OB" || std::string(vr) == "OW") {
-      put16(0);
-      const auto n = static_cast<std::uint32_t>(value.size());
-      for (int b = 0; b < 4; ++b) out += static_cast<char>((n >> (8 * b)) & 0xff);
-    } else {
-      put16(static_cast<std::uint16_t>(value.size()));
-    }
-    out += value;
-  };
-  const auto us = [](std::uint16_t v) {
-    return std::string{static_cast<char>(v & 0xff), static_cast<char>(v >> 8)};
-  };
+  using testing::dicom::element;
+  using testing::dicom::u16;
   const std::string sop_class = "1.2.840.10008.5.1.4.1.1.7.2", sop = "1.2.826.0.1.3680043.2.1.1";
-  std::string meta;
-  element(meta, 0x0002, 0x0001, "OB", std::string("\0\1", 2));
-  element(meta, 0x0002, 0x0002, "UI", sop_class);
-  element(meta, 0x0002, 0x0003, "UI", sop);
-  element(meta, 0x0002, 0x0010, "UI", "1.2.840.10008.1.2.1");
-  std::string group_length;
-  const auto n = static_cast<std::uint32_t>(meta.size());
-  element(group_length, 0x0002, 0x0000, "UL",
-          std::string{static_cast<char>(n & 0xff), static_cast<char>((n >> 8) & 0xff),
-                      static_cast<char>((n >> 16) & 0xff), static_cast<char>(n >> 24)});
-  element(body, 0x0008, 0x0016, "UI", sop_class);
-  element(body, 0x0008, 0x0018, "UI", sop);
-  element(body, 0x0008, 0x0060, "CS", "OT");
-  element(body, 0x0020, 0x000D, "UI", "1.2.826.0.1.3680043.2.1.2");
-  element(body, 0x0020, 0x000E, "UI", "1.2.826.0.1.3680043.2.1.3");
-  element(body, 0x0020, 0x0013, "IS", "1");
-  element(body, 0x0020, 0x0032, "DS", "0\\0\\0");
-  element(body, 0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0");
-  element(body, 0x0028, 0x0002, "US", us(1));
-  element(body, 0x0028, 0x0004, "CS", "MONOCHROME2");
-  element(body, 0x0028, 0x0008, "IS", std::to_string(frames));
-  element(body, 0x0028, 0x0010, "US", us(static_cast<std::uint16_t>(rows)));
-  element(body, 0x0028, 0x0011, "US", us(static_cast<std::uint16_t>(columns)));
-  element(body, 0x0028, 0x0030, "DS", "1\\1");
-  element(body, 0x0028, 0x0100, "US", us(8));
-  element(body, 0x0028, 0x0101, "US", us(8));
-  element(body, 0x0028, 0x0102, "US", us(7));
-  element(body, 0x0028, 0x0103, "US", us(0));
-  element(body, 0x7FE0, 0x0010, "OB", std::string(pixels.begin(), pixels.end()));
-  return std::string(128, '\0') + "DICM" + group_length + meta + body;
+  const std::string body =
+      element(0x0008, 0x0016, "UI", sop_class) + element(0x0008, 0x0018, "UI", sop) +
+      element(0x0008, 0x0060, "CS", "OT") +
+      element(0x0020, 0x000D, "UI", "1.2.826.0.1.3680043.2.1.2") +
+      element(0x0020, 0x000E, "UI", "1.2.826.0.1.3680043.2.1.3") +
+      element(0x0020, 0x0013, "IS", "1") + element(0x0020, 0x0032, "DS", "0\\0\\0") +
+      element(0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0") + element(0x0028, 0x0002, "US", u16(1)) +
+      element(0x0028, 0x0004, "CS", "MONOCHROME2") +
+      element(0x0028, 0x0008, "IS", std::to_string(frames)) +
+      element(0x0028, 0x0010, "US", u16(static_cast<std::uint16_t>(rows))) +
+      element(0x0028, 0x0011, "US", u16(static_cast<std::uint16_t>(columns))) +
+      element(0x0028, 0x0030, "DS", "1\\1") + element(0x0028, 0x0100, "US", u16(8)) +
+      element(0x0028, 0x0101, "US", u16(8)) + element(0x0028, 0x0102, "US", u16(7)) +
+      element(0x0028, 0x0103, "US", u16(0)) +
+      element(0x7FE0, 0x0010, "OB", std::string(pixels.begin(), pixels.end()));
+  return testing::dicom::part10(sop_class, sop, body);
 }
 
 }  // namespace

@@ -1,0 +1,150 @@
+// Per-frame geometry of enhanced multi-frame DICOM files, through GDCM's data set (dicom_frames.h).
+#include "core/volume/dicom_frames.h"
+
+#include <gdcmDataSet.h>
+#include <gdcmReader.h>
+#include <gdcmSequenceOfItems.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <set>
+
+#include "core/errors.h"
+
+namespace isotile {
+
+namespace {
+
+const gdcm::Tag kSharedGroups(0x5200, 0x9229), kPerFrameGroups(0x5200, 0x9230);
+const gdcm::Tag kPlanePosition(0x0020, 0x9113), kPlaneOrientation(0x0020, 0x9116);
+const gdcm::Tag kPixelMeasures(0x0028, 0x9110), kValueTransformation(0x0028, 0x9145);
+const gdcm::Tag kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037);
+const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
+const gdcm::Tag kIntercept(0x0028, 0x1052), kSlope(0x0028, 0x1053);
+
+// A decimal string's values ("1.5\-2\3"); empty where the element holds none.
+std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path) {
+  std::vector<double> out;
+  const gdcm::ByteValue* bytes = e.GetByteValue();
+  if (!bytes) return out;
+  std::string text(bytes->GetPointer(), bytes->GetLength());
+  std::size_t at = 0;
+  while (at <= text.size()) {
+    std::size_t end = text.find('\\', at);
+    if (end == std::string::npos) end = text.size();
+    std::string value = text.substr(at, end - at);
+    while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
+    while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+    char* stop = nullptr;
+    const double v = std::strtod(value.c_str(), &stop);
+    if (value.empty() || *stop != '\0' || !std::isfinite(v)) {
+      char tag[16];
+      std::snprintf(tag, sizeof tag, "(%04X,%04X)", e.GetTag().GetGroup(), e.GetTag().GetElement());
+      throw InputError(path + ": DICOM element " + tag + " holds '" + value +
+                       "' where a decimal number belongs");
+    }
+    out.push_back(v);
+    at = end + 1;
+  }
+  return out;
+}
+
+// Element `tag` in the first item of sequence `macro`, in a frame's group or else in the shared
+// one (a frame's own value overrides the shared one, as the standard says).
+std::optional<std::vector<double>> group_value(const gdcm::DataSet* frame,
+                                               const gdcm::DataSet* shared, gdcm::Tag macro,
+                                               gdcm::Tag tag, const std::string& path) {
+  for (const gdcm::DataSet* group : {frame, shared}) {
+    if (!group || !group->FindDataElement(macro)) continue;
+    const gdcm::SmartPointer<gdcm::SequenceOfItems> items =
+        group->GetDataElement(macro).GetValueAsSQ();
+    if (!items || items->GetNumberOfItems() == 0) continue;
+    const gdcm::DataSet& item = items->GetItem(1).GetNestedDataSet();
+    if (!item.FindDataElement(tag)) continue;
+    return decimals(item.GetDataElement(tag), path);
+  }
+  return std::nullopt;
+}
+
+bool close(const std::vector<double>& a, const std::vector<double>& b, double tolerance) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (std::abs(a[i] - b[i]) > tolerance * std::max(1.0, std::abs(a[i]))) return false;
+  return true;
+}
+
+}  // namespace
+
+DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
+  DicomFrames out;
+  gdcm::Reader reader;
+  reader.SetFileName(path.c_str());
+  // The header only: the pixel data is read afterwards, frame by frame, by GDCM through ITK.
+  if (!reader.ReadUpToTag(gdcm::Tag(0x7FE0, 0x0010), std::set<gdcm::Tag>()))
+    throw InputError(path + ": GDCM cannot read the DICOM header");
+  const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
+  if (!ds.FindDataElement(kPerFrameGroups)) return out;
+  gdcm::SmartPointer<gdcm::SequenceOfItems> shared_items;
+  const gdcm::DataSet* shared = nullptr;
+  if (ds.FindDataElement(kSharedGroups)) {
+    shared_items = ds.GetDataElement(kSharedGroups).GetValueAsSQ();
+    if (shared_items && shared_items->GetNumberOfItems() > 0)
+      shared = &shared_items->GetItem(1).GetNestedDataSet();
+  }
+  const gdcm::SmartPointer<gdcm::SequenceOfItems> per_frame =
+      ds.GetDataElement(kPerFrameGroups).GetValueAsSQ();
+  const std::int64_t groups =
+      per_frame ? static_cast<std::int64_t>(per_frame->GetNumberOfItems()) : 0;
+  if (groups != frames)
+    throw InputError(path + ": DICOM file of " + std::to_string(frames) + " frames with " +
+                     std::to_string(groups) +
+                     " per-frame functional groups (PerFrameFunctionalGroupsSequence); one per "
+                     "frame places them");
+  std::optional<std::vector<double>> orientation0, spacing0, slope0, intercept0;
+  for (std::int64_t f = 0; f < frames; ++f) {
+    const gdcm::DataSet& frame =
+        per_frame->GetItem(static_cast<std::size_t>(f) + 1).GetNestedDataSet();
+    const std::string which = "frame " + std::to_string(f + 1);
+    const auto value = [&](gdcm::Tag macro, gdcm::Tag tag) {
+      return group_value(&frame, shared, macro, tag, path);
+    };
+    const std::optional<std::vector<double>> position = value(kPlanePosition, kPosition);
+    if (position && position->size() != 3)
+      throw InputError(path + ": " + which + "'s ImagePositionPatient holds " +
+                       std::to_string(position->size()) + " values (3)");
+    if (f > 0 && position.has_value() != !out.positions.empty())
+      throw InputError(path + ": " + which + (position ? " has an" : " has no") +
+                       " ImagePositionPatient (PlanePositionSequence) where frame 1 " +
+                       (position ? "has none" : "has one") + "; the frames cannot be placed");
+    if (position) out.positions.push_back({(*position)[0], (*position)[1], (*position)[2]});
+    // What one volume needs alike in every frame: GDCM takes the first frame's for all.
+    const auto alike = [&](std::optional<std::vector<double>>& first, gdcm::Tag macro,
+                           gdcm::Tag tag, const char* what, double tolerance) {
+      const std::optional<std::vector<double>> v = value(macro, tag);
+      if (f == 0)
+        first = v;
+      else if (v.has_value() != first.has_value() || (v && !close(*v, *first, tolerance)))
+        throw InputError(path + ": " + which + "'s " + what +
+                         " differs from frame 1's; one volume needs it alike in every frame");
+    };
+    alike(orientation0, kPlaneOrientation, kOrientation, "ImageOrientationPatient", 1e-4);
+    alike(spacing0, kPixelMeasures, kPixelSpacing, "PixelSpacing", 1e-6);
+    alike(slope0, kValueTransformation, kSlope, "RescaleSlope", 1e-9);
+    alike(intercept0, kValueTransformation, kIntercept, "RescaleIntercept", 1e-9);
+  }
+  if (orientation0) {
+    if (orientation0->size() != 6)
+      throw InputError(path + ": ImageOrientationPatient holds " +
+                       std::to_string(orientation0->size()) + " values (6)");
+    out.orientation.emplace();
+    for (int i = 0; i < 6; ++i) (*out.orientation)[i] = (*orientation0)[i];
+  }
+  if (spacing0) {
+    if (spacing0->size() != 2 || (*spacing0)[0] <= 0 || (*spacing0)[1] <= 0)
+      throw InputError(path + ": PixelSpacing must hold two positive values");
+    out.pixel_spacing = std::array<double, 2>{(*spacing0)[0], (*spacing0)[1]};
+  }
+  return out;
+}
+
+}  // namespace isotile
