@@ -312,11 +312,12 @@ TEST(ItkRegions, PlainFilesAreReadByRegion) {
 // `order` 'I' or 'M' (the samples in that byte order too), `gap` bytes between pages' samples,
 // `compression` as tag 259 says (the samples are stored plainly whatever it says: only the
 // check reads them), `orientation` 0 for no tag 274.
-// `tags` replace or add short or long values (tag, type 3 or 4, value) on every page, and
-// `description` is page 1's ImageDescription where not empty (every page's with `on_every_page`).
+// `tags` replace or add short, long or rational values (tag, type 3, 4 or 5, value, and a
+// rational's denominator) on every page, and `description` is page 1's ImageDescription where not
+// empty (every page's with `on_every_page`).
 struct TiffTag {
   std::uint16_t tag, type;
-  std::uint32_t value;
+  std::uint32_t value, denominator = 1;
 };
 void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::uint32_t gap = 0,
                       std::uint16_t compression = 1, std::uint16_t orientation = 0,
@@ -333,10 +334,14 @@ void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::ui
   const auto pages = static_cast<std::uint32_t>(v.dims()[2]);
   out.append(2, order);
   put(42, 2);
-  // The first directory, after the samples and the description.
+  // The first directory, after the samples, the description and the rationals' values.
   const std::uint32_t text_at = 8 + pages * (plane + gap);
   const auto text_size = static_cast<std::uint32_t>(description.size() + 1);
-  put(text_at + (description.empty() ? 0 : text_size), 4);
+  const std::uint32_t rationals_at = text_at + (description.empty() ? 0 : text_size);
+  std::vector<std::uint32_t> rationals;  // numerator, denominator, ...
+  for (const TiffTag& t : tags)
+    if (t.type == 5) rationals.insert(rationals.end(), {t.value, t.denominator});
+  put(rationals_at + 4 * static_cast<std::uint32_t>(rationals.size()), 4);
   const auto* bytes = reinterpret_cast<const unsigned char*>(v.bytes());
   for (std::uint32_t k = 0; k < pages; ++k) {
     for (std::uint32_t i = 0; i < plane; i += static_cast<std::uint32_t>(size))
@@ -345,6 +350,7 @@ void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::ui
     out.append(gap, '\0');
   }
   if (!description.empty()) out.append(description.c_str(), text_size);
+  for (const std::uint32_t r : rationals) put(r, 4);
   const ScalarType t = v.type();
   const std::uint16_t format =
       is_floating(t)                                                              ? 3
@@ -367,13 +373,15 @@ void write_tiff_pages(const fs::path& path, const Volume& v, char order, std::ui
                             {279, 4, plane},
                             {339, 3, format}};
     if (orientation == 0) e.erase(e.begin() + 6);
+    std::uint32_t rational = 0;
     for (const TiffTag& t : tags) {
+      const Entry entry{t.tag, t.type, t.type == 5 ? rationals_at + 8 * rational++ : t.value};
       const auto at =
           std::find_if(e.begin(), e.end(), [&](const Entry& x) { return x.tag == t.tag; });
       if (at != e.end())
-        *at = {t.tag, t.type, t.value};
+        *at = entry;
       else
-        e.push_back({t.tag, t.type, t.value});
+        e.push_back(entry);
     }
     if (!description.empty() && (k == 0 || on_every_page))
       e.push_back({270, 2, text_at, text_size});
@@ -512,6 +520,59 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
     const fs::path p = dir / ("i32_" + std::to_string(gap) + ".tif");
     write_tiff_pages(p, field_as("field:torus:20", ScalarType::Int32), 'I', gap, gap ? 1 : 32773);
     expect_both_refuse(p, "32-bit integer TIFF samples are read only when");
+  }
+  fs::remove_all(dir);
+}
+
+// ImageJ's calibration (the pixel size as 1 / XResolution and 1 / YResolution, in the unit its
+// description names, the voxel depth as `spacing=`) is the volume's spacing, in that unit (mm
+// for the centimetre and the inch, as ITK gives those). ITK reads resolution tags of no unit as
+// a spacing of 1: such a stack of 0.5 um pixels 2.5 um apart was read as 1, 1, 1, its mesh
+// squashed five times along z against x.
+TEST(ItkRegions, ImageJCalibrationIsTheSpacing) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-ij-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume u16 = field_as("field:torus:20", ScalarType::UInt16);
+  struct Case {
+    const char* name;
+    std::uint32_t x_per_unit, y_per_unit;
+    std::uint16_t unit_tag;
+    const char* description;
+    Vec3d spacing;
+    const char* unit;
+  };
+  for (const Case& c :
+       {Case{"micron", 2, 4, 1, "unit=micron\nspacing=2.5\n", {0.5, 0.25, 2.5}, "micron"},
+        Case{"cm", 20, 20, 3, "unit=cm\nspacing=0.1\n", {0.5, 0.5, 1}, "mm"},
+        Case{"no_depth", 10, 10, 1, "unit=nm\n", {0.1, 0.1, 1}, "nm"},
+        Case{"pixel", 1, 1, 1, "unit=pixel\n", {1, 1, 1}, ""}}) {
+    const fs::path p = dir / (std::string(c.name) + ".tif");
+    write_tiff_pages(p, u16, 'I', 0, 1, 0,
+                     {{282, 5, c.x_per_unit}, {283, 5, c.y_per_unit}, {296, 3, c.unit_tag}},
+                     std::string("ImageJ=1.54f\nimages=20\nslices=20\n") + c.description);
+    const VolumeHeader h = read_volume_header(p.string());
+    const Volume v = read_volume(p.string());
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(h.spacing[a], c.spacing[a], 1e-12) << c.name << " axis " << a;
+      EXPECT_EQ(v.spacing()[a], h.spacing[a]) << c.name << " axis " << a;
+    }
+    EXPECT_EQ(h.spacing_unit, c.unit) << c.name;
+    // Given, --spacing replaces the calibration and its unit.
+    RawOptions given;
+    given.spacing = Vec3d{1, 2, 3};
+    const VolumeHeader replaced = read_volume_header(p.string(), given);
+    EXPECT_EQ(replaced.spacing, (Vec3d{1, 2, 3})) << c.name;
+    EXPECT_EQ(replaced.spacing_unit, "") << c.name;
+  }
+  // Axes in different units, and a depth that is no number: refused.
+  for (const auto& [description, says] :
+       {std::pair{"unit=micron\nzunit=nm\n", "axes in different units (micron, nm)"},
+        std::pair{"unit=micron\nspacing=abc\n", "voxel depth 'spacing=abc' is not a positive"}}) {
+    const fs::path p = dir / "refused.tif";
+    write_tiff_pages(p, u16, 'I', 0, 1, 0, {{282, 5, 2}, {283, 5, 2}, {296, 3, 1}},
+                     std::string("ImageJ=1.54f\nimages=20\nslices=20\n") + description);
+    expect_both_refuse(p, says);
   }
   fs::remove_all(dir);
 }

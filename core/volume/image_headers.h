@@ -17,6 +17,8 @@ struct ImageHeaderCheck {
   std::optional<PlainData> plain;  // uncompressed, unscaled samples in one file
   // TIFF stacks: each slice file stored plainly, by its name (as the stack lists it).
   std::vector<PlainData> plain_slices;
+  std::optional<Vec3d> spacing;  // a TIFF's calibration ITK does not read (TiffCheck)
+  std::string spacing_unit;
   bool rescaled = false;  // NIfTI's scl_slope/scl_inter change the values
   double rescale_slope = 1;
   double rescale_intercept = 0;
@@ -49,10 +51,20 @@ void check_dicom_input(const std::string& input);
 
 // TIFF files (classic and BigTIFF), every page's directory walked before ITK sees them: the
 // directories, their values and every strip or tile must lie within the file, and uncompressed
-// pages must hold the samples their size says. Returns where the samples lie when every page
-// stores them uncompressed, one gray sample per pixel, top row first, in strips that run on from
-// page to page (as ImageJ writes stacks): the pages as planes of a raw volume.
-std::optional<PlainData> check_tiff_file(const std::string& path);
+// pages must hold the samples their size says.
+struct TiffCheck {
+  // Where the samples lie when every page stores them uncompressed, one gray sample per pixel,
+  // top row first, in strips that run on from page to page (as ImageJ writes stacks): the pages
+  // as planes of a raw volume.
+  std::optional<PlainData> plain;
+  // ImageJ's calibration, which ITK does not read (it takes the resolution tags only where their
+  // unit is the inch or the centimetre): pixel width, height and voxel depth, and their unit
+  // ("um", "micron", "nm"...; "mm" for the inch and the centimetre; empty where ImageJ names
+  // none).
+  std::optional<Vec3d> spacing;
+  std::string spacing_unit;
+};
+TiffCheck check_tiff_file(const std::string& path);
 
 // Inflates a checked header's compressed samples (without keeping them) and throws InputError,
 // naming the file, the bytes expected and those found, when the stream is cut off, corrupt, or

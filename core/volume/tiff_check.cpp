@@ -2,7 +2,9 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <optional>
 #include <string>
@@ -68,6 +70,42 @@ ImageJShape imagej_shape(const std::string& description) {
   return shape;
 }
 
+// ImageJ's calibration ("unit=micron\nspacing=2.5\n" beside the resolution tags): the unit of
+// the pixel width and height (1 / XResolution, 1 / YResolution) and of the voxel depth
+// (`spacing`, 1 where it does not say). Uncalibrated ("pixel", or no unit nor spacing): none.
+struct ImageJCalibration {
+  std::string unit, y_unit, z_unit;
+  std::optional<double> depth;
+};
+std::optional<ImageJCalibration> imagej_calibration(const std::string& path,
+                                                    const std::string& description) {
+  if (description.rfind("ImageJ=", 0) != 0) return std::nullopt;
+  ImageJCalibration c;
+  std::size_t at = 0;
+  while (at < description.size()) {
+    std::size_t end = description.find('\n', at);
+    if (end == std::string::npos) end = description.size();
+    const std::string line = description.substr(at, end - at);
+    const std::size_t eq = line.find('=');
+    const std::string key = line.substr(0, eq),
+                      value = eq == std::string::npos ? "" : line.substr(eq + 1);
+    if (key == "unit") c.unit = value;
+    if (key == "yunit") c.y_unit = value;
+    if (key == "zunit") c.z_unit = value;
+    if (key == "spacing") {
+      char* stop = nullptr;
+      const double d = std::strtod(value.c_str(), &stop);
+      if (value.empty() || *stop != '\0' || !std::isfinite(d) || d <= 0)
+        throw InputError(path + ": ImageJ's voxel depth 'spacing=" + value +
+                         "' is not a positive number");
+      c.depth = d;
+    }
+    at = end + 1;
+  }
+  if ((c.unit.empty() || c.unit == "pixel" || c.unit == "pixels") && !c.depth) return std::nullopt;
+  return c;
+}
+
 // The array shape tifffile writes in its description of a series' first page ({"shape": [5, 2,
 // 6, 8], ...}); empty where the description is not one.
 std::vector<std::uint64_t> tifffile_shape(const std::string& description) {
@@ -95,7 +133,8 @@ std::vector<std::uint64_t> tifffile_shape(const std::string& description) {
 
 }  // namespace
 
-std::optional<PlainData> check_tiff_file(const std::string& path) {
+TiffCheck check_tiff_file(const std::string& path) {
+  TiffCheck result;
   FileBytes file(path);
   unsigned char h[16];
   if (!file.read(0, h, 8))
@@ -150,6 +189,7 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                   orientation = 1;
     std::vector<std::uint64_t> offsets, counts;
     std::string description;
+    double x_resolution = 0, y_resolution = 0;  // pixels per unit (0: not given)
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
       const std::uint64_t at = ifd + count_size + e * entry_size;
@@ -230,6 +270,16 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
           break;
         case 323:
           tile_h = value(0);
+          break;
+        case 282:
+        case 283:
+          if (type == 5) {  // a rational: two unsigned 32-bit integers
+            unsigned char r[8];
+            file.read(where, r, 8);
+            const std::uint32_t num = get<std::uint32_t>(r, swap),
+                                den = get<std::uint32_t>(r + 4, swap);
+            (tag == 282 ? x_resolution : y_resolution) = den ? double(num) / den : 0;
+          }
           break;
         case 270:  // ImageDescription, where ImageJ and tifffile say what the pages are
           if (size == 1 && n <= (1u << 20)) {
@@ -319,6 +369,20 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
                        "ImageJ and most tools do by default)");
     const std::vector<std::uint64_t> series = tifffile_shape(description);
     if (page == 1) {
+      if (const std::optional<ImageJCalibration> c = imagej_calibration(path, description)) {
+        for (const std::string& other : {c->y_unit, c->z_unit})
+          if (!other.empty() && other != c->unit)
+            throw InputError(path + ": ImageJ's calibration has axes in different units (" +
+                             c->unit + ", " + other +
+                             "); give the spacing in one with --spacing X,Y,Z");
+        // ImageJ writes the resolution tags' unit as the inch or the centimetre for those two
+        // (ITK gives them in mm) and as none for the others.
+        const double mm = c->unit == "inch" ? 25.4 : c->unit == "cm" ? 10 : 1;
+        const double x = x_resolution > 0 ? 1 / x_resolution : 1;
+        result.spacing = Vec3d{mm * x, mm * (y_resolution > 0 ? 1 / y_resolution : x),
+                               mm * c->depth.value_or(1)};
+        result.spacing_unit = mm != 1 ? "mm" : c->unit == "pixel" ? "" : c->unit;
+      }
       if (spp != 1)
         throw InputError(
             path + ": TIFF pages hold " + std::to_string(spp) + " samples per pixel (" +
@@ -384,15 +448,15 @@ std::optional<PlainData> check_tiff_file(const std::string& path) {
     file.read(next_at, nx, inline_size);
     ifd = big ? get<std::uint64_t>(nx, swap) : get<std::uint32_t>(nx, swap);
   }
-  if (!plain || page == 0) return std::nullopt;
-  PlainData data;
+  if (!plain || page == 0) return result;
+  PlainData& data = result.plain.emplace();
   data.file = path;
   data.offset = plain_start;
   data.type = *plain_type;
   data.dims = {static_cast<std::int64_t>(first[0]), static_cast<std::int64_t>(first[1]), page};
   data.endian = little ? Endian::Little : Endian::Big;
   data.bytes_after = true;  // the later pages' directories may follow the samples
-  return data;
+  return result;
 }
 
 }  // namespace isotile

@@ -153,13 +153,17 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
   if (kind == InputKind::MetaImage) return check_metaimage_header(input);
   if (kind == InputKind::Tiff) {
     ImageHeaderCheck check;
-    check.plain = check_tiff_file(input);
+    TiffCheck tiff = check_tiff_file(input);
+    check.plain = std::move(tiff.plain);
+    check.spacing = tiff.spacing;
+    check.spacing_unit = std::move(tiff.spacing_unit);
     return check;
   }
   if (kind == InputKind::TiffStack) {
     ImageHeaderCheck check;
     const auto slice = [&](const std::string& file) {
-      if (std::optional<PlainData> p = check_tiff_file(file)) check.plain_slices.push_back(*p);
+      if (std::optional<PlainData> p = check_tiff_file(file).plain)
+        check.plain_slices.push_back(*p);
     };
     std::error_code ec;
     if (std::filesystem::is_directory(input, ec)) {
@@ -347,7 +351,8 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
     h.type = info.type;
     h.dims = info.dims;
-    h.spacing = info.spacing;
+    h.spacing = check.spacing.value_or(info.spacing);
+    h.spacing_unit = check.spacing_unit;
     h.origin = info.origin;
     h.world = WorldFrame{info.origin, info.direction};
     h.rescaled = info.rescaled || check.rescaled;
@@ -382,6 +387,7 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     return h;
   }
   apply_overrides(raw, h.spacing, h.origin, h.world);
+  if (raw.spacing) h.spacing_unit.clear();
   return h;
 }
 
@@ -427,7 +433,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     verify_compressed(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
-    volume = Volume(info.type, info.dims, info.spacing, info.origin);
+    volume = Volume(info.type, info.dims, check.spacing.value_or(info.spacing), info.origin);
     volume.set_world(WorldFrame{info.origin, info.direction});
     volume.set_series(info.series_uid, info.series_description);
     const std::optional<PlainData> plain = plain_layout(input, kind, check, info);

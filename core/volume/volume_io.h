@@ -106,6 +106,9 @@ struct VolumeHeader {
   ScalarType type = ScalarType::Float32;
   Index3 dims{0, 0, 0};
   Vec3d spacing{1, 1, 1};
+  // The spacing's unit where the file names one isotile does not turn into mm (ImageJ's
+  // calibration: "um", "micron", "nm"...); empty otherwise (mm for medical formats).
+  std::string spacing_unit;
   Vec3d origin{0, 0, 0};
   std::optional<WorldFrame> world;
   bool rescaled = false;  // values are stored * slope + intercept

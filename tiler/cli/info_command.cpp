@@ -109,6 +109,7 @@ int run_info(const InfoArgs& args) {
   j["type"] = scalar_name(v.type);
   j["format"] = has_header ? header.format : std::string(input_kind_name(kind));
   j["spacing"] = v.spacing;
+  if (has_header && !header.spacing_unit.empty()) j["spacing_unit"] = header.spacing_unit;
   j["origin"] = v.origin;
   // The world frame the mesh is written in (extract --frame world).
   j["world_origin"] = world.origin;
@@ -148,7 +149,9 @@ int run_info(const InfoArgs& args) {
               static_cast<long long>(v.dims[1]), static_cast<long long>(v.dims[2]));
   std::printf("type     %s (%zu bytes)\n", std::string(scalar_name(v.type)).c_str(),
               volume.byte_size());
-  std::printf("spacing  %g, %g, %g\n", v.spacing[0], v.spacing[1], v.spacing[2]);
+  std::printf(
+      "spacing  %g, %g, %g%s\n", v.spacing[0], v.spacing[1], v.spacing[2],
+      has_header && !header.spacing_unit.empty() ? (" " + header.spacing_unit).c_str() : "");
   std::printf("format   %s\n", j["format"].get<std::string>().c_str());
   if (!header.series_uid.empty())
     std::printf("series   %s  %s\n", header.series_uid.c_str(), header.series_description.c_str());
