@@ -795,6 +795,14 @@ TEST(Mrc, ImodBytesAndVolumeStacks) {
   stack.mz = 3;
   write_mrc(dir / "sampled.mrc", v, stack);
   EXPECT_EQ(read_volume((dir / "sampled.mrc").string()).dims(), v.dims());
+  // ISPG 0 named .mrcs (cryo-EM's stacks of particle images): 6 images, not a volume; the same
+  // bytes named .mrc are read as a volume.
+  stack.ispg = 0;
+  stack.mz = 1;
+  write_mrc(dir / "particles.MRCS", v, stack);
+  expect_both_refuse(dir / "particles.MRCS", "a stack of 6 2-D images (.mrcs, space group ISPG 0)");
+  write_mrc(dir / "images.mrc", v, stack);
+  EXPECT_EQ(read_volume((dir / "images.mrc").string()).dims(), v.dims());
   fs::remove_all(dir);
 }
 
