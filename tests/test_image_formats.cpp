@@ -1148,9 +1148,9 @@ class DicomFiles : public CliTest {
     std::ofstream(dir_ / name, std::ios::binary) << testing::dicom::part10(sop_class, sop, body);
   }
   // One MR slice of content `c` at `position` (none where `position` is empty), with its pixel
-  // spacing where `spacing`.
+  // spacing where `spacing`, and RescaleSlope `slope` where not 0.
   void write_slice(const std::string& name, int c, const std::optional<Vec3d>& position,
-                   bool spacing = true) const {
+                   bool spacing = true, int slope = 0) const {
     using testing::dicom::element;
     using testing::dicom::u16;
     std::string pixels;
@@ -1173,6 +1173,9 @@ class DicomFiles : public CliTest {
         (spacing ? element(0x0028, 0x0030, "DS", "0.7\\0.3") : "") +
         element(0x0028, 0x0100, "US", u16(16)) + element(0x0028, 0x0101, "US", u16(16)) +
         element(0x0028, 0x0102, "US", u16(15)) + element(0x0028, 0x0103, "US", u16(0)) +
+        (slope ? element(0x0028, 0x1052, "DS", "0") +
+                     element(0x0028, 0x1053, "DS", std::to_string(slope))
+               : "") +
         element(0x7FE0, 0x0010, "OW", pixels);
     std::ofstream(dir_ / name, std::ios::binary) << testing::dicom::part10(sop_class, sop, body);
   }
@@ -1332,6 +1335,26 @@ TEST_F(DicomFiles, PositionsWrittenWithTwoDecimalsAreEven) {
   const std::string err = refusal(".");
   EXPECT_NE(err.find("non-uniform slice spacing: 0.648"), std::string::npos) << err;
   EXPECT_NE(err.find(" mm between slices s4.dcm and s5.dcm"), std::string::npos) << err;
+}
+
+// Slices of their own slopes: each rescaled by its own, and info says so (it showed the first
+// slice's slope as the series').
+TEST_F(DicomFiles, SlicesOfTheirOwnSlopes) {
+  REQUIRE_ITK();
+  for (int k = 0; k < 4; ++k)
+    write_slice("s" + std::to_string(k) + ".dcm", k, at(1.5 * k), true, 2 + k % 2);
+  const Volume v = read_volume(dir_.string());
+  ASSERT_EQ(v.dims(), (Index3{kColumns, kRows, 4}));
+  for (int k = 0; k < 4; ++k)
+    EXPECT_EQ(v.view().value(2, 3, k), (2 + k % 2) * sample(k, 3, 2)) << k;
+  CliResult r = run("info .");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("rescale  per slice: value = stored x 2..3 + 0..0, each slice by its own"),
+            std::string::npos)
+      << r.out;
+  r = run("info . --json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"per_slice\": true"), std::string::npos) << r.out;
 }
 
 // Several multi-frame files of one series (stacks, echoes): the folder is refused naming the

@@ -342,17 +342,26 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
   auto io = make_io(input.kind);
   std::vector<FileHeader> h;
   h.reserve(files.size());
-  for (const std::string& f : files) {
-    h.push_back(read_header(*io, f));
+  ItkImageInfo info;
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    h.push_back(read_header(*io, files[k]));
+    if (!dicom || files.size() == 1) continue;
+    auto& gdcm = static_cast<itk::GDCMImageIO&>(*io);
     // GDCM puts a slice without a position at 0, 0, 0: reported as a gap or a tilt.
-    if (dicom && files.size() > 1 && h.back().dims[2] == 1 &&
-        series_tag(static_cast<itk::GDCMImageIO&>(*io), "0020|0032").empty())
-      throw InputError(f +
+    if (h.back().dims[2] == 1 && series_tag(gdcm, "0020|0032").empty())
+      throw InputError(files[k] +
                        ": no ImagePositionPatient (0020,0032); the slices of a series cannot be "
                        "placed without it");
+    // Each slice's rescale, as GDCM applies it to that slice.
+    const double slope = gdcm.GetRescaleSlope(), intercept = gdcm.GetRescaleIntercept();
+    info.slope_min = k ? std::min(info.slope_min, slope) : slope;
+    info.slope_max = k ? std::max(info.slope_max, slope) : slope;
+    info.intercept_min = k ? std::min(info.intercept_min, intercept) : intercept;
+    info.intercept_max = k ? std::max(info.intercept_max, intercept) : intercept;
   }
+  info.rescale_per_slice =
+      info.slope_min != info.slope_max || info.intercept_min != info.intercept_max;
   bool spacing_in_groups = false;
-  ItkImageInfo info;
   info.format = format_name(input.kind);
   if (files.size() == 1) {
     // One file holding the whole volume (multi-frame DICOM, multi-page TIFF).

@@ -355,9 +355,14 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     h.spacing_unit = check.spacing_unit;
     h.origin = info.origin;
     h.world = WorldFrame{info.origin, info.direction};
-    h.rescaled = info.rescaled || check.rescaled;
+    h.rescaled = info.rescaled || info.rescale_per_slice || check.rescaled;
     h.rescale_slope = check.rescaled ? check.rescale_slope : info.rescale_slope;
     h.rescale_intercept = check.rescaled ? check.rescale_intercept : info.rescale_intercept;
+    h.rescale_per_slice = info.rescale_per_slice;
+    h.slope_min = info.slope_min;
+    h.slope_max = info.slope_max;
+    h.intercept_min = info.intercept_min;
+    h.intercept_max = info.intercept_max;
     h.series_uid = info.series_uid;
     h.series_description = info.series_description;
     h.plain = plain_layout(input, kind, check, info);

@@ -120,6 +120,10 @@ int run_info(const InfoArgs& args) {
   j["rescaled"] = header.rescaled;
   if (header.rescaled)
     j["rescale"] = {{"slope", header.rescale_slope}, {"intercept", header.rescale_intercept}};
+  if (header.rescale_per_slice)
+    j["rescale"] = {{"per_slice", true},
+                    {"slope", {header.slope_min, header.slope_max}},
+                    {"intercept", {header.intercept_min, header.intercept_max}}};
   if (!header.series_uid.empty()) {
     j["series_uid"] = header.series_uid;
     j["series_description"] = header.series_description;
@@ -163,7 +167,12 @@ int run_info(const InfoArgs& args) {
       world.direction[0], world.direction[3], world.direction[6], world.direction[1],
       world.direction[4], world.direction[7], world.direction[2], world.direction[5],
       world.direction[8]);
-  if (header.rescaled)
+  if (header.rescale_per_slice)
+    std::printf(
+        "rescale  per slice: value = stored x %g..%g + %g..%g, each slice by its own (range and "
+        "histogram in these units)\n",
+        header.slope_min, header.slope_max, header.intercept_min, header.intercept_max);
+  else if (header.rescaled)
     std::printf("rescale  value = stored x %g + %g (range and histogram in these units)\n",
                 header.rescale_slope, header.rescale_intercept);
   std::printf("range    %g .. %g\n", lo, hi);
