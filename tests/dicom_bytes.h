@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,17 @@ inline std::string element(std::uint16_t group, std::uint16_t elem, const std::s
   else
     out += u16(static_cast<std::uint16_t>(value.size()));
   return out + value;
+}
+
+// A decimal string: the numbers to 10 significant digits, separated by backslashes.
+inline std::string ds(const std::vector<double>& values) {
+  std::string text;
+  for (const double v : values) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.10g", v);
+    text += (text.empty() ? "" : "\\") + std::string(b);
+  }
+  return text;
 }
 
 // A sequence of items of defined length, each item the elements given (in tag order).

@@ -2,10 +2,13 @@
 #include "core/volume/dicom_frames.h"
 
 #include <gdcmDataSet.h>
+#include <gdcmImageHelper.h>
+#include <gdcmMediaStorage.h>
 #include <gdcmReader.h>
 #include <gdcmSequenceOfItems.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <set>
 
@@ -21,6 +24,13 @@ const gdcm::Tag kPixelMeasures(0x0028, 0x9110), kValueTransformation(0x0028, 0x9
 const gdcm::Tag kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037);
 const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
 const gdcm::Tag kIntercept(0x0028, 0x1052), kSlope(0x0028, 0x1053);
+const gdcm::Tag kGridFrameOffsets(0x3004, 0x000C);
+
+// GDCM's own choice of the element that gives an image's pixel spacing (by its SOP class), which
+// GDCM 3.0 declares protected: the same table, not a copy of it.
+struct GdcmSpacingTag : gdcm::ImageHelper {
+  using gdcm::ImageHelper::GetSpacingTagFromMediaStorage;
+};
 
 // A decimal string's values ("1.5\-2\3"); empty where the element holds none.
 std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path) {
@@ -83,7 +93,45 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   if (!reader.ReadUpToTag(gdcm::Tag(0x7FE0, 0x0010), std::set<gdcm::Tag>()))
     throw InputError(path + ": GDCM cannot read the DICOM header");
   const gdcm::DataSet& ds = reader.GetFile().GetDataSet();
-  if (!ds.FindDataElement(kPerFrameGroups)) return out;
+  const auto has = [&](gdcm::Tag tag) {
+    return ds.FindDataElement(tag) && !ds.GetDataElement(tag).IsEmpty();
+  };
+  gdcm::MediaStorage storage;
+  storage.SetFromFile(reader.GetFile());
+  const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
+  out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
+  char tag[16];
+  std::snprintf(tag, sizeof tag, "(%04X,%04X)", spacing_tag.GetGroup(), spacing_tag.GetElement());
+  const gdcm::Tag kImager(0x0018, 0x1164), kScanned(0x0018, 0x2010), kPlane(0x3002, 0x0011);
+  out.spacing_element = std::string(spacing_tag == kImager         ? "ImagerPixelSpacing "
+                                    : spacing_tag == kScanned      ? "NominalScannedPixelSpacing "
+                                    : spacing_tag == kPlane        ? "ImagePlanePixelSpacing "
+                                    : spacing_tag == kPixelSpacing ? "PixelSpacing "
+                                                                   : "") +
+                        tag;
+  if (!ds.FindDataElement(kPerFrameGroups)) {
+    // RT Dose: the frames' offsets along the normal from the one position (relative to it where
+    // the first is 0, else coordinates along the normal; the differences are the same).
+    if (frames < 2 || !has(kGridFrameOffsets) || !has(kPosition) || !has(kOrientation)) return out;
+    const std::vector<double> offsets = decimals(ds.GetDataElement(kGridFrameOffsets), path);
+    const std::vector<double> p = decimals(ds.GetDataElement(kPosition), path),
+                              o = decimals(ds.GetDataElement(kOrientation), path);
+    if (offsets.size() != static_cast<std::size_t>(frames) || p.size() != 3 || o.size() != 6)
+      throw InputError(path + ": DICOM GridFrameOffsetVector holds " +
+                       std::to_string(offsets.size()) + " offsets for " + std::to_string(frames) +
+                       " frames (or ImagePositionPatient and ImageOrientationPatient are not 3 "
+                       "and 6 values)");
+    const Vec3d normal = cross({o[0], o[1], o[2]}, {o[3], o[4], o[5]});
+    const double length = std::sqrt(dot(normal, normal));
+    if (!(length > 0)) throw InputError(path + ": ImageOrientationPatient has no normal");
+    for (const double offset : offsets) {
+      const double along = (offset - offsets[0]) / length;
+      out.positions.push_back(
+          {p[0] + along * normal[0], p[1] + along * normal[1], p[2] + along * normal[2]});
+    }
+    return out;
+  }
+  out.functional_groups = true;
   gdcm::SmartPointer<gdcm::SequenceOfItems> shared_items;
   const gdcm::DataSet* shared = nullptr;
   if (ds.FindDataElement(kSharedGroups)) {
@@ -143,6 +191,7 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
     if (spacing0->size() != 2 || (*spacing0)[0] <= 0 || (*spacing0)[1] <= 0)
       throw InputError(path + ": PixelSpacing must hold two positive values");
     out.pixel_spacing = std::array<double, 2>{(*spacing0)[0], (*spacing0)[1]};
+    out.spacing_known = true;
   }
   return out;
 }

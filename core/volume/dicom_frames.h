@@ -1,8 +1,10 @@
-// The geometry of each frame of an enhanced multi-frame DICOM file (Enhanced CT, MR, PET...),
-// from its functional groups: where each frame lies, how it is turned, its pixel spacing. GDCM
-// places the frames of such a file by the step between the first two it finds, and falls back to
-// a spacing of 1, 1, 1 where the steps differ; isotile reads them so that they can be checked
-// like the slices of a series (slice_stack.h).
+// The geometry of a DICOM file's frames from its own elements, where GDCM's is not to be trusted:
+// enhanced multi-frame files (Enhanced CT, MR, PET...) give each frame's position, orientation
+// and pixel spacing in functional groups, and GDCM places their frames by the step between the
+// first two, falling back to a spacing of 1, 1, 1 where the steps differ; RT Dose gives its
+// frames' offsets along the normal (GridFrameOffsetVector), which GDCM refuses when they
+// descend and does not check for gaps. isotile reads them so that they can be checked like the
+// slices of a series (slice_stack.h).
 #pragma once
 
 #include <array>
@@ -16,17 +18,25 @@
 namespace isotile {
 
 struct DicomFrames {
-  // Each frame's ImagePositionPatient, in frame order; empty where the file has none per frame
-  // (a single-frame image, or a multi-frame one that only gives one position and a spacing).
+  bool functional_groups = false;  // PerFrameFunctionalGroupsSequence present (an enhanced file)
+  // Each frame's ImagePositionPatient, in frame order: from the functional groups, or RT Dose's
+  // position plus each GridFrameOffsetVector offset along the normal; empty where the file gives
+  // none per frame (a single-frame image, or a multi-frame one with one position and a spacing).
   std::vector<Vec3d> positions;
   // ImageOrientationPatient (row, then column cosines) and PixelSpacing (between rows, then
   // between columns), alike in every frame, where the functional groups give them.
   std::optional<std::array<double, 6>> orientation;
   std::optional<std::array<double, 2>> pixel_spacing;
+  // The pixel spacing GDCM reads for this kind of image (PixelSpacing for CT and MR,
+  // ImagerPixelSpacing for projections...; gdcm::ImageHelper) is in the file, at the top level
+  // or in the functional groups. Without it GDCM takes 1 mm.
+  bool spacing_known = true;
+  std::string spacing_element;  // that element, e.g. "PixelSpacing (0028,0030)"
 };
 
-// Throws InputError naming the file and the frame where frames differ in what one volume needs
-// alike (orientation, pixel spacing, rescale), or some frames have a position and others none.
+// `frames`: the file's frames as GDCM counts them. Throws InputError naming the file and the
+// frame where frames differ in what one volume needs alike (orientation, pixel spacing, rescale),
+// some frames have a position and others none, or RT Dose's offsets are not one per frame.
 DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames);
 
 }  // namespace isotile

@@ -246,10 +246,6 @@ void read_samples(itk::ImageIOBase& io, const std::string& file, const FileHeade
   }
 }
 
-double dot(const Vec3d& a, const Vec3d& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
 std::string series_tag(itk::GDCMImageIO& io, const char* key) {
   std::string value;
   itk::ExposeMetaData<std::string>(io.GetMetaDataDictionary(), key, value);
@@ -295,27 +291,19 @@ itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
   return names;
 }
 
-// An enhanced multi-frame DICOM file's frames placed by their own positions, checked as a series'
-// slices are; GDCM's geometry is kept for files that give one position and a spacing. True where
-// the functional groups give the pixel spacing.
-bool place_frames(const std::string& input, const std::string& file, ItkImageInfo& info) {
-  const DicomFrames frames = read_dicom_frames(file, info.dims[2]);
-  if (frames.positions.empty()) {
-    if (!std::isfinite(info.spacing[2]) || info.spacing[2] <= 0)
-      throw InputError(file + ": spacing " + std::to_string(info.spacing[2]) +
-                       " between frames (must be positive)");
-    return false;
-  }
+// A multi-frame DICOM file's frames placed by their own positions (an enhanced file's functional
+// groups, RT Dose's offsets), checked as a series' slices are; GDCM's geometry is kept for files
+// that give one position and a spacing. Returns what it read.
+DicomFrames place_frames(const std::string& input, const std::string& file, ItkImageInfo& info) {
+  DicomFrames frames = read_dicom_frames(file, info.dims[2]);
   if (frames.orientation) {
     const std::array<double, 6>& o = *frames.orientation;
     const Vec3d row{o[0], o[1], o[2]}, column{o[3], o[4], o[5]};
-    const Vec3d normal{row[1] * column[2] - row[2] * column[1],
-                       row[2] * column[0] - row[0] * column[2],
-                       row[0] * column[1] - row[1] * column[0]};
-    const double length = std::sqrt(dot(normal, normal));
-    if (!(length > 0.5) || std::abs(dot(row, row) - 1) > 1e-3 ||
-        std::abs(dot(column, column) - 1) > 1e-3)
+    if (std::abs(dot(row, row) - 1) > 1e-3 || std::abs(dot(column, column) - 1) > 1e-3 ||
+        std::abs(dot(row, column)) > 1e-3)
       throw InputError(file + ": ImageOrientationPatient is not two unit vectors at right angles");
+    const Vec3d normal = cross(row, column);
+    const double length = std::sqrt(dot(normal, normal));
     for (int r = 0; r < 3; ++r) {
       info.direction[3 * r] = row[r];
       info.direction[3 * r + 1] = column[r];
@@ -327,13 +315,24 @@ bool place_frames(const std::string& input, const std::string& file, ItkImageInf
     info.spacing[0] = (*frames.pixel_spacing)[1];
     info.spacing[1] = (*frames.pixel_spacing)[0];
   }
+  if (frames.positions.empty()) {
+    // GDCM then places the frames 1 mm apart from 0, 0, 0.
+    if (frames.functional_groups)
+      throw InputError(file +
+                       ": its frames have no ImagePositionPatient (PlanePositionSequence), so "
+                       "they cannot be placed");
+    if (!std::isfinite(info.spacing[2]) || info.spacing[2] <= 0)
+      throw InputError(file + ": spacing " + std::to_string(info.spacing[2]) +
+                       " between frames (must be positive)");
+    return frames;
+  }
   const SliceStack stack = stack_along_normal(
-      input, frames.positions, {info.direction[2], info.direction[5], info.direction[8]}, "frames",
-      [](std::size_t k) { return std::to_string(k + 1); });
+      input, frames.positions, {info.direction[2], info.direction[5], info.direction[8]},
+      {"frame", "frames"}, [](std::size_t k) { return std::to_string(k + 1); });
   info.spacing[2] = stack.step;
   info.origin = frames.positions[stack.order[0]];
   if (!std::is_sorted(stack.order.begin(), stack.order.end())) info.frame_order = stack.order;
-  return frames.pixel_spacing.has_value();
+  return frames;
 }
 
 // A stack of 2D files (DICOM slices, TIFF pages), ordered in z.
@@ -347,8 +346,10 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     h.push_back(read_header(*io, files[k]));
     if (!dicom || files.size() == 1) continue;
     auto& gdcm = static_cast<itk::GDCMImageIO&>(*io);
-    // GDCM puts a slice without a position at 0, 0, 0: reported as a gap or a tilt.
-    if (h.back().dims[2] == 1 && series_tag(gdcm, "0020|0032").empty())
+    // GDCM puts a slice without a position at 0, 0, 0: reported as a gap or a tilt. An enhanced
+    // file of one frame gives its position in its functional group.
+    if (h.back().dims[2] == 1 && series_tag(gdcm, "0020|0032").empty() &&
+        read_dicom_frames(files[k], 1).positions.empty())
       throw InputError(files[k] +
                        ": no ImagePositionPatient (0020,0032); the slices of a series cannot be "
                        "placed without it");
@@ -361,7 +362,7 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
   }
   info.rescale_per_slice =
       info.slope_min != info.slope_max || info.intercept_min != info.intercept_max;
-  bool spacing_in_groups = false;
+  DicomFrames geometry;  // the first file's, as DICOM files give it
   info.format = format_name(input.kind);
   if (files.size() == 1) {
     // One file holding the whole volume (multi-frame DICOM, multi-page TIFF).
@@ -373,7 +374,7 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.spacing = h[0].spacing;
     info.origin = h[0].origin;
     info.direction = h[0].direction;
-    if (dicom) spacing_in_groups = place_frames(input.path, files[0], info);
+    if (dicom) geometry = place_frames(input.path, files[0], info);
   } else {
     const FileHeader first = h[0];
     for (std::size_t k = 0; k < files.size(); ++k) {
@@ -407,7 +408,9 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
       for (std::size_t k = 0; k < files.size(); ++k) origins[k] = h[k].origin;
       const SliceStack stack = stack_along_normal(
           input.path, origins, {first.direction[2], first.direction[5], first.direction[8]},
-          "slices", [&](std::size_t k) { return fs::path(files[k]).filename().string(); });
+          {"slice", "slices"},
+          [&](std::size_t k) { return fs::path(files[k]).filename().string(); });
+      geometry = read_dicom_frames(files[0], 1);
       std::vector<std::string> sorted(files.size());
       for (std::size_t k = 0; k < files.size(); ++k) sorted[k] = files[stack.order[k]];
       files = std::move(sorted);
@@ -423,16 +426,17 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.rescale_intercept = gdcm.GetRescaleIntercept();
     info.rescaled = info.rescale_slope != 1 || info.rescale_intercept != 0;
     info.series_description = series_tag(gdcm, "0008|103e");
-    // Without a pixel spacing (the standard's for CT and MR, or a projection's), GDCM takes 1 mm
-    // and says so only in a warning: a mesh of made-up size.
-    if (!spacing_in_groups && !input.spacing_given && series_tag(gdcm, "0028|0030").empty() &&
-        series_tag(gdcm, "0018|1164").empty() && series_tag(gdcm, "0018|2010").empty()) {
+    // Without the pixel spacing GDCM reads for this kind of image (PixelSpacing for CT and MR,
+    // ImagerPixelSpacing for projections...), it takes 1 mm and says so only in a warning: a
+    // mesh of made-up size.
+    if (!geometry.spacing_known && !input.spacing_given) {
       char step[64] = "";
       if (info.files.size() > 1)
         std::snprintf(step, sizeof step, " (the slices lie %g mm apart)", info.spacing[2]);
-      throw InputError(info.files.front() +
-                       ": no PixelSpacing (0028,0030), so the distance between its pixels is "
-                       "unknown; give the spacing with --spacing X,Y,Z" +
+      throw InputError(info.files.front() + ": no " + geometry.spacing_element +
+                       ", the element GDCM reads this kind of image's pixel spacing from, so the "
+                       "distance between its pixels is unknown; give the spacing with --spacing "
+                       "X,Y,Z" +
                        std::string(step));
     }
   }

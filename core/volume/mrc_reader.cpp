@@ -224,12 +224,12 @@ MrcLayout mrc_layout(const std::string& path) {
                      "), not one volume; cut the one to extract out first (e.g. IMOD's newstack, "
                      "or mrcfile)");
   // ISPG 0 is an image or a stack of images (MRC2014), and `.mrcs` the name cryo-EM software
-  // (RELION, cryoSPARC) gives stacks of 2-D particle images: read as a volume, its images would
+  // (RELION) gives stacks of 2-D particle images: read as a volume, its images would
   // be laid one on another along z. A volume written with ISPG 0 under another name is read.
   std::string name = std::filesystem::path(path).filename().string();
   for (char& ch : name) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
   if (ispg == 0 && dims[2] > 1 && (name.ends_with(".mrcs") || name.ends_with(".mrcs.gz")))
-    throw InputError(path + ": a stack of " + std::to_string(dims[2]) +
+    throw InputError(path + ": a stack of " + std::to_string(m.n[2]) +
                      " 2-D images (.mrcs, space group ISPG 0), not a volume; if it holds one "
                      "volume, name it .mrc");
   const std::int32_t nsymbt = i32(92);

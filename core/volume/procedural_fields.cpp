@@ -43,9 +43,6 @@ Vec3d add(const Vec3d& a, const Vec3d& b) {
 Vec3d scale(const Vec3d& a, double s) {
   return {a[0] * s, a[1] * s, a[2] * s};
 }
-double dot(const Vec3d& a, const Vec3d& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
 double norm(const Vec3d& a) {
   return std::sqrt(dot(a, a));
 }

@@ -10,16 +10,14 @@
 namespace isotile {
 
 SliceStack stack_along_normal(const std::string& input, const std::vector<Vec3d>& origins,
-                              const Vec3d& normal, const char* plural,
+                              const Vec3d& normal, PlaneNoun noun,
                               const std::function<std::string(std::size_t)>& name) {
   const std::size_t n = origins.size();
-  const std::string many = plural, one = many.substr(0, many.size() - 1);
+  if (n < 2) throw InputError(input + ": one " + noun.one + "; a volume needs several");
+  const std::string one = noun.one, many = noun.many;
   const auto offset = [&](std::size_t k) {
     return Vec3d{origins[k][0] - origins[0][0], origins[k][1] - origins[0][1],
                  origins[k][2] - origins[0][2]};
-  };
-  const auto dot = [](const Vec3d& a, const Vec3d& b) {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
   };
   std::vector<double> d(n);
   for (std::size_t k = 0; k < n; ++k) d[k] = dot(offset(k), normal);

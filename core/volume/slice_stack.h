@@ -18,11 +18,17 @@ struct SliceStack {
   double step = 0;                 // the distance between neighbours, along the normal
 };
 
+// What the planes are called in messages: "slice" and "slices", or "frame" and "frames".
+struct PlaneNoun {
+  const char* one;
+  const char* many;
+};
+
 // `origins`: each plane's first sample (ImagePositionPatient), at least two; `normal`: a unit
-// vector. `plural` names the planes ("slices", "frames") and `name(k)` plane k in messages.
-// Throws InputError prefixed with `input`.
+// vector. `noun` names the planes and `name(k)` plane k in messages. Throws InputError prefixed
+// with `input`.
 SliceStack stack_along_normal(const std::string& input, const std::vector<Vec3d>& origins,
-                              const Vec3d& normal, const char* plural,
+                              const Vec3d& normal, PlaneNoun noun,
                               const std::function<std::string(std::size_t)>& name);
 
 }  // namespace isotile

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -13,6 +14,7 @@
 #include "core/errors.h"
 #include "core/volume/file_bytes.h"
 #include "core/volume/image_headers.h"
+#include "core/volume/imagej_description.h"
 
 namespace isotile {
 
@@ -34,76 +36,6 @@ std::optional<ScalarType> tiff_sample_type(std::uint64_t bits, std::uint64_t for
   if (bits == 16) return sign ? ScalarType::Int16 : ScalarType::UInt16;
   if (bits == 32) return sign ? ScalarType::Int32 : ScalarType::UInt32;
   return std::nullopt;
-}
-
-// ImageJ's description of a hyperstack ("ImageJ=1.54f\nimages=20\nchannels=2\nslices=10\n...")
-// as far as a volume cares: its channels and time points (frames), 1 where it does not say.
-struct ImageJShape {
-  std::uint64_t channels = 1, slices = 1, frames = 1;
-  // Pages of more than one of these axes interleave them (one alone, whatever ImageJ or tifffile
-  // calls it, is a stack of planes: tifffile's imagej=True labels a plain stack's z as channels).
-  bool hyperstack() const { return (channels > 1) + (slices > 1) + (frames > 1) > 1; }
-};
-ImageJShape imagej_shape(const std::string& description) {
-  ImageJShape shape;
-  if (description.rfind("ImageJ=", 0) != 0) return shape;
-  std::size_t at = 0;
-  while (at < description.size()) {
-    std::size_t end = description.find('\n', at);
-    if (end == std::string::npos) end = description.size();
-    const std::string line = description.substr(at, end - at);
-    const auto number = [&](const char* key) -> std::optional<std::uint64_t> {
-      const std::string k = std::string(key) + "=";
-      if (line.rfind(k, 0) != 0) return std::nullopt;
-      std::uint64_t v = 0;
-      for (std::size_t i = k.size(); i < line.size() && v < (1u << 30); ++i) {
-        if (line[i] < '0' || line[i] > '9') break;
-        v = v * 10 + static_cast<std::uint64_t>(line[i] - '0');
-      }
-      return v;
-    };
-    if (const auto c = number("channels")) shape.channels = *c;
-    if (const auto z = number("slices")) shape.slices = *z;
-    if (const auto f = number("frames")) shape.frames = *f;
-    at = end + 1;
-  }
-  return shape;
-}
-
-// ImageJ's calibration ("unit=micron\nspacing=2.5\n" beside the resolution tags): the unit of
-// the pixel width and height (1 / XResolution, 1 / YResolution) and of the voxel depth
-// (`spacing`, 1 where it does not say). Uncalibrated ("pixel", or no unit nor spacing): none.
-struct ImageJCalibration {
-  std::string unit, y_unit, z_unit;
-  std::optional<double> depth;
-};
-std::optional<ImageJCalibration> imagej_calibration(const std::string& path,
-                                                    const std::string& description) {
-  if (description.rfind("ImageJ=", 0) != 0) return std::nullopt;
-  ImageJCalibration c;
-  std::size_t at = 0;
-  while (at < description.size()) {
-    std::size_t end = description.find('\n', at);
-    if (end == std::string::npos) end = description.size();
-    const std::string line = description.substr(at, end - at);
-    const std::size_t eq = line.find('=');
-    const std::string key = line.substr(0, eq),
-                      value = eq == std::string::npos ? "" : line.substr(eq + 1);
-    if (key == "unit") c.unit = value;
-    if (key == "yunit") c.y_unit = value;
-    if (key == "zunit") c.z_unit = value;
-    if (key == "spacing") {
-      char* stop = nullptr;
-      const double d = std::strtod(value.c_str(), &stop);
-      if (value.empty() || *stop != '\0' || !std::isfinite(d) || d <= 0)
-        throw InputError(path + ": ImageJ's voxel depth 'spacing=" + value +
-                         "' is not a positive number");
-      c.depth = d;
-    }
-    at = end + 1;
-  }
-  if ((c.unit.empty() || c.unit == "pixel" || c.unit == "pixels") && !c.depth) return std::nullopt;
-  return c;
 }
 
 // The array shape tifffile writes in its description of a series' first page ({"shape": [5, 2,
@@ -190,6 +122,7 @@ TiffCheck check_tiff_file(const std::string& path) {
     std::vector<std::uint64_t> offsets, counts;
     std::string description;
     double x_resolution = 0, y_resolution = 0;  // pixels per unit (0: not given)
+    std::uint64_t resolution_unit = 2;          // TIFF's default: the inch
     for (std::uint64_t e = 0; e < entries; ++e) {
       unsigned char d[20];
       const std::uint64_t at = ifd + count_size + e * entry_size;
@@ -281,6 +214,9 @@ TiffCheck check_tiff_file(const std::string& path) {
             (tag == 282 ? x_resolution : y_resolution) = den ? double(num) / den : 0;
           }
           break;
+        case 296:
+          resolution_unit = value(0);
+          break;
         case 270:  // ImageDescription, where ImageJ and tifffile say what the pages are
           if (size == 1 && n <= (1u << 20)) {
             description.resize(n);
@@ -368,20 +304,12 @@ TiffCheck check_tiff_file(const std::string& path) {
                        ", which ITK's TIFF reader reads as colour; save the pages in strips (as "
                        "ImageJ and most tools do by default)");
     const std::vector<std::uint64_t> series = tifffile_shape(description);
+    const std::map<std::string, std::string> imagej = imagej_properties(description);
     if (page == 1) {
-      if (const std::optional<ImageJCalibration> c = imagej_calibration(path, description)) {
-        for (const std::string& other : {c->y_unit, c->z_unit})
-          if (!other.empty() && other != c->unit)
-            throw InputError(path + ": ImageJ's calibration has axes in different units (" +
-                             c->unit + ", " + other +
-                             "); give the spacing in one with --spacing X,Y,Z");
-        // ImageJ writes the resolution tags' unit as the inch or the centimetre for those two
-        // (ITK gives them in mm) and as none for the others.
-        const double mm = c->unit == "inch" ? 25.4 : c->unit == "cm" ? 10 : 1;
-        const double x = x_resolution > 0 ? 1 / x_resolution : 1;
-        result.spacing = Vec3d{mm * x, mm * (y_resolution > 0 ? 1 / y_resolution : x),
-                               mm * c->depth.value_or(1)};
-        result.spacing_unit = mm != 1 ? "mm" : c->unit == "pixel" ? "" : c->unit;
+      if (const std::optional<ImageJSpacing> c =
+              imagej_spacing(path, imagej, x_resolution, y_resolution, resolution_unit)) {
+        result.spacing = c->spacing;
+        result.spacing_unit = c->unit;
       }
       if (spp != 1)
         throw InputError(
@@ -405,7 +333,7 @@ TiffCheck check_tiff_file(const std::string& path) {
                          "] here, whose pages interleave more axes than z (channels or time "
                          "points); a volume is one 3-D array: save each one on its own");
       }
-      const ImageJShape shape = imagej_shape(description);
+      const ImageJShape shape = imagej_shape(imagej);
       if (shape.hyperstack())
         throw InputError(
             path + ": an ImageJ hyperstack of " +

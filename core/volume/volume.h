@@ -29,6 +29,13 @@ using Vec3d = std::array<double, 3>;
 using Mat3 = std::array<double, 9>;
 inline constexpr Mat3 kIdentity3{1, 0, 0, 0, 1, 0, 0, 0, 1};
 
+inline double dot(const Vec3d& a, const Vec3d& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+inline Vec3d cross(const Vec3d& a, const Vec3d& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+
 // Where a grid lies in a file's world space (ITK's convention, LPS for medical images): global
 // sample g is at origin + direction * (spacing * g), where column a of `direction` is the unit
 // world vector of index axis a. The grid frame (origin + spacing * g) is the special case of the

@@ -691,6 +691,8 @@ std::string dicom_multiframe(const std::vector<std::uint8_t>& pixels, int column
   const std::string body =
       element(0x0008, 0x0016, "UI", sop_class) + element(0x0008, 0x0018, "UI", sop) +
       element(0x0008, 0x0060, "CS", "OT") +
+      // The pixel spacing GDCM reads for secondary captures (PixelSpacing it does not).
+      element(0x0018, 0x2010, "DS", "1\\1") +
       element(0x0020, 0x000D, "UI", "1.2.826.0.1.3680043.2.1.2") +
       element(0x0020, 0x000E, "UI", "1.2.826.0.1.3680043.2.1.3") +
       element(0x0020, 0x0013, "IS", "1") + element(0x0020, 0x0032, "DS", "0\\0\\0") +
