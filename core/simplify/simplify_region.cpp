@@ -383,10 +383,15 @@ struct RegionSimplifier::Impl {
     return lb > 0 && ca >= (before | r) / lb && deficit <= opt.max_input_turn * lb - (before | r);
   }
 
+  // How worst_after_move counts a face of no area that stays so: skipped, or as a radius ratio of
+  // 0 (as worst_around counts it).
+  enum class Flat { Skip, Zero };
+
   // Shape and normals of the faces around v after v moves to x, skipping f0 and f1 (the faces a
   // collapse removes), with `other` (the collapse's other end) also at x. Returns the worst new
   // radius ratio, or -1 when a face would turn too far, from its last shape or from the input.
-  double worst_after_move(VH v, VH other, const P& x, FH f0 = FH(), FH f1 = FH()) const {
+  double worst_after_move(VH v, VH other, const P& x, FH f0 = FH(), FH f1 = FH(),
+                          Flat flat = Flat::Skip) const {
     double worst = 1;
     // After a collapse the vertex at x stands for both ends' surface. (Only f0 and f1 hold both.)
     const P merged = other == v ? area(v) : area(v) + area(other);
@@ -408,8 +413,16 @@ struct RegionSimplifier::Impl {
       const double lb = before.norm(), la = after.norm();
       // A face of no area that stays so (Marching Cubes makes fans of them where samples equal
       // the isovalue, their corners at one point) is not made worse: judged, it refused every
-      // collapse in such a fan (each leaves the others), and the fans stayed whole.
-      if (la == 0 && lb == 0) continue;
+      // collapse in such a fan (each leaves the others), and the fans stayed whole. The cleanup's
+      // moves count it (Flat::Zero): they are there to lift the worst triangle, and one that
+      // stays of no area is not lifted. Skipped there, every move looked like a lift from 0 and
+      // the vertex of such a face between two locked corners at one point walked off the
+      // surface a step per cleanup visit (engine's Marching Cubes mesh at 100: 3 voxels, on the
+      // volume's z = 0 border).
+      if (la == 0 && lb == 0) {
+        if (flat == Flat::Zero) worst = 0;
+        continue;
+      }
       if (la == 0) return -1;
       if (lb > 0 && (before | after) < opt.max_normal_turn * lb * la) return -1;
       if (!faces_input(after, before, ref, sum)) return -1;
@@ -712,7 +725,7 @@ struct RegionSimplifier::Impl {
         for (const P& d : dirs) {
           const P x = best + step * d;
           if ((x - start).norm() > reach || q(arr(x)) > bound) continue;
-          const double w = worst_after_move(v, v, x);
+          const double w = worst_after_move(v, v, x, FH(), FH(), Flat::Zero);
           if (w > best_worst + 1e-9) {
             best_worst = w;
             best = x;
