@@ -358,6 +358,31 @@ TEST(SurfaceDistance, IsZeroForTheSameMeshAndTheOffsetOfAPlane) {
   EXPECT_FALSE(surface_distance(Mesh{}, a));  // no face: no distance
 }
 
+// A face of no area whose corners lie on a line is that line, measured to and from; one whose
+// corners meet at a point is nothing. Their corners were sampled while the faces were left out of
+// the tree, so a piece of the mesh of no area (as Marching Cubes makes at samples equal to the
+// isovalue) was measured to the nearest face with one: bonsai's MC mesh at 50 was 30.08 voxels
+// from itself.
+TEST(SurfaceDistance, FacesOfNoAreaAreLinesOrNothing) {
+  Mesh a;
+  a.positions = {{0, 0, 0},  {10, 0, 0}, {10, 10, 0}, {0, 10, 0},  {30, 0, 0},
+                 {31, 0, 0}, {32, 0, 0}, {30, 0, 0},  {50, 50, 50}};
+  // A square, a sliver and a spike on the line y = z = 0, and a face at one point.
+  a.triangles = {{0, 1, 2}, {0, 2, 3}, {4, 5, 6}, {4, 7, 5}, {8, 8, 8}};
+  const SurfaceDistance same = *surface_distance(a, a, {.face_samples = 1000});
+  EXPECT_EQ(same.max(), 0.0);
+  EXPECT_EQ(same.a_to_b.samples, 1008u);  // the point's vertex is no sample
+  Mesh square = a;
+  square.triangles.resize(2);
+  const SurfaceDistance d = *surface_distance(a, square, {.face_samples = 1000});
+  EXPECT_NEAR(d.a_to_b.max, 22.0, 1e-9);  // (32, 0, 0) to (10, 0, 0)
+  EXPECT_EQ(d.b_to_a.max, 0.0);
+  // Measured to: a point on the line is 0 from it, one beside it its distance.
+  Mesh near = square;
+  near.positions = {{31, 0, 0}, {31.5, 0, 0}, {31.5, 0, 1}, {31, 0, 1}};
+  EXPECT_NEAR(surface_distance(near, a, {.face_samples = 1000})->a_to_b.max, 1.0, 1e-9);
+}
+
 // Bonsai extracted by `method` at `iso`, its path checked by the caller.
 Mesh bonsai_mesh(const std::filesystem::path& path, Method method, double iso) {
   const Volume vol = read_volume(path.string());

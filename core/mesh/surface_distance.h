@@ -2,8 +2,10 @@
 // simplified mesh strays from its input, and the input from it.
 //
 // Each direction samples one mesh and finds, for every sample, the closest point on the other
-// mesh's triangles (CGAL's AABB tree, exact closest points in double). The samples of a mesh are
-// all its vertices plus area-weighted points on its faces: `face_samples` points placed by
+// mesh's faces (CGAL's AABB trees, exact closest points in double; a face of no area whose
+// corners lie on a line counts as that line). The samples of a mesh are the vertices of its faces
+// (but for faces whose corners meet at one point) plus area-weighted points on its faces:
+// `face_samples` points placed by
 // systematic sampling along the cumulative area (evenly spaced in area, each at a fixed
 // quasi-random spot inside its triangle), so the result is deterministic and independent of the
 // thread count. The vertices catch the far tips that uniform sampling of the faces would miss.
