@@ -41,12 +41,6 @@ struct WorkMesh {
 Vec3d sub(const Vec3d& a, const Vec3d& b) {
   return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
 }
-Vec3d cross(const Vec3d& a, const Vec3d& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double dot(const Vec3d& a, const Vec3d& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
 
 // Vertex -> faces in ascending face order (count, scan, fill).
 struct VertexFaces {
