@@ -1448,8 +1448,9 @@ TEST_F(DicomFiles, SeveralMultiFrameFilesOfOneSeries) {
   write("b.dcm", {0, 1, 2, 3, 4, 5}, further, {}, "2");
   const CliResult r = run("info .");
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.err.find(": a series of several multi-frame files ("), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("holds 6 frames); isotile reads one such file at a time: name it"),
+  EXPECT_NE(r.err.find(": a multi-frame file in a series of several files ("), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("holds 6 frames); isotile reads such a file by itself: name it"),
             std::string::npos)
       << r.err;
   expect_volume("a.dcm", {0, 1, 2, 3, 4, 5}, first_);

@@ -379,9 +379,9 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     const FileHeader first = h[0];
     for (std::size_t k = 0; k < files.size(); ++k) {
       if (h[k].dims[2] != 1 && dicom)
-        throw InputError(input.path + ": a series of several multi-frame files (" + files[k] +
-                         " holds " + std::to_string(h[k].dims[2]) +
-                         " frames); isotile reads one such file at a time: name it");
+        throw InputError(input.path + ": a multi-frame file in a series of several files (" +
+                         files[k] + " holds " + std::to_string(h[k].dims[2]) +
+                         " frames); isotile reads such a file by itself: name it");
       if (h[k].dims[2] != 1 || h[k].dims[0] != first.dims[0] || h[k].dims[1] != first.dims[1])
         throw InputError(files[k] + ": slice of " + std::to_string(h[k].dims[0]) + "x" +
                          std::to_string(h[k].dims[1]) + "x" + std::to_string(h[k].dims[2]) +
