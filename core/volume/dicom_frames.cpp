@@ -2,6 +2,8 @@
 #include "core/volume/dicom_frames.h"
 
 #include <gdcmDataSet.h>
+#include <gdcmDicts.h>
+#include <gdcmGlobal.h>
 #include <gdcmImageHelper.h>
 #include <gdcmMediaStorage.h>
 #include <gdcmReader.h>
@@ -32,6 +34,12 @@ struct GdcmSpacingTag : gdcm::ImageHelper {
   using gdcm::ImageHelper::GetSpacingTagFromMediaStorage;
 };
 
+std::string tag_text(const gdcm::Tag& t) {
+  char text[16];
+  std::snprintf(text, sizeof text, "(%04X,%04X)", t.GetGroup(), t.GetElement());
+  return text;
+}
+
 // A decimal string's values ("1.5\-2\3"); empty where the element holds none.
 std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path) {
   std::vector<double> out;
@@ -48,9 +56,7 @@ std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path
     char* stop = nullptr;
     const double v = std::strtod(value.c_str(), &stop);
     if (value.empty() || *stop != '\0' || !std::isfinite(v)) {
-      char tag[16];
-      std::snprintf(tag, sizeof tag, "(%04X,%04X)", e.GetTag().GetGroup(), e.GetTag().GetElement());
-      throw InputError(path + ": DICOM element " + tag + " holds '" + value +
+      throw InputError(path + ": DICOM element " + tag_text(e.GetTag()) + " holds '" + value +
                        "' where a decimal number belongs");
     }
     out.push_back(v);
@@ -100,15 +106,10 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   storage.SetFromFile(reader.GetFile());
   const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
   out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
-  char tag[16];
-  std::snprintf(tag, sizeof tag, "(%04X,%04X)", spacing_tag.GetGroup(), spacing_tag.GetElement());
-  const gdcm::Tag kImager(0x0018, 0x1164), kScanned(0x0018, 0x2010), kPlane(0x3002, 0x0011);
-  out.spacing_element = std::string(spacing_tag == kImager         ? "ImagerPixelSpacing "
-                                    : spacing_tag == kScanned      ? "NominalScannedPixelSpacing "
-                                    : spacing_tag == kPlane        ? "ImagePlanePixelSpacing "
-                                    : spacing_tag == kPixelSpacing ? "PixelSpacing "
-                                                                   : "") +
-                        tag;
+  const char* keyword =
+      gdcm::Global::GetInstance().GetDicts().GetDictEntry(spacing_tag).GetKeyword();
+  out.spacing_element =
+      std::string(keyword && *keyword ? std::string(keyword) + " " : "") + tag_text(spacing_tag);
   if (!ds.FindDataElement(kPerFrameGroups)) {
     // RT Dose: the frames' offsets along the normal from the one position (relative to it where
     // the first is 0, else coordinates along the normal; the differences are the same).

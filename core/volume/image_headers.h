@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/volume/imagej_description.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -17,9 +18,8 @@ struct ImageHeaderCheck {
   std::optional<PlainData> plain;  // uncompressed, unscaled samples in one file
   // TIFF stacks: each slice file stored plainly, by its name (as the stack lists it).
   std::vector<PlainData> plain_slices;
-  std::optional<Vec3d> spacing;  // a TIFF's calibration ITK does not read (TiffCheck)
-  std::string spacing_unit;
-  bool rescaled = false;  // NIfTI's scl_slope/scl_inter change the values
+  std::optional<ImageJSpacing> calibration;  // a TIFF's, which ITK does not read (TiffCheck)
+  bool rescaled = false;                     // NIfTI's scl_slope/scl_inter change the values
   double rescale_slope = 1;
   double rescale_intercept = 0;
   // Compressed samples, which only inflating them shows to be all there (verify_compressed).
@@ -58,11 +58,8 @@ struct TiffCheck {
   // as planes of a raw volume.
   std::optional<PlainData> plain;
   // ImageJ's calibration, which ITK does not read (it takes the resolution tags only where their
-  // unit is the inch or the centimetre): pixel width, height and voxel depth, and their unit
-  // ("um", "micron", "nm"...; "mm" for the inch and the centimetre; empty where ImageJ names
-  // none).
-  std::optional<Vec3d> spacing;
-  std::string spacing_unit;
+  // unit is the inch or the centimetre).
+  std::optional<ImageJSpacing> calibration;
 };
 TiffCheck check_tiff_file(const std::string& path);
 

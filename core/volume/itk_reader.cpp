@@ -355,13 +355,12 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
                        "placed without it");
     // Each slice's rescale, as GDCM applies it to that slice.
     const double slope = gdcm.GetRescaleSlope(), intercept = gdcm.GetRescaleIntercept();
-    info.slope_min = k ? std::min(info.slope_min, slope) : slope;
-    info.slope_max = k ? std::max(info.slope_max, slope) : slope;
-    info.intercept_min = k ? std::min(info.intercept_min, intercept) : intercept;
-    info.intercept_max = k ? std::max(info.intercept_max, intercept) : intercept;
+    RescaleRange& r = info.rescale_range;
+    r.slope_min = k ? std::min(r.slope_min, slope) : slope;
+    r.slope_max = k ? std::max(r.slope_max, slope) : slope;
+    r.intercept_min = k ? std::min(r.intercept_min, intercept) : intercept;
+    r.intercept_max = k ? std::max(r.intercept_max, intercept) : intercept;
   }
-  info.rescale_per_slice =
-      info.slope_min != info.slope_max || info.intercept_min != info.intercept_max;
   DicomFrames geometry;  // the first file's, as DICOM files give it
   info.format = format_name(input.kind);
   if (files.size() == 1) {

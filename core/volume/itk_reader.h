@@ -35,10 +35,7 @@ struct ItkImageInfo {
   bool rescaled = false;
   double rescale_slope = 1;
   double rescale_intercept = 0;
-  // A DICOM series whose slices carry their own slope or intercept (GDCM rescales each by its
-  // own; the two above are the first slice's): their least and greatest.
-  bool rescale_per_slice = false;
-  double slope_min = 1, slope_max = 1, intercept_min = 0, intercept_max = 0;
+  RescaleRange rescale_range;      // the slices' (the two above are the first slice's)
   std::vector<std::string> files;  // stacks: the slices in z order
   // A multi-frame DICOM file whose frames are not in order along their normal: the frame (in
   // the file) of each z, lowest first; empty where they are.

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <numeric>
 
 #include "core/errors.h"
 
@@ -26,7 +27,7 @@ SliceStack stack_along_normal(const std::string& input, const std::vector<Vec3d>
   // keep their order, so that two planes at one place are named as they came.
   SliceStack stack;
   stack.order.resize(n);
-  for (std::size_t k = 0; k < n; ++k) stack.order[k] = k;
+  std::iota(stack.order.begin(), stack.order.end(), std::size_t{0});
   std::stable_sort(stack.order.begin(), stack.order.end(),
                    [&](std::size_t a, std::size_t b) { return d[a] < d[b]; });
   const auto at = [&](std::size_t k) { return d[stack.order[k]]; };

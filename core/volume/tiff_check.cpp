@@ -304,13 +304,11 @@ TiffCheck check_tiff_file(const std::string& path) {
                        ", which ITK's TIFF reader reads as colour; save the pages in strips (as "
                        "ImageJ and most tools do by default)");
     const std::vector<std::uint64_t> series = tifffile_shape(description);
-    const std::map<std::string, std::string> imagej = imagej_properties(description);
     if (page == 1) {
-      if (const std::optional<ImageJSpacing> c =
-              imagej_spacing(path, imagej, x_resolution, y_resolution, resolution_unit)) {
-        result.spacing = c->spacing;
-        result.spacing_unit = c->unit;
-      }
+      // ImageJ describes the file on its first page.
+      const std::map<std::string, std::string> imagej = imagej_properties(description);
+      result.calibration =
+          imagej_spacing(path, imagej, x_resolution, y_resolution, resolution_unit);
       if (spp != 1)
         throw InputError(
             path + ": TIFF pages hold " + std::to_string(spp) + " samples per pixel (" +

@@ -36,6 +36,13 @@ inline Vec3d cross(const Vec3d& a, const Vec3d& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
+// The rescale slopes and intercepts of a DICOM series whose slices carry their own (each is
+// rescaled by its own): their least and greatest.
+struct RescaleRange {
+  double slope_min = 1, slope_max = 1, intercept_min = 0, intercept_max = 0;
+  bool per_slice() const { return slope_min != slope_max || intercept_min != intercept_max; }
+};
+
 // Where a grid lies in a file's world space (ITK's convention, LPS for medical images): global
 // sample g is at origin + direction * (spacing * g), where column a of `direction` is the unit
 // world vector of index axis a. The grid frame (origin + spacing * g) is the special case of the

@@ -155,8 +155,7 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
     ImageHeaderCheck check;
     TiffCheck tiff = check_tiff_file(input);
     check.plain = std::move(tiff.plain);
-    check.spacing = tiff.spacing;
-    check.spacing_unit = std::move(tiff.spacing_unit);
+    check.calibration = std::move(tiff.calibration);
     return check;
   }
   if (kind == InputKind::TiffStack) {
@@ -351,18 +350,14 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
     h.type = info.type;
     h.dims = info.dims;
-    h.spacing = check.spacing.value_or(info.spacing);
-    h.spacing_unit = check.spacing_unit;
+    h.spacing = check.calibration ? check.calibration->spacing : info.spacing;
+    if (check.calibration) h.spacing_unit = check.calibration->unit;
     h.origin = info.origin;
     h.world = WorldFrame{info.origin, info.direction};
-    h.rescaled = info.rescaled || info.rescale_per_slice || check.rescaled;
+    h.rescaled = info.rescaled || info.rescale_range.per_slice() || check.rescaled;
     h.rescale_slope = check.rescaled ? check.rescale_slope : info.rescale_slope;
     h.rescale_intercept = check.rescaled ? check.rescale_intercept : info.rescale_intercept;
-    h.rescale_per_slice = info.rescale_per_slice;
-    h.slope_min = info.slope_min;
-    h.slope_max = info.slope_max;
-    h.intercept_min = info.intercept_min;
-    h.intercept_max = info.intercept_max;
+    h.rescale_range = info.rescale_range;
     h.series_uid = info.series_uid;
     h.series_description = info.series_description;
     h.plain = plain_layout(input, kind, check, info);
@@ -438,7 +433,8 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     verify_compressed(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
-    volume = Volume(info.type, info.dims, check.spacing.value_or(info.spacing), info.origin);
+    volume = Volume(info.type, info.dims,
+                    check.calibration ? check.calibration->spacing : info.spacing, info.origin);
     volume.set_world(WorldFrame{info.origin, info.direction});
     volume.set_series(info.series_uid, info.series_description);
     const std::optional<PlainData> plain = plain_layout(input, kind, check, info);

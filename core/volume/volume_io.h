@@ -114,10 +114,7 @@ struct VolumeHeader {
   bool rescaled = false;  // values are stored * slope + intercept
   double rescale_slope = 1;
   double rescale_intercept = 0;
-  // A DICOM series whose slices carry their own slope or intercept (each is rescaled by its own;
-  // the two above are the first slice's): their least and greatest.
-  bool rescale_per_slice = false;
-  double slope_min = 1, slope_max = 1, intercept_min = 0, intercept_max = 0;
+  RescaleRange rescale_range;  // a DICOM series' slices' (the two above are the first slice's)
   std::string series_uid, series_description;  // DICOM
   std::optional<PlainData> plain;              // readable box by box
 };

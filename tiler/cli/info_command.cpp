@@ -120,10 +120,11 @@ int run_info(const InfoArgs& args) {
   j["rescaled"] = header.rescaled;
   if (header.rescaled)
     j["rescale"] = {{"slope", header.rescale_slope}, {"intercept", header.rescale_intercept}};
-  if (header.rescale_per_slice)
+  const RescaleRange& range = header.rescale_range;
+  if (range.per_slice())
     j["rescale"] = {{"per_slice", true},
-                    {"slope", {header.slope_min, header.slope_max}},
-                    {"intercept", {header.intercept_min, header.intercept_max}}};
+                    {"slope", {range.slope_min, range.slope_max}},
+                    {"intercept", {range.intercept_min, range.intercept_max}}};
   if (!header.series_uid.empty()) {
     j["series_uid"] = header.series_uid;
     j["series_description"] = header.series_description;
@@ -167,11 +168,11 @@ int run_info(const InfoArgs& args) {
       world.direction[0], world.direction[3], world.direction[6], world.direction[1],
       world.direction[4], world.direction[7], world.direction[2], world.direction[5],
       world.direction[8]);
-  if (header.rescale_per_slice)
+  if (range.per_slice())
     std::printf(
         "rescale  per slice: value = stored x %g..%g + %g..%g, each slice by its own (range and "
         "histogram in these units)\n",
-        header.slope_min, header.slope_max, header.intercept_min, header.intercept_max);
+        range.slope_min, range.slope_max, range.intercept_min, range.intercept_max);
   else if (header.rescaled)
     std::printf("rescale  value = stored x %g + %g (range and histogram in these units)\n",
                 header.rescale_slope, header.rescale_intercept);
