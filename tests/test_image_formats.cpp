@@ -1199,6 +1199,26 @@ class DicomFiles : public CliTest {
         element(0x3004, 0x000C, "DS", testing::dicom::ds(offsets)) + pixels(contents);
     std::ofstream(dir_ / name, std::ios::binary) << testing::dicom::part10(sop_class, sop, body);
   }
+  // A multi-frame file of class `sop_class` whose frames have no positions of their own: one
+  // ImagePositionPatient (the first frame's) and PixelSpacing for all; FrameIncrementPointer
+  // naming `pointer` (group, element pairs) where not empty; `more` (further elements).
+  void write_frames(const std::string& name, const std::string& sop_class, const char* modality,
+                    const std::vector<int>& contents,
+                    const std::vector<std::pair<std::uint16_t, std::uint16_t>>& pointer,
+                    const std::string& more) const {
+    using testing::dicom::element;
+    using testing::dicom::u16;
+    std::string named;
+    for (const auto& [group, elem] : pointer) named += u16(group) + u16(elem);
+    const std::string sop = "1.2.826.0.1.3680043.2.1.12.1";
+    const std::string body =
+        identity(sop_class, sop, modality, "1.2.826.0.1.3680043.2.1.13", "1") + position(first_) +
+        orientation() +
+        pixel_module(contents.size(), "0.7\\0.3",
+                     named.empty() ? "" : element(0x0028, 0x0009, "AT", named)) +
+        more + pixels(contents);
+    std::ofstream(dir_ / name, std::ios::binary) << testing::dicom::part10(sop_class, sop, body);
+  }
   // ImageOrientationPatient, its column turned by `turn` (towards x).
   std::string orientation(double turn = 0) const {
     return testing::dicom::element(
@@ -1411,6 +1431,58 @@ TEST_F(DicomFiles, DoseFramesArePlacedByTheirOffsets) {
   write_dose("gap.dcm", {0, 1, 2, 3}, {0, 1.5, 4.5, 6});
   EXPECT_NE(refusal("gap.dcm").find("a gap of 3 mm between frames 2 and 3 where the frames lie "
                                     "1.5 mm apart (about 1 frame missing)"),
+            std::string::npos);
+}
+
+// Frames without positions of their own, which GDCM stacks as slices whatever they are, 1 mm
+// apart where it finds no distance between them: read where they are slices by the file's
+// FrameIncrementPointer and GDCM reads their distance (NM tomography: SpacingBetweenSlices);
+// otherwise refused naming what they run over (a cine loop's FrameTime, a gated study's time
+// slots) or the missing distance, unless --spacing says how far apart they lie.
+TEST_F(DicomFiles, FramesWithoutPositionsAreSlicesWhereTheFileSaysSo) {
+  REQUIRE_ITK();
+  using testing::dicom::element;
+  const auto vector = [](const std::vector<int>& values) {
+    std::string out;
+    for (const int v : values) out += testing::dicom::u16(static_cast<std::uint16_t>(v));
+    return out;
+  };
+  const std::string nm = "1.2.840.10008.5.1.4.1.1.20";
+  // NM gives its position and orientation in DetectorInformationSequence, and GDCM reads them
+  // there.
+  const std::string between =
+      element(0x0018, 0x0088, "DS", "1.5") +
+      testing::dicom::sequence(0x0054, 0x0022, {position(first_) + orientation()});
+  write_frames("nm.dcm", nm, "NM", {0, 1, 2, 3}, {{0x0054, 0x0010}, {0x0054, 0x0080}},
+               between + element(0x0054, 0x0010, "US", vector({1, 1, 1, 1})) +
+                   element(0x0054, 0x0080, "US", vector({1, 2, 3, 4})));
+  expect_volume("nm.dcm", {0, 1, 2, 3}, first_);
+  write_frames("gated.dcm", nm, "NM", {0, 1, 2, 3}, {{0x0054, 0x0070}, {0x0054, 0x0080}},
+               between + element(0x0054, 0x0070, "US", vector({1, 1, 2, 2})) +
+                   element(0x0054, 0x0080, "US", vector({1, 2, 1, 2})));
+  EXPECT_NE(refusal("gated.dcm")
+                .find("its 4 frames run over TimeSlotVector (0054,0070) (its "
+                      "FrameIncrementPointer), not over slice positions"),
+            std::string::npos);
+  write_frames("apart.dcm", nm, "NM", {0, 1, 2, 3}, {{0x0054, 0x0080}},
+               element(0x0054, 0x0080, "US", vector({1, 2, 3, 4})));
+  EXPECT_NE(refusal("apart.dcm")
+                .find("its 4 frames carry no positions and no "
+                      "SpacingBetweenSlices (0018,0088), so the distance between "
+                      "them is unknown"),
+            std::string::npos);
+  write_frames("cine.dcm", "1.2.840.10008.5.1.4.1.1.3.1", "US", {0, 1, 2, 3}, {{0x0018, 0x1063}},
+               element(0x0018, 0x1063, "DS", "33.3"));
+  EXPECT_NE(refusal("cine.dcm").find("its 4 frames run over FrameTime (0018,1063)"),
+            std::string::npos);
+  const CliResult r = run("extract cine.dcm -o out.ply --iso 500 -q --spacing 0.3,0.7,1.5");
+  EXPECT_EQ(r.code, 0) << r.err;
+  fs::remove(dir_ / "out.ply");
+  write_frames("capture.dcm", "1.2.840.10008.5.1.4.1.1.7.3", "OT", {0, 1, 2, 3}, {},
+               element(0x0018, 0x2010, "DS", "0.7\\0.3"));
+  EXPECT_NE(refusal("capture.dcm")
+                .find("GDCM reads no distance between the frames of Multi-frame Grayscale Word "
+                      "Secondary Capture Image Storage files"),
             std::string::npos);
 }
 

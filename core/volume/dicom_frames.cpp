@@ -1,6 +1,7 @@
 // Per-frame geometry of enhanced multi-frame DICOM files, through GDCM's data set (dicom_frames.h).
 #include "core/volume/dicom_frames.h"
 
+#include <gdcmAttribute.h>
 #include <gdcmDataSet.h>
 #include <gdcmDicts.h>
 #include <gdcmGlobal.h>
@@ -8,6 +9,7 @@
 #include <gdcmMediaStorage.h>
 #include <gdcmReader.h>
 #include <gdcmSequenceOfItems.h>
+#include <gdcmUIDs.h>
 
 #include <cmath>
 #include <cstdio>
@@ -28,16 +30,70 @@ const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
 const gdcm::Tag kIntercept(0x0028, 0x1052), kSlope(0x0028, 0x1053);
 const gdcm::Tag kGridFrameOffsets(0x3004, 0x000C);
 
-// GDCM's own choice of the element that gives an image's pixel spacing (by its SOP class), which
-// GDCM 3.0 declares protected: the same table, not a copy of it.
+// GDCM's own choice of the elements that give an image's pixel spacing and the distance between
+// its frames (by its SOP class), which GDCM 3.0 declares protected: the same tables, not copies.
 struct GdcmSpacingTag : gdcm::ImageHelper {
   using gdcm::ImageHelper::GetSpacingTagFromMediaStorage;
+  using gdcm::ImageHelper::GetZSpacingTagFromMediaStorage;
 };
 
 std::string tag_text(const gdcm::Tag& t) {
   char text[16];
   std::snprintf(text, sizeof text, "(%04X,%04X)", t.GetGroup(), t.GetElement());
   return text;
+}
+
+// "PixelSpacing (0028,0030)": the element's keyword in GDCM's dictionary and its tag.
+std::string element_name(const gdcm::Tag& t) {
+  const char* keyword = gdcm::Global::GetInstance().GetDicts().GetDictEntry(t).GetKeyword();
+  return std::string(keyword && *keyword ? std::string(keyword) + " " : "") + tag_text(t);
+}
+
+// What the frames of a multi-frame file without per-frame positions run over, by its
+// FrameIncrementPointer (dicom_frames.h): the elements it names, other than the slice vectors,
+// whose value changes from frame to frame (FrameTime always: one step in time per frame).
+// Empty where the file names none.
+std::string frames_over(const gdcm::DataSet& ds) {
+  const gdcm::Tag pointer(0x0028, 0x0009);
+  if (!ds.FindDataElement(pointer) || ds.GetDataElement(pointer).IsEmpty()) return "";
+  gdcm::Attribute<0x0028, 0x0009> named;
+  named.SetFromDataElement(ds.GetDataElement(pointer));
+  const gdcm::Tag frame_time(0x0018, 0x1063);
+  const std::set<gdcm::Tag> slices{gdcm::Tag(0x0054, 0x0080),   // NM's SliceVector
+                                   gdcm::Tag(0x0018, 0x2005)};  // SliceLocationVector
+  std::string over;
+  for (unsigned i = 0; i < named.GetNumberOfValues(); ++i) {
+    const gdcm::Tag tag = named.GetValue(i);
+    if (slices.count(tag) || (tag != frame_time && !ds.FindDataElement(tag))) continue;
+    if (tag != frame_time) {
+      // One value per frame: NM's vectors are US, the others text (decimal or labels).
+      const gdcm::DataElement& e = ds.GetDataElement(tag);
+      const gdcm::ByteValue* bytes = e.GetByteValue();
+      if (!bytes) continue;
+      gdcm::VR vr = e.GetVR();
+      if (vr == gdcm::VR::INVALID || vr == gdcm::VR::UN)
+        vr = gdcm::Global::GetInstance().GetDicts().GetDictEntry(tag).GetVR();
+      const std::string raw(bytes->GetPointer(), bytes->GetLength());
+      std::set<std::string> values;
+      if (vr == gdcm::VR::US) {
+        for (std::size_t at = 0; at + 2 <= raw.size(); at += 2) values.insert(raw.substr(at, 2));
+      } else {
+        std::size_t at = 0;
+        while (at <= raw.size()) {
+          std::size_t end = raw.find('\\', at);
+          if (end == std::string::npos) end = raw.size();
+          std::string value = raw.substr(at, end - at);
+          while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
+          while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+          values.insert(value);
+          at = end + 1;
+        }
+      }
+      if (values.size() < 2) continue;  // alike in every frame: not what they run over
+    }
+    over += (over.empty() ? "" : ", ") + element_name(tag);
+  }
+  return over;
 }
 
 // A decimal string's values ("1.5\-2\3"); empty where the element holds none.
@@ -106,14 +162,26 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   storage.SetFromFile(reader.GetFile());
   const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
   out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
-  const char* keyword =
-      gdcm::Global::GetInstance().GetDicts().GetDictEntry(spacing_tag).GetKeyword();
-  out.spacing_element =
-      std::string(keyword && *keyword ? std::string(keyword) + " " : "") + tag_text(spacing_tag);
+  out.spacing_element = element_name(spacing_tag);
   if (!ds.FindDataElement(kPerFrameGroups)) {
+    if (frames < 2) return out;
+    if (!has(kGridFrameOffsets) || !has(kPosition) || !has(kOrientation)) {
+      // One position for all frames (or none): GDCM's geometry, where the frames are slices
+      // and GDCM finds the distance between them.
+      out.frames_over = frames_over(ds);
+      const gdcm::Tag z = GdcmSpacingTag::GetZSpacingTagFromMediaStorage(storage);
+      if (z != gdcm::Tag(0xFFFF, 0xFFFF)) {
+        if (!has(z)) out.frame_spacing_unknown = "no " + element_name(z);
+      } else {
+        gdcm::UIDs kind;
+        const bool named = storage.GetString() && kind.SetFromUID(storage.GetString());
+        out.frame_spacing_unknown = std::string("GDCM reads no distance between the frames of ") +
+                                    (named ? kind.GetName() : "this kind of") + " files";
+      }
+      return out;
+    }
     // RT Dose: the frames' offsets along the normal from the one position (relative to it where
     // the first is 0, else coordinates along the normal; the differences are the same).
-    if (frames < 2 || !has(kGridFrameOffsets) || !has(kPosition) || !has(kOrientation)) return out;
     const std::vector<double> offsets = decimals(ds.GetDataElement(kGridFrameOffsets), path);
     const std::vector<double> p = decimals(ds.GetDataElement(kPosition), path),
                               o = decimals(ds.GetDataElement(kOrientation), path);

@@ -32,6 +32,17 @@ struct DicomFrames {
   // or in the functional groups. Without it GDCM takes 1 mm.
   bool spacing_known = true;
   std::string spacing_element;  // that element, e.g. "PixelSpacing (0028,0030)"
+  // A multi-frame file whose frames carry no positions of their own (no functional groups, not
+  // RT Dose): GDCM stacks them as slices whatever they are and puts them 1 mm apart unless the
+  // element it reads the distance from is in the file (SpacingBetweenSlices for MR and NM,
+  // none for most kinds). Empty where they are slices as far as the file says, else what they
+  // run over by FrameIncrementPointer: time (FrameTime, FrameTimeVector: a cine loop, a
+  // dynamic series) or something else that differs from frame to frame (NM's detectors,
+  // rotations, energy windows, gates; angles).
+  std::string frames_over;
+  // Why GDCM does not know the distance between such frames ("no SpacingBetweenSlices
+  // (0018,0088)"); empty where it does.
+  std::string frame_spacing_unknown;
 };
 
 // `frames`: the file's frames as GDCM counts them. Throws InputError naming the file and the

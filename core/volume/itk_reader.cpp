@@ -294,7 +294,7 @@ itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
 // A multi-frame DICOM file's frames placed by their own positions (an enhanced file's functional
 // groups, RT Dose's offsets), checked as a series' slices are; GDCM's geometry is kept for files
 // that give one position and a spacing. Returns what it read.
-DicomFrames place_frames(const std::string& input, const std::string& file, ItkImageInfo& info) {
+DicomFrames place_frames(const ItkInput& input, const std::string& file, ItkImageInfo& info) {
   DicomFrames frames = read_dicom_frames(file, info.dims[2]);
   if (frames.orientation) {
     const std::array<double, 6>& o = *frames.orientation;
@@ -321,13 +321,26 @@ DicomFrames place_frames(const std::string& input, const std::string& file, ItkI
       throw InputError(file +
                        ": its frames have no ImagePositionPatient (PlanePositionSequence), so "
                        "they cannot be placed");
+    // GDCM stacks any frames as slices, 1 mm apart where it finds no distance: a cine loop
+    // would be meshed as a volume. --spacing says the frames are slices and how far apart.
+    const std::string count = std::to_string(info.dims[2]);
+    if (!frames.frames_over.empty() && !input.spacing_given)
+      throw InputError(file + ": its " + count + " frames run over " + frames.frames_over +
+                       " (its FrameIncrementPointer), not over slice positions: a series in "
+                       "time or of projections, not a volume; --spacing X,Y,Z stacks them as "
+                       "slices that far apart");
+    if (!frames.frame_spacing_unknown.empty() && !input.spacing_given)
+      throw InputError(file + ": its " + count + " frames carry no positions and " +
+                       frames.frame_spacing_unknown +
+                       ", so the distance between them is unknown; give the spacing with "
+                       "--spacing X,Y,Z");
     if (!std::isfinite(info.spacing[2]) || info.spacing[2] <= 0)
       throw InputError(file + ": spacing " + std::to_string(info.spacing[2]) +
                        " between frames (must be positive)");
     return frames;
   }
   const SliceStack stack = stack_along_normal(
-      input, frames.positions, {info.direction[2], info.direction[5], info.direction[8]},
+      input.path, frames.positions, {info.direction[2], info.direction[5], info.direction[8]},
       {"frame", "frames"}, [](std::size_t k) { return std::to_string(k + 1); });
   info.spacing[2] = stack.step;
   info.origin = frames.positions[stack.order[0]];
@@ -373,7 +386,7 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.spacing = h[0].spacing;
     info.origin = h[0].origin;
     info.direction = h[0].direction;
-    if (dicom) geometry = place_frames(input.path, files[0], info);
+    if (dicom) geometry = place_frames(input, files[0], info);
   } else {
     const FileHeader first = h[0];
     for (std::size_t k = 0; k < files.size(); ++k) {

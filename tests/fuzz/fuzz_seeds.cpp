@@ -682,17 +682,16 @@ Seed random_vdb_seed(std::uint32_t seed) {
 namespace {
 
 // A multi-frame 8-bit DICOM file (explicit VR little endian), element by element: one file that
-// GDCM reads as a volume of `frames` slices.
+// GDCM reads as a volume of `frames` slices (an MR image: GDCM reads the distance between its
+// frames from SpacingBetweenSlices; for a secondary capture it reads none, which isotile refuses).
 std::string dicom_multiframe(const std::vector<std::uint8_t>& pixels, int columns, int rows,
                              int frames) {
   using testing::dicom::element;
   using testing::dicom::u16;
-  const std::string sop_class = "1.2.840.10008.5.1.4.1.1.7.2", sop = "1.2.826.0.1.3680043.2.1.1";
+  const std::string sop_class = "1.2.840.10008.5.1.4.1.1.4", sop = "1.2.826.0.1.3680043.2.1.1";
   const std::string body =
       element(0x0008, 0x0016, "UI", sop_class) + element(0x0008, 0x0018, "UI", sop) +
-      element(0x0008, 0x0060, "CS", "OT") +
-      // The pixel spacing GDCM reads for secondary captures (PixelSpacing it does not).
-      element(0x0018, 0x2010, "DS", "1\\1") +
+      element(0x0008, 0x0060, "CS", "MR") + element(0x0018, 0x0088, "DS", "1") +
       element(0x0020, 0x000D, "UI", "1.2.826.0.1.3680043.2.1.2") +
       element(0x0020, 0x000E, "UI", "1.2.826.0.1.3680043.2.1.3") +
       element(0x0020, 0x0013, "IS", "1") + element(0x0020, 0x0032, "DS", "0\\0\\0") +
