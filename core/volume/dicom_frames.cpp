@@ -49,6 +49,26 @@ std::string element_name(const gdcm::Tag& t) {
   return std::string(keyword && *keyword ? std::string(keyword) + " " : "") + tag_text(t);
 }
 
+// A text element's values ("1.5\\-2\\3" -> "1.5", "-2", "3"), without their padding; none where
+// the element holds no bytes.
+std::vector<std::string> text_values(const gdcm::DataElement& e) {
+  std::vector<std::string> out;
+  const gdcm::ByteValue* bytes = e.GetByteValue();
+  if (!bytes) return out;
+  const std::string text(bytes->GetPointer(), bytes->GetLength());
+  std::size_t at = 0;
+  while (at <= text.size()) {
+    std::size_t end = text.find('\\', at);
+    if (end == std::string::npos) end = text.size();
+    std::string value = text.substr(at, end - at);
+    while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
+    while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+    out.push_back(std::move(value));
+    at = end + 1;
+  }
+  return out;
+}
+
 // What the frames of a multi-frame file without per-frame positions run over, by its
 // FrameIncrementPointer (dicom_frames.h): the elements it names, other than the slice vectors,
 // whose value changes from frame to frame (FrameTime always: one step in time per frame).
@@ -68,26 +88,16 @@ std::string frames_over(const gdcm::DataSet& ds) {
     if (tag != frame_time) {
       // One value per frame: NM's vectors are US, the others text (decimal or labels).
       const gdcm::DataElement& e = ds.GetDataElement(tag);
-      const gdcm::ByteValue* bytes = e.GetByteValue();
-      if (!bytes) continue;
       gdcm::VR vr = e.GetVR();
       if (vr == gdcm::VR::INVALID || vr == gdcm::VR::UN)
         vr = gdcm::Global::GetInstance().GetDicts().GetDictEntry(tag).GetVR();
-      const std::string raw(bytes->GetPointer(), bytes->GetLength());
       std::set<std::string> values;
       if (vr == gdcm::VR::US) {
+        const gdcm::ByteValue* bytes = e.GetByteValue();
+        const std::string raw = bytes ? std::string(bytes->GetPointer(), bytes->GetLength()) : "";
         for (std::size_t at = 0; at + 2 <= raw.size(); at += 2) values.insert(raw.substr(at, 2));
       } else {
-        std::size_t at = 0;
-        while (at <= raw.size()) {
-          std::size_t end = raw.find('\\', at);
-          if (end == std::string::npos) end = raw.size();
-          std::string value = raw.substr(at, end - at);
-          while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
-          while (!value.empty() && value.front() == ' ') value.erase(value.begin());
-          values.insert(value);
-          at = end + 1;
-        }
+        for (std::string& v : text_values(e)) values.insert(std::move(v));
       }
       if (values.size() < 2) continue;  // alike in every frame: not what they run over
     }
@@ -99,16 +109,7 @@ std::string frames_over(const gdcm::DataSet& ds) {
 // A decimal string's values ("1.5\-2\3"); empty where the element holds none.
 std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path) {
   std::vector<double> out;
-  const gdcm::ByteValue* bytes = e.GetByteValue();
-  if (!bytes) return out;
-  std::string text(bytes->GetPointer(), bytes->GetLength());
-  std::size_t at = 0;
-  while (at <= text.size()) {
-    std::size_t end = text.find('\\', at);
-    if (end == std::string::npos) end = text.size();
-    std::string value = text.substr(at, end - at);
-    while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
-    while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+  for (const std::string& value : text_values(e)) {
     char* stop = nullptr;
     const double v = std::strtod(value.c_str(), &stop);
     if (value.empty() || *stop != '\0' || !std::isfinite(v)) {
@@ -116,7 +117,6 @@ std::vector<double> decimals(const gdcm::DataElement& e, const std::string& path
                        "' where a decimal number belongs");
     }
     out.push_back(v);
-    at = end + 1;
   }
   return out;
 }
