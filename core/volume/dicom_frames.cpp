@@ -1,4 +1,4 @@
-// Per-frame geometry of enhanced multi-frame DICOM files, through GDCM's data set (dicom_frames.h).
+// Per-frame geometry of multi-frame DICOM files, through GDCM's data set (dicom_frames.h).
 #include "core/volume/dicom_frames.h"
 
 #include <gdcmAttribute.h>

@@ -4,7 +4,8 @@
 // first two, falling back to a spacing of 1, 1, 1 where the steps differ; RT Dose gives its
 // frames' offsets along the normal (GridFrameOffsetVector), which GDCM refuses when they
 // descend and does not check for gaps. isotile reads them so that they can be checked like the
-// slices of a series (slice_stack.h).
+// slices of a series (slice_stack.h). Other multi-frame files give one position for all frames;
+// GDCM stacks those frames as slices whatever they are, so isotile reads what they run over.
 #pragma once
 
 #include <array>
