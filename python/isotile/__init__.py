@@ -45,6 +45,13 @@ def _readable(array, what):
     a = _np.asarray(array)
     if a.dtype.kind not in "biuf":
         raise TypeError(f"{what}: dtype {a.dtype} is not a number type")
+    # The library reads a bool's byte; NumPy's True is any byte but 0 (a uint8 array viewed as
+    # bool holds 2s and 255s), so such an array is read as the 0s and 1s it means.
+    if a.dtype.kind == "b" and a.size:
+        u = a.view(_np.uint8)
+        # Plane by plane: a reduction over a strided whole buffers as much as a copy.
+        if max(int(p.max()) for p in (u if u.ndim > 1 else [u])) > 1:
+            a = u != 0
     dtype = a.dtype.newbyteorder("=")
     if dtype not in _IN_PLACE:
         dtype = _np.dtype(_np.float32 if a.dtype.kind == "f" and a.dtype.itemsize < 4
@@ -279,7 +286,7 @@ class Volume:
     """
 
     def __init__(self, samples, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), direction=None):
-        self._handle = None
+        self._handle = self._read_samples = None
         self.samples = _np.asarray(samples)
         if self.samples.ndim != 3:
             raise ValueError("samples must be a 3-D array indexed [z, y, x]")
@@ -301,7 +308,7 @@ class Volume:
     def _from_handle(cls, handle):
         v = cls.__new__(cls)
         v._handle = handle
-        v.samples = handle.samples
+        v.samples = v._read_samples = handle.samples
         v.spacing = tuple(handle.spacing)
         v.origin = tuple(handle.world_origin)
         v.direction = [list(row) for row in handle.direction]
@@ -380,11 +387,15 @@ def _refuse(given, applies):
                          f"{applies}")
 
 
+_MAX_THREADS = 4096  # as the CLI's --threads: TBB fails past what it can start
+
+
 def _check_threads(threads):
     if threads is not None and (isinstance(threads, bool)
-                                or not isinstance(threads, _numbers.Integral) or threads < 1):
-        raise ValueError(f"threads must be an int of at least 1, or None (every core), not "
-                         f"{threads!r}")
+                                or not isinstance(threads, _numbers.Integral)
+                                or not 1 <= threads <= _MAX_THREADS):
+        raise ValueError(f"threads must be an int from 1 to {_MAX_THREADS}, or None (every "
+                         f"core), not {threads!r}")
 
 
 def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, dc_solver="mass",
@@ -472,6 +483,11 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
                 "to a path or an array; a Volume has its own (read_volume(path, spacing=...) "
                 "or Volume(samples, spacing=...))")
         if source._handle is not None:
+            if source.samples is not source._read_samples:
+                raise ValueError("this Volume's samples were replaced after read_volume, and its "
+                                 "file's are what the run uses: wrap the new samples in "
+                                 "Volume(samples, spacing=v.spacing, origin=v.origin, "
+                                 "direction=v.direction)")
             if (tuple(source.spacing) != tuple(source._handle.spacing)
                     or tuple(source.origin) != tuple(source._handle.world_origin)
                     or source.direction != [list(r) for r in source._handle.direction]):

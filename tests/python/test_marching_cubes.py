@@ -483,3 +483,32 @@ def test_a_gl_failure_under_auto_is_a_warning_and_the_cpus_mesh(tmp_path):
     assert message.endswith("); extracting on the CPU instead"), message
     assert "\n" not in message, message
     assert filename == str(script)
+
+
+def test_threads_beyond_what_tbb_starts_are_refused():
+    # TBB crashed tearing down an arena of 100,000 threads (quality, simplify, marching_cubes)
+    # and ran out of memory at 2**31 - 1 (extract): the CLI's bound, named.
+    vol = sphere((10, 10, 10), radius=3.0)
+    v, f, _, _ = isotile.marching_cubes(vol, 0.0)
+    for call in (lambda t: isotile.marching_cubes(vol, 0.0, threads=t),
+                 lambda t: isotile.quality(v, f, threads=t),
+                 lambda t: isotile.simplify(v, f, ratio=0.5, threads=t),
+                 lambda t: isotile.extract(vol, 0.0, threads=t)):
+        for t in (4097, 100000, 2**31 - 1, 2**31):
+            with pytest.raises(ValueError, match="threads must be an int from 1 to 4096"):
+                call(t)
+    assert len(isotile.marching_cubes(vol, 0.0, threads=4096)[1]) == len(f)
+
+
+def test_bool_samples_are_what_numpy_says():
+    # A uint8 array viewed as bool holds 2s: NumPy reads them as True, and so must the mesh.
+    z, y, x = np.indices((10, 11, 12))
+    inside = (z - 4.5) ** 2 + (y - 5.0) ** 2 + (x - 5.5) ** 2 < 9
+    twos = (inside.astype(np.uint8) * 2).view(np.bool_)
+    assert np.array_equal(twos, inside)
+    for a, b in zip(isotile.marching_cubes(twos, 0.5), isotile.marching_cubes(inside, 0.5)):
+        assert np.array_equal(a, b)
+    assert np.array_equal(isotile.extract(twos[:, ::-1], 0.5).vertices,
+                          isotile.extract(inside[:, ::-1], 0.5).vertices)
+    with pytest.raises(ValueError, match="Surface level must be within volume data range"):
+        isotile.marching_cubes(twos, 1.5)
