@@ -277,6 +277,20 @@ TEST_F(Render, PlyFacesReadInPiecesGiveTheSamePicture) {
   std::memcpy(bad.data() + bad.size() - 4, &past, 4);
   std::ofstream(dir_ / "bad.ply", std::ios::binary) << bad;
   EXPECT_THROW(gl::render_mesh_file(dir_ / "bad.ply", o), InputError);
+  // A face count one short of the faces the file holds (the last face was left out of the
+  // picture, exit 0), and a newline after the last face: the reader of the whole file refuses
+  // both, and so must the streamed one.
+  const std::string count = "element face " + std::to_string(mesh.triangles.size()) + "\n";
+  std::string fewer = bytes;
+  ASSERT_NE(fewer.find(count), std::string::npos);
+  fewer.replace(fewer.find(count), count.size(),
+                "element face " + std::to_string(mesh.triangles.size() - 1) + "\n");
+  std::ofstream(dir_ / "fewer.ply", std::ios::binary) << fewer;
+  std::ofstream(dir_ / "newline.ply", std::ios::binary) << bytes + "\n";
+  for (const char* name : {"fewer.ply", "newline.ply"}) {
+    EXPECT_THROW(read_mesh(dir_ / name), InputError) << name;
+    EXPECT_THROW(gl::render_mesh_file(dir_ / name, o), InputError) << name;
+  }
   // A second x: the reader of the whole file refuses it, so the streamed one must not pick one.
   std::string twice =
       "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"

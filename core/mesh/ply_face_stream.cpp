@@ -185,6 +185,13 @@ bool PlyFaceStream::next(std::size_t max_triangles, std::vector<Tri>& out) {
                      static_cast<std::uint32_t>(idx[k + 1])});
     ++read_;
   }
+  // Data past the last face: the header's counts say less than the file holds, and the rest of
+  // the mesh would be left out of the picture without a word (the whole-mesh reader refuses it
+  // too).
+  if (read_ == faces_ && std::fgetc(f) != EOF)
+    throw InputError(path_.string() +
+                     ": data after the last face (the header's counts say less than the file "
+                     "holds)");
   return true;
 }
 
