@@ -278,16 +278,19 @@ TEST_F(Render, PlyFacesReadInPiecesGiveTheSamePicture) {
   std::ofstream(dir_ / "bad.ply", std::ios::binary) << bad;
   EXPECT_THROW(gl::render_mesh_file(dir_ / "bad.ply", o), InputError);
   // A face count one short of the faces the file holds (the last face was left out of the
-  // picture, exit 0), and a newline after the last face: the reader of the whole file refuses
-  // both, and so must the streamed one.
+  // picture, exit 0), a count of none, and a newline after the last face: the reader of the whole
+  // file refuses both, and so must the streamed one.
   const std::string count = "element face " + std::to_string(mesh.triangles.size()) + "\n";
   std::string fewer = bytes;
   ASSERT_NE(fewer.find(count), std::string::npos);
   fewer.replace(fewer.find(count), count.size(),
                 "element face " + std::to_string(mesh.triangles.size() - 1) + "\n");
   std::ofstream(dir_ / "fewer.ply", std::ios::binary) << fewer;
+  std::string none = bytes;
+  none.replace(none.find(count), count.size(), "element face 0\n");
+  std::ofstream(dir_ / "none.ply", std::ios::binary) << none;
   std::ofstream(dir_ / "newline.ply", std::ios::binary) << bytes + "\n";
-  for (const char* name : {"fewer.ply", "newline.ply"}) {
+  for (const char* name : {"fewer.ply", "none.ply", "newline.ply"}) {
     EXPECT_THROW(read_mesh(dir_ / name), InputError) << name;
     EXPECT_THROW(gl::render_mesh_file(dir_ / name, o), InputError) << name;
   }

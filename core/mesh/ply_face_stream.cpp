@@ -147,6 +147,7 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
       for (int a = 0; a < 3; ++a) s.positions_[v + k][a] = block[k * props + xyz[a]];
   }
   check_finite_positions(path.string(), s.positions_);  // as read_mesh() does
+  if (s.faces_ == 0) s.check_end();                     // next() is not called for no faces
   return s;
 }
 
@@ -185,14 +186,18 @@ bool PlyFaceStream::next(std::size_t max_triangles, std::vector<Tri>& out) {
                      static_cast<std::uint32_t>(idx[k + 1])});
     ++read_;
   }
+  if (read_ == faces_) check_end();
+  return true;
+}
+
+void PlyFaceStream::check_end() {
   // Data past the last face: the header's counts say less than the file holds, and the rest of
   // the mesh would be left out of the picture without a word (the whole-mesh reader refuses it
   // too).
-  if (read_ == faces_ && std::fgetc(f) != EOF)
+  if (std::fgetc(file_.get()) != EOF)
     throw InputError(path_.string() +
                      ": data after the last face (the header's counts say less than the file "
                      "holds)");
-  return true;
 }
 
 }  // namespace isotile
