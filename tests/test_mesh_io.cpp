@@ -465,6 +465,16 @@ TEST(MeshReader, ObjHandWritten) {
   EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
 }
 
+// A UTF-8 byte order mark before the first vertex (Notepad saves one): the vertex is read (it
+// was skipped as an unknown keyword, and every corner pointed one vertex further on).
+TEST(MeshReader, ObjAfterAByteOrderMark) {
+  TempDir dir;
+  write_bytes(dir / "b.obj", "\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n");
+  const Mesh m = read_mesh(dir / "b.obj");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
 TEST(MeshReader, OffHandWritten) {
   TempDir dir;
   const std::string s =

@@ -704,10 +704,17 @@ class PlyReader : Reader {
 // ---------------------------------------------------------------------------------------------
 // OBJ
 
+std::size_t bom(const std::vector<char>& data) {
+  return data.size() >= 3 && std::memcmp(data.data(), "\xEF\xBB\xBF", 3) == 0 ? 3 : 0;
+}
+
 class ObjReader : Reader {
  public:
+  // A UTF-8 byte order mark (Notepad writes one) is skipped: glued to the first keyword it made
+  // an unknown one, skipped as OBJ's unknown keywords are, and a first vertex left out shifted
+  // every face's corners by one.
   ObjReader(std::string name, const std::vector<char>& data)
-      : Reader(std::move(name)), text_(data.data(), data.data() + data.size(), true) {}
+      : Reader(std::move(name)), text_(data.data() + bom(data), data.data() + data.size(), true) {}
 
   Mesh read() {
     Mesh mesh;
