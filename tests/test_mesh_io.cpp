@@ -23,6 +23,7 @@
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
+#include "core/mesh/ply_face_stream.h"
 
 namespace isotile {
 namespace {
@@ -148,6 +149,15 @@ Mesh big_mesh(bool normals, bool quads) {
 Mesh round_trip(const Mesh& m, const fs::path& path, MeshWriteOptions options = {}) {
   write_mesh(m, path, options);
   return read_mesh(path);
+}
+
+std::string error_of(const fs::path& path) {
+  try {
+    read_mesh(path);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no InputError)";
 }
 
 TEST(MeshFormat, FromExtension) {
@@ -414,25 +424,46 @@ TEST(MeshReader, DoublesRoundToNearestFloat) {
   } catch (const InputError& e) {
     EXPECT_EQ(std::string(e.what()),
               (dir / "inf.ply").string() +
-                  ": vertex 1 has a coordinate that is not a finite number (inf)");
+                  ": vertex 1 has a coordinate that is not a finite number (inf: infinite, or "
+                  "past float32's largest, 3.4e38)");
   }
 }
 
 // A coordinate below float's range reads as 0 in every text format, as PLY's doubles did (OBJ,
-// OFF, ASCII STL and float PLY called 1e-50 a bad number).
+// OFF, ASCII STL and float PLY called 1e-50 a bad number), and so does one below double's range
+// (1e-400 was a bad number where 1e-320 read as 0), its sign kept; one above double's range is
+// infinite, as one above float's is.
 TEST(MeshReader, TinyCoordinatesUnderflowToZeroInEveryTextFormat) {
   TempDir dir;
-  write_bytes(dir / "t.obj", "v 1e-50 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-  write_bytes(dir / "t.off", "OFF\n3 1 0\n1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-  write_bytes(dir / "t.ply",
-              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-              "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
-              "end_header\n1e-50 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-  for (const char* name : {"t.obj", "t.off", "t.ply"}) {
-    const Mesh m = read_mesh(dir / name);
-    ASSERT_EQ(m.positions.size(), 3u) << name;
-    EXPECT_EQ(m.positions[0][0], 0.0f) << name;
+  for (const std::string x : {"1e-50", "-1e-400", "0.0000000001e-399"}) {
+    SCOPED_TRACE(x);
+    write_bytes(dir / "t.obj", "v " + x + " 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    write_bytes(dir / "t.off", "OFF\n3 1 0\n" + x + " 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    for (const char* type : {"float", "double"})
+      write_bytes(dir / (std::string(type) + ".ply"),
+                  "ply\nformat ascii 1.0\nelement vertex 3\nproperty " + std::string(type) +
+                      " x\nproperty float y\nproperty float z\nelement face 1\n"
+                      "property list uchar int vertex_indices\nend_header\n" +
+                      x + " 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    write_bytes(dir / "t.stl", "solid s\nfacet normal 0 0 1\nouter loop\nvertex " + x +
+                                   " 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\n"
+                                   "endsolid s\n");
+    for (const char* name : {"t.obj", "t.off", "float.ply", "double.ply", "t.stl"}) {
+      const Mesh m = read_mesh(dir / name);
+      ASSERT_EQ(m.positions.size(), 3u) << name;
+      EXPECT_EQ(m.positions[0][0], 0.0f) << name;
+      // (STL's corners are welded by position, -0 as 0.)
+      if (std::string(name) != "t.stl") {
+        EXPECT_EQ(std::signbit(m.positions[0][0]), x[0] == '-') << name;
+      }
+    }
   }
+  write_bytes(dir / "big.obj", "v 1 0 0\nv -1e400 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_NE(error_of(dir / "big.obj")
+                .find("vertex 1 has a coordinate that is not a finite number "
+                      "(-inf: infinite, or past float32's largest"),
+            std::string::npos)
+      << error_of(dir / "big.obj");
 }
 
 TEST(MeshReader, ObjHandWritten) {
@@ -546,15 +577,6 @@ TEST(MeshReader, StlBinaryStartingWithSolid) {
   EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
 }
 
-std::string error_of(const fs::path& path) {
-  try {
-    read_mesh(path);
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(no InputError)";
-}
-
 // 64-bit face indices and counts (isotile's tiler writes uint64 indices past 2^32 - 1
 // vertices); an index beyond int64's range is named as too large, not as negative.
 TEST(MeshReader, Ply64BitIndices) {
@@ -600,6 +622,195 @@ TEST(MeshReader, PlyPropertyTwiceIsRefused) {
   EXPECT_NE(error_of(dir / "xx.ply").find("element 'vertex' has a second property 'x'"),
             std::string::npos)
       << error_of(dir / "xx.ply");
+}
+
+// Lines ended by a carriage return alone (classic Mac OS) are lines: an OBJ read as one vertex
+// and no face, exit 0 (the rest of the first `v` line, skipped, was the whole file).
+TEST(MeshReader, LinesEndedByACarriageReturnAlone) {
+  TempDir dir;
+  const std::vector<std::pair<std::string, std::string>> files = {
+      {"m.obj",
+       "# tetrahedron\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\n"
+       "f 2 3 4\n"},
+      {"m.off", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"},
+      {"m.stl",
+       "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+       "vertex 0 1 0\nendloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
+       "vertex 1 0 0\nvertex 0 0 1\nendloop\nendfacet\nendsolid t\n"}};
+  for (const auto& [name, text] : files) {
+    SCOPED_TRACE(name);
+    write_bytes(dir / name, text);
+    const Mesh lf = read_mesh(dir / name);
+    ASSERT_FALSE(lf.triangles.empty());
+    std::string cr = text;
+    std::replace(cr.begin(), cr.end(), '\n', '\r');
+    write_bytes(dir / name, cr);
+    expect_same_mesh(lf, read_mesh(dir / name));
+  }
+  // Lines are counted at lone carriage returns too.
+  write_bytes(dir / "bad.obj", "v 0 0 0\rv 1 0 0\r\rv 0 x 0\r");
+  EXPECT_NE(error_of(dir / "bad.obj").find("line 4: bad number 'x'"), std::string::npos)
+      << error_of(dir / "bad.obj");
+}
+
+// `fo` (the face keyword of OBJ's first versions) is a face, and a comment may follow the last
+// index without a space: `fo` faces were skipped (exit 0), `3#` was a bad index.
+TEST(MeshReader, ObjOldFaceKeywordAndCommentsAfterIndices) {
+  TempDir dir;
+  write_bytes(dir / "o.obj",
+              "v 0 0 0\nv 1 0 0\nv 0 1 0 # top\nv 0 0 1#apex\nfo 1 3 2\n"
+              "f 1 2 4# side\nf 1 4 3#\n");
+  const Mesh m = read_mesh(dir / "o.obj");
+  EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 2, 1}, {0, 1, 3}, {0, 3, 2}}));
+}
+
+// Stanford's `tristrips` element: strips ended by -1, every other triangle turned round so all
+// face one way, triangles with a corner twice (the joins) left out. It was skipped (no faces,
+// exit 0).
+TEST(MeshReader, PlyTriangleStrips) {
+  TempDir dir;
+  // A 3x2 grid of vertices: 0 1 2 / 3 4 5. One strip 0 3 1 4 2 5, its four triangles facing -z;
+  // then two runs, the second with corners repeated as joins do.
+  const std::string head =
+      "element vertex 6\nproperty float x\nproperty float y\nproperty float z\n"
+      "element tristrips 2\nproperty list int int vertex_indices\nend_header\n";
+  const std::string ascii = "ply\nformat ascii 1.0\n" + head +
+                            "0 0 0\n1 0 0\n2 0 0\n0 1 0\n1 1 0\n2 1 0\n"
+                            "6 0 3 1 4 2 5\n9 0 1 4 -1 2 2 5 4 4\n";
+  write_bytes(dir / "a.ply", ascii);
+  std::string binary = "ply\nformat binary_big_endian 1.0\n" + head;
+  for (int v = 0; v < 6; ++v) {
+    put_be(binary, static_cast<float>(v % 3));
+    put_be(binary, static_cast<float>(v / 3));
+    put_be(binary, 0.0f);
+  }
+  for (const std::vector<std::int32_t>& strip :
+       {std::vector<std::int32_t>{0, 3, 1, 4, 2, 5}, {0, 1, 4, -1, 2, 2, 5, 4, 4}}) {
+    put_be(binary, static_cast<std::int32_t>(strip.size()));
+    for (std::int32_t c : strip) put_be(binary, c);
+  }
+  write_bytes(dir / "b.ply", binary);
+  for (const char* name : {"a.ply", "b.ply"}) {
+    SCOPED_TRACE(name);
+    const Mesh m = read_mesh(dir / name);
+    ASSERT_EQ(m.positions.size(), 6u);
+    EXPECT_EQ(m.triangles,
+              (std::vector<Tri>{{0, 3, 1}, {1, 3, 4}, {1, 4, 2}, {2, 4, 5}, {0, 1, 4}, {5, 2, 4}}));
+  }
+  std::string bad = ascii;
+  bad.replace(bad.find("-1"), 2, "-2");
+  write_bytes(dir / "bad.ply", bad);
+  EXPECT_NE(error_of(dir / "bad.ply").find("strip 1 references vertex -2 but there are 6"),
+            std::string::npos)
+      << error_of(dir / "bad.ply");
+}
+
+// A mesh under element names this reader does not read is refused, not skipped: `Vertex` and
+// `Face` (PLY's names are case-sensitive) gave an empty mesh, exit 0.
+TEST(MeshReaderErrors, PlyMeshUnderOtherNamesIsRefused) {
+  TempDir dir;
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  auto ply = [](const std::string& vertex, const std::string& face) {
+    return "ply\nformat ascii 1.0\nelement " + vertex +
+           " 3\nproperty float x\nproperty float y\nproperty float z\nelement " + face +
+           " 1\nproperty list uchar int vertex_indices\nend_header\n";
+  };
+  write_bytes(dir / "v.ply", ply("Vertex", "face") + body);
+  EXPECT_NE(error_of(dir / "v.ply")
+                .find("element 'Vertex' has x, y and z, but vertices are read "
+                      "from the element named 'vertex'"),
+            std::string::npos)
+      << error_of(dir / "v.ply");
+  write_bytes(dir / "f.ply", ply("vertex", "polygon") + body);
+  EXPECT_NE(error_of(dir / "f.ply")
+                .find("element 'polygon' lists vertex_indices, but faces are "
+                      "read from elements named 'face' or 'tristrips'"),
+            std::string::npos)
+      << error_of(dir / "f.ply");
+  // Another element with x, y and z beside the vertices (a camera's, say) is skipped.
+  std::string cam = ply("vertex", "face");
+  cam.insert(cam.find("element vertex"),
+             "element camera 1\nproperty float x\nproperty float y\nproperty float z\n");
+  write_bytes(dir / "cam.ply", cam + "5 5 5\n" + body);
+  EXPECT_EQ(read_mesh(dir / "cam.ply").triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+// An ASCII PLY record is one line: a header that names fewer properties than the lines hold, or
+// more, put the values in the wrong places (three lines of `0 0 0 1` read as four vertices of
+// three, exit 0).
+TEST(MeshReaderErrors, AsciiPlyRecordsAreLines) {
+  TempDir dir;
+  auto ply = [](int props, const std::string& body) {
+    std::string s = "ply\nformat ascii 1.0\nelement vertex 4\n";
+    const char* names[] = {"x", "y", "z", "nx", "ny", "nz"};
+    for (int i = 0; i < props; ++i) s += std::string("property float ") + names[i] + "\n";
+    return s + "element face 1\nproperty list uchar int vertex_indices\nend_header\n" + body;
+  };
+  write_bytes(dir / "more.ply", ply(3, "0 0 0 1\n0 0 0 1\n0 0 0 1\n3 0 1 2\n"));
+  EXPECT_NE(error_of(dir / "more.ply")
+                .find("line 10: vertex 0 has more values than the header's "
+                      "properties for it ('1' is left over)"),
+            std::string::npos)
+      << error_of(dir / "more.ply");
+  // Six properties over lines of three: the totals agree, the normals were the next positions.
+  write_bytes(dir / "fewer.ply",
+              ply(6, "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 0\n1 0 1\n0 1 1\n1 1 1\n3 0 1 2\n"));
+  EXPECT_NE(error_of(dir / "fewer.ply")
+                .find("line 13: vertex 0 has fewer values than the "
+                      "header's properties for it"),
+            std::string::npos)
+      << error_of(dir / "fewer.ply");
+  write_bytes(dir / "face.ply", ply(3, "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2 3\n"));
+  EXPECT_NE(error_of(dir / "face.ply").find("line 14: face 0 has more values"), std::string::npos)
+      << error_of(dir / "face.ply");
+  // Blank lines between records and spaces at the ends of lines are no values.
+  write_bytes(dir / "blank.ply", ply(3, "0 0 0 \n\n1 0 0\t\n0 1 0\n0 0 1\n\n3 0 1 2 \n"));
+  EXPECT_EQ(read_mesh(dir / "blank.ply").triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+// Many writers leave out an OFF's edge count, which nothing reads (the first vertex's x was
+// taken for it, and the file failed far on: "file ends in face 3").
+TEST(MeshReader, OffWithoutTheEdgeCount) {
+  TempDir dir;
+  write_bytes(dir / "e.off", "OFF\n3 1\n0.5 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  const Mesh m = read_mesh(dir / "e.off");
+  EXPECT_TRUE(same_bits(m.positions, {{0.5f, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+  write_bytes(dir / "one.off", "OFF\n3\n1 0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  EXPECT_NE(error_of(dir / "one.off").find("line 2: expected the vertex and face counts"),
+            std::string::npos)
+      << error_of(dir / "one.off");
+}
+
+// A PLY through a FIFO (any file whose size is unknown) is read whole, its counts checked
+// against what came: the streamed reader sized 30,000,000 vertices (360 MB) from a 160-byte
+// file's header before it found them missing.
+TEST(MeshReader, APlyThroughAFifoIsReadWhole) {
+  TempDir dir;
+  const fs::path fifo = dir / "m.ply";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string bytes =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 30000000\nproperty float x\n"
+      "property float y\nproperty float z\nelement face 1\n"
+      "property list uchar int vertex_indices\nend_header\n" +
+      std::string(36, '\0');
+  std::thread writer([&] { std::ofstream(fifo, std::ios::binary) << bytes; });
+  std::string streamed = "nothing";
+  try {
+    if (PlyFaceStream::open(fifo)) streamed = "a stream";
+  } catch (const std::exception& e) {
+    streamed = e.what();
+  }
+  if (streamed != "nothing") {
+    writer.join();  // it has written: the stream read the FIFO
+    FAIL() << "the FIFO was opened as a stream, giving " << streamed;
+  }
+  const std::string error = error_of(fifo);  // once: a second read would wait for a writer
+  writer.join();
+  EXPECT_NE(error.find("declares 30000000 records but the file has only 36 bytes left"),
+            std::string::npos)
+      << error;
 }
 
 TEST(MeshReaderErrors, MessagesNameFileAndProblem) {
@@ -687,6 +898,16 @@ TEST(MeshReaderErrors, DataPastTheCountsIsRefused) {
   EXPECT_NE(error_of(dir / "solid.stl").find("binary STL header says 1 triangles"),
             std::string::npos)
       << error_of(dir / "solid.stl");
+  // An ASCII STL with a stray NUL byte is named as what it looks like too, not only as binary.
+  write_bytes(dir / "nul.stl",
+              "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+              "vertex 0 1 0\nendloop\nendfacet\nendsolid s\n" +
+                  std::string(1, '\0'));
+  EXPECT_NE(error_of(dir / "nul.stl")
+                .find("; it begins with 'solid' as ASCII STL does, but holds "
+                      "a NUL byte (at offset 105), which text does not"),
+            std::string::npos)
+      << error_of(dir / "nul.stl");
   const std::string head =
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
       "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"

@@ -1,6 +1,8 @@
 // Every count read from a file is checked against the bytes that remain before anything is
 // allocated or looped over, and every read is bounds-checked: the reader must survive any bytes.
 #include <fcntl.h>
+#include <locale.h>
+#include <stdlib.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -70,6 +72,12 @@ bool is_space(char c) {
   return c == ' ' || c == '\n' || c == '\r' || c == '\t' || c == '\v' || c == '\f';
 }
 
+// A line ends at LF, CR LF or a lone CR (classic Mac OS files: read with LF alone, the rest of a
+// `v` line was skipped, which was the whole file, and an OBJ gave one vertex and no face, exit 0).
+bool is_eol(char c) {
+  return c == '\n' || c == '\r';
+}
+
 // Whitespace-separated tokens with line tracking, for the text formats.
 class Text {
  public:
@@ -80,7 +88,7 @@ class Text {
   std::string_view token() {
     for (;;) {
       while (p_ < end_ && is_space(*p_)) {
-        if (*p_ == '\n') ++line_;
+        if (*p_ == '\n' || (*p_ == '\r' && (p_ + 1 == end_ || p_[1] != '\n'))) ++line_;
         ++p_;
       }
       if (comments_ && p_ < end_ && *p_ == '#') {
@@ -93,18 +101,16 @@ class Text {
 
   // The next token on the current line; empty when the line (or a trailing comment) ends.
   std::string_view line_token() {
-    while (p_ < end_ && *p_ != '\n' && is_space(*p_)) ++p_;
-    if (p_ == end_ || *p_ == '\n' || (comments_ && *p_ == '#')) return {};
+    while (p_ < end_ && !is_eol(*p_) && is_space(*p_)) ++p_;
+    if (p_ == end_ || is_eol(*p_) || (comments_ && *p_ == '#')) return {};
     return take();
   }
 
   void skip_line() {
-    const void* nl = std::memchr(p_, '\n', static_cast<std::size_t>(end_ - p_));
-    if (!nl) {
-      p_ = end_;
-      return;
-    }
-    p_ = static_cast<const char*>(nl) + 1;
+    while (p_ < end_ && !is_eol(*p_)) ++p_;
+    if (p_ == end_) return;
+    if (*p_ == '\r' && p_ + 1 < end_ && p_[1] == '\n') ++p_;
+    ++p_;
     ++line_;
   }
 
@@ -112,9 +118,10 @@ class Text {
   std::size_t remaining() const { return static_cast<std::size_t>(end_ - p_); }
 
  private:
+  // Where `#` starts comments it also ends a token: `f 1 2 3# note` is a face of three corners.
   std::string_view take() {
     const char* b = p_;
-    while (p_ < end_ && !is_space(*p_)) ++p_;
+    while (p_ < end_ && !is_space(*p_) && !(comments_ && *p_ == '#')) ++p_;
     return {b, static_cast<std::size_t>(p_ - b)};
   }
 
@@ -147,12 +154,35 @@ bool parse_number(std::string_view s, T& out) {
   return ec == std::errc() && ptr == s.data() + s.size();
 }
 
+// A real number in text. Past double's range from_chars reports an error and no value; like a
+// float past float's range, such a number is taken as IEEE conversion rounds it: below the range
+// 0 (of its sign; "1e-400" was a bad number where "1e-320" read as 0), above it infinity (refused
+// later as no finite position, naming the vertex).
+bool parse_real(std::string_view s, double& out) {
+  if (!s.empty() && s[0] == '+') s.remove_prefix(1);
+  if (s.empty() || s[0] == '+' || s[0] == ' ') return false;
+  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
+  if (ptr != s.data() + s.size()) return false;
+  if (ec == std::errc()) return true;
+  if (ec != std::errc::result_out_of_range) return false;
+  // The text is a well-formed number (from_chars took all of it) past double's range: which way
+  // it left the range, strtold_l tells (in the C locale, whatever the process's).
+  static const locale_t c_locale = ::newlocale(LC_ALL_MASK, "C", locale_t{});
+  const std::string copy(s);
+  const bool tiny = std::fabs(::strtold_l(copy.c_str(), nullptr, c_locale)) < 1;
+  const bool negative = s[0] == '-';
+  out = tiny ? (negative ? -0.0 : 0.0)
+             : (negative ? -std::numeric_limits<double>::infinity()
+                         : std::numeric_limits<double>::infinity());
+  return true;
+}
+
 // A coordinate in text: read as a double and rounded to float as IEEE conversion does, so that
 // a value below float's range becomes 0 (or a subnormal) as the PLY reader's doubles do, where
 // from_chars into a float calls it out of range ("1e-50" was a bad number in OBJ, 0 in PLY).
 bool parse_float(std::string_view s, float& out) {
   double d;
-  if (!parse_number(s, d)) return false;
+  if (!parse_real(s, d)) return false;
   out = to_float(d);
   return true;
 }
@@ -168,9 +198,10 @@ std::string quoted(std::string_view s) {
   return out + "'";
 }
 
-std::string vertex_error(std::uint64_t face, std::int64_t vertex, std::uint64_t count) {
-  return "face " + std::to_string(face) + " references vertex " + std::to_string(vertex) +
-         " but there are " + std::to_string(count) + " vertices";
+std::string vertex_error(std::uint64_t face, std::int64_t vertex, std::uint64_t count,
+                         const char* what = "face") {
+  return std::string(what) + " " + std::to_string(face) + " references vertex " +
+         std::to_string(vertex) + " but there are " + std::to_string(count) + " vertices";
 }
 
 // Polygons of more than four corners become a fan around the first corner.
@@ -181,6 +212,25 @@ void add_polygon(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
     mesh.quads.push_back({c[0], c[1], c[2], c[3]});
   } else {
     for (std::size_t i = 1; i + 1 < n; ++i) mesh.triangles.push_back({c[0], c[i], c[i + 1]});
+  }
+}
+
+// Ends a run of a triangle strip; no vertex can carry this index (a mesh has fewer than 2^32 - 1).
+constexpr std::uint32_t kStripRestart = std::numeric_limits<std::uint32_t>::max();
+
+// The triangles of strips (Stanford's `tristrips` element: runs ended by -1): every other one
+// turned round so that all face one way, as OpenGL draws strips. Triangles with a corner twice
+// are the joins strips use to turn corners, not faces, and are left out.
+void add_strips(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
+  std::size_t start = 0;
+  for (std::size_t i = 0; i <= n; ++i) {
+    if (i < n && c[i] != kStripRestart) continue;
+    for (std::size_t k = start; k + 2 < i; ++k) {
+      const Tri t =
+          (k - start) % 2 == 0 ? Tri{c[k], c[k + 1], c[k + 2]} : Tri{c[k + 1], c[k], c[k + 2]};
+      if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) mesh.triangles.push_back(t);
+    }
+    start = i + 1;
   }
 }
 
@@ -332,6 +382,7 @@ class PlyReader : Reader {
 
   Mesh read() {
     parse_header();
+    check_elements();
     std::uint64_t vertex_count = 0;
     for (const auto& e : elements_) {
       if (e.name == "vertex") vertex_count = e.count;
@@ -340,7 +391,7 @@ class PlyReader : Reader {
     for (const auto& e : elements_) {
       if (e.name == "vertex") {
         read_vertices(e, mesh);
-      } else if (e.name == "face") {
+      } else if (e.name == "face" || e.name == "tristrips") {
         read_faces(e, vertex_count, mesh);
       } else {
         skip_element(e);
@@ -402,7 +453,8 @@ class PlyReader : Reader {
           fail(where() + "expected 'element NAME COUNT'");
         }
         for (const auto& other : elements_) {
-          if (other.name == e.name && (e.name == "vertex" || e.name == "face")) {
+          if (other.name == e.name &&
+              (e.name == "vertex" || e.name == "face" || e.name == "tristrips")) {
             fail(where() + "second '" + e.name + "' element");
           }
         }
@@ -443,6 +495,28 @@ class PlyReader : Reader {
             (format_ == PlyFormat::Big) != (std::endian::native == std::endian::big);
   }
 
+  // Elements that hold a mesh under a name this reader does not read are refused, not skipped:
+  // `element Vertex` and `element Face` (PLY's names are case-sensitive) gave an empty mesh with
+  // exit 0, and so did faces in an element of another name.
+  void check_elements() const {
+    const bool vertices = std::any_of(elements_.begin(), elements_.end(),
+                                      [](const PlyElement& e) { return e.name == "vertex"; });
+    for (const auto& e : elements_) {
+      if (e.name == "vertex" || e.name == "face" || e.name == "tristrips") continue;
+      if (!vertices && e.find("x") >= 0 && e.find("y") >= 0 && e.find("z") >= 0)
+        fail("element '" + e.name +
+             "' has x, y and z, but vertices are read from the element named 'vertex' (PLY's "
+             "names are case-sensitive), and the file has none");
+      for (const char* list : {"vertex_indices", "vertex_index"}) {
+        const int k = e.find(list);
+        if (k >= 0 && e.properties[k].list)
+          fail("element '" + e.name + "' lists " + list +
+               ", but faces are read from elements named 'face' or 'tristrips' (PLY's names are "
+               "case-sensitive)");
+      }
+    }
+  }
+
   std::uint64_t remaining() const { return static_cast<std::uint64_t>(end_ - pos_); }
 
   [[noreturn]] void truncated(const PlyElement& e, std::uint64_t index) const {
@@ -472,15 +546,35 @@ class PlyReader : Reader {
     lines_before_ += t.line() - 1;
   }
 
-  std::string_view ascii_token(Text& t, const PlyElement& e, std::uint64_t index) const {
+  std::string_view ascii_token(Text& t, const PlyElement& e, std::uint64_t index) {
     const std::string_view s = t.token();
     if (s.empty()) truncated(e, index);
+    if (record_line_ == 0) record_line_ = t.line();
     return s;
+  }
+
+  // An ASCII record is one line: a header that names fewer properties than the lines hold (or
+  // more) read the values into the wrong places, and only a total that came out uneven was
+  // noticed (three lines of `0 0 0 1` were four vertices of three, exit 0).
+  void end_record(Text& t, const PlyElement& e, std::uint64_t index) {
+    const std::size_t first = record_line_;
+    record_line_ = 0;
+    auto where = [&](std::size_t line) {
+      return "line " + std::to_string(lines_before_ + line) + ": " + e.name + " " +
+             std::to_string(index);
+    };
+    if (first != 0 && t.line() != first)
+      fail(where(first) +
+           " has fewer values than the header's properties for it (its record "
+           "runs on into the next line)");
+    if (const std::string_view extra = t.line_token(); !extra.empty())
+      fail(where(t.line()) + " has more values than the header's properties for it (" +
+           quoted(extra) + " is left over)");
   }
   [[noreturn]] void bad_number(const Text& t, std::string_view s) const {
     fail("line " + std::to_string(lines_before_ + t.line()) + ": bad number " + quoted(s));
   }
-  float ascii_float(Text& t, const PlyElement& e, std::uint64_t index, PlyType type) const {
+  float ascii_float(Text& t, const PlyElement& e, std::uint64_t index, PlyType type) {
     const std::string_view s = ascii_token(t, e, index);
     if (type == PlyType::F32) {
       float f;
@@ -488,10 +582,10 @@ class PlyReader : Reader {
       return f;
     }
     double d;
-    if (!parse_number(s, d)) bad_number(t, s);
+    if (!parse_real(s, d)) bad_number(t, s);
     return to_float(d);
   }
-  std::int64_t ascii_int(Text& t, const PlyElement& e, std::uint64_t index) const {
+  std::int64_t ascii_int(Text& t, const PlyElement& e, std::uint64_t index) {
     const std::string_view s = ascii_token(t, e, index);
     std::int64_t v;
     if (!parse_number(s, v)) bad_number(t, s);
@@ -545,6 +639,7 @@ class PlyReader : Reader {
     if (format_ == PlyFormat::Ascii) text.emplace(ascii_text());
     for (std::uint64_t i = 0; i < e.count; ++i) {
       for (const auto& p : e.properties) skip_property(p, e, i, text ? &*text : nullptr);
+      if (text) end_record(*text, e, i);
     }
     if (text) ascii_done(*text);
   }
@@ -594,6 +689,7 @@ class PlyReader : Reader {
             store(v, target[k], ascii_float(t, e, v, p.type));
           }
         }
+        end_record(t, e, v);
       }
       ascii_done(t);
       return;
@@ -642,13 +738,15 @@ class PlyReader : Reader {
     }
   }
 
+  // A `face` element's polygons, or a `tristrips` element's strips.
   void read_faces(const PlyElement& e, std::uint64_t vertex_count, Mesh& mesh) {
+    const bool strips = e.name == "tristrips";
     int index_prop = e.find("vertex_indices");
     if (index_prop < 0) index_prop = e.find("vertex_index");
-    if (index_prop < 0) fail("face element has no vertex_indices property");
+    if (index_prop < 0) fail(e.name + " element has no vertex_indices property");
     const PlyProperty& ip = e.properties[index_prop];
-    if (!ip.list) fail("face property vertex_indices is not a list");
-    if (!ply_integer(ip.type)) fail("face vertex indices must be integers");
+    if (!ip.list) fail(e.name + " property vertex_indices is not a list");
+    if (!ply_integer(ip.type)) fail(e.name + " vertex indices must be integers");
     const std::uint64_t min = std::max<std::uint64_t>(min_size(e), 1);
     check_fits(e, min);
     // A face of three corners is the smallest there can be; reserve what will certainly fit.
@@ -668,7 +766,7 @@ class PlyReader : Reader {
           continue;
         }
         const std::uint64_t n = list_count(p, e, f, t);
-        if (n < 3) {
+        if (n < 3 && !strips) {
           fail("face " + std::to_string(f) + " has " + std::to_string(n) +
                " corners (at least 3 needed)");
         }
@@ -681,13 +779,22 @@ class PlyReader : Reader {
             v = load_int(p.type, pos_, swap_);
             pos_ += isize;
           }
+          if (strips && v == -1) {
+            corners[c] = kStripRestart;
+            continue;
+          }
           if (v < 0 || static_cast<std::uint64_t>(v) >= vertex_count) {
-            fail(vertex_error(f, v, vertex_count));
+            fail(vertex_error(f, v, vertex_count, strips ? "strip" : "face"));
           }
           corners[c] = static_cast<std::uint32_t>(v);
         }
-        add_polygon(mesh, corners.data(), n);
+        if (strips) {
+          add_strips(mesh, corners.data(), n);
+        } else {
+          add_polygon(mesh, corners.data(), n);
+        }
       }
+      if (t) end_record(*t, e, f);
     }
     if (t) ascii_done(*t);
   }
@@ -699,6 +806,7 @@ class PlyReader : Reader {
   PlyFormat format_ = PlyFormat::Ascii;
   bool swap_ = false;
   std::size_t lines_before_ = 0;  // text lines before the current Text starts
+  std::size_t record_line_ = 0;   // the Text's line of the open ASCII record's first value; 0: none
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -737,7 +845,7 @@ class ObjReader : Reader {
         if (mesh.positions.size() > kMaxVertices) {
           throw CapacityError(name() + ": more than 2^32-1 vertices");
         }
-      } else if (kw == "f") {
+      } else if (kw == "f" || kw == "fo") {  // `fo`: the face keyword of OBJ's first versions
         face_start.push_back(corners.size());
         for (std::string_view c = text_.line_token(); !c.empty(); c = text_.line_token()) {
           const std::size_t s1 = c.find('/');
@@ -820,10 +928,15 @@ Mesh read_off(const Reader& r, const std::vector<char>& data) {
   } else if (magic != "OFF" && magic != "COFF") {
     r.fail("not an OFF file (first word is " + quoted(magic) + ")");
   }
-  std::uint64_t counts[3];
-  for (auto& c : counts) {
-    const std::string_view s = t.token();
-    if (!parse_number(s, c)) r.fail(at() + "expected the vertex, face and edge counts");
+  // The counts, on one line (after OFF or on the next). Many writers leave out the edge count,
+  // which nothing reads: taken from the next line it was the first vertex's x, and the file
+  // failed far on with "file ends in face 3".
+  std::uint64_t counts[3] = {};
+  for (int i = 0; i < 3; ++i) {
+    const std::string_view s = i == 0 ? t.token() : t.line_token();
+    if (i == 2 && s.empty()) break;
+    if (!parse_number(s, counts[i]))
+      r.fail(at() + "expected the vertex and face counts (and the edge count) on one line");
   }
   t.skip_line();
   const std::uint64_t nv = counts[0], nf = counts[1];
@@ -952,8 +1065,10 @@ class Welder {
   std::vector<std::uint32_t> table_;
 };
 
-Mesh read_stl_binary(const Reader& r, const std::vector<char>& data) {
-  if (data.size() < 84) r.fail("binary STL shorter than its 84-byte header");
+// `text_hint`: what to add to a size error when the file begins as ASCII STL does.
+Mesh read_stl_binary(const Reader& r, const std::vector<char>& data,
+                     const std::string& text_hint = {}) {
+  if (data.size() < 84) r.fail("binary STL shorter than its 84-byte header" + text_hint);
   const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
   const bool swap = std::endian::native == std::endian::big;
   const std::uint64_t count = load<std::uint32_t>(bytes + 80, swap);
@@ -961,7 +1076,7 @@ Mesh read_stl_binary(const Reader& r, const std::vector<char>& data) {
   if (84 + 50 * count != data.size()) {
     r.fail("binary STL header says " + std::to_string(count) + " triangles (" +
            std::to_string(84 + 50 * count) + " bytes) but the file has " +
-           std::to_string(data.size()) + " bytes");
+           std::to_string(data.size()) + " bytes" + text_hint);
   }
   Mesh mesh;
   mesh.triangles.resize(count);
@@ -1050,13 +1165,17 @@ Mesh read_stl(const Reader& r, const std::vector<char>& data) {
   while (i < data.size() && is_space(data[i])) ++i;
   // Text never holds a NUL byte; a binary STL's header and floats almost always do, so one
   // whose size is off is named as binary, not read as text that ends too soon.
-  const bool text =
-      std::memchr(data.data(), '\0', std::min<std::size_t>(data.size(), 4096)) == nullptr;
-  if (text && data.size() - i >= 5 && stl_keyword({data.data() + i, 5}, "solid") &&
-      (data.size() - i == 5 || is_space(data[i + 5]))) {
-    return read_stl_ascii(r, data);
-  }
-  return read_stl_binary(r, data);
+  const void* nul = std::memchr(data.data(), '\0', std::min<std::size_t>(data.size(), 4096));
+  const bool solid = data.size() - i >= 5 && stl_keyword({data.data() + i, 5}, "solid") &&
+                     (data.size() - i == 5 || is_space(data[i + 5]));
+  if (solid && !nul) return read_stl_ascii(r, data);
+  // A text file with a stray NUL is named as what it looks like too, not only as binary.
+  const std::string hint =
+      solid ? "; it begins with 'solid' as ASCII STL does, but holds a NUL byte (at offset " +
+                  std::to_string(static_cast<const char*>(nul) - data.data()) +
+                  "), which text does not"
+            : std::string();
+  return read_stl_binary(r, data, hint);
 }
 
 }  // namespace
@@ -1092,8 +1211,11 @@ void check_finite_positions(const std::string& file, const std::vector<Vec3f>& p
   for (std::size_t v = 0; v < positions.size(); ++v)
     for (const float c : positions[v])
       if (!std::isfinite(c))
+        // Readers round doubles and text to float32, so a finite value past float32's range
+        // arrives here as infinity too: said so, lest a file's 1e39 be called infinite.
         throw InputError(file + ": vertex " + std::to_string(v) +
                          " has a coordinate that is not a finite number (" + std::to_string(c) +
+                         (std::isinf(c) ? ": infinite, or past float32's largest, 3.4e38" : "") +
                          ")");
 }
 

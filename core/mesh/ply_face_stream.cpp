@@ -1,5 +1,7 @@
 #include "core/mesh/ply_face_stream.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -27,6 +29,13 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
   if (!little_endian_host()) return std::nullopt;
   PlyFaceStream s;
   s.path_ = path;
+  // Only a regular file's size bounds the header's counts before anything is sized by them (a
+  // FIFO's 152 bytes claiming 1e8 vertices took 1.2 GB before the read found them missing);
+  // anything else is read whole, and its counts checked against what came, by read_mesh(). Asked
+  // before opening: a FIFO opened here and closed would leave read_mesh() waiting for a writer
+  // that has gone.
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) return std::nullopt;
   s.file_.reset(std::fopen(path.c_str(), "rb"));
   if (!s.file_) throw IoError("cannot open " + path.string() + ": " + std::strerror(errno));
   std::FILE* f = s.file_.get();

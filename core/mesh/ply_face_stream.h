@@ -5,9 +5,9 @@
 //
 // Takes the layout isotile's writers and most tools write: a `vertex` element whose properties
 // are all float and include x, y and z, then a `face` element whose only property is a list of
-// vertex indices (uchar count; int, uint or uint64 indices), and nothing after it. open() returns
-// nothing for any other PLY (ASCII, big-endian, double coordinates, more elements), which
-// read_mesh() reads whole instead.
+// vertex indices (uchar count; int, uint or uint64 indices), and nothing after it, in a regular
+// file. open() returns nothing for any other PLY (ASCII, big-endian, double coordinates, more
+// elements) and for a FIFO or device, which read_mesh() reads whole instead.
 #pragma once
 
 #include <cstdint>
