@@ -21,6 +21,7 @@ own the library's buffers (no copy).
 
 import json as _json
 import numbers as _numbers
+import operator as _operator
 import os as _os
 
 import numpy as _np
@@ -75,7 +76,9 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         float16, int64 and uint64 are copied to float32 / float64 first.
     level : float, optional
         Isovalue. None: the middle of the data's range, (min + max) / 2. A level outside the
-        range, or NaN, raises ValueError.
+        range, or NaN, raises ValueError. Samples equal to the level count as inside (scikit-image
+        counts them as outside): on integer data a level between sample values (0.5, not 1)
+        gives the same surface in both.
     spacing : 3 floats
         Distance between samples along axis 0, 1, 2.
     gradient_direction : "descent" or "ascent"
@@ -112,7 +115,7 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         Triangles, indices into verts.
     normals : (V, 3) float32 array or None
         Unit normals from the data's gradient, pointing down it (out of the bright object), in
-        the array's axis order.
+        the array's axis order; (0, 0, 0) where the gradient vanishes.
     values : (V,) float32 array
         As scikit-image defines them: for each vertex, the largest (max - min) of the samples of
         the cells it lies in.
@@ -184,6 +187,11 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         raise NoSurface("No surface found at the given iso value.")
     if not allow_degenerate:
         verts, faces, norms, values = _without_repeated_points(verts, faces, norms, values)
+        # Every triangle had two corners at one point (the level is a sample value at which the
+        # surface has no area): no surface, as the docstring says, not empty arrays.
+        if len(faces) == 0:
+            raise NoSurface("No surface found at the given iso value: every triangle has two "
+                            "corners at one point (samples equal to the level count as inside).")
     # Views, no copies: columns reversed into the array's axis order (a mirror, which turns the
     # library's winding into scikit-image's for "descent"); "ascent" reverses the winding.
     verts = verts[:, ::-1]
@@ -268,11 +276,31 @@ def _triple_text(value):
     """(x, y, z) as the CLI's text "x,y,z" (repr: exact for floats); text passes through."""
     if value is None or isinstance(value, str):
         return value
-    return ",".join(repr(v) if isinstance(v, float) else str(v) for v in value)
+    # repr of the plain float: NumPy 2's repr of its float64 (a float) is "np.float64(0.5)".
+    return ",".join(repr(float(v)) if isinstance(v, float) else str(v) for v in value)
+
+
+def _same_matrix(a, b):
+    """Whether two 3x3 matrices (lists or arrays; None for none) hold the same numbers."""
+    if a is None or b is None:
+        return a is None and b is None
+    return _np.array_equal(_np.asarray(a, dtype=float), _np.asarray(b, dtype=float))
+
+
+def _dims_text(dims):
+    """dims as the CLI's text; sample counts are integers (28.0 was refused as not "three
+    comma-separated numbers", which it is)."""
+    if dims is None or isinstance(dims, str):
+        return dims
+    try:
+        return ",".join(str(_operator.index(n)) for n in dims)
+    except TypeError:
+        raise ValueError(f"dims must be three integers (samples along x, y, z), got {dims!r}") \
+            from None
 
 
 def _raw_options(dims, type, spacing, origin, endian, series):
-    return {"dims": _triple_text(dims), "type": type, "spacing": _triple_text(spacing),
+    return {"dims": _dims_text(dims), "type": type, "spacing": _triple_text(spacing),
             "origin": _triple_text(origin), "endian": endian, "series": series}
 
 
@@ -490,7 +518,7 @@ def extract(source, iso=None, *, method="mc", quality="fast", macet_relax=0.0, d
                                  "direction=v.direction)")
             if (tuple(source.spacing) != tuple(source._handle.spacing)
                     or tuple(source.origin) != tuple(source._handle.world_origin)
-                    or source.direction != [list(r) for r in source._handle.direction]):
+                    or not _same_matrix(source.direction, source._handle.direction)):
                 raise ValueError("this Volume's spacing, origin or direction was changed after "
                                  "read_volume, and its file's are what the run uses: read it "
                                  "with read_volume(path, spacing=..., origin=...)")

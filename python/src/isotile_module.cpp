@@ -7,6 +7,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 #include <tbb/global_control.h>
+#include <tbb/info.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -24,6 +25,7 @@
 #include <string>
 #include <string_view>
 #include <thread>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -113,7 +115,9 @@ auto run_released(std::optional<int> threads, F&& f) {
   if (threads && *threads < 1) throw py::value_error("threads must be at least 1");
   py::gil_scoped_release release;
   if (threads) {
-    tbb::task_arena arena(*threads);
+    // No more than TBB can start: beyond the cores it printed a warning of its own on stderr
+    // ("The request for 2 workers is ignored"), past Python's warnings, and ran as many anyway.
+    tbb::task_arena arena(std::min(*threads, tbb::info::default_concurrency()));
     return arena.execute(std::forward<F>(f));
   }
   return f();
@@ -280,46 +284,12 @@ py::tuple extract_arrays(const py::array& volume, const py::array& whole,
                         out_values);
 }
 
-// A face's corner as a vertex index, or a ValueError naming the row and what is wrong with it.
-std::uint32_t vertex_index(std::int64_t idx, py::ssize_t vertices, const std::string& row,
-                           py::ssize_t i) {
-  if (idx < 0)
-    throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
-                          std::to_string(idx) + ": indices count from 0");
-  if (idx >= vertices)
-    throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
-                          std::to_string(idx) + ", past the " + std::to_string(vertices) +
-                          " vertices");
-  return static_cast<std::uint32_t>(idx);
-}
-
-// A mesh from (V, 3) vertices and (F, 3) faces: copied, since Mesh owns its arrays.
-Mesh mesh_of(const py::array& vertices, const py::array& faces) {
-  if (vertices.ndim() != 2 || vertices.shape(1) != 3)
-    throw py::value_error("vertices must be a (V, 3) array");
-  if (faces.ndim() != 2 || faces.shape(1) != 3)
-    throw py::value_error("faces must be an (F, 3) array");
-  const auto v = py::array_t<float, py::array::forcecast>::ensure(vertices);
-  if (!v) throw py::type_error("vertices must be numeric");
-  if (faces.dtype().kind() != 'i' && faces.dtype().kind() != 'u')
-    throw py::type_error("faces must be an integer array");
-  const auto f = py::array_t<std::int64_t, py::array::forcecast>::ensure(faces);
-  Mesh mesh;
-  const auto vr = v.unchecked<2>();
-  mesh.positions.resize(static_cast<std::size_t>(vr.shape(0)));
-  for (py::ssize_t i = 0; i < vr.shape(0); ++i) mesh.positions[i] = {vr(i, 0), vr(i, 1), vr(i, 2)};
-  const auto fr = f.unchecked<2>();
-  mesh.triangles.resize(static_cast<std::size_t>(fr.shape(0)));
-  for (py::ssize_t i = 0; i < fr.shape(0); ++i)
-    for (int c = 0; c < 3; ++c) {
-      mesh.triangles[i][c] = vertex_index(fr(i, c), vr.shape(0), "face", i);
-    }
-  return mesh;
-}
+Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py::object& quads,
+                    const py::object& normals);
 
 py::object quality_of(const py::array& vertices, const py::array& faces, bool check_intersections,
                       std::optional<int> threads) {
-  const Mesh mesh = mesh_of(vertices, faces);
+  const Mesh mesh = mesh_of_arrays(vertices, faces, py::none(), py::none());
   QualityStats q;
   TopologyStats t;
   std::optional<std::uint64_t> crossing;
@@ -336,7 +306,7 @@ py::object quality_of(const py::array& vertices, const py::array& faces, bool ch
 py::tuple simplify_arrays(const py::array& vertices, const py::array& faces, double ratio,
                           std::uint64_t target_faces, double max_error, double min_quality,
                           bool relax, std::optional<int> threads) {
-  const Mesh mesh = mesh_of(vertices, faces);
+  const Mesh mesh = mesh_of_arrays(vertices, faces, py::none(), py::none());
   SimplifyOptions o;
   o.ratio = ratio;
   o.faces = target_faces;
@@ -727,8 +697,26 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
   return py::make_tuple(mesh, stats);
 }
 
+// A face's corner as a vertex index, or a ValueError naming the row and what is wrong with it.
+// Unsigned indices are read as such: uint64 ones past 2^63 were "vertex -1" once made int64.
+template <class Index>
+std::uint32_t vertex_index(Index idx, py::ssize_t vertices, const std::string& row, py::ssize_t i) {
+  if constexpr (std::is_signed_v<Index>)
+    if (idx < 0)
+      throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
+                            std::to_string(idx) + ": indices count from 0");
+  if (static_cast<std::uint64_t>(idx) >= static_cast<std::uint64_t>(vertices))
+    throw py::value_error(row + " " + std::to_string(i) + " refers to vertex " +
+                          std::to_string(idx) + ", past the " + std::to_string(vertices) +
+                          " vertices");
+  return static_cast<std::uint32_t>(idx);
+}
+
 // A mesh from arrays (vertices (V, 3), triangles (F, 3), quads (Q, 4) or None, normals (V, 3)
-// or None): copied, as Mesh owns its arrays; indices are checked by the writer.
+// or None), for every function that takes one (quality, simplify, write_mesh): copied, as Mesh
+// owns its arrays. Positions that are not finite (NaN, inf, or float64 past float32's range)
+// are refused here, as every mesh file reader refuses them: quality measured them as
+// degenerate triangles.
 Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py::object& quads,
                     const py::object& normals) {
   Mesh mesh;
@@ -743,17 +731,25 @@ Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py:
   mesh.positions.resize(static_cast<std::size_t>(v.shape(0)));
   std::copy_n(v.data(), 3 * v.shape(0),
               mesh.positions.empty() ? nullptr : mesh.positions[0].data());
+  check_finite_positions("vertices", mesh.positions);
   const auto indices = [&](const py::array& a, int width, const char* what, auto& out) {
     rows(a, width, what);
     if (a.size() > 0 && a.dtype().kind() != 'i' && a.dtype().kind() != 'u')
       throw py::type_error(std::string(what) + " must be an integer array");
-    const auto f = py::array_t<std::int64_t, py::array::forcecast | py::array::c_style>::ensure(a);
-    out.resize(static_cast<std::size_t>(f.shape(0)));
-    for (py::ssize_t i = 0; i < f.shape(0); ++i)
-      for (int c = 0; c < width; ++c) {
-        out[i][c] =
-            vertex_index(f.data()[i * width + c], v.shape(0), std::string(what) + " row", i);
-      }
+    const auto read = [&](auto type) {
+      using Index = decltype(type);
+      const auto f = py::array_t<Index, py::array::forcecast | py::array::c_style>::ensure(a);
+      out.resize(static_cast<std::size_t>(f.shape(0)));
+      for (py::ssize_t i = 0; i < f.shape(0); ++i)
+        for (int c = 0; c < width; ++c)
+          out[i][c] =
+              vertex_index(f.data()[i * width + c], v.shape(0), std::string(what) + " row", i);
+    };
+    if (a.dtype().kind() == 'u') {
+      read(std::uint64_t{});
+    } else {
+      read(std::int64_t{});
+    }
   };
   indices(faces, 3, "faces", mesh.triangles);
   if (!quads.is_none()) indices(quads.cast<py::array>(), 4, "quads", mesh.quads);

@@ -336,6 +336,14 @@ def test_allow_degenerate_false_drops_the_triangles_that_repeat_a_point():
     at = np.array([first[tuple(x)] for x in kv])
     assert np.array_equal(kn, n[at]) and np.array_equal(kval, val[at])
     assert kf.dtype == f.dtype
+    # Nothing left: no surface, as when there was none (empty arrays came back). At the data's
+    # largest value only the samples equal to it are inside, and the surface round each is a
+    # point.
+    one = np.zeros((4, 4, 4), np.float32)
+    one[1, 1, 1] = 1
+    assert len(isotile.marching_cubes(one, 1.0)[1]) == 8
+    with pytest.raises(isotile.NoSurface, match="every triangle has two corners at one point"):
+        isotile.marching_cubes(one, 1.0, allow_degenerate=False)
     # Nothing to drop: the mesh is unchanged.
     s = sphere((20, 21, 22), radius=7.3)
     a, b = isotile.marching_cubes(s, 0.5), isotile.marching_cubes(s, 0.5, allow_degenerate=False)

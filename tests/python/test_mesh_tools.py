@@ -1,6 +1,7 @@
 # isotile.quality and isotile.simplify: the same numbers and meshes as the isotile program's
 # `quality --json` and `simplify` on the same mesh.
 import json
+import os
 
 import numpy as np
 import pytest
@@ -53,7 +54,7 @@ def test_mesh_tools_errors():
     p = np.zeros((3, 3), np.float32)
     with pytest.raises(ValueError, match="past the 3 vertices"):
         isotile.quality(p, np.array([[0, 1, 3]]))
-    with pytest.raises(ValueError, match="vertices must be a"):
+    with pytest.raises(ValueError, match=r"vertices must be an \(N, 3\) array"):
         isotile.quality(p[:, :2], np.array([[0, 1, 2]]))
     with pytest.raises(TypeError, match="integer"):
         isotile.quality(p, np.array([[0.0, 1.0, 2.0]]))
@@ -66,6 +67,16 @@ def test_mesh_tools_errors():
         isotile.quality(p, np.array([[0, 1, -1]]))
     with pytest.raises(ValueError, match="faces row 0 refers to vertex -1: indices count from 0"):
         isotile.write_mesh("never.ply", (p, np.array([[0, 1, -1]])))
+    # An unsigned index is read as given (2**64 - 1 was "vertex -1" once made int64).
+    for call in (isotile.quality, isotile.simplify):
+        with pytest.raises(ValueError, match="faces row 0 refers to vertex 18446744073709551615, "
+                                             "past the 3 vertices"):
+            call(p, np.array([[0, 1, 2**64 - 1]], np.uint64), **({"ratio": 0.5}
+                                                                 if call is isotile.simplify
+                                                                 else {}))
+    # No faces is no faces, whatever the empty array's type (write_mesh took an empty float
+    # array, quality called it not an integer array).
+    assert isotile.quality(p, np.zeros((0, 3)))["triangles"] == 0
 
 
 def test_quality_of_no_faces_and_nan_positions(tmp_path):
@@ -73,8 +84,31 @@ def test_quality_of_no_faces_and_nan_positions(tmp_path):
     # No face: neither closed nor open, no radius ratio (null in the CLI's JSON, None here).
     q = isotile.quality(p, np.zeros((0, 3), np.int32))
     assert q["triangles"] == 0 and q["closed"] is None and q["radius_ratio_min"] is None
-    # A NaN position is written by no writer (every reader refuses it).
+    # A NaN position is written by no writer (every reader refuses it), and measured by no
+    # measure (quality called the triangles degenerate and the mesh closed).
     p[1, 2] = np.nan
     with pytest.raises(ValueError, match="vertex 1 has a coordinate that is not a finite number"):
         isotile.write_mesh(tmp_path / "nan.ply", (p, np.array([[0, 1, 2]])))
     assert not (tmp_path / "nan.ply").exists()
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    assert isotile.quality(tet, faces)["closed"] is True
+    for bad, what in ((np.nan, r"\(nan\)"), (np.inf, r"\(inf: infinite"),
+                      (1e39, r"\(inf: infinite, or past float32's largest, 3.4e38\)")):
+        v = tet.copy()
+        v[3, 0] = bad
+        for call in (lambda: isotile.quality(v, faces),
+                     lambda: isotile.simplify(v, faces, ratio=0.5)):
+            with pytest.raises(ValueError, match="vertices: vertex 3 has a coordinate that is not "
+                                                 "a finite number " + what):
+                with np.errstate(over="ignore"):  # NumPy's cast of 1e39 to float32
+                    call()
+
+
+def test_threads_past_the_cores_print_nothing(capfd):
+    # TBB printed "The request for N workers is ignored" on stderr, past Python's warnings.
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]], np.float32)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    q = isotile.quality(p, f, threads=(os.cpu_count() or 1) + 3)
+    assert q["closed"] is True
+    assert capfd.readouterr().err == ""

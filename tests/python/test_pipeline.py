@@ -144,6 +144,14 @@ def test_a_volume_read_first_gives_the_paths_mesh(tmp_path, ball):
     volume.samples = np.zeros((2, 2, 2), np.uint8)
     with pytest.raises(ValueError, match="samples were replaced after read_volume"):
         isotile.extract(volume, 90)
+    # Its direction set again as an array, the same or another: compared as numbers (NumPy
+    # said "the truth value of an array ... is ambiguous").
+    again = isotile.read_volume(ball)
+    again.direction = np.eye(3)
+    assert np.array_equal(isotile.extract(again, 90).faces, d.faces)
+    again.direction = np.diag([1.0, -1.0, -1.0])
+    with pytest.raises(ValueError, match="spacing, origin or direction was changed"):
+        isotile.extract(again, 90)
 
 
 def test_raw_options_are_the_clis(tmp_path):
@@ -163,6 +171,17 @@ def test_raw_options_are_the_clis(tmp_path):
     assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli" / "m.ply").read_bytes()
     with pytest.raises(ValueError, match="dims must be three comma-separated numbers"):
         isotile.read_volume(plain, dims=(38, 34), type="uint16")
+    # Sample counts are integers: 38.0 is named as not one (it was "not three numbers").
+    with pytest.raises(ValueError, match=r"dims must be three integers .*, got \(38.0, 34, 30\)"):
+        isotile.read_volume(plain, dims=(38.0, 34, 30), type="uint16")
+    # NumPy's integers and floats are numbers like Python's: under NumPy 2 a float64's repr is
+    # "np.float64(0.5)", which went into the text the options are parsed from.
+    class Float64(float):
+        def __repr__(self):
+            return f"np.float64({float(self)})"
+    w = isotile.read_volume(plain, dims=np.array([38, 34, 30]), type="uint16", endian="big",
+                            spacing=(Float64(0.5), Float64(1.0), Float64(2.0)))
+    assert w.spacing == (0.5, 1.0, 2.0) and np.array_equal(w.samples, v.samples)
 
 
 @pytest.mark.parametrize("flags,options", [
