@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/volume/finite_range.h"
 #include "core/volume/volume_io.h"
 #include "test_support.h"
 
@@ -144,6 +145,10 @@ std::vector<T> sample_values(std::size_t n) {
   }
   v.front() = std::numeric_limits<T>::lowest();
   v.back() = std::numeric_limits<T>::max();
+  if constexpr (std::is_same_v<T, double>) {  // the largest a float64 sample may be
+    v.front() = -kLargestFloat64Sample;
+    v.back() = kLargestFloat64Sample;
+  }
   return v;
 }
 
@@ -551,6 +556,30 @@ TEST(CheckFinite, DoublesSubviewsAndIntegers) {
   EXPECT_NO_THROW(check_finite(dense_view(ints.data(), ScalarType::Int32, {2, 2, 2}), "i"));
 }
 
+// Float64 samples past 1e100 are refused as NaN is: at 9e307 the difference of two samples was
+// infinite (vertices snapped onto samples, NaN normals written to the file, exit 0).
+TEST(CheckFinite, Float64SamplesPastTheLargestAreRefused) {
+  std::vector<double> values(5 * 4 * 3, -kLargestFloat64Sample);
+  values[7] = kLargestFloat64Sample;
+  const VolumeView view = dense_view(values.data(), ScalarType::Float64, {5, 4, 3});
+  EXPECT_NO_THROW(check_finite(view, "d"));
+  EXPECT_NO_THROW(finite_value_range(view, "d"));
+  values[2 + 5 * (3 + 4 * 1)] = -9e307;
+  values[4 + 5 * (3 + 4 * 2)] = std::nextafter(kLargestFloat64Sample, 1e300);
+  const std::string want =
+      "d: 2 samples are past +-1e100 (first at x=2, y=3, z=1); float64 values that large overflow "
+      "the differences and gradients an isosurface is computed from: scale the samples";
+  EXPECT_EQ(message_of<InputError>([&] { check_finite(view, "d"); }), want);
+  EXPECT_EQ(message_of<InputError>([&] { finite_value_range(view, "d"); }), want);
+  // NaN is named as such where both are there.
+  values[1] = std::nan("");
+  EXPECT_TRUE(contains(message_of<InputError>([&] { check_finite(view, "d"); }),
+                       "d: 1 sample is NaN or Inf (first at x=1, y=0, z=0)"));
+  // Float32 samples cannot come near it.
+  const std::vector<float> floats(8, std::numeric_limits<float>::max());
+  EXPECT_NO_THROW(check_finite(dense_view(floats.data(), ScalarType::Float32, {2, 2, 2}), "f"));
+}
+
 TEST(ValueRange, TypesSubviewsAndEmpty) {
   std::vector<std::int16_t> shorts(5 * 4 * 3);
   for (std::size_t i = 0; i < shorts.size(); ++i) shorts[i] = static_cast<std::int16_t>(i * 10);
@@ -824,7 +853,7 @@ TEST_F(Vdb, DoubleGridAfterOtherGrids) {
   doubles->setName("density");  // same name: must still read this grid, not the first
   auto acc = doubles->getAccessor();
   acc.setValueOn(openvdb::Coord(100, 0, 0), 0.125);
-  acc.setValueOn(openvdb::Coord(101, 1, 0), 1e300);
+  acc.setValueOn(openvdb::Coord(101, 1, 0), 1e100);  // no float holds it
   const std::string file = path("v.vdb");
   write(file, {ints, doubles});
 
@@ -836,7 +865,7 @@ TEST_F(Vdb, DoubleGridAfterOtherGrids) {
   EXPECT_EQ(v.data<double>()[0], 0.125);
   EXPECT_EQ(v.data<double>()[1], -1.0);
   EXPECT_EQ(v.data<double>()[2], -1.0);
-  EXPECT_EQ(v.data<double>()[3], 1e300);
+  EXPECT_EQ(v.data<double>()[3], 1e100);
 }
 
 TEST_F(Vdb, NotAVdbFile) {

@@ -129,8 +129,11 @@ std::pair<double, double> value_range(const VolumeView& view) {
 std::pair<double, double> finite_value_range(const VolumeView& view, const std::string& what) {
   if (view.sample_count() <= 0) return {0.0, 0.0};
   const Scan s = scan(view);
-  // Throws, counting the NaN and Inf samples and naming the first.
-  if (!s.finite) check_finite(view, what);
+  // Throws, counting the NaN and Inf samples (or float64 ones past kLargestFloat64Sample) and
+  // naming the first.
+  if (!s.finite ||
+      (view.type == ScalarType::Float64 && std::max(-s.lo, s.hi) > kLargestFloat64Sample))
+    check_finite(view, what);
   return bounds(s);
 }
 

@@ -234,8 +234,9 @@ struct NonFinite {
   std::int64_t first = -1;
 };
 
-template <class T>
-NonFinite count_non_finite(const VolumeView& view) {
+// Samples for which `bad` holds, counted in one parallel pass.
+template <class T, class Bad>
+NonFinite count_samples(const VolumeView& view, Bad bad) {
   const T* data = view.typed<T>();
   const Index3& d = view.dims;
   return tbb::parallel_reduce(
@@ -245,7 +246,7 @@ NonFinite count_non_finite(const VolumeView& view) {
           for (std::int64_t j = 0; j < d[1]; ++j) {
             const T* row = data + view.offset(0, j, k);
             for (std::int64_t i = 0; i < d[0]; ++i) {
-              if (std::isfinite(row[i * view.strides[0]])) continue;
+              if (!bad(row[i * view.strides[0]])) continue;
               if (acc.count++ == 0) acc.first = (k * d[1] + j) * d[0] + i;
             }
           }
@@ -453,17 +454,34 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
 
 void check_finite(const VolumeView& view, const std::string& what) {
   if (!is_floating(view.type) || view.sample_count() <= 0) return;
-  const NonFinite bad = view.type == ScalarType::Float32 ? count_non_finite<float>(view)
-                                                         : count_non_finite<double>(view);
-  if (bad.count == 0) return;
-  const std::int64_t i = bad.first % view.dims[0];
-  const std::int64_t j = bad.first / view.dims[0] % view.dims[1];
-  const std::int64_t k = bad.first / view.dims[0] / view.dims[1];
-  const Index3 g{view.box.lo[0] + i, view.box.lo[1] + j, view.box.lo[2] + k};
-  throw InputError(
-      what + ": " + std::to_string(bad.count) + (bad.count == 1 ? " sample is" : " samples are") +
-      " NaN or Inf (first at x=" + std::to_string(g[0]) + ", y=" + std::to_string(g[1]) +
-      ", z=" + std::to_string(g[2]) + "); isosurfaces need finite values");
+  // "WHAT: N samples are KIND (first at x=.., y=.., z=..)", at the sample's global position.
+  const auto found = [&](const NonFinite& n, const char* kind) {
+    const std::int64_t i = n.first % view.dims[0];
+    const std::int64_t j = n.first / view.dims[0] % view.dims[1];
+    const std::int64_t k = n.first / view.dims[0] / view.dims[1];
+    return what + ": " + std::to_string(n.count) +
+           (n.count == 1 ? " sample is " : " samples are ") + kind +
+           " (first at x=" + std::to_string(view.box.lo[0] + i) +
+           ", y=" + std::to_string(view.box.lo[1] + j) +
+           ", z=" + std::to_string(view.box.lo[2] + k) + ")";
+  };
+  const auto non_finite = [](auto v) { return !std::isfinite(v); };
+  const auto refuse_non_finite = [&](const NonFinite& n) {
+    if (n.count > 0) throw InputError(found(n, "NaN or Inf") + "; isosurfaces need finite values");
+  };
+  if (view.type == ScalarType::Float32) {
+    refuse_non_finite(count_samples<float>(view, non_finite));
+    return;
+  }
+  // Float64: one pass finds both faults (NaN fails the comparison too); only a volume that has
+  // one is read again, to tell which.
+  const NonFinite out = count_samples<double>(
+      view, [](double v) { return !(std::fabs(v) <= kLargestFloat64Sample); });
+  if (out.count == 0) return;
+  refuse_non_finite(count_samples<double>(view, non_finite));
+  throw InputError(found(out, "past +-1e100") +
+                   "; float64 values that large overflow the differences and gradients an "
+                   "isosurface is computed from: scale the samples");
 }
 
 // Through open_vdb, which the isotile program resolves to a module it loads on first use

@@ -161,8 +161,16 @@ struct NrrdDataLayout {
 };
 std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
 
-// Throws InputError when a floating-point volume holds NaN or Inf samples, saying how many and
-// where the first one is (x, y, z). Integer volumes always pass.
+// The largest magnitude a float64 sample may have. Past it the arithmetic on samples overflows
+// double: at 9e307 the difference of two samples is infinite (vertices snapped onto samples, NaN
+// normals), and from about 1e153 over the spacing the gradient's squared length is (zero or NaN
+// normals). 1e100 keeps the gradient's square finite even over the finest spacing float32
+// positions allow (1.4e-45); float32 samples never come near it.
+inline constexpr double kLargestFloat64Sample = 1e100;
+
+// Throws InputError when a floating-point volume holds NaN or Inf samples, or float64 samples
+// past kLargestFloat64Sample, saying how many and where the first one is (x, y, z). Integer
+// volumes always pass.
 void check_finite(const VolumeView& view, const std::string& what);
 
 // Minimum and maximum sample value (0, 0 for an empty view; NaN samples are skipped, and an

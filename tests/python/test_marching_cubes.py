@@ -278,6 +278,15 @@ def test_errors_of_isotile_own():
     bad[1, 2, 3] = np.nan
     with pytest.raises(ValueError, match=r"NaN or Inf \(first at x=3, y=2, z=1\)"):
         isotile.marching_cubes(bad, 0.0)
+    # Finite float64 samples whose differences overflow (vertices snapped onto samples, NaN
+    # normals) are refused as NaN is; 1e100 is the largest taken, and gives unit normals.
+    big = np.where(sphere((8, 9, 10), radius=3.0) > 0, 9e307, -9e307)
+    with pytest.raises(ValueError, match=r"samples are past \+-1e100 \(first at x=0, y=0, z=0\)"):
+        isotile.marching_cubes(big, 0.0)
+    with pytest.raises(ValueError, match=r"past \+-1e100"):
+        isotile.extract(big, 0.0)
+    _, _, n, _ = isotile.marching_cubes(np.sign(big) * 1e100, 0.0)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-6)
     with pytest.raises(TypeError):
         isotile.marching_cubes(vol.astype(np.complex64), 0.0)
     with pytest.raises(ValueError, match="threads"):
