@@ -584,6 +584,47 @@ TEST(ItkRegions, ImageJCalibrationIsTheSpacing) {
   fs::remove_all(dir);
 }
 
+// A directory or pattern of ImageJ slices, as ImageJ's Save As > Image Sequence writes them:
+// their calibration is the stack's, as ImageJ's import reads it (ITK read none of it: 0.5 x
+// 0.25 um pixels came out at 1, 1, 1). Slices calibrated differently are refused.
+TEST(ItkRegions, ImageJSlicesKeepTheirCalibration) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-ijs-" + std::to_string(::getpid()));
+  fs::create_directories(dir / "ij");
+  const Volume u16 = field_as("field:torus:20", ScalarType::UInt16);
+  const std::size_t plane = 20 * 20 * sizeof(std::uint16_t);
+  const auto write_slice = [&](int k, std::uint32_t x_per_unit, const std::string& description) {
+    Volume slice(ScalarType::UInt16, {20, 20, 1});
+    std::memcpy(slice.bytes(), u16.bytes() + k * plane, plane);
+    char name[32];
+    std::snprintf(name, sizeof name, "s_%03d.tif", k + 1);
+    write_tiff_pages(dir / "ij" / name, slice, 'I', 0, 1, 0,
+                     {{282, 5, x_per_unit}, {283, 5, 4}, {296, 3, 1}}, description);
+  };
+  for (int k = 0; k < 20; ++k) write_slice(k, 2, "ImageJ=1.54f\nunit=micron\n");
+  for (const fs::path& input : {dir / "ij", dir / "ij" / "s_%03d.tif"}) {
+    SCOPED_TRACE(input.string());
+    const VolumeHeader h = read_volume_header(input.string());
+    const Volume v = read_volume(input.string());
+    EXPECT_EQ(h.spacing, (Vec3d{0.5, 0.25, 1}));
+    EXPECT_EQ(h.spacing_unit, "micron");
+    EXPECT_EQ(v.spacing(), h.spacing);
+    ASSERT_EQ(v.dims(), u16.dims());
+    EXPECT_EQ(std::memcmp(v.bytes(), u16.bytes(), u16.byte_size()), 0);
+  }
+  // One slice of another pixel size, or none: which holds is anyone's guess.
+  write_slice(4, 3, "ImageJ=1.54f\nunit=micron\n");
+  expect_both_refuse(dir / "ij", "its slices are calibrated differently");
+  write_slice(4, 2, "");
+  expect_both_refuse(dir / "ij", "uncalibrated");
+  // --spacing reads them anyway, as the message says.
+  RawOptions given;
+  given.spacing = Vec3d{1, 2, 3};
+  EXPECT_EQ(read_volume_header((dir / "ij").string(), given).spacing, (Vec3d{1, 2, 3}));
+  EXPECT_EQ(read_volume((dir / "ij").string(), given).spacing(), (Vec3d{1, 2, 3}));
+  fs::remove_all(dir);
+}
+
 // NIfTI's scl_slope and scl_inter are applied; such a file is read whole out of core.
 TEST(ItkRegions, NiftiRescaleIsApplied) {
   REQUIRE_ITK();

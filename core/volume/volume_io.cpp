@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -147,8 +149,38 @@ ItkInput itk_input(const std::string& input, InputKind kind, const RawOptions& r
   return in;
 }
 
+// The calibration of a stack of slices: the one its slices share, read as ImageJ's image
+// sequence import reads it (the pixel size of the slices, the voxel depth theirs too, or 1 unit
+// where a slice says none), or none where no slice has one. Slices calibrated differently, or
+// some not at all, are refused: which of them holds is anyone's guess.
+std::optional<ImageJSpacing> stack_calibration(
+    const std::string& input,
+    const std::map<std::string, std::optional<ImageJSpacing>>& calibrations) {
+  const auto text = [](const std::optional<ImageJSpacing>& c) {
+    if (!c) return std::string("uncalibrated");
+    std::ostringstream out;
+    out << c->spacing[0] << ", " << c->spacing[1] << ", " << c->spacing[2]
+        << (c->unit.empty() ? "" : " " + c->unit);
+    return out.str();
+  };
+  const auto same = [](const std::optional<ImageJSpacing>& a,
+                       const std::optional<ImageJSpacing>& b) {
+    return a.has_value() == b.has_value() &&
+           (!a || (a->spacing == b->spacing && a->unit == b->unit));
+  };
+  if (calibrations.empty()) return std::nullopt;
+  const auto& [first_file, first] = *calibrations.begin();
+  for (const auto& [file, c] : calibrations)
+    if (!same(c, first))
+      throw InputError(input + ": its slices are calibrated differently (" + first_file + ": " +
+                       text(first) + "; " + file + ": " + text(c) +
+                       "); give the spacing with --spacing X,Y,Z");
+  return first;
+}
+
 // Checks made before ITK or GDCM sees the file (they are not hardened against malformed input).
-ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
+// `raw`: what the user gave; a spacing given makes the slices' calibrations moot.
+ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind, const RawOptions& raw) {
   if (kind == InputKind::Nifti) return check_nifti_header(input);
   if (kind == InputKind::MetaImage) return check_metaimage_header(input);
   if (kind == InputKind::Tiff) {
@@ -160,9 +192,13 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
   }
   if (kind == InputKind::TiffStack) {
     ImageHeaderCheck check;
+    // Each slice's ImageJ calibration, by file name. ImageJ's image sequences carry it in every
+    // slice, and ITK reads none of it: a stack of 0.5 um pixels was read at 1, 1, 1.
+    std::map<std::string, std::optional<ImageJSpacing>> calibrations;
     const auto slice = [&](const std::string& file) {
-      if (std::optional<PlainData> p = check_tiff_file(file).plain)
-        check.plain_slices.push_back(*p);
+      TiffCheck tiff = check_tiff_file(file);
+      if (tiff.plain) check.plain_slices.push_back(*tiff.plain);
+      calibrations[file] = std::move(tiff.calibration);
     };
     std::error_code ec;
     if (std::filesystem::is_directory(input, ec)) {
@@ -171,6 +207,7 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind) {
     } else {
       for (const std::string& name : numbered_files(input)) slice(name);  // as ITK takes them
     }
+    if (!raw.spacing) check.calibration = stack_calibration(input, calibrations);
     return check;
   }
   if (kind == InputKind::Dicom) check_dicom_input(input);
@@ -347,7 +384,7 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
   if (kind == InputKind::Mrc) {
     h = read_mrc_header(input);
   } else if (is_itk_kind(kind)) {
-    const ImageHeaderCheck check = check_before_itk(input, kind);
+    const ImageHeaderCheck check = check_before_itk(input, kind, raw);
     const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
     h.type = info.type;
     h.dims = info.dims;
@@ -430,7 +467,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   } else if (kind == InputKind::Vdb) {
     volume = read_vdb(input);
   } else {
-    const ImageHeaderCheck check = check_before_itk(input, kind);
+    const ImageHeaderCheck check = check_before_itk(input, kind, raw);
     verify_compressed(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
