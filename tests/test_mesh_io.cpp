@@ -653,16 +653,20 @@ TEST(MeshReader, LinesEndedByACarriageReturnAlone) {
       << error_of(dir / "bad.obj");
 }
 
-// `fo` (the face keyword of OBJ's first versions) is a face, and a comment may follow the last
-// index without a space: `fo` faces were skipped (exit 0), `3#` was a bad index.
-TEST(MeshReader, ObjOldFaceKeywordAndCommentsAfterIndices) {
+// `fo` (the face keyword of OBJ's first versions) is a face, a comment may follow the last index
+// without a space, and a `\` that ends a line continues the statement on the next: `fo` faces
+// were skipped (exit 0), `3#` and `\` were bad indices.
+TEST(MeshReader, ObjOldFaceKeywordCommentsAndContinuations) {
   TempDir dir;
   write_bytes(dir / "o.obj",
-              "v 0 0 0\nv 1 0 0\nv 0 1 0 # top\nv 0 0 1#apex\nfo 1 3 2\n"
-              "f 1 2 4# side\nf 1 4 3#\n");
+              "v 0 0 0\nv 1 0 0\nv 0 1 0 # top\nv 0 0 \\\r\n1#apex\nfo 1 3 2\n"
+              "f 1 2 4# side\nf 1 \\\n  \\\n4 3#\n");
   const Mesh m = read_mesh(dir / "o.obj");
   EXPECT_TRUE(same_bits(m.positions, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}));
   EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 2, 1}, {0, 1, 3}, {0, 3, 2}}));
+  write_bytes(dir / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 \\ 2 3\n");
+  EXPECT_NE(error_of(dir / "bad.obj").find("line 4: '\\' before '2'"), std::string::npos)
+      << error_of(dir / "bad.obj");
 }
 
 // Stanford's `tristrips` element: strips ended by -1, every other triangle turned round so all
@@ -781,6 +785,28 @@ TEST(MeshReader, OffWithoutTheEdgeCount) {
   EXPECT_NE(error_of(dir / "one.off").find("line 2: expected the vertex and face counts"),
             std::string::npos)
       << error_of(dir / "one.off");
+}
+
+// A vertex property named twice, whichever: the streamed reader (render's) leaves the file to the
+// whole one, which refuses it (it took a second `quality`, and drew the mesh).
+TEST(MeshReader, APropertyTwiceIsNotStreamed) {
+  TempDir dir;
+  for (const char* name : {"x", "quality"}) {
+    SCOPED_TRACE(name);
+    std::string ply =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+        "property float y\nproperty float z\nproperty float quality\nproperty float " +
+        std::string(name) +
+        "\nelement face 1\nproperty list uchar uint vertex_indices\nend_header\n";
+    const float corners[3][5] = {{0, 0, 0, 9, 9}, {1, 0, 0, 9, 9}, {0, 1, 0, 9, 9}};
+    ply.append(reinterpret_cast<const char*>(corners), sizeof(corners));
+    const std::uint32_t face[3] = {0, 1, 2};
+    ply += '\3';
+    ply.append(reinterpret_cast<const char*>(face), sizeof(face));
+    write_bytes(dir / "twice.ply", ply);
+    EXPECT_FALSE(PlyFaceStream::open(dir / "twice.ply").has_value());
+    EXPECT_NE(error_of(dir / "twice.ply").find("has a second property"), std::string::npos);
+  }
 }
 
 // A PLY through a FIFO (any file whose size is unknown) is read whole, its counts checked

@@ -847,7 +847,7 @@ class ObjReader : Reader {
         }
       } else if (kw == "f" || kw == "fo") {  // `fo`: the face keyword of OBJ's first versions
         face_start.push_back(corners.size());
-        for (std::string_view c = text_.line_token(); !c.empty(); c = text_.line_token()) {
+        for (std::string_view c = value(); !c.empty(); c = value()) {
           const std::size_t s1 = c.find('/');
           const std::uint64_t v = index(c.substr(0, s1), mesh.positions.size());
           corners.push_back(v);
@@ -890,8 +890,21 @@ class ObjReader : Reader {
  private:
   std::string at() const { return "line " + std::to_string(text_.line()) + ": "; }
 
+  // The statement's next value, on this line or, after a `\` that ends a line (OBJ's line
+  // continuation), the next; empty where the statement ends.
+  std::string_view value() {
+    for (;;) {
+      const std::string_view v = text_.line_token();
+      if (v != "\\") return v;
+      if (const std::string_view more = text_.line_token(); !more.empty())
+        fail(at() + "'\\' before " + quoted(more) +
+             " (a line continues only after a '\\' at its end)");
+      text_.skip_line();
+    }
+  }
+
   float number() {
-    const std::string_view s = text_.line_token();
+    const std::string_view s = value();
     float f;
     if (!parse_float(s, f)) {
       fail(at() + (s.empty() ? std::string("missing number") : "bad number " + quoted(s)));

@@ -60,6 +60,7 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
   int props = 0, xyz[3] = {-1, -1, -1};
   enum { None, Vertex, Face, Done } at = None;
   bool binary_le = false, face_list = false;
+  std::vector<std::string> vertex_names;
   for (std::size_t i = 1; i + 1 < lines.size(); ++i) {
     std::istringstream in(lines[i]);
     std::string kw;
@@ -92,13 +93,13 @@ std::optional<PlyFaceStream> PlyFaceStream::open(const std::filesystem::path& pa
         std::string name;
         in >> name;
         if (type != "float" && type != "float32") return std::nullopt;
-        // A second x, y or z: the full reader names the file's fault.
+        // A property named twice (x or any other): the full reader names the file's fault.
+        if (std::find(vertex_names.begin(), vertex_names.end(), name) != vertex_names.end())
+          return std::nullopt;
+        vertex_names.push_back(name);
         static const char* const kAxes[3] = {"x", "y", "z"};
         for (int k = 0; k < 3; ++k)
-          if (name == kAxes[k]) {
-            if (xyz[k] >= 0) return std::nullopt;
-            xyz[k] = props;
-          }
+          if (name == kAxes[k]) xyz[k] = props;
         ++props;
       } else if (at == Face && !face_list && type == "list") {
         std::string count_type, index_type, name;
