@@ -369,7 +369,9 @@ TEST(MeshReader, PlyBigEndianWithExtraProperties) {
   };
   face({0, 1, 2});
   face({0, 1, 2, 3});
-  face({0, 1, 2, 3, 4});  // fanned around corner 0
+  // Cut by ear clipping, seen along x (its Newell normal's largest part), where corners 0 and 1
+  // meet: neither is an ear.
+  face({0, 1, 2, 3, 4});
   write_bytes(dir / "be.ply", s);
 
   const Mesh m = read_mesh(dir / "be.ply");
@@ -378,7 +380,7 @@ TEST(MeshReader, PlyBigEndianWithExtraProperties) {
     for (int k = 0; k < 3; ++k) EXPECT_EQ(m.positions[v][k], static_cast<float>(xyz[v][k]));
   }
   EXPECT_TRUE(m.normals.empty());
-  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {0, 1, 2}, {0, 2, 3}, {0, 3, 4}}));
+  EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {1, 2, 3}, {1, 3, 4}, {0, 1, 4}}));
   EXPECT_EQ(m.quads, (std::vector<Quad>{{0, 1, 2, 3}}));
 }
 
@@ -622,6 +624,83 @@ TEST(MeshReader, PlyPropertyTwiceIsRefused) {
   EXPECT_NE(error_of(dir / "xx.ply").find("element 'vertex' has a second property 'x'"),
             std::string::npos)
       << error_of(dir / "xx.ply");
+}
+
+// Polygons of five or more corners are cut into ears, so that every triangle lies inside them: a
+// fan from the first corner folded over a concave one (an L from its outer corner: a triangle
+// turned over, outside the L). A convex polygon still gives the fan, as before.
+TEST(MeshReader, ConcavePolygonsAreCutIntoEars) {
+  TempDir dir;
+  // An L of area 3 from its outer corner (2, 0), tilted out of every axis plane, counter-clockwise
+  // and (the same corners reversed) clockwise; and a convex pentagon.
+  const double l[6][2] = {{2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}, {0, 0}};
+  std::string obj, off_vertices;
+  for (const auto& p : l) {
+    const std::string v = std::to_string(p[0]) + " " + std::to_string(p[1]) + " " +
+                          std::to_string(0.5 * p[0] - 0.25 * p[1]);
+    obj += "v " + v + "\n";
+    off_vertices += v + "\n";
+  }
+  obj += "v 5 0 0\nv 6 0 0\nv 6.5 1 0\nv 5.5 2 0\nv 4.5 1 0\n";
+  off_vertices += "5 0 0\n6 0 0\n6.5 1 0\n5.5 2 0\n4.5 1 0\n";
+  write_bytes(dir / "l.obj", obj + "f 1 2 3 4 5 6\nf 6 5 4 3 2 1\nf 7 8 9 10 11\n");
+  write_bytes(dir / "l.off",
+              "OFF\n11 3 0\n" + off_vertices + "6 0 1 2 3 4 5\n6 5 4 3 2 1 0\n5 6 7 8 9 10\n");
+  std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 11\nproperty float x\n"
+      "property float y\nproperty float z\nelement face 3\n"
+      "property list uchar uint vertex_indices\nend_header\n";
+  const Mesh from_obj = read_mesh(dir / "l.obj");
+  for (const Vec3f& p : from_obj.positions) ply.append(reinterpret_cast<const char*>(&p), 12);
+  for (const std::vector<std::uint32_t>& f : std::vector<std::vector<std::uint32_t>>{
+           {0, 1, 2, 3, 4, 5}, {5, 4, 3, 2, 1, 0}, {6, 7, 8, 9, 10}}) {
+    ply += static_cast<char>(f.size());
+    ply.append(reinterpret_cast<const char*>(f.data()), 4 * f.size());
+  }
+  write_bytes(dir / "l.ply", ply);
+  for (const char* name : {"l.obj", "l.off", "l.ply"}) {
+    SCOPED_TRACE(name);
+    const Mesh m = read_mesh(dir / name);
+    ASSERT_EQ(m.triangles.size(), 4u + 4u + 3u);
+    // Each L's triangles face the way the L does (its normal, up the tilted plane's z), cover
+    // area 3, and use the L's corners only.
+    for (int side = 0; side < 2; ++side) {
+      double area = 0;
+      for (int t = 0; t < 4; ++t) {
+        const Tri& tri = m.triangles[4 * side + t];
+        const Vec3f &a = m.positions[tri[0]], &b = m.positions[tri[1]], &c = m.positions[tri[2]];
+        // Seen along z, the plane's area scale does not matter for the sign or the sum.
+        const double z = (double(b[0]) - a[0]) * (double(c[1]) - a[1]) -
+                         (double(b[1]) - a[1]) * (double(c[0]) - a[0]);
+        EXPECT_GT(side == 0 ? z : -z, 0) << "triangle " << 4 * side + t << " turned over";
+        area += 0.5 * std::abs(z);
+        for (std::uint32_t v : tri) EXPECT_LT(v, 6u);
+      }
+      EXPECT_NEAR(area, 3, 1e-6) << (side == 0 ? "counter-clockwise" : "clockwise");
+    }
+    EXPECT_EQ(std::vector<Tri>(m.triangles.begin() + 8, m.triangles.end()),
+              (std::vector<Tri>{{6, 7, 8}, {6, 8, 9}, {6, 9, 10}}));
+    EXPECT_TRUE(m.quads.empty());
+  }
+  // render's streamed reader cuts them the same way.
+  std::optional<PlyFaceStream> stream = PlyFaceStream::open(dir / "l.ply");
+  ASSERT_TRUE(stream.has_value());
+  std::vector<Tri> streamed, piece;
+  while (stream->next(1, piece)) {  // a face at a time
+    streamed.insert(streamed.end(), piece.begin(), piece.end());
+    piece.clear();
+  }
+  EXPECT_EQ(streamed, read_mesh(dir / "l.ply").triangles);
+  // A polygon of more corners than ear clipping gets through in seconds is refused, not cut for
+  // hours.
+  std::string big = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf";
+  for (int c = 0; c < 65537; ++c) big += " " + std::to_string(c % 3 + 1);
+  write_bytes(dir / "big.obj", big + "\n");
+  EXPECT_NE(error_of(dir / "big.obj")
+                .find("a face of 65537 corners (polygons of more than 65536 "
+                      "are not read)"),
+            std::string::npos)
+      << error_of(dir / "big.obj");
 }
 
 // Lines ended by a carriage return alone (classic Mac OS) are lines: an OBJ read as one vertex

@@ -20,6 +20,7 @@
 
 #include "core/errors.h"
 #include "core/mesh/mesh_io.h"
+#include "core/mesh/polygon_triangulation.h"
 
 namespace isotile {
 
@@ -204,16 +205,47 @@ std::string vertex_error(std::uint64_t face, std::int64_t vertex, std::uint64_t 
          std::to_string(vertex) + " but there are " + std::to_string(count) + " vertices";
 }
 
-// Polygons of more than four corners become a fan around the first corner.
-void add_polygon(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
-  if (n == 3) {
-    mesh.triangles.push_back({c[0], c[1], c[2]});
-  } else if (n == 4) {
-    mesh.quads.push_back({c[0], c[1], c[2], c[3]});
-  } else {
-    for (std::size_t i = 1; i + 1 < n; ++i) mesh.triangles.push_back({c[0], c[i], c[i + 1]});
+// A file's faces: triangles, quads (kept), and polygons of more than four corners, which become
+// triangles by ear clipping (polygon_triangulation.h) once every position is known (a PLY's faces
+// may come before its vertices); until then they hold the places of their n - 2 triangles.
+class Faces {
+ public:
+  // Ear clipping takes time growing with the square of a polygon's corners: 65,536 take seconds,
+  // and a file's one polygon of millions would take hours. No mesh tool writes such a face.
+  static constexpr std::size_t kMaxCorners = 65536;
+
+  explicit Faces(const Reader& reader) : reader_(reader) {}
+
+  void add(Mesh& mesh, const std::uint32_t* c, std::size_t n) {
+    if (n > kMaxCorners)
+      reader_.fail("a face of " + std::to_string(n) + " corners (polygons of more than " +
+                   std::to_string(kMaxCorners) + " are not read)");
+    if (n == 3) {
+      mesh.triangles.push_back({c[0], c[1], c[2]});
+    } else if (n == 4) {
+      mesh.quads.push_back({c[0], c[1], c[2], c[3]});
+    } else {
+      at_.push_back(mesh.triangles.size());
+      start_.push_back(corners_.size());
+      corners_.insert(corners_.end(), c, c + n);
+      mesh.triangles.resize(mesh.triangles.size() + n - 2);
+    }
   }
-}
+  // Call once the positions are read and the indices checked.
+  void triangulate(Mesh& mesh) const {
+    for (std::size_t p = 0; p < at_.size(); ++p) {
+      const std::size_t end = p + 1 < at_.size() ? start_[p + 1] : corners_.size();
+      triangulate_polygon(mesh.positions, corners_.data() + start_[p], end - start_[p],
+                          mesh.triangles.data() + at_[p]);
+    }
+  }
+
+ private:
+  const Reader& reader_;
+  std::vector<std::size_t> at_;     // each polygon's first triangle
+  std::vector<std::size_t> start_;  // each polygon's first corner in corners_
+  std::vector<std::uint32_t> corners_;
+};
 
 // Ends a run of a triangle strip; no vertex can carry this index (a mesh has fewer than 2^32 - 1).
 constexpr std::uint32_t kStripRestart = std::numeric_limits<std::uint32_t>::max();
@@ -410,6 +442,7 @@ class PlyReader : Reader {
            " bytes after the last element's records (the header's counts say less than the file "
            "holds)");
     }
+    faces_.triangulate(mesh);
     return mesh;
   }
 
@@ -791,7 +824,7 @@ class PlyReader : Reader {
         if (strips) {
           add_strips(mesh, corners.data(), n);
         } else {
-          add_polygon(mesh, corners.data(), n);
+          faces_.add(mesh, corners.data(), n);
         }
       }
       if (t) end_record(*t, e, f);
@@ -803,6 +836,7 @@ class PlyReader : Reader {
   const unsigned char* end_;
   const unsigned char* pos_ = nullptr;
   std::vector<PlyElement> elements_;
+  Faces faces_{*this};
   PlyFormat format_ = PlyFormat::Ascii;
   bool swap_ = false;
   std::size_t lines_before_ = 0;  // text lines before the current Text starts
@@ -874,6 +908,7 @@ class ObjReader : Reader {
     }
     const std::uint64_t nv = mesh.positions.size();
     std::vector<std::uint32_t> face;
+    Faces faces(*this);
     face_start.push_back(corners.size());
     for (std::size_t f = 0; f + 1 < face_start.size(); ++f) {
       face.clear();
@@ -881,8 +916,9 @@ class ObjReader : Reader {
         if (corners[c] >= nv) fail(vertex_error(f, static_cast<std::int64_t>(corners[c] + 1), nv));
         face.push_back(static_cast<std::uint32_t>(corners[c]));
       }
-      add_polygon(mesh, face.data(), face.size());
+      faces.add(mesh, face.data(), face.size());
     }
+    faces.triangulate(mesh);
     if (normals_match && normals.size() == nv && nv > 0) mesh.normals = std::move(normals);
     return mesh;
   }
@@ -981,6 +1017,7 @@ Mesh read_off(const Reader& r, const std::vector<char>& data) {
     t.skip_line();  // colours and texture coordinates
   }
   std::vector<std::uint32_t> corners;
+  Faces faces(r);
   for (std::uint64_t f = 0; f < nf; ++f) {
     const std::string_view s = t.token();
     std::uint64_t n;
@@ -1004,12 +1041,13 @@ Mesh read_off(const Reader& r, const std::vector<char>& data) {
       if (v < 0 || static_cast<std::uint64_t>(v) >= nv) r.fail(vertex_error(f, v, nv));
       corners[c] = static_cast<std::uint32_t>(v);
     }
-    add_polygon(mesh, corners.data(), n);
+    faces.add(mesh, corners.data(), n);
     t.skip_line();
   }
   if (const std::string_view extra = t.token(); !extra.empty())
     r.fail(at() + quoted(extra) + " after the last face (the counts line says " +
            std::to_string(nf) + " faces)");
+  faces.triangulate(mesh);
   return mesh;
 }
 

@@ -11,6 +11,7 @@
 
 #include "core/errors.h"
 #include "core/mesh/mesh_io.h"
+#include "core/mesh/polygon_triangulation.h"
 
 namespace isotile {
 
@@ -191,9 +192,17 @@ bool PlyFaceStream::next(std::size_t max_triangles, std::vector<Tri>& out) {
         throw InputError(path_.string() + ": face " + std::to_string(read_) +
                          " references a vertex past the " + std::to_string(nv) + " vertices");
     }
-    for (int k = 1; k + 1 < count; ++k)
-      out.push_back({static_cast<std::uint32_t>(idx[0]), static_cast<std::uint32_t>(idx[k]),
-                     static_cast<std::uint32_t>(idx[k + 1])});
+    std::uint32_t corner[256];
+    for (int k = 0; k < count; ++k) corner[k] = static_cast<std::uint32_t>(idx[k]);
+    // As read_mesh() takes them: a quad's two halves on 0-2, a larger polygon's ears.
+    const std::size_t at = out.size();
+    out.resize(at + static_cast<std::size_t>(count - 2));
+    if (count <= 4) {
+      out[at] = {corner[0], corner[1], corner[2]};
+      if (count == 4) out[at + 1] = {corner[0], corner[2], corner[3]};
+    } else {
+      triangulate_polygon(positions_, corner, static_cast<std::size_t>(count), &out[at]);
+    }
     ++read_;
   }
   if (read_ == faces_) check_end();

@@ -31,9 +31,10 @@ class PlyFaceStream {
   std::uint64_t faces() const { return faces_; }
 
   // Appends the triangles of the next faces to `out` until it holds at least `max_triangles`
-  // or the faces end (a quad gives 0 1 2 and 0 2 3, a larger polygon a fan from its first
-  // corner); false when no face was left. Throws InputError for an index past the vertices, a
-  // face of fewer than three corners, a file cut short, or data after the last face.
+  // or the faces end (a quad gives 0 1 2 and 0 2 3, a larger polygon its ears, as read_mesh()
+  // cuts it: polygon_triangulation.h); false when no face was left. Throws InputError for an index
+  // past the vertices, a face of fewer than three corners, a file cut short, or data after the last
+  // face.
   bool next(std::size_t max_triangles, std::vector<Tri>& out);
 
  private:
