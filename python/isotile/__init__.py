@@ -184,7 +184,9 @@ def marching_cubes(volume, level=None, *, spacing=(1., 1., 1.), gradient_directi
         vol, whole, None if level is None else float(level), spacing_xyz, _METHODS[method],
         quality, backend, bool(normals), True, mask, threads)
     if len(faces) == 0:
-        raise NoSurface("No surface found at the given iso value.")
+        raise NoSurface("No surface found at the given iso value." + (
+            " Dual Contouring makes no face where the surface meets only the array's border "
+            "(a 2x2x2 array has no edge inside)." if method == "dc" else ""))
     if not allow_degenerate:
         verts, faces, norms, values = _without_repeated_points(verts, faces, norms, values)
         # Every triangle had two corners at one point (the level is a sample value at which the

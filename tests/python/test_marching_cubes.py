@@ -353,6 +353,12 @@ def test_allow_degenerate_false_drops_the_triangles_that_repeat_a_point():
     assert len(isotile.marching_cubes(one, 1.0)[1]) == 8
     with pytest.raises(isotile.NoSurface, match="every triangle has two corners at one point"):
         isotile.marching_cubes(one, 1.0, allow_degenerate=False)
+    # Dual Contouring on one cell: a surface Marching Cubes finds, no face; the message says why.
+    cell = np.zeros((2, 2, 2), np.float32)
+    cell[0, 0, 0] = 1
+    assert len(isotile.marching_cubes(cell, 0.5)[1]) == 1
+    with pytest.raises(isotile.NoSurface, match="meets only the array's border"):
+        isotile.marching_cubes(cell, 0.5, method="dc")
     # Nothing to drop: the mesh is unchanged.
     s = sphere((20, 21, 22), radius=7.3)
     a, b = isotile.marching_cubes(s, 0.5), isotile.marching_cubes(s, 0.5, allow_degenerate=False)
