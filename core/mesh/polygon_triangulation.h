@@ -3,8 +3,8 @@
 // A fan from the first corner covers a convex polygon but folds over a concave one (an L, a
 // letter's outline from a CAD export): triangles outside the polygon, overlapping others, which
 // every measure, simplification and picture then takes for the surface. Ear clipping in the
-// polygon's plane (its Newell normal) keeps every triangle inside. A convex polygon gives exactly
-// the fan (ears are taken from the first corner on), so meshes that were right stay the same bytes.
+// polygon's plane (its Newell normal) keeps every triangle inside. A convex polygon (every corner
+// turning the same way) is still the fan, so meshes that were right stay the same bytes.
 #pragma once
 
 #include <cstddef>
