@@ -345,6 +345,7 @@ void set_grid_uniforms(GLuint prog, const GridUniforms& u) {
   if (static_cast<double>(iso_float) < u.iso)
     iso_float = std::nextafter(iso_float, std::numeric_limits<float>::infinity());
   glProgramUniform1f(prog, glGetUniformLocation(prog, "u_iso_float"), iso_float);
+  glProgramUniform1f(prog, glGetUniformLocation(prog, "u_iso_nearest"), static_cast<float>(u.iso));
   d3("u_origin", u.origin);
   d3("u_spacing", u.spacing);
   check("setting the grid uniforms");

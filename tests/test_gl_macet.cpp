@@ -104,6 +104,27 @@ TEST_P(GlMacet, TiesMovedAlongTheLevelSetMatchCpu) {
   expect_same_mesh(run(GetParam(), view, opts(m)), cpu, view, "labels");
 }
 
+// Float32 samples holding the float nearest the isovalue (0.1f at 0.1) are ties on the device
+// too (macet_common.glsl's at_tie, from the float the CPU rounds the isovalue to).
+TEST_P(GlMacet, Float32TiesOfTheNearestFloatMatchCpu) {
+  REQUIRE_GL();
+  const Index3 n{16, 16, 16};
+  std::vector<float> samples(static_cast<std::size_t>(n[0] * n[1] * n[2]), 0.0f);
+  for (std::int64_t k = 0; k < n[2]; ++k)
+    for (std::int64_t j = 0; j < n[1]; ++j)
+      for (std::int64_t i = 0; i < n[0]; ++i)
+        if ((i - 7.5) * (i - 7.5) + (j - 7.5) * (j - 7.5) + (k - 7.5) * (k - 7.5) < 25)
+          samples[static_cast<std::size_t>(i + n[0] * (j + n[1] * k))] = 0.1f;
+  const VolumeView view = dense_view(samples.data(), ScalarType::Float32, n);
+  for (MacetQuality quality : {MacetQuality::Fast, MacetQuality::Max}) {
+    const MacetOptions m{.iso = 0.1, .normals = true, .quality = quality};
+    const Mesh cpu = macet(view, m);
+    ASSERT_GT(cpu.triangles.size(), 500u);
+    expect_same_mesh(run(GetParam(), view, opts(m)), cpu, view,
+                     quality == MacetQuality::Fast ? "0.1f, fast" : "0.1f, max");
+  }
+}
+
 // Slabs along z (a volume larger than the device's memory): each slab's region holds its cells
 // plus macet_halo(), so the mesh is the whole volume's.
 TEST_P(GlMacet, SlabsMatchWholeVolume) {

@@ -16,7 +16,8 @@
 //          pushed off the isovalue first and keeps its crossings on the interpolant). "Still at
 //          the isovalue": exactly, or a tie moved along the level set to within the root
 //          search's tolerance of it (label maps: the interpolant there is the isovalue up to
-//          rounding, or nearly).
+//          rounding, or nearly). In float32 data a tie is a sample holding the float nearest
+//          the isovalue (--iso 0.1 on samples of 0.1f, 1.5e-9 above it).
 //   DC:    a pinned tie. Two cells' vertices coincide only where every crossing of both cells
 //          lies on one tie they share, which needs a pinned tie; other ties keep their exact
 //          crossings, so surfaces and sharp edges through sample planes stay exact.

@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -256,13 +257,21 @@ inline bool spreading_tie(const BitGrid& grid, const std::int64_t s[3]) {
 // find_root's tolerance of it, where the root search would stop at the end point itself: on label
 // maps a tie moved by the push or the smoothing lands where the interpolant is the isovalue up to
 // rounding (4.4e-16) or nearly, and all its crossings would then fall on it or within 1e-6 of it.
+// A float32 sample holding the float nearest the isovalue is a tie too: float32 data of 0.1 at
+// --iso 0.1 (whose double lies 1.5e-9 below 0.1f) had the crossings of such samples within 1.5e-8
+// of them, and 466 degenerate triangles of 1,016 on a ball where the tie 0.10000000149011612 gave
+// none.
 template <class T>
 double edge_crossing(const Field<T>& field, const BitGrid& grid, const std::int64_t s0[3],
                      const std::int64_t s1[3], const P3& p0, const P3& p1, double f0, double f1,
                      bool straight, typename Field<T>::Corners* cache = nullptr) {
   const double tol = kRootTolerance * std::abs(f0 - f1);
   const auto at_tie = [&](double f, const std::int64_t s[3]) {
-    return f == 0 || (std::abs(f) <= tol && field.sample(s[0], s[1], s[2]) == field.iso);
+    if (f == 0) return true;
+    if (std::abs(f) > tol) return false;
+    const double v = field.sample(s[0], s[1], s[2]);
+    return v == field.iso ||
+           (std::is_same_v<T, float> && v == static_cast<double>(static_cast<float>(field.iso)));
   };
   if (at_tie(f0, s0) && spreading_tie(grid, s0)) return kTieOffset;
   if (at_tie(f1, s1) && spreading_tie(grid, s1)) return 1 - kTieOffset;

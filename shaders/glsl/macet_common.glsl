@@ -132,10 +132,16 @@ double find_root(dvec3 p0, dvec3 p1, double f0, double f1) {
 dvec4 disp_at(ivec3 g) { return disp_in[region_index(g)]; }
 
 // edge_crossing's end "still at the isovalue": exactly, or a tie moved to within find_root's
-// tolerance of it. `f`: this end's value, `g`: the other end's.
+// tolerance of it. `f`: this end's value, `g`: the other end's. A float32 sample holding the float
+// nearest the isovalue is a tie too (core/extract/macet_field.h).
 bool at_tie(double f, double g, ivec3 s) {
   precise double tol = MACET_ROOT_TOLERANCE * abs(f - g);
-  return f == 0.0LF || (abs(f) <= tol && sample_at(s) == u_iso);
+#ifdef SAMPLE_F32
+  bool tie = sample_at(s) == u_iso || sample_at(s) == double(u_iso_nearest);
+#else
+  bool tie = sample_at(s) == u_iso;
+#endif
+  return f == 0.0LF || (abs(f) <= tol && tie);
 }
 
 // The linear estimate of the crossing on edge (s, axis) between its displaced end points (the

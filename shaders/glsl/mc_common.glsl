@@ -56,6 +56,7 @@ uniform ivec3 u_box_lo;       // cells extracted: [u_box_lo, u_box_hi), global;
 uniform ivec3 u_box_hi;       // their vertices: samples in the closed box [u_box_lo, u_box_hi]
 uniform double u_iso;
 uniform float u_iso_float;  // the smallest float >= u_iso (core/extract/inside_bits.h's InsideTest)
+uniform float u_iso_nearest;  // the float nearest u_iso: what float32 samples hold of it (Macet's ties)
 uniform dvec3 u_origin;
 uniform dvec3 u_spacing;
 
