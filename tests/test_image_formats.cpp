@@ -625,6 +625,37 @@ TEST(ItkRegions, ImageJSlicesKeepTheirCalibration) {
   fs::remove_all(dir);
 }
 
+// NaN and Inf in a NIfTI file's floating-point samples are refused, as in every other format:
+// ITK's nifti library turned them into 0, and the volume was meshed with exit 0 (--memory, which
+// reads plain samples itself, refused it).
+TEST(ItkRegions, NiftiNanSamplesAreRefused) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-nan-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  for (const ScalarType type : {ScalarType::Float32, ScalarType::Float64}) {
+    Volume v(type, {5, 6, 7});
+    visit_scalar(type, [&](auto tag) {
+      using T = decltype(tag);
+      for (std::int64_t i = 0; i < v.sample_count(); ++i) v.data<T>()[i] = static_cast<T>(i % 9);
+      v.data<T>()[1 + 5 * (2 + 6 * 3)] = std::numeric_limits<T>::quiet_NaN();
+    });
+    for (const char* name : {"n.nii", "n.nii.gz"}) {
+      SCOPED_TRACE(std::string(scalar_name(type)) + " " + name);
+      const fs::path p = dir / name;
+      write_itk(p.string(), v.bytes(), type, v.dims(), {1, 1, 1}, {0, 0, 0}, kIdentity3);
+      try {
+        read_volume(p.string());
+        ADD_FAILURE() << "read";
+      } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("1 sample is NaN or Inf (first at x=1, y=2, z=3)"),
+                  std::string::npos)
+            << e.what();
+      }
+    }
+  }
+  fs::remove_all(dir);
+}
+
 // NIfTI's scl_slope and scl_inter are applied; such a file is read whole out of core.
 TEST(ItkRegions, NiftiRescaleIsApplied) {
   REQUIRE_ITK();

@@ -211,11 +211,14 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     throw InputError(path + ": " + std::to_string(size) + " compressed bytes cannot hold " +
                      dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
   ImageHeaderCheck out;
-  if (gz)
+  if (gz) {
     out.compressed = ImageHeaderCheck::Compressed{
         path, 0, offset + bytes, true,
         dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples after " +
             std::to_string(offset) + " header bytes"};
+    if (is_floating(*type))
+      out.compressed->floats = ImageHeaderCheck::Compressed::Floats{*type, dims, offset, swap};
+  }
   // A slope of 0 (or not a number) means no scaling in NIfTI, intercept included; ITK 5.2 takes it
   // for 1 and adds the intercept, shifting every sample. Such a file would read wrong through it.
   if ((slope == 0 || !std::isfinite(slope)) && std::isfinite(inter) && inter != 0)
@@ -411,6 +414,35 @@ void verify_compressed(const ImageHeaderCheck& check) {
   if (inflateInit2(&z, 15 + 32) != Z_OK) throw IoError(c.file + ": out of memory for zlib");
   std::vector<unsigned char> in(1 << 20), out(1 << 20);
   std::uint64_t total = 0, left = c.limit ? c.limit : UINT64_MAX;  // compressed bytes to read
+  // The floating-point samples' check: bytes gathered into whole samples across the buffers.
+  const std::size_t sample_size = c.floats ? scalar_size(c.floats->type) : 0;
+  const std::uint64_t samples_end =
+      c.floats ? c.floats->at +
+                     sample_size * static_cast<std::uint64_t>(c.floats->dims[0] *
+                                                              c.floats->dims[1] * c.floats->dims[2])
+               : 0;
+  unsigned char partial[8];
+  std::size_t partial_size = 0;
+  std::int64_t non_finite = 0, first = -1, index = 0;
+  const auto check_floats = [&](const unsigned char* bytes, std::uint64_t from, std::size_t n) {
+    const std::uint64_t lo = std::max(from, c.floats->at), hi = std::min(from + n, samples_end);
+    for (std::uint64_t p = lo; p < hi; ++p) {
+      partial[partial_size++] = bytes[p - from];
+      if (partial_size < sample_size) continue;
+      partial_size = 0;
+      if (c.floats->swap) std::reverse(partial, partial + sample_size);
+      double v;
+      if (sample_size == 4) {
+        float f;
+        std::memcpy(&f, partial, 4);
+        v = f;
+      } else {
+        std::memcpy(&v, partial, 8);
+      }
+      if (!std::isfinite(v) && non_finite++ == 0) first = index;
+      ++index;
+    }
+  };
   bool ended = false;
   int code = Z_OK;
   // After a gzip member: whether another follows, i.e. the next two bytes are gzip's magic. Other
@@ -444,6 +476,7 @@ void verify_compressed(const ImageHeaderCheck& check) {
     z.next_out = out.data();
     z.avail_out = static_cast<uInt>(out.size());
     code = inflate(&z, Z_NO_FLUSH);
+    if (c.floats) check_floats(out.data(), total, out.size() - z.avail_out);
     total += out.size() - z.avail_out;
     if (code == Z_STREAM_END) {
       // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip, and
@@ -481,6 +514,14 @@ void verify_compressed(const ImageHeaderCheck& check) {
     throw InputError(c.file + ": compressed data inflates to " + std::to_string(total) +
                      " bytes but " + expected + " were expected" +
                      (total < c.need ? " (too short)" : " (too long)"));
+  if (non_finite > 0) {
+    const Index3& d = c.floats->dims;
+    throw InputError(c.file + ": " + std::to_string(non_finite) +
+                     (non_finite == 1 ? " sample is" : " samples are") +
+                     " NaN or Inf (first at x=" + std::to_string(first % d[0]) +
+                     ", y=" + std::to_string(first / d[0] % d[1]) + ", z=" +
+                     std::to_string(first / d[0] / d[1]) + "); isosurfaces need finite values");
+  }
 }
 
 }  // namespace isotile

@@ -32,6 +32,15 @@ struct ImageHeaderCheck {
     std::string what;          // the samples, e.g. "256x256x133 uint8 samples"
     bool members = false;      // gzip of exactly `need` in one or more members (NRRD)
     std::uint64_t limit = 0;   // the stream's compressed bytes when the header says (else 0)
+    // NIfTI's floating-point samples, checked for NaN and Inf as they inflate: ITK's nifti
+    // library turns them into 0 (a volume whose samples it should refuse, meshed, exit 0).
+    struct Floats {
+      ScalarType type = ScalarType::Float32;
+      Index3 dims{0, 0, 0};
+      std::uint64_t at = 0;  // where the samples start in the inflated stream
+      bool swap = false;     // stored in the other byte order
+    };
+    std::optional<Floats> floats;
   };
   std::optional<Compressed> compressed;
 };

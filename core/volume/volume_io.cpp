@@ -477,8 +477,11 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     volume.set_series(info.series_uid, info.series_description);
     const std::optional<PlainData> plain = plain_layout(input, kind, check, info);
     // A plainly stored TIFF is read as out of core reads it (ITK's reader cannot read all of
-    // them, above); the other formats' plain samples are ITK's to read.
-    if (plain && (kind == InputKind::Tiff || kind == InputKind::TiffStack))
+    // them, above), and so are a NIfTI file's plain floating-point samples: ITK's nifti library
+    // turns NaN and Inf into 0, and a volume refused with --memory was meshed in core, exit 0.
+    // The other formats' plain samples are ITK's to read.
+    if (plain && (kind == InputKind::Tiff || kind == InputKind::TiffStack ||
+                  (kind == InputKind::Nifti && is_floating(info.type))))
       read_plain_data(*plain, volume);
     else
       read_itk_data(in, info, volume.bytes());
