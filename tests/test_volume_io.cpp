@@ -790,6 +790,32 @@ TEST_F(VolumeIo, NrrdMalformedHeader) {
             "cannot open " + missing + ": No such file or directory");
 }
 
+// An axis's space direction of no length (zero, underflowing, or `none`) gives its samples no
+// distance apart: refused. They were read 1 apart, every axis's direction the identity, exit 0.
+TEST_F(VolumeIo, NrrdSpaceDirectionsOfNoLengthAreRefused) {
+  const std::string file = path("d.nrrd");
+  const auto nrrd = [&](const std::string& directions) {
+    write_file(file,
+               "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nspace: LPS\n"
+               "space directions: " +
+                   directions + "\nspace origin: (5,6,7)\nencoding: raw\n\n" +
+                   std::string(8, '\1'));
+  };
+  for (const auto& [directions, says] :
+       {std::pair{"(0,0,0) (1.2,1.6,0) (0,0,3)",
+                  "NRRD axis 1 of 3 has a space direction of no length"},
+        std::pair{"(1,0,0) (0,1e-300,0) (0,0,3)",
+                  "NRRD axis 2 of 3 has a space direction of no length"},
+        std::pair{"(1,0,0) (0,1,0) none", "NRRD axis 3 of 3 has no space direction"}}) {
+    SCOPED_TRACE(directions);
+    nrrd(directions);
+    EXPECT_TRUE(contains(message_of<InputError>([&] { read_nrrd(file); }), says));
+    EXPECT_TRUE(contains(message_of<InputError>([&] { read_volume_header(file); }), says));
+  }
+  nrrd("(0,0.6,0.8) (1.2,1.6,0) (0,0,3)");
+  EXPECT_EQ(read_nrrd(file).spacing(), (Vec3d{1, 2, 3}));
+}
+
 TEST_F(VolumeIo, NrrdNonFinite) {
   std::vector<float> values(8, 1.0f);
   values[5] = std::numeric_limits<float>::infinity();

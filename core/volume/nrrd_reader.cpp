@@ -173,6 +173,25 @@ HeaderInfo header_info(const std::string& path, const Nrrd& nrrd) {
   if (!type)
     throw InputError(path + ": NRRD sample type '" + airEnumStr(nrrdType, nrrd.type) +
                      "' is not supported (int8 to uint32, float or double)");
+  // In a NRRD with a space, each axis's space direction is its step in that space: a vector of
+  // no length (0, 1e-300, or `none`) gives it none, and the made-up spacing of 1 and identity
+  // directions that followed put the mesh elsewhere, rotated, with exit 0.
+  if (nrrd.spaceDim > 0)
+    for (unsigned a = first; a < first + 3; ++a) {
+      const NrrdAxisInfo& axis = nrrd.axis[a];
+      double sum = 0;
+      bool finite = true;
+      for (unsigned d = 0; d < nrrd.spaceDim; ++d) {
+        finite = finite && std::isfinite(axis.spaceDirection[d]);
+        sum += axis.spaceDirection[d] * axis.spaceDirection[d];
+      }
+      if (!finite || !(sum > 0) || !std::isfinite(sum))
+        throw InputError(path + ": NRRD axis " + std::to_string(a + 1) + " of " +
+                         std::to_string(nrrd.dim) + " has " +
+                         (finite ? "a space direction of no length" : "no space direction") +
+                         " (`space directions`), so the samples along it are no distance "
+                         "apart; give each of the volume's axes a vector");
+    }
   HeaderInfo h{*type, {}, {}, nrrd_origin(nrrd), nrrd_world(nrrd, first)};
   for (int a = 0; a < 3; ++a) {
     const NrrdAxisInfo& axis = nrrd.axis[first + a];
