@@ -1073,6 +1073,52 @@ TEST_F(DicomDir, UnevenOrDuplicateSlicesAreErrors) {
 
 // One slice whose position moves across the normal, the first and the last on the stack's axis:
 // named (only the last slice's position was compared, and the slice was stacked in place).
+// Every slice's PixelSpacing must be the first's (GDCM stacks them at the first's: half a series
+// at another scale came out at it, exit 0), and none may be 0 (GDCM takes 1 mm for it).
+TEST_F(DicomDir, PixelSpacingsThatDifferOrAreZeroAreRefused) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  const auto set_spacing = [&](int number, const std::string& value) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%08d.dcm", number);
+    std::string bytes = testing::slurp(dir_ / name);
+    const std::size_t tag =
+        bytes.find(std::string("\x28\x00\x30\x00"
+                               "DS\x08\x00",
+                               8));
+    ASSERT_NE(tag, std::string::npos);
+    ASSERT_EQ(value.size(), 8u);
+    bytes.replace(tag + 8, 8, value);
+    std::ofstream(dir_ / name, std::ios::binary) << bytes;
+  };
+  const auto error_of = [](const auto& read) {
+    try {
+      read();
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(read)");
+  };
+  for (int n = 50; n < 55; ++n) copy(n);
+  ASSERT_EQ(read_volume_header(dir_.string()).spacing[0], 0.5);
+  set_spacing(52, "0.9\\0.9 ");
+  for (const bool header : {true, false}) {
+    const std::string msg = error_of([&] {
+      if (header)
+        read_volume_header(dir_.string());
+      else
+        read_volume(dir_.string());
+    });
+    EXPECT_NE(msg.find("00000052.dcm: pixel spacing 0.9 x 0.9 where "), std::string::npos) << msg;
+    EXPECT_NE(msg.find("one volume needs it alike in every slice"), std::string::npos) << msg;
+  }
+  for (int n = 50; n < 55; ++n) set_spacing(n, "0\\0.5   ");
+  const std::string msg = error_of([&] { read_volume_header(dir_.string()); });
+  EXPECT_NE(msg.find("PixelSpacing (0028,0030) holds '0\\0.5'; a pixel spacing is two positive"),
+            std::string::npos)
+      << msg;
+}
+
 TEST_F(DicomDir, ASliceOffTheStacksAxisIsNamed) {
   REQUIRE_ITK();
   ISOTILE_REQUIRE_SHARED(series_);

@@ -27,6 +27,7 @@ const gdcm::Tag kPlanePosition(0x0020, 0x9113), kPlaneOrientation(0x0020, 0x9116
 const gdcm::Tag kPixelMeasures(0x0028, 0x9110), kValueTransformation(0x0028, 0x9145);
 const gdcm::Tag kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037);
 const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
+const gdcm::Tag kImagerPixelSpacing(0x0018, 0x1164);
 const gdcm::Tag kIntercept(0x0028, 0x1052), kSlope(0x0028, 0x1053);
 const gdcm::Tag kGridFrameOffsets(0x3004, 0x000C);
 
@@ -163,6 +164,17 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
   out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
   out.spacing_element = element_name(spacing_tag);
+  // A pixel spacing of 0 (or less) is no distance: GDCM took 1 mm for it without a word.
+  if ((spacing_tag == kPixelSpacing || spacing_tag == kImagerPixelSpacing) && has(spacing_tag)) {
+    const gdcm::DataElement& e = ds.GetDataElement(spacing_tag);
+    const std::vector<double> v = decimals(e, path);
+    if (v.size() != 2 || !(v[0] > 0) || !(v[1] > 0)) {
+      std::string values;
+      for (const std::string& x : text_values(e)) values += (values.empty() ? "" : "\\") + x;
+      throw InputError(path + ": " + out.spacing_element + " holds '" + values +
+                       "'; a pixel spacing is two positive distances (GDCM takes 1 mm for a 0)");
+    }
+  }
   if (!ds.FindDataElement(kPerFrameGroups)) {
     if (frames < 2) return out;
     if (!has(kGridFrameOffsets) || !has(kPosition) || !has(kOrientation)) {

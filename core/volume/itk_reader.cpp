@@ -37,6 +37,13 @@ namespace isotile {
 
 namespace {
 
+// A distance as people write it (0.5, not 0.500000).
+std::string decimal(double v) {
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
 namespace fs = std::filesystem;
 using IOComponent = itk::IOComponentEnum;
 
@@ -416,6 +423,17 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
           if (std::abs(h[k].direction[3 * c] - first.direction[3 * c]) > 1e-4 ||
               std::abs(h[k].direction[3 * c + 1] - first.direction[3 * c + 1]) > 1e-4)
             throw InputError(files[k] + ": slice orientation differs from " + files[0] + "'s");
+      // GDCM stacks the slices at the first one's pixel spacing, as it does a multi-frame file's
+      // frames (dicom_frames.cpp refuses those): half a series at another scale came out at the
+      // first's, exit 0.
+      for (std::size_t k = 0; k < files.size(); ++k)
+        if (std::abs(h[k].spacing[0] - first.spacing[0]) > 1e-6 * first.spacing[0] ||
+            std::abs(h[k].spacing[1] - first.spacing[1]) > 1e-6 * first.spacing[1])
+          throw InputError(files[k] + ": pixel spacing " + decimal(h[k].spacing[1]) + " x " +
+                           decimal(h[k].spacing[0]) + " where " + files[0] + "'s is " +
+                           decimal(first.spacing[1]) + " x " + decimal(first.spacing[0]) +
+                           " (PixelSpacing, rows then columns); one volume needs it alike in "
+                           "every slice");
       std::vector<Vec3d> origins(files.size());
       for (std::size_t k = 0; k < files.size(); ++k) origins[k] = h[k].origin;
       const SliceStack stack = stack_along_normal(
