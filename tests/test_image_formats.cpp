@@ -1119,6 +1119,31 @@ TEST_F(DicomDir, PixelSpacingsThatDifferOrAreZeroAreRefused) {
       << msg;
 }
 
+// MONOCHROME1: ITK's reader inverts the stored values (to MONOCHROME2) before the rescale, so the
+// samples are not in the file's units (-1024 HU came out as 64511): refused, not meshed.
+TEST_F(DicomDir, Monochrome1IsRefused) {
+  REQUIRE_ITK();
+  ISOTILE_REQUIRE_SHARED(series_);
+  for (int n = 50; n < 54; ++n) {
+    copy(n);
+    char name[32];
+    std::snprintf(name, sizeof name, "%08d.dcm", n);
+    std::string bytes = testing::slurp(dir_ / name);
+    const std::size_t at = bytes.find("MONOCHROME2");
+    ASSERT_NE(at, std::string::npos);
+    bytes[at + 10] = '1';
+    std::ofstream(dir_ / name, std::ios::binary) << bytes;
+  }
+  try {
+    read_volume_header(dir_.string());
+    ADD_FAILURE() << "read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("PhotometricInterpretation MONOCHROME1"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 TEST_F(DicomDir, ASliceOffTheStacksAxisIsNamed) {
   REQUIRE_ITK();
   ISOTILE_REQUIRE_SHARED(series_);

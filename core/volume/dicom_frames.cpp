@@ -28,6 +28,7 @@ const gdcm::Tag kPixelMeasures(0x0028, 0x9110), kValueTransformation(0x0028, 0x9
 const gdcm::Tag kPosition(0x0020, 0x0032), kOrientation(0x0020, 0x0037);
 const gdcm::Tag kPixelSpacing(0x0028, 0x0030);
 const gdcm::Tag kImagerPixelSpacing(0x0018, 0x1164);
+const gdcm::Tag kPhotometric(0x0028, 0x0004);
 const gdcm::Tag kIntercept(0x0028, 0x1052), kSlope(0x0028, 0x1053);
 const gdcm::Tag kGridFrameOffsets(0x3004, 0x000C);
 
@@ -164,6 +165,17 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
   out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
   out.spacing_element = element_name(spacing_tag);
+  // MONOCHROME1 only says how to display the values (the lowest white); ITK's DICOM reader turns
+  // such an image into MONOCHROME2 by inverting the stored values, before the rescale, so the
+  // samples were no longer in the file's units (-1024 HU read as 64511), exit 0.
+  if (has(kPhotometric)) {
+    std::vector<std::string> photometric = text_values(ds.GetDataElement(kPhotometric));
+    if (!photometric.empty() && photometric.front() == "MONOCHROME1")
+      throw InputError(path +
+                       ": PhotometricInterpretation MONOCHROME1 (the lowest value shown white): "
+                       "ITK's DICOM reader inverts such samples, so they would not be in the "
+                       "file's units (CT's Hounsfield units); isotile does not read them");
+  }
   // A pixel spacing of 0 (or less) is no distance: GDCM took 1 mm for it without a word.
   if ((spacing_tag == kPixelSpacing || spacing_tag == kImagerPixelSpacing) && has(spacing_tag)) {
     const gdcm::DataElement& e = ds.GetDataElement(spacing_tag);
