@@ -238,6 +238,18 @@ TEST(ItkRegions, TiffSlicesFromADirectoryOrAPattern) {
           ASSERT_EQ(got[(k * 6 + j) * 11 + i],
                     raw.data<std::uint16_t>()[((4 + k) * 16 + 3 + j) * 16 + 2 + i]);
   }
+  // A directory of numbered slices with one missing, or with a file outside their numbering, is
+  // refused as the pattern's stack is (every slice above the gap moved down a spacing, and a
+  // stray notes.tif became a slice, exit 0).
+  fs::create_directories(dir / "gap");
+  for (int k : {1, 2, 3, 4, 6, 7})
+    fs::copy_file(dir / "slices" / ("s_00" + std::to_string(k) + ".tif"),
+                  dir / "gap" / ("s_00" + std::to_string(k) + ".tif"));
+  expect_both_refuse(dir / "gap", "slice number 5 is missing, between s_004.tif and s_006.tif");
+  fs::copy_file(dir / "slices" / "s_005.tif", dir / "gap" / "s_005.tif");
+  EXPECT_EQ(read_volume((dir / "gap").string()).dims()[2], 7);
+  fs::copy_file(dir / "slices" / "s_005.tif", dir / "gap" / "notes.tif");
+  expect_both_refuse(dir / "gap", "notes.tif is not numbered as its other 7 slices are (s_N.tif)");
   // A slice of another size is an error naming it.
   write_itk((dir / "slices" / "s_017.tif").string(), raw.bytes(), ScalarType::UInt16, {8, 8, 1},
             {1, 1, 1}, {0, 0, 0}, kIdentity3);

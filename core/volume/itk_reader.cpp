@@ -21,7 +21,9 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <mutex>
+#include <set>
 #include <sstream>
 
 #include "core/errors.h"
@@ -519,11 +521,64 @@ bool tiff_name(const fs::path& p) {
   return ext == ".tif" || ext == ".tiff";
 }
 
+// A directory of slices numbered alike (one prefix and suffix round the last run of digits) must
+// hold every number from its first to its last, and no file outside that numbering: a missing
+// slice moved every one above it down a spacing, and a stray notes.tif became a slice, exit 0 (a
+// pattern's stack refused the same gap). Names that share no numbering are taken as they sort.
+void check_slice_numbers(const std::string& dir, const std::vector<std::string>& files) {
+  struct Numbered {
+    std::string prefix, suffix;
+    std::int64_t number = -1;
+  };
+  const auto numbered = [](const std::string& file) {
+    const std::string name = fs::path(file).filename().string();
+    Numbered n;
+    const std::size_t end = name.find_last_of("0123456789");
+    if (end == std::string::npos) return n;
+    std::size_t begin = end;
+    while (begin > 0 && name[begin - 1] >= '0' && name[begin - 1] <= '9') --begin;
+    if (end - begin >= 18) return n;
+    n.prefix = name.substr(0, begin);
+    n.suffix = name.substr(end + 1);
+    n.number = std::stoll(name.substr(begin, end + 1 - begin));
+    return n;
+  };
+  std::vector<Numbered> names;
+  for (const std::string& f : files) names.push_back(numbered(f));
+  // The numbering most of the files share.
+  std::map<std::pair<std::string, std::string>, std::size_t> counts;
+  for (const Numbered& n : names)
+    if (n.number >= 0) ++counts[{n.prefix, n.suffix}];
+  if (counts.empty()) return;
+  const auto common = std::max_element(counts.begin(), counts.end(),
+                                       [](auto& a, auto& b) { return a.second < b.second; });
+  if (common->second < 2 || 2 * common->second <= files.size()) return;
+  const auto& [prefix, suffix] = common->first;
+  std::map<std::int64_t, std::string> numbers;  // number -> file name
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    if (names[k].number < 0 || names[k].prefix != prefix || names[k].suffix != suffix)
+      throw InputError(dir + ": " + fs::path(files[k]).filename().string() +
+                       " is not numbered as its other " + std::to_string(common->second) +
+                       " slices are (" + prefix + "N" + suffix +
+                       "); a stack holds its slices only: move it out");
+    const std::string name = fs::path(files[k]).filename().string();
+    if (const auto [at, added] = numbers.emplace(names[k].number, name); !added)
+      throw InputError(dir + ": " + at->second + " and " + name + " are both slice " +
+                       std::to_string(names[k].number) + "; a stack has one of each");
+  }
+  for (auto at = numbers.begin(); std::next(at) != numbers.end(); ++at)
+    if (std::next(at)->first != at->first + 1)
+      throw InputError(dir + ": slice number " + std::to_string(at->first + 1) +
+                       " is missing, between " + at->second + " and " + std::next(at)->second +
+                       "; a stack needs every slice");
+}
+
 std::vector<std::string> stack_files(const ItkInput& input) {
   if (input.kind == ItkInput::Kind::TiffStack) {
     if (fs::is_directory(input.path)) {
       auto files = sorted_files(input.path, tiff_name);
       if (files.empty()) throw InputError(input.path + ": no .tif files in the directory");
+      check_slice_numbers(input.path, files);
       return files;
     }
     return numbered_files(input.path);
