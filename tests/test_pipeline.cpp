@@ -248,6 +248,19 @@ TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
                                            "auto (or --allow-empty to write the empty mesh)");
     }
   }
+  // Every number as it reads back: at ten digits an isovalue just above the largest sample read
+  // "no surface at iso 255: the samples range from 0 to 255, all below it".
+  PipelineOptions above;
+  above.iso = range.second + 1e-9;
+  try {
+    run_pipeline(input(nucleon), above);
+    ADD_FAILURE() << "no error";
+  } catch (const NoSurfaceError& e) {
+    EXPECT_NE(std::string(e.what()).find("no surface at iso " + std::to_string(int(range.second)) +
+                                         ".000000001: "),
+              std::string::npos)
+        << e.what();
+  }
   EXPECT_TRUE(fs::is_empty(dir_));
 }
 
