@@ -426,7 +426,15 @@ void verify_compressed(const ImageHeaderCheck& check) {
   std::int64_t non_finite = 0, first = -1, index = 0;
   const auto check_floats = [&](const unsigned char* bytes, std::uint64_t from, std::size_t n) {
     const std::uint64_t lo = std::max(from, c.floats->at), hi = std::min(from + n, samples_end);
-    for (std::uint64_t p = lo; p < hi; ++p) {
+    std::uint64_t p = lo;
+    // Whole samples straight from the buffer while none is pending (the usual case).
+    if (partial_size == 0 && !c.floats->swap && sample_size == 4)
+      for (; p + 4 <= hi; p += 4, ++index) {
+        float f;
+        std::memcpy(&f, bytes + (p - from), 4);
+        if (!std::isfinite(f) && non_finite++ == 0) first = index;
+      }
+    for (; p < hi; ++p) {
       partial[partial_size++] = bytes[p - from];
       if (partial_size < sample_size) continue;
       partial_size = 0;
@@ -516,11 +524,9 @@ void verify_compressed(const ImageHeaderCheck& check) {
                      (total < c.need ? " (too short)" : " (too long)"));
   if (non_finite > 0) {
     const Index3& d = c.floats->dims;
-    throw InputError(c.file + ": " + std::to_string(non_finite) +
-                     (non_finite == 1 ? " sample is" : " samples are") +
-                     " NaN or Inf (first at x=" + std::to_string(first % d[0]) +
-                     ", y=" + std::to_string(first / d[0] % d[1]) + ", z=" +
-                     std::to_string(first / d[0] / d[1]) + "); isosurfaces need finite values");
+    throw InputError(faulty_samples(c.file, non_finite, "NaN or Inf",
+                                    {first % d[0], first / d[0] % d[1], first / d[0] / d[1]}) +
+                     "; isosurfaces need finite values");
   }
 }
 

@@ -492,18 +492,22 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   return volume;
 }
 
+std::string faulty_samples(const std::string& what, std::int64_t count, const char* kind,
+                           const Index3& first) {
+  return what + ": " + std::to_string(count) + (count == 1 ? " sample is " : " samples are ") +
+         kind + " (first at x=" + std::to_string(first[0]) + ", y=" + std::to_string(first[1]) +
+         ", z=" + std::to_string(first[2]) + ")";
+}
+
 void check_finite(const VolumeView& view, const std::string& what) {
   if (!is_floating(view.type) || view.sample_count() <= 0) return;
-  // "WHAT: N samples are KIND (first at x=.., y=.., z=..)", at the sample's global position.
+  // At the first sample's global position.
   const auto found = [&](const NonFinite& n, const char* kind) {
     const std::int64_t i = n.first % view.dims[0];
     const std::int64_t j = n.first / view.dims[0] % view.dims[1];
     const std::int64_t k = n.first / view.dims[0] / view.dims[1];
-    return what + ": " + std::to_string(n.count) +
-           (n.count == 1 ? " sample is " : " samples are ") + kind +
-           " (first at x=" + std::to_string(view.box.lo[0] + i) +
-           ", y=" + std::to_string(view.box.lo[1] + j) +
-           ", z=" + std::to_string(view.box.lo[2] + k) + ")";
+    return faulty_samples(what, n.count, kind,
+                          {view.box.lo[0] + i, view.box.lo[1] + j, view.box.lo[2] + k});
   };
   const auto non_finite = [](auto v) { return !std::isfinite(v); };
   const auto refuse_non_finite = [&](const NonFinite& n) {

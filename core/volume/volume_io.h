@@ -168,6 +168,11 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path);
 // positions allow (1.4e-45); float32 samples never come near it.
 inline constexpr double kLargestFloat64Sample = 1e100;
 
+// "WHAT: N samples are KIND (first at x=.., y=.., z=..)": how check_finite names faulty samples,
+// `first` their first one's global position.
+std::string faulty_samples(const std::string& what, std::int64_t count, const char* kind,
+                           const Index3& first);
+
 // Throws InputError when a floating-point volume holds NaN or Inf samples, or float64 samples
 // past kLargestFloat64Sample, saying how many and where the first one is (x, y, z). Integer
 // volumes always pass.
