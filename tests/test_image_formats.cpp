@@ -651,10 +651,18 @@ TEST(ItkRegions, NiftiNanSamplesAreRefused) {
       for (std::int64_t i = 0; i < v.sample_count(); ++i) v.data<T>()[i] = static_cast<T>(i % 9);
       v.data<T>()[1 + 5 * (2 + 6 * 3)] = std::numeric_limits<T>::quiet_NaN();
     });
-    for (const char* name : {"n.nii", "n.nii.gz"}) {
+    // Plain, gzip'd, and rescaled (scl_slope 2.5: read through ITK, checked in the file first).
+    for (const char* name : {"n.nii", "n.nii.gz", "scaled.nii"}) {
       SCOPED_TRACE(std::string(scalar_name(type)) + " " + name);
       const fs::path p = dir / name;
       write_itk(p.string(), v.bytes(), type, v.dims(), {1, 1, 1}, {0, 0, 0}, kIdentity3);
+      if (std::string(name) == "scaled.nii") {
+        std::string bytes = testing::slurp(p);
+        const float slope = 2.5f;
+        std::memcpy(bytes.data() + 112, &slope, 4);
+        std::ofstream(p, std::ios::binary) << bytes;
+        ASSERT_TRUE(read_volume_header(p.string()).rescaled);
+      }
       try {
         read_volume(p.string());
         ADD_FAILURE() << "read";

@@ -217,7 +217,7 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
         dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples after " +
             std::to_string(offset) + " header bytes"};
     if (is_floating(*type))
-      out.compressed->floats = ImageHeaderCheck::Compressed::Floats{*type, dims, offset, swap};
+      out.compressed->floats = ImageHeaderCheck::Floats{*type, dims, offset, swap};
   }
   // A slope of 0 (or not a number) means no scaling in NIfTI, intercept included; ITK 5.2 takes it
   // for 1 and adds the intercept, shifting every sample. Such a file would read wrong through it.
@@ -231,6 +231,11 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     out.rescale_slope = slope;
     out.rescale_intercept = std::isfinite(inter) ? inter : 0;
   }
+  // Rescaled floating-point samples go through ITK, whose nifti library turns NaN and Inf into 0:
+  // checked in the file first (verify_plain_floats).
+  if (!gz && out.rescaled && is_floating(*type))
+    out.plain_floats =
+        ImageHeaderCheck::PlainFloats{path, ImageHeaderCheck::Floats{*type, dims, offset, swap}};
   // Trailing bytes past the samples are allowed by ITK; box reads want the exact layout.
   if (!gz && !out.rescaled && size == offset + bytes)
     out.plain = PlainData{
@@ -403,6 +408,87 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   return out;
 }
 
+namespace {
+
+// NIfTI's floating-point samples checked for NaN and Inf as their bytes go by, in pieces of any
+// size (an inflate buffer, a read), a sample split between two pieces included.
+class FloatScan {
+ public:
+  explicit FloatScan(const ImageHeaderCheck::Floats& f)
+      : f_(f),
+        size_(scalar_size(f.type)),
+        end_(f.at + size_ * static_cast<std::uint64_t>(f.dims[0] * f.dims[1] * f.dims[2])) {}
+
+  // The `n` bytes at offset `from` of the stream the samples lie in.
+  void feed(const unsigned char* bytes, std::uint64_t from, std::size_t n) {
+    const std::uint64_t lo = std::max(from, f_.at), hi = std::min(from + n, end_);
+    std::uint64_t p = lo;
+    // Whole samples straight from the piece while none is pending (the usual case).
+    if (partial_size_ == 0 && !f_.swap && size_ == 4)
+      for (; p + 4 <= hi; p += 4) {
+        float v;
+        std::memcpy(&v, bytes + (p - from), 4);
+        count(std::isfinite(v));
+      }
+    for (; p < hi; ++p) {
+      partial_[partial_size_++] = bytes[p - from];
+      if (partial_size_ < size_) continue;
+      partial_size_ = 0;
+      if (f_.swap) std::reverse(partial_, partial_ + size_);
+      if (size_ == 4) {
+        float v;
+        std::memcpy(&v, partial_, 4);
+        count(std::isfinite(v));
+      } else {
+        double v;
+        std::memcpy(&v, partial_, 8);
+        count(std::isfinite(v));
+      }
+    }
+  }
+
+  // Throws InputError naming `file`, as check_finite names a volume's, where one was not finite.
+  void check(const std::string& file) const {
+    if (non_finite_ == 0) return;
+    const Index3& d = f_.dims;
+    throw InputError(faulty_samples(file, non_finite_, "NaN or Inf",
+                                    {first_ % d[0], first_ / d[0] % d[1], first_ / d[0] / d[1]}) +
+                     "; isosurfaces need finite values");
+  }
+
+ private:
+  void count(bool finite) {
+    if (!finite && non_finite_++ == 0) first_ = index_;
+    ++index_;
+  }
+
+  ImageHeaderCheck::Floats f_;
+  std::size_t size_;
+  std::uint64_t end_;
+  unsigned char partial_[8];
+  std::size_t partial_size_ = 0;
+  std::int64_t non_finite_ = 0, first_ = -1, index_ = 0;
+};
+
+}  // namespace
+
+void verify_plain_floats(const ImageHeaderCheck& check) {
+  if (!check.plain_floats) return;
+  const ImageHeaderCheck::PlainFloats& p = *check.plain_floats;
+  std::ifstream f(p.file, std::ios::binary);
+  if (!f) throw IoError("cannot open " + p.file + ": " + std::strerror(errno));
+  FloatScan scan(p.floats);
+  std::vector<unsigned char> buffer(1 << 20);
+  for (std::uint64_t at = 0;;) {
+    f.read(reinterpret_cast<char*>(buffer.data()), static_cast<std::streamsize>(buffer.size()));
+    const auto got = static_cast<std::size_t>(f.gcount());
+    if (got == 0) break;
+    scan.feed(buffer.data(), at, got);
+    at += got;
+  }
+  scan.check(p.file);
+}
+
 void verify_compressed(const ImageHeaderCheck& check) {
   if (!check.compressed) return;
   const ImageHeaderCheck::Compressed& c = *check.compressed;
@@ -414,43 +500,8 @@ void verify_compressed(const ImageHeaderCheck& check) {
   if (inflateInit2(&z, 15 + 32) != Z_OK) throw IoError(c.file + ": out of memory for zlib");
   std::vector<unsigned char> in(1 << 20), out(1 << 20);
   std::uint64_t total = 0, left = c.limit ? c.limit : UINT64_MAX;  // compressed bytes to read
-  // The floating-point samples' check: bytes gathered into whole samples across the buffers.
-  const std::size_t sample_size = c.floats ? scalar_size(c.floats->type) : 0;
-  const std::uint64_t samples_end =
-      c.floats ? c.floats->at +
-                     sample_size * static_cast<std::uint64_t>(c.floats->dims[0] *
-                                                              c.floats->dims[1] * c.floats->dims[2])
-               : 0;
-  unsigned char partial[8];
-  std::size_t partial_size = 0;
-  std::int64_t non_finite = 0, first = -1, index = 0;
-  const auto check_floats = [&](const unsigned char* bytes, std::uint64_t from, std::size_t n) {
-    const std::uint64_t lo = std::max(from, c.floats->at), hi = std::min(from + n, samples_end);
-    std::uint64_t p = lo;
-    // Whole samples straight from the buffer while none is pending (the usual case).
-    if (partial_size == 0 && !c.floats->swap && sample_size == 4)
-      for (; p + 4 <= hi; p += 4, ++index) {
-        float f;
-        std::memcpy(&f, bytes + (p - from), 4);
-        if (!std::isfinite(f) && non_finite++ == 0) first = index;
-      }
-    for (; p < hi; ++p) {
-      partial[partial_size++] = bytes[p - from];
-      if (partial_size < sample_size) continue;
-      partial_size = 0;
-      if (c.floats->swap) std::reverse(partial, partial + sample_size);
-      double v;
-      if (sample_size == 4) {
-        float f;
-        std::memcpy(&f, partial, 4);
-        v = f;
-      } else {
-        std::memcpy(&v, partial, 8);
-      }
-      if (!std::isfinite(v) && non_finite++ == 0) first = index;
-      ++index;
-    }
-  };
+  std::optional<FloatScan> floats;
+  if (c.floats) floats.emplace(*c.floats);
   bool ended = false;
   int code = Z_OK;
   // After a gzip member: whether another follows, i.e. the next two bytes are gzip's magic. Other
@@ -484,7 +535,7 @@ void verify_compressed(const ImageHeaderCheck& check) {
     z.next_out = out.data();
     z.avail_out = static_cast<uInt>(out.size());
     code = inflate(&z, Z_NO_FLUSH);
-    if (c.floats) check_floats(out.data(), total, out.size() - z.avail_out);
+    if (floats) floats->feed(out.data(), total, out.size() - z.avail_out);
     total += out.size() - z.avail_out;
     if (code == Z_STREAM_END) {
       // gzip files may hold several members (as pigz writes); NIfTI's whole file is gzip, and
@@ -522,12 +573,7 @@ void verify_compressed(const ImageHeaderCheck& check) {
     throw InputError(c.file + ": compressed data inflates to " + std::to_string(total) +
                      " bytes but " + expected + " were expected" +
                      (total < c.need ? " (too short)" : " (too long)"));
-  if (non_finite > 0) {
-    const Index3& d = c.floats->dims;
-    throw InputError(faulty_samples(c.file, non_finite, "NaN or Inf",
-                                    {first % d[0], first / d[0] % d[1], first / d[0] / d[1]}) +
-                     "; isosurfaces need finite values");
-  }
+  if (floats) floats->check(c.file);
 }
 
 }  // namespace isotile

@@ -15,6 +15,14 @@
 namespace isotile {
 
 struct ImageHeaderCheck {
+  // NIfTI's floating-point samples, checked for NaN and Inf before ITK reads them: its nifti
+  // library turns them into 0 (a volume whose samples it should refuse, meshed, exit 0).
+  struct Floats {
+    ScalarType type = ScalarType::Float32;
+    Index3 dims{0, 0, 0};
+    std::uint64_t at = 0;  // where the samples start in the (inflated) file
+    bool swap = false;     // stored in the other byte order
+  };
   std::optional<PlainData> plain;  // uncompressed, unscaled samples in one file
   // TIFF stacks: each slice file stored plainly, by its name (as the stack lists it).
   std::vector<PlainData> plain_slices;
@@ -24,25 +32,23 @@ struct ImageHeaderCheck {
   double rescale_intercept = 0;
   // Compressed samples, which only inflating them shows to be all there (verify_compressed).
   struct Compressed {
-    std::string file;          // holding the compressed stream
-    std::uint64_t offset = 0;  // where the stream starts in it
-    std::uint64_t need = 0;    // bytes it must inflate to
-    bool whole_gzip = false;   // NIfTI .nii.gz: the file is one gzip stream, header included,
-                               // and may run on past `need`; else a zlib stream of exactly need
-    std::string what;          // the samples, e.g. "256x256x133 uint8 samples"
-    bool members = false;      // gzip of exactly `need` in one or more members (NRRD)
-    std::uint64_t limit = 0;   // the stream's compressed bytes when the header says (else 0)
-    // NIfTI's floating-point samples, checked for NaN and Inf as they inflate: ITK's nifti
-    // library turns them into 0 (a volume whose samples it should refuse, meshed, exit 0).
-    struct Floats {
-      ScalarType type = ScalarType::Float32;
-      Index3 dims{0, 0, 0};
-      std::uint64_t at = 0;  // where the samples start in the inflated stream
-      bool swap = false;     // stored in the other byte order
-    };
-    std::optional<Floats> floats;
+    std::string file;              // holding the compressed stream
+    std::uint64_t offset = 0;      // where the stream starts in it
+    std::uint64_t need = 0;        // bytes it must inflate to
+    bool whole_gzip = false;       // NIfTI .nii.gz: the file is one gzip stream, header included,
+                                   // and may run on past `need`; else a zlib stream of exactly need
+    std::string what;              // the samples, e.g. "256x256x133 uint8 samples"
+    bool members = false;          // gzip of exactly `need` in one or more members (NRRD)
+    std::uint64_t limit = 0;       // the stream's compressed bytes when the header says (else 0)
+    std::optional<Floats> floats;  // checked as they inflate
   };
   std::optional<Compressed> compressed;
+  // Uncompressed floating-point samples that ITK reads (rescaled ones), checked in the file.
+  struct PlainFloats {
+    std::string file;
+    Floats floats;
+  };
+  std::optional<PlainFloats> plain_floats;
 };
 
 // Throw InputError naming the file and the field at fault, IoError when it cannot be read.
@@ -77,5 +83,9 @@ TiffCheck check_tiff_file(const std::string& path);
 // does not hold exactly the samples (ITK's readers would otherwise fill the rest with zeros and
 // say nothing, or print a warning only).
 void verify_compressed(const ImageHeaderCheck& check);
+
+// Reads a checked header's uncompressed floating-point samples that ITK will read (without
+// keeping them) and throws InputError, as check_finite does, where one is NaN or Inf.
+void verify_plain_floats(const ImageHeaderCheck& check);
 
 }  // namespace isotile

@@ -469,6 +469,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
   } else {
     const ImageHeaderCheck check = check_before_itk(input, kind, raw);
     verify_compressed(check);
+    verify_plain_floats(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
     volume = Volume(info.type, info.dims,
