@@ -39,13 +39,6 @@ namespace isotile {
 
 namespace {
 
-// A distance as people write it (0.5, not 0.500000).
-std::string decimal(double v) {
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
-
 namespace fs = std::filesystem;
 using IOComponent = itk::IOComponentEnum;
 
@@ -431,9 +424,9 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
       for (std::size_t k = 0; k < files.size(); ++k)
         if (std::abs(h[k].spacing[0] - first.spacing[0]) > 1e-6 * first.spacing[0] ||
             std::abs(h[k].spacing[1] - first.spacing[1]) > 1e-6 * first.spacing[1])
-          throw InputError(files[k] + ": pixel spacing " + decimal(h[k].spacing[1]) + " x " +
-                           decimal(h[k].spacing[0]) + " where " + files[0] + "'s is " +
-                           decimal(first.spacing[1]) + " x " + decimal(first.spacing[0]) +
+          throw InputError(files[k] + ": pixel spacing " + short_number(h[k].spacing[1]) + " x " +
+                           short_number(h[k].spacing[0]) + " where " + files[0] + "'s is " +
+                           short_number(first.spacing[1]) + " x " + short_number(first.spacing[0]) +
                            " (PixelSpacing, rows then columns); one volume needs it alike in "
                            "every slice");
       std::vector<Vec3d> origins(files.size());

@@ -71,13 +71,6 @@ Box3 local_cell_box(const VolumeView& view, const Box3& global_cells, int halo) 
 
 namespace {
 
-// A number as messages show it: 6 significant digits, exponent where needed.
-std::string short_number(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
-}
-
 // The distance from float32 `m` (> 0) to the next float32 up: the step of a position there.
 double float_step(double m) {
   const float f = static_cast<float>(m);

@@ -13,6 +13,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <optional>
 #include <string>
@@ -182,6 +183,14 @@ inline constexpr double kFewPositionSteps = 32;
 // enough. `world`: the world frame where the mesh is written in it.
 void warn_coarse_positions(const Index3& dims, const Vec3d& spacing, const Vec3d& origin,
                            const std::optional<WorldFrame>& world, const Warn& warn);
+
+// A number as messages show it: 6 significant digits, exponent where needed (0.5, not 0.500000).
+// Inline: the ITK reader module, loaded on its own, does not link volume.cpp.
+inline std::string short_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
 
 // Number of bytes of dims[0]*dims[1]*dims[2] samples of `type`. Throws InputError when a dim is
 // not positive and CapacityError when the product overflows 63 bits.

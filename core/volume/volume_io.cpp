@@ -9,7 +9,6 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -158,10 +157,8 @@ std::optional<ImageJSpacing> stack_calibration(
     const std::map<std::string, std::optional<ImageJSpacing>>& calibrations) {
   const auto text = [](const std::optional<ImageJSpacing>& c) {
     if (!c) return std::string("uncalibrated");
-    std::ostringstream out;
-    out << c->spacing[0] << ", " << c->spacing[1] << ", " << c->spacing[2]
-        << (c->unit.empty() ? "" : " " + c->unit);
-    return out.str();
+    return short_number(c->spacing[0]) + ", " + short_number(c->spacing[1]) + ", " +
+           short_number(c->spacing[2]) + (c->unit.empty() ? "" : " " + c->unit);
   };
   const auto same = [](const std::optional<ImageJSpacing>& a,
                        const std::optional<ImageJSpacing>& b) {
