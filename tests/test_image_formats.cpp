@@ -1765,6 +1765,26 @@ TEST_F(BadHeaders, Mrc) {
   std::string ext = mrc;
   ext[95] = static_cast<char>(0x80);  // NSYMBT negative
   expect_one_line(write("ext.mrc", ext), "NSYMBT");
+  // Geometry MRC2014 has no "unknown" for: refused, never replaced (a NaN ORIGIN was read as 0,
+  // a negative cell length as 1 per voxel, exit 0).
+  const auto with_float = [&](std::size_t at, float f) {
+    std::string m = mrc;
+    std::memcpy(m.data() + at, &f, 4);
+    return m;
+  };
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  expect_one_line(write("origin.mrc", with_float(200, nan)), "MRC ORIGIN along Y is nan");
+  expect_one_line(write("cell.mrc", with_float(48, -12)), "MRC cell length along Z is -12");
+  expect_one_line(write("cellnan.mrc", with_float(40, nan)), "MRC cell length along X is nan");
+  expect_one_line(write("angle.mrc", with_float(56, 200)), "MRC cell angle beta is 200");
+  expect_one_line(write("anglenan.mrc", with_float(60, nan)), "MRC cell angle gamma is nan");
+  // Left unset (0): 1 per voxel and 90 degrees, as older writers leave them.
+  std::string unset = with_float(44, 0);
+  std::memset(unset.data() + 52, 0, 12);
+  std::ofstream(dir_ / "unset.mrc", std::ios::binary) << unset;
+  const VolumeHeader h = read_volume_header((dir_ / "unset.mrc").string());
+  EXPECT_EQ(h.spacing, (Vec3d{1, 1, 3}));  // Y's cell length unset; X's and Z's kept
+  EXPECT_FALSE(h.world.has_value());
 }
 
 // --- damaged and foreign inputs (issue 38) ---------------------------------------------------

@@ -256,19 +256,33 @@ MrcLayout mrc_layout(const std::string& path) {
   v.type = type;
   v.dims = dims;
   const std::int32_t sampling[3] = {i32(28), i32(32), i32(36)};
+  // A cell length or angle of 0 is a field left unset (common in maps written by older tools):
+  // 1 per voxel and 90 degrees, as for MX 0. Anything else that cannot be a cell (negative,
+  // NaN, angles of 180 or more) and a non-finite ORIGIN are refused: MRC2014 has no "unknown"
+  // value for them, and a made-up one would place the mesh wrongly with exit status 0.
+  static const char* const kAxis[3] = {"X", "Y", "Z"};
   for (int a = 0; a < 3; ++a) {
     const double cell = f32(40 + 4 * a);
+    if (!std::isfinite(cell) || cell < 0)
+      throw InputError(path + ": MRC cell length along " + kAxis[a] + " is " + short_number(cell) +
+                       " (must be finite and not negative)");
     v.spacing[a] = 1;
-    if (sampling[a] > 0 && std::isfinite(cell) && cell > 0) v.spacing[a] = cell / sampling[a];
+    if (sampling[a] > 0 && cell > 0) v.spacing[a] = cell / sampling[a];
   }
   double angle[3];
+  static const char* const kAngle[3] = {"alpha", "beta", "gamma"};
   for (int a = 0; a < 3; ++a) {
     angle[a] = f32(52 + 4 * a);
-    if (!std::isfinite(angle[a]) || angle[a] <= 0 || angle[a] >= 180) angle[a] = 90;
+    if (!std::isfinite(angle[a]) || angle[a] < 0 || angle[a] >= 180)
+      throw InputError(path + ": MRC cell angle " + kAngle[a] + " is " + short_number(angle[a]) +
+                       " degrees (must be above 0 and below 180, or 0 for unset)");
+    if (angle[a] == 0) angle[a] = 90;
   }
-  Vec3d origin{f32(196), f32(200), f32(204)};
-  for (double& o : origin)
-    if (!std::isfinite(o)) o = 0;
+  const Vec3d origin{f32(196), f32(200), f32(204)};
+  for (int a = 0; a < 3; ++a)
+    if (!std::isfinite(origin[a]))
+      throw InputError(path + ": MRC ORIGIN along " + kAxis[a] + " is " + short_number(origin[a]) +
+                       " (must be finite)");
   for (int a = 0; a < 3; ++a) v.origin[a] = origin[a] + start[a] * v.spacing[a];
   if (angle[0] != 90 || angle[1] != 90 || angle[2] != 90) {
     // Cell axes a, b, c in Cartesian coordinates (a along x, b in the x-y plane).
