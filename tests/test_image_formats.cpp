@@ -676,6 +676,56 @@ TEST(ItkRegions, NiftiNanSamplesAreRefused) {
   fs::remove_all(dir);
 }
 
+// NIfTI's units (xyzt_units) apply to the whole transform: ITK scales the spacing to
+// millimetres, and the origin must follow (a micron file's mesh lay 1000 times too far from 0
+// for its size). A pixdim of 0 without an sform is no spacing (ITK read it as 1): refused,
+// unless --spacing gives one.
+TEST(ItkRegions, NiftiUnitsScaleTheOriginAndPixdimZeroIsRefused) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-units-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume v(ScalarType::UInt8, {5, 6, 7});
+  for (std::int64_t i = 0; i < v.sample_count(); ++i) v.data<std::uint8_t>()[i] = i % 7;
+  const fs::path p = dir / "u.nii";
+  write_itk(p.string(), v.bytes(), v.type(), v.dims(), {0.5, 2, 3}, {10, -20, 30}, kIdentity3);
+  const std::string written = testing::slurp(p);
+  for (const auto& [units, scale] : {std::pair{1, 1e3}, std::pair{2, 1.0}, std::pair{3, 1e-3}}) {
+    SCOPED_TRACE(units);
+    std::string bytes = written;
+    bytes[123] = static_cast<char>((bytes[123] & ~7) | units);
+    std::ofstream(p, std::ios::binary) << bytes;
+    const VolumeHeader h = read_volume_header(p.string());
+    const Volume r = read_volume(p.string());
+    const Vec3d spacing{0.5, 2, 3}, origin{10, -20, 30};
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(h.spacing[a], spacing[a] * scale, 1e-9 * scale);
+      EXPECT_NEAR(h.origin[a], origin[a] * scale, 1e-6 * scale);
+      EXPECT_NEAR(h.world->origin[a], origin[a] * scale, 1e-6 * scale);
+      EXPECT_EQ(r.origin()[a], h.origin[a]);
+      EXPECT_EQ(r.world()->origin[a], h.origin[a]);
+    }
+  }
+  std::string bytes = written;
+  const float zero = 0;
+  std::memcpy(bytes.data() + 84, &zero, 4);  // pixdim[2]
+  bytes[254] = bytes[255] = 0;               // no sform
+  std::ofstream(p, std::ios::binary) << bytes;
+  for (const bool header : {true, false}) {
+    try {
+      header ? (void)read_volume_header(p.string()) : (void)read_volume(p.string());
+      ADD_FAILURE() << "pixdim 0 read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("NIfTI pixdim[2] (the spacing along y) is 0"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  RawOptions given;
+  given.spacing = Vec3d{0.5, 1.5, 3};
+  EXPECT_EQ(read_volume(p.string(), given).spacing(), *given.spacing);
+  fs::remove_all(dir);
+}
+
 // NIfTI's scl_slope and scl_inter are applied; such a file is read whole out of core.
 TEST(ItkRegions, NiftiRescaleIsApplied) {
   REQUIRE_ITK();

@@ -211,6 +211,24 @@ ImageHeaderCheck check_nifti_header(const std::string& path) {
     throw InputError(path + ": " + std::to_string(size) + " compressed bytes cannot hold " +
                      dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples");
   ImageHeaderCheck out;
+  if (version == 1) {
+    // NIfTI-1 spatial units (xyzt_units' low 3 bits): 1 metre, 2 millimetre, 3 micron; ITK
+    // reads the spacing in millimetres.
+    const int units = h[123] & 7;
+    out.origin_scale = units == 1 ? 1e3 : units == 3 ? 1e-3 : 1;
+    // pixdim 0 is no spacing; niftilib makes it 1 unless the sform gives the voxel's size.
+    const int sform = get<std::int16_t>(h.data() + 254, swap);
+    static const char* const kAxis[3] = {"x", "y", "z"};
+    for (int a = 1; a <= 3 && sform <= 0; ++a)
+      if (dims[a - 1] > 1 && get<float>(h.data() + 76 + 4 * a, swap) == 0) {
+        out.unknown_spacing = path + ": NIfTI pixdim[" + std::to_string(a) +
+                              "] (the spacing along " + kAxis[a - 1] +
+                              ") is 0 and no sform gives it, so the distance between samples is "
+                              "unknown (ITK's reader would take 1); give the spacing with "
+                              "--spacing X,Y,Z";
+        break;
+      }
+  }
   if (gz) {
     out.compressed = ImageHeaderCheck::Compressed{
         path, 0, offset + bytes, true,

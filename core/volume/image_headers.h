@@ -49,6 +49,13 @@ struct ImageHeaderCheck {
     Floats floats;
   };
   std::optional<PlainFloats> plain_floats;
+  // NIfTI's xyzt_units in millimetres per unit (1000 for metres, 0.001 for microns). ITK scales
+  // the spacing by it but not the origin: the caller scales the origin, else a micron file's
+  // mesh lay 1000 times too far from 0 for its size.
+  double origin_scale = 1;
+  // Set where the header gives no spacing along an axis of more than one sample (NIfTI's pixdim
+  // 0 without an sform, which ITK reads as 1): the message, refused unless --spacing is given.
+  std::string unknown_spacing;
 };
 
 // Throw InputError naming the file and the field at fault, IoError when it cannot be read.

@@ -178,7 +178,11 @@ std::optional<ImageJSpacing> stack_calibration(
 // Checks made before ITK or GDCM sees the file (they are not hardened against malformed input).
 // `raw`: what the user gave; a spacing given makes the slices' calibrations moot.
 ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind, const RawOptions& raw) {
-  if (kind == InputKind::Nifti) return check_nifti_header(input);
+  if (kind == InputKind::Nifti) {
+    ImageHeaderCheck check = check_nifti_header(input);
+    if (!check.unknown_spacing.empty() && !raw.spacing) throw InputError(check.unknown_spacing);
+    return check;
+  }
   if (kind == InputKind::MetaImage) return check_metaimage_header(input);
   if (kind == InputKind::Tiff) {
     ImageHeaderCheck check;
@@ -253,6 +257,20 @@ std::optional<PlainData> plain_layout(const std::string& input, InputKind kind,
                      "them), and alike in every file of a stack; ITK's TIFF reader cannot "
                      "read them otherwise. Save them so, or as 16-bit or 32-bit float");
   return plain;
+}
+
+// The spacing and world frame of an ITK input: ITK's, with what the checks before it read that
+// ITK does not (a TIFF's ImageJ calibration, NIfTI's units applied to the origin too).
+struct ItkGeometry {
+  Vec3d spacing, origin;
+  WorldFrame world;
+};
+ItkGeometry itk_geometry(const ImageHeaderCheck& check, const ItkImageInfo& info) {
+  ItkGeometry g;
+  g.spacing = check.calibration ? check.calibration->spacing : info.spacing;
+  for (int a = 0; a < 3; ++a) g.origin[a] = info.origin[a] * check.origin_scale;
+  g.world = WorldFrame{g.origin, info.direction};
+  return g;
 }
 
 // Options that only a raw file can use would otherwise be dropped without a word.
@@ -385,10 +403,11 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
     h.type = info.type;
     h.dims = info.dims;
-    h.spacing = check.calibration ? check.calibration->spacing : info.spacing;
+    const ItkGeometry g = itk_geometry(check, info);
+    h.spacing = g.spacing;
     if (check.calibration) h.spacing_unit = check.calibration->unit;
-    h.origin = info.origin;
-    h.world = WorldFrame{info.origin, info.direction};
+    h.origin = g.origin;
+    h.world = g.world;
     h.rescaled = info.rescaled || info.rescale_range.per_slice() || check.rescaled;
     h.rescale_slope = check.rescaled ? check.rescale_slope : info.rescale_slope;
     h.rescale_intercept = check.rescaled ? check.rescale_intercept : info.rescale_intercept;
@@ -469,9 +488,9 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     verify_plain_floats(check);
     const ItkInput in = itk_input(input, kind, raw);
     const ItkImageInfo info = read_itk_info(in);
-    volume = Volume(info.type, info.dims,
-                    check.calibration ? check.calibration->spacing : info.spacing, info.origin);
-    volume.set_world(WorldFrame{info.origin, info.direction});
+    const ItkGeometry g = itk_geometry(check, info);
+    volume = Volume(info.type, info.dims, g.spacing, g.origin);
+    volume.set_world(g.world);
     volume.set_series(info.series_uid, info.series_description);
     const std::optional<PlainData> plain = plain_layout(input, kind, check, info);
     // A plainly stored TIFF is read as out of core reads it (ITK's reader cannot read all of
