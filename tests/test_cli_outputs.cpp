@@ -523,6 +523,18 @@ TEST_F(CliOutputs, BadGeometryInAFileIsAnError) {
     r = run("extract flipped.nrrd --iso 1 -o out.ply --spacing 1,1,1 --allow-empty -q" + memory);
     EXPECT_EQ(r.code, 0) << r.err;
   }
+  // info refuses what extract refuses, with the same line (it said such a file was fine).
+  write_geometry_nrrd(dir_ / "huge.nrrd", "spacings: 2e38 1 1\n");
+  for (const auto& [file, message] :
+       {std::pair{"singular.nrrd", "singular.nrrd: the direction matrix is singular"},
+        std::pair{"flipped.nrrd", "flipped.nrrd: the spacing must be finite and positive"},
+        std::pair{"huge.nrrd", "huge.nrrd: the grid's coordinates reach 6e+38"}}) {
+    const CliResult r = run(std::string("info ") + file);
+    EXPECT_EQ(r.code, 1) << file;
+    EXPECT_TRUE(says(r, message)) << r.err;
+    EXPECT_EQ(r.out, "") << file;
+  }
+  EXPECT_EQ(run("info flipped.nrrd --spacing 1,1,1").code, 0);
 }
 
 // Positions are written as float32: a file whose grid passes float32's range is refused (its

@@ -84,6 +84,9 @@ int run_info(const InfoArgs& args) {
   const VolumeHeader header = has_header ? read_volume_header(in.input, raw) : VolumeHeader{};
   const Volume volume = read_volume(in.input, raw);
   const VolumeView v = volume.view();
+  // The geometry extract refuses (a negative or zero spacing, a singular direction, positions
+  // float32 cannot hold): info said such a file was fine, exit 0.
+  check_grid_geometry(v.dims, v.spacing, v.origin, v.world, in.input);
   const auto [lo, hi] = value_range(v);
   constexpr int kBins = 16;
   std::array<std::uint64_t, kBins> hist{};
