@@ -611,9 +611,9 @@ TEST(BrickPlan, RowsGiveWayToCubesWhereTheHaloMakesThemReadMuchMore) {
   EXPECT_EQ(plan_bricks(o.volume_dims, o).brick[0], 2047);
 }
 
-// A brick whose one-cell z-slices still overflow the budget (the run goes over it, said once):
-// cut into the fewest slices within a quarter above the one-cell slices' need (where that need is
-// twice the budget or more; else no more than it), not into one-cell
+// A brick whose z-slices overflow the budget however thin (the run goes over it, said once):
+// cut into the fewest slices within a quarter above the least need of any slicing (where that need
+// is twice the budget or more; else no more than it), not into one-cell
 // slices, each of which re-reads the halo (Macet max's 138 samples: 329 parts of nucleon's 64
 // bricks took 9.6-10.1 s, 131 parts 3.5-3.8 s).
 TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed) {
@@ -625,11 +625,20 @@ TEST(BrickReaderSlicing, ABudgetNoSliceKeepsCutsTheFewestSlicesNearTheLeastNeed)
   const std::uint64_t vertices = 400000, faces = 800000;
   const std::int64_t depth = cells.extent(2);
   const BrickReader::Slicing s = reader.slice(cells, vertices, faces, 1000);
-  // What one-cell slices would need: the least.
-  Box3 one = cells;
-  one.hi[2] = one.lo[2] + 1;
-  const auto n = static_cast<std::uint64_t>(depth);
-  EXPECT_EQ(s.least, reader.estimate(one, (vertices + n - 1) / n, (faces + n - 1) / n));
+  // The least: the smallest need over every slicing, which a deep halo can put above one-cell
+  // slices (the warning said one-cell slices needed 114,505 bytes, "with slices of up to
+  // 97,900 bytes").
+  const auto thickest = [&](std::int64_t count) {
+    Box3 part = cells;
+    part.hi[2] = cells.lo[2] + (depth + count - 1) / count;
+    const auto n = static_cast<std::uint64_t>(count);
+    return reader.estimate(part, (vertices + n - 1) / n, (faces + n - 1) / n);
+  };
+  std::uint64_t least = thickest(1);
+  for (std::int64_t count = 2; count <= depth; ++count) least = std::min(least, thickest(count));
+  EXPECT_EQ(s.least, least);
+  EXPECT_LT(least, thickest(depth));  // here one-cell slices are not the least
+  EXPECT_GE(s.bytes, s.least);
   EXPECT_GT(s.least, 1000u);
   EXPECT_LE(static_cast<double>(s.bytes), 1.25 * static_cast<double>(s.least));
   EXPECT_LT(s.count, depth);
