@@ -165,6 +165,9 @@ TEST_F(CliSimplify, OutOfCoreReportsItsBrickPlan) {
   ASSERT_TRUE(j.contains("simplify_brick_plan"));
   EXPECT_EQ(j["simplify_brick_plan"]["brick_grid"], j["brick_grid"]);
   EXPECT_EQ(j["simplify_brick_plan"]["seam_grid"].size(), 3u);
+  const auto& grid = j["simplify_brick_plan"]["seam_grid"];
+  EXPECT_GE(j["simplify_brick_plan"]["seam_parts"].get<int>(),
+            grid[0].get<int>() * grid[1].get<int>() * grid[2].get<int>());
   const double before = j["triangles_before"].get<double>();
   EXPECT_NEAR(j["triangles"].get<double>(), 0.1 * before, 0.02 * 0.1 * before);
   EXPECT_TRUE(j["simplify_hausdorff_max"].is_null());

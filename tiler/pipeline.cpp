@@ -194,8 +194,10 @@ StatsJson tiled_stats(const TiledStatsInput& in) {
     j["simplify_target_faces"] = r.simplify.target_faces;
     // Bricks are simplified with their seams locked, then the seams in cells of a grid shifted by
     // half a brick: the result depends on this plan (docs/simplify.md).
-    j["simplify_brick_plan"] = {
-        {"brick_cells", r.plan.brick}, {"brick_grid", r.plan.count}, {"seam_grid", r.seam_cells}};
+    j["simplify_brick_plan"] = {{"brick_cells", r.plan.brick},
+                                {"brick_grid", r.plan.count},
+                                {"seam_grid", r.seam_cells},
+                                {"seam_parts", r.seam_parts}};
     j["simplify_collapses"] = r.simplify.collapses;
     j["simplify_split_vertices"] = r.simplify.split_vertices;
     j["simplify_unlinked_faces"] = r.simplify.unlinked_faces;

@@ -81,6 +81,9 @@ struct TiledResult {
   std::uint64_t triangles_extracted = 0;
   SimplifyStats simplify;
   Index3 seam_cells{0, 0, 0};
+  // The pieces the seam pass simplified: the seam cells, those the budget cannot hold whole
+  // counted by their z-parts.
+  std::int64_t seam_parts = 0;
   double seconds_seams = 0;
   // Radius ratio over all triangles (quads as their two triangles along the better diagonal).
   // min, mean and degenerate are exact; q001, q01 and median come from a histogram of 2^16 bins
