@@ -261,6 +261,34 @@ TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
               std::string::npos)
         << e.what();
   }
+  // Under --iso auto the way out is not --iso auto (a column of 2x2 samples: Dual Contouring
+  // makes no face where the surface meets only the volume's border).
+  Volume column(ScalarType::Int16, {2, 2, 12});
+  for (std::int64_t i = 0; i < column.sample_count(); ++i)
+    column.data<std::int16_t>()[i] = static_cast<std::int16_t>(i < 24 ? -1000 : 1000);
+  for (const char* memory : {"", "256KiB"}) {
+    PipelineOptions o;
+    o.iso_auto = true;
+    o.extract.method = Method::DualContouring;
+    o.memory = memory;
+    PipelineInput in;
+    in.path = (dir_ / "column_2x2x12_int16.raw").string();
+    std::ofstream(in.path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(column.bytes()),
+               static_cast<std::streamsize>(column.byte_size()));
+    if (*memory) o.output = (dir_ / "m.ply").string();
+    try {
+      run_pipeline(in, o);
+      ADD_FAILURE() << "no error";
+    } catch (const NoSurfaceError& e) {
+      EXPECT_EQ(std::string(e.what()), "no surface at iso " + number_text(e.iso) +
+                                           " (--iso auto's choice): " + e.finding +
+                                           "; choose another method or an isovalue with --iso, or "
+                                           "--allow-empty to write the empty mesh");
+      EXPECT_TRUE(e.straddled);
+    }
+    fs::remove(in.path);
+  }
   EXPECT_TRUE(fs::is_empty(dir_));
 }
 

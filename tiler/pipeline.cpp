@@ -325,7 +325,7 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
     result.range = value_range(view);
   }
   log("extracting (" + std::string(method_name(eo.method)) + ", " +
-      std::string(backend_name(backend)) + ", iso " + std::to_string(eo.iso) + ")");
+      std::string(backend_name(backend)) + ", iso " + number_text(eo.iso) + ")");
   t0 = Clock::now();
   Mesh mesh = extract(view, eo, &choice);
   const double t_extract = seconds_since(t0);
@@ -492,6 +492,15 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
   if (watch.p) watch.p->set_stop_when([asked] { return !backend_start_failure(asked).empty(); });
   try {
     return run_pipeline_watched(input, options);
+  } catch (const NoSurfaceError& e) {
+    // --iso auto chose the isovalue: the way out is another method or an isovalue of one's own,
+    // not --iso auto again.
+    if (!options.iso_auto) throw;
+    throw NoSurfaceError("no surface at iso " + number_text(e.iso) +
+                             " (--iso auto's choice): " + e.finding +
+                             "; choose another method or an isovalue with --iso, or --allow-empty "
+                             "to write the empty mesh",
+                         e.iso, e.range, e.finding, e.straddled);
   } catch (const Cancelled&) {
     if (std::string why = backend_start_failure(asked); !why.empty()) throw InputError(why);
     throw;

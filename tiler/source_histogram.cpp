@@ -1,7 +1,6 @@
 #include "tiler/source_histogram.h"
 
 #include <algorithm>
-#include <charconv>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -65,24 +64,21 @@ void throw_no_surface(VolumeSource& source, std::uint64_t memory_budget, double 
 void throw_no_surface(double iso, const std::optional<std::pair<double, double>>& range) {
   // Each number as the shortest text that reads back to it: at ten digits 99.99999999999 read
   // "100", and "no surface at iso 100: the samples range from 0 to 100, all below it".
-  const auto text = [](double v) {
-    char buffer[32];
-    const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, v);
-    return ec == std::errc() ? std::string(buffer, end) : std::to_string(v);
-  };
   std::ostringstream f;
   const bool inside = range && range->first < iso && iso <= range->second;
   if (inside)  // straddled, yet no face
-    f << "the samples range from " << text(range->first) << " to " << text(range->second)
+    f << "the samples range from " << number_text(range->first) << " to "
+      << number_text(range->second)
       << " but no face crosses it (a volume one sample thick has no cells; Dual Contouring makes "
          "no face where the surface meets only the volume's border)";
   else if (range)
-    f << "the samples range from " << text(range->first) << " to " << text(range->second)
+    f << "the samples range from " << number_text(range->first) << " to "
+      << number_text(range->second)
       << (iso > range->second ? ", all below it" : ", all at or above it");
   else
     f << "every sample lies on one side of it";
   std::ostringstream s;
-  s << "no surface at iso " << text(iso) << ": " << f.str()
+  s << "no surface at iso " << number_text(iso) << ": " << f.str()
     << (range ? "" : " (`isotile info` shows the range)")
     << (inside ? "; choose another isovalue or method" : "; choose an isovalue inside the range")
     << ", or --iso auto (or --allow-empty to write the empty mesh)";
