@@ -162,7 +162,7 @@ Picture render_pieces(const std::vector<Vec3f>& positions, std::uint64_t expecte
   if (!std::isfinite(o.azimuth) || !(o.elevation >= -90 && o.elevation <= 90))
     throw InputError("the view's azimuth must be finite and its elevation in [-90, 90]");
   const int bar = o.colour == RenderColour::Quality ? colour_bar_height(o.width, o.height) : 0;
-  if (o.height - bar < 8 || (bar > 0 && o.width < 64))
+  if (bar > 0 && (o.height - bar < 8 || o.width < 64))
     throw InputError("a picture coloured by quality needs at least 64x" + std::to_string(bar + 8) +
                      " pixels for its colour bar, got " + std::to_string(o.width) + "x" +
                      std::to_string(o.height));

@@ -107,6 +107,24 @@ TEST_F(Render, SphereIsADiscOfTheExpectedArea) {
   }
 }
 
+// Only a quality picture has a minimum size (its colour bar): solid and normal pictures of one
+// pixel or a few rows are drawn (heights under 8 were refused, naming the quality bar).
+TEST_F(Render, SolidAndNormalPicturesOfAnySizeAreDrawn) {
+  REQUIRE_GL_CLI();
+  sphere();
+  for (const auto& [colour, size, w, h] :
+       {std::tuple{"solid", "1x1", 1, 1}, std::tuple{"normal", "100x7", 100, 7},
+        std::tuple{"solid", "5x3", 5, 3}}) {
+    const CliResult r = run(std::string("render sphere.ply -q --colour ") + colour + " --size " +
+                            size + " -o small.png");
+    ASSERT_EQ(r.code, 0) << colour << " " << size << ": " << r.err;
+    const Png p = read_png(dir_ / "small.png");
+    EXPECT_EQ(p.width, w) << size;
+    EXPECT_EQ(p.height, h) << size;
+    EXPECT_FALSE(white(p.at(w / 2, h / 2))) << colour << " " << size;  // the sphere's middle
+  }
+}
+
 // Every pixel of a quality picture is the ramp's colour of some quality within the mesh's
 // [min, max], dimmed by the light, and the colour bar is the ramp itself, left (0) to right (1).
 TEST_F(Render, QualityColoursFollowTheRamp) {
