@@ -273,9 +273,11 @@ class TiledSimplification {
     result.simplify.faces_after = result.triangles;
     // Said before the file is written (a front end may make it an error).
     if (const std::string missed = target_missed(result.simplify); !missed.empty())
-      say_warning(opt_.warn, missed +
-                                 " (each brick's border is locked until the seams' pass: "
-                                 "larger bricks, a larger --memory, lock fewer vertices)");
+      say_warning(opt_.warn, result.triangles > target
+                                 ? missed +
+                                       " (each brick's border is locked until the seams' pass: "
+                                       "larger bricks, a larger --memory, lock fewer vertices)"
+                                 : missed);
 
     // 4. The file, once the input is known to have stayed as it was read.
     src_.check_unchanged();

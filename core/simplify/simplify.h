@@ -74,7 +74,8 @@ struct SimplifyStats {
 
 // A warning where the result holds more than a tenth more faces than its target (the checks
 // that keep topology, the border, orientation and shape refused the collapses left: thin parts,
-// a long border, and out of core the bricks' seams hold faces); empty otherwise.
+// a long border, and out of core the bricks' seams hold faces), or more than a tenth fewer (the
+// cleanup's collapses below a raised quality floor); empty otherwise.
 std::string target_missed(const SimplifyStats& stats);
 
 // Throws InputError for options without a target, a ratio outside (0, 1], or invalid face
