@@ -1927,6 +1927,16 @@ TEST_F(DamagedInputs, CompressedNiftiAndMetaImageMustInflateToEverySample) {
             {0, 0, 0}, kIdentity3);
   fs::copy_file(dir_ / "detached.mhd", dir_ / "DETACHED.MHD");
   EXPECT_EQ(triangles("DETACHED.MHD"), want);
+  // A data file name with a space is one file to MetaIO (only `%` or LIST name several): it was
+  // refused as "data in several files".
+  std::string detached = testing::slurp(dir_ / "detached.mhd");
+  const std::size_t name_at = detached.find("ElementDataFile = ") + 18;
+  const std::string data_name = detached.substr(name_at, detached.find('\n', name_at) - name_at);
+  fs::copy_file(dir_ / data_name, dir_ / "my data.raw");
+  detached.replace(name_at, data_name.size(), "my data.raw");
+  write("spaced.mhd", detached);
+  EXPECT_EQ(triangles("spaced.mhd"), want);
+  EXPECT_EQ(triangles("spaced.mhd", "--memory 1MiB"), want);
 
   const std::string nii = testing::slurp(dir_ / "good.nii.gz");
   expect_refused(write("cut.nii.gz", nii.substr(0, nii.size() * 2 / 3)),

@@ -381,8 +381,9 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   // MetaIO takes these three spellings for data in the header's own file.
   const bool local = data_file == "LOCAL" || data_file == "Local" || data_file == "local";
   if (!local) {
-    if (data_file == "LIST" || data_file.find('%') != std::string::npos ||
-        data_file.find(' ') != std::string::npos)
+    // MetaIO reads a name with `%` as a pattern ("slice%03d.raw 1 40 1") and LIST as a list;
+    // any other value, spaces and all, is one file's name.
+    if (data_file == "LIST" || data_file.find('%') != std::string::npos)
       throw InputError(path + ": MetaImage data in several files (ElementDataFile " + data_file +
                        ") is not supported");
     fs::path p = data_file;
