@@ -1794,6 +1794,16 @@ TEST_F(BadHeaders, NiftiAndMetaImage) {
   std::string et = mha;
   et.replace(et.find("MET_FLOAT"), 9, "MET_LONG_LONG");
   expect_one_line(write("type.mha", et), "ElementType 'MET_LONG_LONG' is not supported");
+  // Fewer values than axes: MetaIO failed with five lines naming DimSize.
+  std::string spacing = mha;
+  const std::size_t line_at = spacing.find("ElementSpacing = ");
+  spacing.replace(line_at, spacing.find('\n', line_at) - line_at, "ElementSpacing = 2 3");
+  expect_one_line(write("spacing.mha", spacing),
+                  "MetaImage ElementSpacing has 2 values where NDims 3 needs 3");
+  std::string offset = mha;
+  const std::size_t offset_at = offset.find("Offset = ");
+  offset.replace(offset_at, offset.find('\n', offset_at) - offset_at, "Offset = 7");
+  expect_one_line(write("offset.mha", offset), "MetaImage Offset has 1 value where NDims 3");
   expect_one_line(write("junk.tif", std::string(64, 'x')), "not a TIFF file");
 }
 

@@ -276,6 +276,9 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   std::int64_t header_size = 0, channels = 1;
   std::optional<std::uint64_t> compressed_size;
   std::uint64_t header_end = 0;
+  // Per-axis fields and their counts: MetaIO needs NDims values in each and, given fewer, fails
+  // with five lines on stderr that name DimSize.
+  std::vector<std::pair<std::string, std::size_t>> per_axis;
   while (std::getline(f, line)) {
     header_end += line.size() + 1;
     if (header_end > kMaxHeader) break;
@@ -340,6 +343,8 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
                            m[2] * (m[3] * m[7] - m[4] * m[6]);
         if (!(std::abs(det) > 1e-6)) throw InputError(path + ": MetaImage " + key + " is singular");
       }
+      if (key != "TransformMatrix" && key != "Rotation" && key != "Orientation")
+        per_axis.emplace_back(key, values.size());
       if (key == "ElementSpacing")
         for (double x : values)
           if (!(x != 0)) throw InputError(path + ": MetaImage ElementSpacing holds 0");
@@ -354,6 +359,11 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   if (!found)
     throw InputError(path + ": not a MetaImage header (no ElementDataFile line" +
                      std::string(header_end > kMaxHeader ? " in its first 64 KiB)" : ")"));
+  for (const auto& [key, count] : per_axis)
+    if (ndims > 0 && count < static_cast<std::size_t>(ndims))
+      throw InputError(path + ": MetaImage " + key + " has " + std::to_string(count) +
+                       (count == 1 ? " value" : " values") + " where NDims " +
+                       std::to_string(ndims) + " needs " + std::to_string(ndims));
   while (ndims > 3 && static_cast<int>(dimsize.size()) >= ndims && dimsize[ndims - 1] == 1) --ndims;
   if (ndims != 3 || dimsize.size() < 3)
     throw InputError(path + ": MetaImage with NDims " + std::to_string(ndims) + " and " +
