@@ -2125,6 +2125,17 @@ TEST_F(DamagedInputs, ForeignFormatsAreNamedByTheirContent) {
                  "an HDF5 file", false);
   expect_refused(write("v.vtk", "# vtk DataFile Version 3.0\nimage\nBINARY\n"), "a legacy VTK file",
                  false);
+  // A NIfTI or Analyze header beside its .img (it got the raw name's message: pass --dims).
+  std::string hdr(348, '\0');
+  hdr[0] = '\x5c';
+  hdr[1] = '\x01';
+  expect_refused(write("a.hdr", hdr), "an Analyze 7.5 header (.hdr, samples in a separate .img",
+                 false);
+  hdr.replace(344, 4, std::string("ni1\0", 4));
+  expect_refused(write("n.HDR", hdr),
+                 "a NIfTI header whose samples are in a separate .img file, which isotile does not "
+                 "read; convert the pair to a single .nii",
+                 false);
   expect_refused(write("v.vti", "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\">\n"),
                  "a VTK XML file", false);
   fs::create_directories(dir_ / "v.zarr");

@@ -98,6 +98,15 @@ void refuse_foreign_content(const std::string& path) {
     refuse("an HDF5 file",
            "export the dataset to raw samples (h5dump -d /DATASET -b LE -o out.raw FILE) and pass "
            "--dims and --type");
+  // A NIfTI or Analyze 7.5 header beside its .img: sizeof_hdr 348 in either byte order, and
+  // NIfTI's "ni1" magic where it has one. Taken for a raw file by its name, it got the raw
+  // name's message (pass --dims and --type, which would drop its geometry).
+  // (By the name too: a raw volume may start with those bytes.)
+  if (ends_with_ci(path, ".hdr") && n >= 348 &&
+      (at(0, "\x5c\x01\0\0", 4) || at(0, "\0\0\x01\x5c", 4)))
+    refuse(at(344, "ni1\0", 4) ? "a NIfTI header whose samples are in a separate .img file"
+                               : "an Analyze 7.5 header (.hdr, samples in a separate .img file)",
+           "convert the pair to a single .nii (e.g. nibabel.save(nibabel.load(HDR), 'out.nii'))");
   if (at(0, "# vtk DataFile Version", 22))
     refuse("a legacy VTK file",
            "convert it to MetaImage or NIfTI (e.g. ParaView's Save Data as .mha, or VTK's "
