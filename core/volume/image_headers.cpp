@@ -77,6 +77,21 @@ bool ends_with_ci(const std::string& s, const std::string& suffix) {
 
 ImageHeaderCheck check_nifti_header(const std::string& path) {
   const bool gz = ends_with_ci(path, ".gz");
+  // ITK's nifti library takes .nii and .nii.gz in lower or upper case only: a mixed-case name
+  // failed with three lines of its own and "not a readable Nifti file".
+  {
+    const std::size_t n = gz ? 7 : 4;
+    const std::string ext = path.size() >= n ? path.substr(path.size() - n) : path;
+    const bool lower =
+        std::none_of(ext.begin(), ext.end(), [](unsigned char c) { return std::isupper(c); });
+    const bool upper =
+        std::none_of(ext.begin(), ext.end(), [](unsigned char c) { return std::islower(c); });
+    if (!lower && !upper)
+      throw InputError(path +
+                       ": ITK's NIfTI reader takes the extension in lower or upper case "
+                       "only (.nii, .NII, .nii.gz, .NII.GZ), not '" +
+                       ext + "'; rename the file");
+  }
   const std::uint64_t size = file_size_of(path);
   std::array<unsigned char, 540> h{};
   std::size_t got = 0;
