@@ -465,6 +465,21 @@ TEST(ItkRegions, TiffPagesStoredInARowAreReadByRegion) {
       EXPECT_THROW(open_volume_source(p.string(), {}, 1000), InputError);
     }
   }
+  // Other orientations take ITK's reader down libtiff's colour path: refused naming the tag (it
+  // said "4 components per sample (e.g. colour)" of gray pages).
+  for (const std::uint16_t orientation : {2, 3, 5, 8}) {
+    write_tiff_pages(dir / "turned.tif", field_as("field:torus:20", ScalarType::UInt16), 'I', 0, 1,
+                     orientation);
+    try {
+      read_volume((dir / "turned.tif").string());
+      ADD_FAILURE() << orientation;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("TIFF page 1 has Orientation " +
+                                           std::to_string(orientation) + " ("),
+                std::string::npos)
+          << e.what();
+    }
+  }
   // Compressed pages are ITK's to decode (here PackBits' tag over plain bytes; the header alone
   // is read, not the samples).
   write_tiff_pages(dir / "packbits.tif", field_as("field:torus:20", ScalarType::UInt16), 'I', 0,

@@ -303,6 +303,20 @@ TiffCheck check_tiff_file(const std::string& path) {
                        std::to_string(tile_w) + "x" + std::to_string(tile_h) +
                        ", which ITK's TIFF reader reads as colour; save the pages in strips (as "
                        "ImageJ and most tools do by default)");
+    // Orientations other than top-left (1) and bottom-left (4) send ITK's reader through
+    // libtiff's colour path: a gray page was refused as "4 components per sample (colour)".
+    if (orientation != 1 && orientation != 4) {
+      static const char* const kOrientation[] = {
+          "",         "",          "top-right",    "bottom-right", "",
+          "left-top", "right-top", "right-bottom", "left-bottom"};
+      throw InputError(path + ": TIFF page " + std::to_string(page) + " has Orientation " +
+                       std::to_string(orientation) +
+                       (orientation <= 8 && *kOrientation[orientation]
+                            ? std::string(" (") + kOrientation[orientation] + ")"
+                            : std::string()) +
+                       ", which ITK's TIFF reader reads as colour; save the pages top-left "
+                       "(Orientation 1, the default of ImageJ and most tools)");
+    }
     const std::vector<std::uint64_t> series = tifffile_shape(description);
     if (page == 1) {
       // ImageJ describes the file on its first page.
