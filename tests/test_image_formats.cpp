@@ -611,6 +611,55 @@ TEST(ItkRegions, ImageJCalibrationIsTheSpacing) {
   fs::remove_all(dir);
 }
 
+// ImageJ's layout for stacks past 4 GiB (and tifffile's imagej=True, truncate=True): one page
+// directory, `images=N` in its description, the planes one after another. Read as ImageJ reads
+// it, in core and by region, with its calibration (it was refused as "one TIFF page").
+TEST(ItkRegions, ImageJStacksInOnePageDirectory) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-ij1-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const Volume u16 = field_as("field:torus:20", ScalarType::UInt16);
+  // Every page's directory written, then the chain cut after the first.
+  const auto one_directory = [&](const fs::path& p, std::uint16_t compression, int images) {
+    const std::string n = std::to_string(images);
+    write_tiff_pages(
+        p, u16, 'I', 0, compression, 0, {{282, 5, 2}, {283, 5, 2}, {296, 3, 1}},
+        "ImageJ=1.54f\nimages=" + n + "\nslices=" + n + "\nunit=micron\nspacing=2.5\n");
+    std::string bytes = testing::slurp(p);
+    std::uint32_t ifd = 0;
+    std::uint16_t entries = 0;
+    std::memcpy(&ifd, bytes.data() + 4, 4);
+    std::memcpy(&entries, bytes.data() + ifd, 2);
+    std::memset(bytes.data() + ifd + 2 + 12 * entries, 0, 4);
+    std::ofstream(p, std::ios::binary) << bytes;
+  };
+  const fs::path p = dir / "one.tif";
+  one_directory(p, 1, 20);
+  const VolumeHeader h = read_volume_header(p.string());
+  EXPECT_EQ(h.dims, u16.dims());
+  EXPECT_EQ(h.spacing, (Vec3d{0.5, 0.5, 2.5}));
+  EXPECT_EQ(h.spacing_unit, "micron");
+  const Volume v = read_volume(p.string());
+  ASSERT_EQ(v.dims(), u16.dims());
+  EXPECT_EQ(std::memcmp(v.bytes(), u16.bytes(), u16.byte_size()), 0);
+  auto source = open_volume_source(p.string(), {});
+  EXPECT_FALSE(source->in_memory());
+  std::vector<std::uint16_t> got(4 * 5 * 6);
+  source->read({{3, 4, 12}, {7, 9, 18}}, got.data());
+  for (std::int64_t k = 0; k < 6; ++k)
+    for (std::int64_t j = 0; j < 5; ++j)
+      for (std::int64_t i = 0; i < 4; ++i)
+        ASSERT_EQ(got[(k * 5 + j) * 4 + i],
+                  u16.data<std::uint16_t>()[((12 + k) * 20 + 4 + j) * 20 + 3 + i]);
+  // Counting more planes than the file holds: refused, naming the bytes (not a stack cut short).
+  one_directory(dir / "short.tif", 1, 40);
+  expect_both_refuse(dir / "short.tif", "an ImageJ stack of 40 images in one page directory needs");
+  // Compressed, the planes cannot be found.
+  one_directory(dir / "packed.tif", 5, 20);
+  expect_both_refuse(dir / "packed.tif", "whose samples are not stored plainly");
+  fs::remove_all(dir);
+}
+
 // A directory or pattern of ImageJ slices, as ImageJ's Save As > Image Sequence writes them:
 // their calibration is the stack's, as ImageJ's import reads it (ITK read none of it: 0.5 x
 // 0.25 um pixels came out at 1, 1, 1). Slices calibrated differently are refused.

@@ -27,6 +27,7 @@ struct ImageHeaderCheck {
   // TIFF stacks: each slice file stored plainly, by its name (as the stack lists it).
   std::vector<PlainData> plain_slices;
   std::optional<ImageJSpacing> calibration;  // a TIFF's, which ITK does not read (TiffCheck)
+  bool imagej_planes = false;                // TiffCheck's: read from `plain` without ITK
   bool rescaled = false;                     // NIfTI's scl_slope/scl_inter change the values
   double rescale_slope = 1;
   double rescale_intercept = 0;
@@ -82,6 +83,9 @@ struct TiffCheck {
   // ImageJ's calibration, which ITK does not read (it takes the resolution tags only where their
   // unit is the inch or the centimetre).
   std::optional<ImageJSpacing> calibration;
+  // One page directory that ImageJ's description gives more images (its layout past 4 GiB):
+  // `plain` holds them all, and ITK, which sees one page, is not asked.
+  bool imagej_planes = false;
 };
 TiffCheck check_tiff_file(const std::string& path);
 

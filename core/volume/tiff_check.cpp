@@ -104,6 +104,7 @@ TiffCheck check_tiff_file(const std::string& path) {
   bool plain = true;
   std::optional<ScalarType> plain_type;
   std::uint64_t plain_start = 0, plain_end = 0;
+  std::uint64_t imagej_images = 0;  // page 1's `images=`: ImageJ's count of planes
   int page = 0;
   while (ifd != 0) {
     ++page;
@@ -321,6 +322,10 @@ TiffCheck check_tiff_file(const std::string& path) {
     if (page == 1) {
       // ImageJ describes the file on its first page.
       const std::map<std::string, std::string> imagej = imagej_properties(description);
+      if (const auto it = imagej.find("images");
+          it != imagej.end() && it->second.size() < 12 && !it->second.empty() &&
+          it->second.find_first_not_of("0123456789") == std::string::npos)
+        imagej_images = std::stoull(it->second);
       result.calibration =
           imagej_spacing(path, imagej, x_resolution, y_resolution, resolution_unit);
       if (spp != 1)
@@ -388,12 +393,34 @@ TiffCheck check_tiff_file(const std::string& path) {
     file.read(next_at, nx, inline_size);
     ifd = big ? get<std::uint64_t>(nx, swap) : get<std::uint32_t>(nx, swap);
   }
+  // One page directory whose description counts more images: ImageJ's layout for stacks past
+  // 4 GiB (and tifffile's imagej=True with truncate=True), the planes stored one after another
+  // from the first page's samples on, as ImageJ and Fiji read it. ITK sees one page; isotile
+  // reads the planes itself.
+  std::int64_t planes = page;
+  if (page == 1 && imagej_images > 1) {
+    const std::uint64_t plane = plain_end - plain_start;
+    if (!plain)
+      throw InputError(path + ": an ImageJ stack of " + std::to_string(imagej_images) +
+                       " images in one page directory (as ImageJ writes stacks past 4 GiB), whose "
+                       "samples are not stored plainly (uncompressed gray strips), so their "
+                       "planes cannot be found; save it with a directory per page");
+    if (imagej_images > file.size() / std::max<std::uint64_t>(plane, 1) ||
+        !file.fits(plain_start, plane * imagej_images))
+      throw InputError(path + ": an ImageJ stack of " + std::to_string(imagej_images) +
+                       " images in one page directory needs " +
+                       std::to_string(plane * imagej_images) + " bytes of samples from offset " +
+                       std::to_string(plain_start) + " but the file holds " +
+                       std::to_string(file.size()) + " bytes (truncated file)");
+    planes = static_cast<std::int64_t>(imagej_images);
+    result.imagej_planes = true;
+  }
   if (!plain || page == 0) return result;
   PlainData& data = result.plain.emplace();
   data.file = path;
   data.offset = plain_start;
   data.type = *plain_type;
-  data.dims = {static_cast<std::int64_t>(first[0]), static_cast<std::int64_t>(first[1]), page};
+  data.dims = {static_cast<std::int64_t>(first[0]), static_cast<std::int64_t>(first[1]), planes};
   data.endian = little ? Endian::Little : Endian::Big;
   data.bytes_after = true;  // the later pages' directories may follow the samples
   return result;

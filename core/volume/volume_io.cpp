@@ -198,6 +198,7 @@ ImageHeaderCheck check_before_itk(const std::string& input, InputKind kind, cons
     TiffCheck tiff = check_tiff_file(input);
     check.plain = std::move(tiff.plain);
     check.calibration = std::move(tiff.calibration);
+    check.imagej_planes = tiff.imagej_planes;
     return check;
   }
   if (kind == InputKind::TiffStack) {
@@ -280,6 +281,18 @@ ItkGeometry itk_geometry(const ImageHeaderCheck& check, const ItkImageInfo& info
   for (int a = 0; a < 3; ++a) g.origin[a] = info.origin[a] * check.origin_scale;
   g.world = WorldFrame{g.origin, info.direction};
   return g;
+}
+
+// ITK's header of an input, or, for an ImageJ stack in one page directory (which ITK reads as
+// one page), the header its checked layout gives: origin 0 and no rotation, as ITK gives a TIFF.
+ItkImageInfo itk_info(const std::string& input, InputKind kind, const RawOptions& raw,
+                      const ImageHeaderCheck& check) {
+  if (!check.imagej_planes || !check.plain) return read_itk_info(itk_input(input, kind, raw));
+  ItkImageInfo info;
+  info.format = "TIFF";
+  info.type = check.plain->type;
+  info.dims = check.plain->dims;
+  return info;
 }
 
 // Options that only a raw file can use would otherwise be dropped without a word.
@@ -409,7 +422,7 @@ VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw)
     h = read_mrc_header(input);
   } else if (is_itk_kind(kind)) {
     const ImageHeaderCheck check = check_before_itk(input, kind, raw);
-    const ItkImageInfo info = read_itk_info(itk_input(input, kind, raw));
+    const ItkImageInfo info = itk_info(input, kind, raw, check);
     h.type = info.type;
     h.dims = info.dims;
     const ItkGeometry g = itk_geometry(check, info);
@@ -496,7 +509,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
     verify_compressed(check);
     verify_plain_floats(check);
     const ItkInput in = itk_input(input, kind, raw);
-    const ItkImageInfo info = read_itk_info(in);
+    const ItkImageInfo info = itk_info(input, kind, raw, check);
     const ItkGeometry g = itk_geometry(check, info);
     volume = Volume(info.type, info.dims, g.spacing, g.origin);
     volume.set_world(g.world);
