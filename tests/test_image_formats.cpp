@@ -1442,9 +1442,11 @@ class DicomFiles : public CliTest {
   }
   // One slice of content `c` at `where` (none where empty): MR with its PixelSpacing where
   // `spacing`, and RescaleSlope `slope` where not 0; or, `ct_imager`, CT whose only pixel
-  // spacing is ImagerPixelSpacing (a projection's, which GDCM does not read for CT).
+  // spacing is ImagerPixelSpacing (a projection's, which GDCM does not read for CT);
+  // ImageOrientationPatient with its column turned by `turn` (none where empty).
   void write_slice(const std::string& name, int c, const std::optional<Vec3d>& where,
-                   bool spacing = true, int slope = 0, bool ct_imager = false) const {
+                   bool spacing = true, int slope = 0, bool ct_imager = false,
+                   std::optional<double> turn = 0.0) const {
     using testing::dicom::element;
     const std::string sop_class =
                           ct_imager ? "1.2.840.10008.5.1.4.1.1.2" : "1.2.840.10008.5.1.4.1.1.4",
@@ -1452,7 +1454,7 @@ class DicomFiles : public CliTest {
     const std::string body = identity(sop_class, sop, ct_imager ? "CT" : "MR",
                                       "1.2.826.0.1.3680043.2.1.9", std::to_string(c + 1)) +
                              (ct_imager ? element(0x0018, 0x1164, "DS", "0.7\\0.3") : "") +
-                             (where ? position(*where) : "") + orientation() +
+                             (where ? position(*where) : "") + (turn ? orientation(*turn) : "") +
                              pixel_module(0, spacing && !ct_imager ? "0.7\\0.3" : "") +
                              (slope ? element(0x0028, 0x1052, "DS", "0") +
                                           element(0x0028, 0x1053, "DS", std::to_string(slope))
@@ -1639,6 +1641,20 @@ TEST_F(DicomFiles, ASliceWithoutPositionOrSpacingIsNamed) {
     write_slice("s" + std::to_string(k) + ".dcm", k, at(1.5 * k), false, 0, true);
   EXPECT_NE(refusal(".").find("s0.dcm: no PixelSpacing (0028,0030), the element GDCM reads"),
             std::string::npos);
+  // Without an orientation, or with a column that leans off the row, the slices cannot be
+  // ordered: named so (both were "slices s0.dcm and s1.dcm lie at the same position").
+  for (int k = 0; k < 4; ++k)
+    write_slice("s" + std::to_string(k) + ".dcm", k, at(1.5 * k), true, 0, false, std::nullopt);
+  EXPECT_NE(refusal(".").find("s0.dcm: no ImageOrientationPatient (0020,0037); the slices of a "
+                              "series cannot be ordered without it"),
+            std::string::npos)
+      << refusal(".");
+  for (int k = 0; k < 4; ++k)
+    write_slice("s" + std::to_string(k) + ".dcm", k, at(1.5 * k), true, 0, false, 0.1);
+  EXPECT_NE(refusal(".").find("s0.dcm: ImageOrientationPatient (0020,0037) is not two unit "
+                              "vectors at right angles (row and column lengths 1 and 1.00499"),
+            std::string::npos)
+      << refusal(".");
 }
 
 // Positions written with two decimals (0.625 mm slices: 0, 0.63, 1.25, 1.88, ...) are even: each
@@ -1691,8 +1707,8 @@ TEST_F(DicomFiles, FramesWithoutPositionsOrAtAnAngleAreRefused) {
   write("sheared.dcm", {0, 1, 2, 3}, up,
         [&](std::size_t) { return testing::dicom::sequence(0x0020, 0x9116, {orientation(0.5)}); });
   EXPECT_NE(refusal("sheared.dcm")
-                .find("sheared.dcm: ImageOrientationPatient is not two unit vectors at right "
-                      "angles"),
+                .find("sheared.dcm: ImageOrientationPatient (0020,0037) is not two unit vectors "
+                      "at right angles"),
             std::string::npos);
 }
 

@@ -293,6 +293,21 @@ itk::GDCMSeriesFileNames::Pointer scan_series(const std::string& dir) {
   return names;
 }
 
+// ImageOrientationPatient must be two unit vectors at right angles: a slice's normal (row x
+// column) orders a series, and slices whose column leans off the row were refused as lying "at
+// the same position".
+void check_orientation(const std::string& file, const std::array<double, 6>& o) {
+  const Vec3d row{o[0], o[1], o[2]}, column{o[3], o[4], o[5]};
+  if (std::abs(dot(row, row) - 1) > 1e-3 || std::abs(dot(column, column) - 1) > 1e-3 ||
+      std::abs(dot(row, column)) > 1e-3)
+    throw InputError(file +
+                     ": ImageOrientationPatient (0020,0037) is not two unit vectors at "
+                     "right angles (row and column lengths " +
+                     short_number(std::sqrt(dot(row, row))) + " and " +
+                     short_number(std::sqrt(dot(column, column))) + ", cosine between them " +
+                     short_number(dot(row, column)) + ")");
+}
+
 // A multi-frame DICOM file's frames placed by their own positions (an enhanced file's functional
 // groups, RT Dose's offsets), checked as a series' slices are; GDCM's geometry is kept for files
 // that give one position and a spacing. Returns what it read.
@@ -300,10 +315,8 @@ DicomFrames place_frames(const ItkInput& input, const std::string& file, ItkImag
   DicomFrames frames = read_dicom_frames(file, info.dims[2]);
   if (frames.orientation) {
     const std::array<double, 6>& o = *frames.orientation;
+    check_orientation(file, o);
     const Vec3d row{o[0], o[1], o[2]}, column{o[3], o[4], o[5]};
-    if (std::abs(dot(row, row) - 1) > 1e-3 || std::abs(dot(column, column) - 1) > 1e-3 ||
-        std::abs(dot(row, column)) > 1e-3)
-      throw InputError(file + ": ImageOrientationPatient is not two unit vectors at right angles");
     const Vec3d normal = cross(row, column);
     const double length = std::sqrt(dot(normal, normal));
     for (int r = 0; r < 3; ++r) {
@@ -368,6 +381,28 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
       throw InputError(files[k] +
                        ": no ImagePositionPatient (0020,0032); the slices of a series cannot be "
                        "placed without it");
+    // Likewise the orientation, whose normal orders the slices: GDCM's default put every slice
+    // of a sagittal series "at the same position".
+    if (h.back().dims[2] == 1) {
+      const std::string iop = series_tag(gdcm, "0020|0037");
+      std::array<double, 6> o{};
+      int got = 0;
+      if (!iop.empty()) {
+        std::string text = iop;
+        std::replace(text.begin(), text.end(), '\\', ' ');
+        std::istringstream in(text);
+        while (got < 6 && in >> o[got]) ++got;
+      }
+      if (got == 6) {
+        check_orientation(files[k], o);
+      } else if (!read_dicom_frames(files[k], 1).orientation) {
+        throw InputError(files[k] +
+                         (iop.empty() ? ": no ImageOrientationPatient (0020,0037)"
+                                      : ": ImageOrientationPatient (0020,0037) '" + iop +
+                                            "' is not six numbers") +
+                         "; the slices of a series cannot be ordered without it");
+      }
+    }
     // Each slice's rescale, as GDCM applies it to that slice.
     const double slope = gdcm.GetRescaleSlope(), intercept = gdcm.GetRescaleIntercept();
     RescaleRange& r = info.rescale_range;
