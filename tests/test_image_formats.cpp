@@ -740,6 +740,38 @@ TEST(ItkRegions, NiftiNanSamplesAreRefused) {
   fs::remove_all(dir);
 }
 
+// MetaImage's text samples (BinaryData = False) are checked against what MetaIO read: it reads a
+// double and casts it (300 in a MET_UCHAR file read 44, exit 0). 1e2 is the number it is.
+TEST(ItkRegions, MetaImageTextSamplesAreTheirNumbers) {
+  REQUIRE_ITK();
+  const fs::path dir = fs::temp_directory_path() / ("isotile-mtext-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path mha = dir / "t.mha";
+  const auto metaimage = [&](const std::string& samples) {
+    std::ofstream(mha, std::ios::binary)
+        << "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n"
+           "BinaryData = False\nElementDataFile = LOCAL\n"
+        << samples << "\n";
+  };
+  metaimage("1 2 3 4 5 1e2 7 8");
+  EXPECT_EQ(read_volume(mha.string()).data<std::uint8_t>()[5], 100);
+  for (const auto& [token, says] :
+       {std::pair{"300", "is '300', out of the uint8 range (0 to 255)"},
+        std::pair{"2.7", "is '2.7', not an integer, as uint8 samples are"}}) {
+    metaimage(std::string("1 2 3 4 5 ") + token + " 7 8");
+    try {
+      read_volume(mha.string());
+      ADD_FAILURE() << token << " read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("MetaImage text sample 5 (x=1, y=0, z=1) ") +
+                                           says),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  fs::remove_all(dir);
+}
+
 // NIfTI's units (xyzt_units) apply to the whole transform: ITK scales the spacing to
 // millimetres, and the origin must follow (a micron file's mesh lay 1000 times too far from 0
 // for its size). A pixdim of 0 without an sform is no spacing (ITK read it as 1): refused,

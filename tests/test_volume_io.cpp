@@ -816,6 +816,34 @@ TEST_F(VolumeIo, NrrdSpaceDirectionsOfNoLengthAreRefused) {
   EXPECT_EQ(read_nrrd(file).spacing(), (Vec3d{1, 2, 3}));
 }
 
+// Text samples are checked against what teem read: it casts each token through an int (300 in
+// a uchar file read 44, -5 read 251) and stops at the first character that is not a digit (1e2
+// read 1), exit 0. Good text, commas included, reads as written (MetaImage's: test_image_formats).
+TEST_F(VolumeIo, TextSamplesThatAreNotTheirTypesNumbersAreRefused) {
+  const std::string file = path("a.nrrd");
+  const auto nrrd = [&](const char* type, const std::string& samples) {
+    write_file(file, std::string("NRRD0004\ntype: ") + type +
+                         "\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n" + samples + "\n");
+  };
+  nrrd("short", "-7 0 , 12 ,40 32767\n-32768 5 6");
+  const Volume v = read_nrrd(file);
+  const std::int16_t want[8] = {-7, 0, 12, 40, 32767, -32768, 5, 6};
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(v.data<std::int16_t>()[i], want[i]) << i;
+  for (const auto& [type, token, says] :
+       {std::tuple{"uchar", "300", "is '300', out of the uint8 range (0 to 255)"},
+        std::tuple{"uchar", "-5", "is '-5', out of the uint8 range"},
+        std::tuple{"uchar", "1e2", "is '1e2', read by the format's library as 1"},
+        std::tuple{"short", "2.7", "is '2.7', not an integer, as int16 samples are"},
+        std::tuple{"uint", "5000000000",
+                   "is '5000000000', out of the uint32 range (0 to 4294967295)"},
+        std::tuple{"float", "1.5x", "is '1.5x', not a number"}}) {
+    SCOPED_TRACE(token);
+    nrrd(type, std::string("1 2 3 4 5 ") + token + " 7 8");
+    const std::string msg = message_of<InputError>([&] { read_nrrd(file); });
+    EXPECT_TRUE(contains(msg, "NRRD ascii sample 5 (x=1, y=0, z=1) " + std::string(says))) << msg;
+  }
+}
+
 TEST_F(VolumeIo, NrrdNonFinite) {
   std::vector<float> values(8, 1.0f);
   values[5] = std::numeric_limits<float>::infinity();

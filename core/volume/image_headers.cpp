@@ -287,7 +287,7 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
   int ndims = 0;
   std::vector<std::int64_t> dimsize;
   std::string element_type;
-  bool compressed = false, msb = false, found = false;
+  bool compressed = false, msb = false, found = false, text = false;
   std::int64_t header_size = 0, channels = 1;
   std::optional<std::uint64_t> compressed_size;
   std::uint64_t header_end = 0;
@@ -324,6 +324,8 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
       }
     } else if (key == "ElementType") {
       element_type = value;
+    } else if (key == "BinaryData") {
+      text = value == "False" || value == "false";
     } else if (key == "CompressedData") {
       compressed = value == "True" || value == "true";
     } else if (key == "CompressedDataSize") {
@@ -442,6 +444,13 @@ ImageHeaderCheck check_metaimage_header(const std::string& path) {
         file, offset, bytes, false,
         dims_text(dims) + " " + std::string(scalar_name(*type)) + " samples"};
     out.compressed->limit = compressed_size.value_or(0);
+    return out;
+  }
+  if (text && !compressed) {
+    // Samples as text (BinaryData = False): MetaIO reads each as a double and casts it to the
+    // type, so 300 in a MET_UCHAR file read 44; checked after ITK's read (verify_text_samples).
+    out.text =
+        TextSamples{file, offset, *type, dims[0] * dims[1] * dims[2], false, "MetaImage text"};
     return out;
   }
   if (available < bytes)

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/volume/imagej_description.h"
+#include "core/volume/text_samples.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -50,6 +51,8 @@ struct ImageHeaderCheck {
     Floats floats;
   };
   std::optional<PlainFloats> plain_floats;
+  // Samples written as text (MetaImage's BinaryData = False), checked once ITK has read them.
+  std::optional<TextSamples> text;
   // NIfTI's xyzt_units in millimetres per unit (1000 for metres, 0.001 for microns). ITK scales
   // the spacing by it but not the origin: the caller scales the origin, else a micron file's
   // mesh lay 1000 times too far from 0 for its size.

@@ -15,6 +15,7 @@
 
 #include "core/errors.h"
 #include "core/volume/image_headers.h"
+#include "core/volume/text_samples.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -209,6 +210,8 @@ struct IoStateNixer {
   }
 };
 
+std::uint64_t after_lines(const std::string& file, std::uint64_t lines);
+
 // The file holding a NRRD's data (one detached file, or the header's own) and where its bytes
 // begin in it: 0 for a detached file, before any line or byte skip; in the header's own file
 // where teem stopped reading, after the header and its line and byte skips. Nothing when teem
@@ -259,16 +262,49 @@ std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path)
   c.file = start->file;
   c.offset = start->offset;
   c.members = true;  // teem reads a gzip stream of several members, as gzip(1) does
-  if (lines > 0) {
-    std::ifstream f(c.file, std::ios::binary);
-    std::string line;
-    for (std::uint64_t i = 0; i < lines; ++i)
-      if (!std::getline(f, line))
-        throw InputError(c.file + ": the NRRD header's line skip of " + std::to_string(lines) +
-                         " lines passes the data file's end");
-    c.offset = static_cast<std::uint64_t>(f.tellg());
-  }
+  if (lines > 0) c.offset = after_lines(c.file, lines);
   return c;
+}
+
+// Where a detached data file's samples start after `lines` lines (teem skips them as text).
+std::uint64_t after_lines(const std::string& file, std::uint64_t lines) {
+  std::ifstream f(file, std::ios::binary);
+  std::string line;
+  for (std::uint64_t i = 0; i < lines; ++i)
+    if (!std::getline(f, line))
+      throw InputError(file + ": the NRRD header's line skip of " + std::to_string(lines) +
+                       " lines passes the data file's end");
+  return static_cast<std::uint64_t>(f.tellg());
+}
+
+// Where an ascii-encoded NRRD's text lies, for verify_text_samples: teem casts each token
+// through an int (300 in a uchar file read 44) and stops at the first character that is not a
+// digit (1e2 read 1). Nothing for other encodings, several data files and byte skips (teem's
+// alone to read).
+std::optional<TextSamples> ascii_text(const std::string& path) {
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  nio->keepNrrdDataFileOpen = AIR_TRUE;
+  {
+    std::lock_guard lock(teem_mutex());
+    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
+      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  }
+  if (nio->encoding != nrrdEncodingAscii || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
+    return std::nullopt;
+  const std::optional<DataStart> start = data_start(path, *nio);
+  if (!start) return std::nullopt;
+  const HeaderInfo h = header_info(path, *nrrd);
+  TextSamples t;
+  t.file = start->file;
+  t.offset = start->offset;
+  if (nio->lineSkip > 0 && nio->dataFNArr->len == 1) t.offset = after_lines(t.file, nio->lineSkip);
+  t.type = h.type;
+  t.count = h.dims[0] * h.dims[1] * h.dims[2];
+  t.commas = true;
+  t.what = "NRRD ascii";
+  return t;
 }
 
 }  // namespace
@@ -303,6 +339,8 @@ Volume read_nrrd(const std::string& path) {
                      std::to_string(volume.byte_size()));
   std::memcpy(volume.bytes(), nrrd->data, volume.byte_size());
   nrrd.reset();
+  if (const std::optional<TextSamples> text = ascii_text(path))
+    verify_text_samples(*text, volume.bytes(), volume.dims());
   check_finite(volume.view(), path);
   return volume;
 }

@@ -524,6 +524,7 @@ Volume read_volume(const std::string& input, const RawOptions& raw) {
       read_plain_data(*plain, volume);
     else
       read_itk_data(in, info, volume.bytes());
+    if (check.text) verify_text_samples(*check.text, volume.bytes(), volume.dims());
     check_finite(volume.view(), input);
   }
   if (kind != InputKind::Mrc) progress_advance(raw.progress);
