@@ -825,7 +825,7 @@ TEST_F(VolumeIo, TextSamplesThatAreNotTheirTypesNumbersAreRefused) {
     write_file(file, std::string("NRRD0004\ntype: ") + type +
                          "\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n\n" + samples + "\n");
   };
-  nrrd("short", "-7 0 , 12 ,40 32767\n-32768 5 6");
+  nrrd("short", "-7 0 , 12 ,40 32767,\n-32768 5 6");
   const Volume v = read_nrrd(file);
   const std::int16_t want[8] = {-7, 0, 12, 40, 32767, -32768, 5, 6};
   for (int i = 0; i < 8; ++i) EXPECT_EQ(v.data<std::int16_t>()[i], want[i]) << i;

@@ -52,6 +52,8 @@ void verify_text_samples(const TextSamples& text, const void* samples, const Ind
     if (text.commas) {
       if (t == ",") continue;
       t.remove_prefix(std::min(t.find_first_not_of(','), t.size()));
+      // A comma after the number ("5,") teem's sscanf leaves unread.
+      while (!t.empty() && t.back() == ',') t.remove_suffix(1);
       if (t.empty()) continue;
     }
     double stored = 0;

@@ -17,8 +17,8 @@ struct TextSamples {
   std::uint64_t offset = 0;  // where the samples' text starts in it
   ScalarType type = ScalarType::UInt8;
   std::int64_t count = 0;  // samples to check, x fastest
-  // NRRD's ascii: a lone "," between values, and commas before a value, are passed over (teem
-  // does so); MetaImage's text is whitespace only.
+  // NRRD's ascii: a lone "," between values, and commas before or after a value, are passed
+  // over (as teem passes them); MetaImage's text is whitespace only.
   bool commas = false;
   std::string what;  // "NRRD ascii", "MetaImage text": the message's name for the encoding
 };
