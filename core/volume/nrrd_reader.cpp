@@ -233,19 +233,28 @@ std::optional<DataStart> data_start(const std::string& path, const NrrdIoState& 
   return DataStart{path, static_cast<std::uint64_t>(at)};
 }
 
+// A NRRD's header alone, the file holding its data kept open where that is the header's own
+// (data_start() asks it where the samples begin).
+struct NrrdHeader {
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd;
+  std::unique_ptr<NrrdIoState, IoStateNixer> nio;
+};
+NrrdHeader load_header(const std::string& path) {
+  NrrdHeader h{std::unique_ptr<Nrrd, NrrdNuker>(nrrdNew()),
+               std::unique_ptr<NrrdIoState, IoStateNixer>(nrrdIoStateNew())};
+  h.nio->skipData = AIR_TRUE;
+  h.nio->keepNrrdDataFileOpen = AIR_TRUE;
+  std::lock_guard lock(teem_mutex());
+  if (nrrdLoad(h.nrrd.get(), path.c_str(), h.nio.get()) != 0)
+    throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  return h;
+}
+
 // Where a gzip-encoded NRRD's stream lies (the data file and its offset), for
 // verify_compressed: teem takes a stream cut short as the end of the data and leaves the rest of
 // the samples as they were. Nothing for other encodings and several data files.
 std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path) {
-  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
-  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
-  nio->skipData = AIR_TRUE;
-  nio->keepNrrdDataFileOpen = AIR_TRUE;
-  {
-    std::lock_guard lock(teem_mutex());
-    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
-      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
-  }
+  const auto [nrrd, nio] = load_header(path);
   if (nio->encoding != nrrdEncodingGzip || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
     return std::nullopt;
   // Lines skipped before a detached file's compressed data (teem skips them as text). In the
@@ -282,15 +291,7 @@ std::uint64_t after_lines(const std::string& file, std::uint64_t lines) {
 // digit (1e2 read 1). Nothing for other encodings, several data files and byte skips (teem's
 // alone to read).
 std::optional<TextSamples> ascii_text(const std::string& path) {
-  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
-  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
-  nio->skipData = AIR_TRUE;
-  nio->keepNrrdDataFileOpen = AIR_TRUE;
-  {
-    std::lock_guard lock(teem_mutex());
-    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
-      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
-  }
+  const auto [nrrd, nio] = load_header(path);
   if (nio->encoding != nrrdEncodingAscii || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
     return std::nullopt;
   const std::optional<DataStart> start = data_start(path, *nio);
@@ -347,15 +348,7 @@ Volume read_nrrd(const std::string& path) {
 
 std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
   probe_file(path);
-  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
-  std::unique_ptr<NrrdIoState, IoStateNixer> nio(nrrdIoStateNew());
-  nio->skipData = AIR_TRUE;
-  nio->keepNrrdDataFileOpen = AIR_TRUE;
-  {
-    std::lock_guard lock(teem_mutex());
-    if (nrrdLoad(nrrd.get(), path.c_str(), nio.get()) != 0)
-      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
-  }
+  const auto [nrrd, nio] = load_header(path);
   const HeaderInfo h = header_info(path, *nrrd);
   NrrdDataLayout out;
   out.type = h.type;
