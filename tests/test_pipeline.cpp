@@ -282,7 +282,7 @@ TEST_F(Pipeline, NoSurfaceSaysWhereTheSamplesLie) {
       ADD_FAILURE() << "no error";
     } catch (const NoSurfaceError& e) {
       EXPECT_EQ(std::string(e.what()), "no surface at iso " + number_text(e.iso) +
-                                           " (--iso auto's choice): " + e.finding +
+                                           " (the isovalue --iso auto chose): " + e.finding +
                                            "; choose another method or an isovalue with --iso, or "
                                            "--allow-empty to write the empty mesh");
       EXPECT_TRUE(e.straddled);

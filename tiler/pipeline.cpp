@@ -497,7 +497,7 @@ PipelineResult run_pipeline(const PipelineInput& input, const PipelineOptions& o
     // not --iso auto again.
     if (!options.iso_auto) throw;
     throw NoSurfaceError("no surface at iso " + number_text(e.iso) +
-                             " (--iso auto's choice): " + e.finding +
+                             " (the isovalue --iso auto chose): " + e.finding +
                              "; choose another method or an isovalue with --iso, or --allow-empty "
                              "to write the empty mesh",
                          e.iso, e.range, e.finding, e.straddled);
