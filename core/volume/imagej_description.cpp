@@ -70,6 +70,7 @@ ImageJShape imagej_shape(const std::map<std::string, std::string>& properties) {
   count("channels", shape.channels);
   count("slices", shape.slices);
   count("frames", shape.frames);
+  count("images", shape.images);
   return shape;
 }
 

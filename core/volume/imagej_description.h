@@ -16,9 +16,10 @@ namespace isotile {
 // with Java's \uXXXX escapes (ImageJ's "\u00B5m") decoded to UTF-8.
 std::map<std::string, std::string> imagej_properties(const std::string& description);
 
-// Its channels, slices and time points (frames), 1 where it does not say.
+// Its channels, slices and time points (frames), and its count of planes (images), 1 where it
+// does not say.
 struct ImageJShape {
-  std::uint64_t channels = 1, slices = 1, frames = 1;
+  std::uint64_t channels = 1, slices = 1, frames = 1, images = 1;
   // Pages of more than one of these axes interleave them (one alone, whatever ImageJ or tifffile
   // calls it, is a stack of planes: tifffile's imagej=True labels a plain stack's z as channels).
   bool hyperstack() const { return (channels > 1) + (slices > 1) + (frames > 1) > 1; }

@@ -104,7 +104,7 @@ TiffCheck check_tiff_file(const std::string& path) {
   bool plain = true;
   std::optional<ScalarType> plain_type;
   std::uint64_t plain_start = 0, plain_end = 0;
-  std::uint64_t imagej_images = 0;  // page 1's `images=`: ImageJ's count of planes
+  std::uint64_t imagej_images = 1;  // page 1's `images=`: ImageJ's count of planes
   int page = 0;
   while (ifd != 0) {
     ++page;
@@ -322,10 +322,8 @@ TiffCheck check_tiff_file(const std::string& path) {
     if (page == 1) {
       // ImageJ describes the file on its first page.
       const std::map<std::string, std::string> imagej = imagej_properties(description);
-      if (const auto it = imagej.find("images");
-          it != imagej.end() && it->second.size() < 12 && !it->second.empty() &&
-          it->second.find_first_not_of("0123456789") == std::string::npos)
-        imagej_images = std::stoull(it->second);
+      const ImageJShape shape = imagej_shape(imagej);
+      imagej_images = shape.images;
       result.calibration =
           imagej_spacing(path, imagej, x_resolution, y_resolution, resolution_unit);
       if (spp != 1)
@@ -350,7 +348,6 @@ TiffCheck check_tiff_file(const std::string& path) {
                          "] here, whose pages interleave more axes than z (channels or time "
                          "points); a volume is one 3-D array: save each one on its own");
       }
-      const ImageJShape shape = imagej_shape(imagej);
       if (shape.hyperstack())
         throw InputError(
             path + ": an ImageJ hyperstack of " +
