@@ -135,13 +135,15 @@ dvec4 disp_at(ivec3 g) { return disp_in[region_index(g)]; }
 // tolerance of it. `f`: this end's value, `g`: the other end's. A float32 sample holding the float
 // nearest the isovalue is a tie too (core/extract/macet_field.h).
 bool at_tie(double f, double g, ivec3 s) {
+  if (f == 0.0LF) return true;
   precise double tol = MACET_ROOT_TOLERANCE * abs(f - g);
+  if (abs(f) > tol) return false;  // the sample is read only for ends this near the isovalue
+  double v = sample_at(s);
 #ifdef SAMPLE_F32
-  bool tie = sample_at(s) == u_iso || sample_at(s) == double(u_iso_nearest);
+  return v == u_iso || v == double(u_iso_nearest);
 #else
-  bool tie = sample_at(s) == u_iso;
+  return v == u_iso;
 #endif
-  return f == 0.0LF || (abs(f) <= tol && tie);
 }
 
 // The linear estimate of the crossing on edge (s, axis) between its displaced end points (the
