@@ -253,8 +253,9 @@ NrrdHeader load_header(const std::string& path) {
 // Where a gzip-encoded NRRD's stream lies (the data file and its offset), for
 // verify_compressed: teem takes a stream cut short as the end of the data and leaves the rest of
 // the samples as they were. Nothing for other encodings and several data files.
-std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path) {
-  const auto [nrrd, nio] = load_header(path);
+std::optional<ImageHeaderCheck::Compressed> gzip_stream(const std::string& path,
+                                                        const NrrdHeader& header) {
+  const auto& [nrrd, nio] = header;
   if (nio->encoding != nrrdEncodingGzip || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
     return std::nullopt;
   // Lines skipped before a detached file's compressed data (teem skips them as text). In the
@@ -290,8 +291,8 @@ std::uint64_t after_lines(const std::string& file, std::uint64_t lines) {
 // through an int (300 in a uchar file read 44) and stops at the first character that is not a
 // digit (1e2 read 1). Nothing for other encodings, several data files and byte skips (teem's
 // alone to read).
-std::optional<TextSamples> ascii_text(const std::string& path) {
-  const auto [nrrd, nio] = load_header(path);
+std::optional<TextSamples> ascii_text(const std::string& path, const NrrdHeader& header) {
+  const auto& [nrrd, nio] = header;
   if (nio->encoding != nrrdEncodingAscii || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
     return std::nullopt;
   const std::optional<DataStart> start = data_start(path, *nio);
@@ -308,47 +309,9 @@ std::optional<TextSamples> ascii_text(const std::string& path) {
   return t;
 }
 
-}  // namespace
-
-Volume read_nrrd(const std::string& path) {
-  probe_file(path);
-  if (std::optional<ImageHeaderCheck::Compressed> gz = gzip_stream(path)) {
-    ImageHeaderCheck check;
-    check.compressed = std::move(gz);
-    verify_compressed(check);
-  }
-  // Raw data must be exactly the samples, as out of core (teem reads a longer file with a warning
-  // on stderr).
-  if (const std::optional<NrrdDataLayout> d = nrrd_data_layout(path); d && !d->gzip) {
-    std::error_code ec;
-    const std::uintmax_t size = std::filesystem::file_size(d->data_file, ec);
-    if (!ec) check_plain_size(d->data_file, size, d->offset, d->type, d->dims);
-  }
-
-  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
-  {
-    std::lock_guard lock(teem_mutex());
-    if (nrrdLoad(nrrd.get(), path.c_str(), nullptr) != 0)
-      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
-  }
-  const HeaderInfo h = header_info(path, *nrrd);
-  Volume volume(h.type, h.dims, h.spacing, h.origin);
-  volume.set_world(h.world);
-  const std::size_t have = nrrdElementNumber(nrrd.get()) * nrrdElementSize(nrrd.get());
-  if (have != volume.byte_size() || nrrd->data == nullptr)
-    throw InputError(path + ": NRRD holds " + std::to_string(have) + " bytes of data, expected " +
-                     std::to_string(volume.byte_size()));
-  std::memcpy(volume.bytes(), nrrd->data, volume.byte_size());
-  nrrd.reset();
-  if (const std::optional<TextSamples> text = ascii_text(path))
-    verify_text_samples(*text, volume.bytes(), volume.dims());
-  check_finite(volume.view(), path);
-  return volume;
-}
-
-std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
-  probe_file(path);
-  const auto [nrrd, nio] = load_header(path);
+// nrrd_data_layout() from a loaded header.
+std::optional<NrrdDataLayout> data_layout(const std::string& path, const NrrdHeader& header) {
+  const auto& [nrrd, nio] = header;
   const HeaderInfo h = header_info(path, *nrrd);
   NrrdDataLayout out;
   out.type = h.type;
@@ -387,6 +350,50 @@ std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
     out.offset = attached ? start : start + static_cast<std::uint64_t>(nio->byteSkip);
   }
   return out;
+}
+
+}  // namespace
+
+Volume read_nrrd(const std::string& path) {
+  probe_file(path);
+  const NrrdHeader header = load_header(path);  // for the checks before and after teem's read
+  if (std::optional<ImageHeaderCheck::Compressed> gz = gzip_stream(path, header)) {
+    ImageHeaderCheck check;
+    check.compressed = std::move(gz);
+    verify_compressed(check);
+  }
+  // Raw data must be exactly the samples, as out of core (teem reads a longer file with a warning
+  // on stderr).
+  if (const std::optional<NrrdDataLayout> d = data_layout(path, header); d && !d->gzip) {
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(d->data_file, ec);
+    if (!ec) check_plain_size(d->data_file, size, d->offset, d->type, d->dims);
+  }
+
+  std::unique_ptr<Nrrd, NrrdNuker> nrrd(nrrdNew());
+  {
+    std::lock_guard lock(teem_mutex());
+    if (nrrdLoad(nrrd.get(), path.c_str(), nullptr) != 0)
+      throw InputError(path + ": not a readable NRRD file: " + take_biff_error());
+  }
+  const HeaderInfo h = header_info(path, *nrrd);
+  Volume volume(h.type, h.dims, h.spacing, h.origin);
+  volume.set_world(h.world);
+  const std::size_t have = nrrdElementNumber(nrrd.get()) * nrrdElementSize(nrrd.get());
+  if (have != volume.byte_size() || nrrd->data == nullptr)
+    throw InputError(path + ": NRRD holds " + std::to_string(have) + " bytes of data, expected " +
+                     std::to_string(volume.byte_size()));
+  std::memcpy(volume.bytes(), nrrd->data, volume.byte_size());
+  nrrd.reset();
+  if (const std::optional<TextSamples> text = ascii_text(path, header))
+    verify_text_samples(*text, volume.bytes(), volume.dims());
+  check_finite(volume.view(), path);
+  return volume;
+}
+
+std::optional<NrrdDataLayout> nrrd_data_layout(const std::string& path) {
+  probe_file(path);
+  return data_layout(path, load_header(path));
 }
 
 }  // namespace isotile
