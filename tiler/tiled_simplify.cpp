@@ -554,26 +554,14 @@ class TiledSimplification {
   // Gathers the octants of seam cell c (its faces whose centroid's z-cell is in [z_lo, z_hi)),
   // joins them at equal keys, simplifies and emits.
   void seam_cell(std::int64_t c, std::int64_t z_lo, std::int64_t z_hi, TiledResult& result) {
-    const bool whole = z_lo == std::numeric_limits<std::int64_t>::min() &&
-                       z_hi == std::numeric_limits<std::int64_t>::max();
     std::vector<SpillVertex> vs, chunk_vs;
     std::vector<Tri> fs, chunk_fs;
     std::vector<std::int64_t> local;
     for (std::size_t slot : cell_slots_[static_cast<std::size_t>(c)]) {
       for (const Chunk& ch : chunks_[slot]) {
-        if (whole) {
-          const auto base = static_cast<std::uint32_t>(vs.size());
-          vs.resize(vs.size() + ch.vertices);
-          chunks_spill_.read(ch.offset, vs.data() + base, ch.vertices * sizeof(SpillVertex));
-          const std::size_t f0 = fs.size();
-          fs.resize(fs.size() + ch.faces);
-          chunks_spill_.read(ch.offset + ch.vertices * sizeof(SpillVertex), fs.data() + f0,
-                             ch.faces * sizeof(Tri));
-          for (std::size_t f = f0; f < fs.size(); ++f)
-            for (std::uint32_t& v : fs[f]) v += base;
-          continue;
-        }
-        // One part: the chunk's faces in the part, and the vertices they use.
+        // The chunk's faces in the part (all of a whole cell's), and the vertices they use, in
+        // the order of first use: a key met in several chunks keeps the chunks' order, so a
+        // whole cell's quadrics add up as when its chunks were read whole.
         if (ch.z0 >= z_hi || ch.z0 + static_cast<std::int64_t>(ch.z_faces.size()) <= z_lo) continue;
         chunk_vs.resize(ch.vertices);
         chunks_spill_.read(ch.offset, chunk_vs.data(), ch.vertices * sizeof(SpillVertex));
