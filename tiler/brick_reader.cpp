@@ -166,15 +166,16 @@ BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertice
   // need more than thicker ones. The least is the minimum over every slicing; where it is at
   // least twice the budget (no hard limit the user counted on holds anyway), the fewest slices
   // within a quarter above it; nearer the budget, the fewest that need no more than it.
-  s.least = s.bytes;
+  std::vector<Slicing> fewer;  // every slicing thicker than one cell, fewest slices first
+  s.least = s.bytes;           // one-cell slices'
   for (std::int64_t count = 1; count < depth; ++count)
-    if (!odd || count % 2 == 1) s.least = std::min(s.least, thickest(count));
+    if (!odd || count % 2 == 1) {
+      fewer.push_back({count, thickest(count)});
+      s.least = std::min(s.least, fewer.back().bytes);
+    }
   const double allowed = static_cast<double>(s.least) * (s.least >= 2 * memory ? 1.25 : 1.0);
-  for (std::int64_t count = 1; count < depth; ++count) {
-    if (odd && count % 2 == 0) continue;
-    const std::uint64_t bytes = thickest(count);
-    if (static_cast<double>(bytes) <= allowed) return {count, bytes, s.least};
-  }
+  for (const Slicing& f : fewer)
+    if (static_cast<double>(f.bytes) <= allowed) return {f.count, f.bytes, s.least};
   return s;
 }
 
