@@ -1279,26 +1279,43 @@ TEST_F(DicomDir, PixelSpacingsThatDifferOrAreZeroAreRefused) {
     EXPECT_NE(msg.find("one volume needs it alike in every slice"), std::string::npos) << msg;
   }
   for (int n = 50; n < 55; ++n) set_spacing(n, "0\\0.5   ");
-  const std::string msg = error_of([&] { read_volume_header(dir_.string()); });
+  std::string msg = error_of([&] { read_volume_header(dir_.string()); });
   EXPECT_NE(msg.find("PixelSpacing (0028,0030) holds '0\\0.5'; a pixel spacing is two positive"),
             std::string::npos)
       << msg;
+  // A 0 in a later slice alone: GDCM's 1 mm for it matched a first slice of 1 mm, exit 0.
+  for (int n = 50; n < 55; ++n) set_spacing(n, n == 53 ? "1\\0     " : "1\\1     ");
+  for (const bool header : {true, false}) {
+    msg = error_of([&] {
+      if (header)
+        read_volume_header(dir_.string());
+      else
+        read_volume(dir_.string());
+    });
+    EXPECT_NE(msg.find("00000053.dcm: PixelSpacing (0028,0030) holds '1\\0'; a pixel spacing"),
+              std::string::npos)
+        << msg;
+  }
 }
 
 // MONOCHROME1: ITK's reader inverts the stored values (to MONOCHROME2) before the rescale, so the
-// samples are not in the file's units (-1024 HU came out as 64511): refused, not meshed.
+// samples are not in the file's units (-1024 HU came out as 64511): refused, not meshed, in any
+// slice of a series.
 TEST_F(DicomDir, Monochrome1IsRefused) {
   REQUIRE_ITK();
   ISOTILE_REQUIRE_SHARED(series_);
-  for (int n = 50; n < 54; ++n) {
-    copy(n);
+  const auto set_photometric = [&](int n, const char* value) {
     char name[32];
     std::snprintf(name, sizeof name, "%08d.dcm", n);
     std::string bytes = testing::slurp(dir_ / name);
     const std::size_t at = bytes.find("MONOCHROME2");
     ASSERT_NE(at, std::string::npos);
-    bytes[at + 10] = '1';
+    bytes.replace(at, 11, value);
     std::ofstream(dir_ / name, std::ios::binary) << bytes;
+  };
+  for (int n = 50; n < 54; ++n) {
+    copy(n);
+    set_photometric(n, "MONOCHROME1");
   }
   try {
     read_volume_header(dir_.string());
@@ -1307,6 +1324,18 @@ TEST_F(DicomDir, Monochrome1IsRefused) {
     EXPECT_NE(std::string(e.what()).find("PhotometricInterpretation MONOCHROME1"),
               std::string::npos)
         << e.what();
+  }
+  // One MONOCHROME1 slice among MONOCHROME2 ones: ITK reads each slice by itself, and that one
+  // came out inverted, exit 0.
+  for (int n = 50; n < 54; ++n) copy(n);
+  set_photometric(52, "MONOCHROME1");
+  for (const char* command : {"info .", "extract . -o out.ply --iso 60 -q",
+                              "extract . -o out.ply --iso 60 -q --memory 8MiB"}) {
+    const CliResult r = run(command);
+    EXPECT_EQ(r.code, 1) << command;
+    EXPECT_NE(r.err.find("00000052.dcm: PhotometricInterpretation MONOCHROME1"), std::string::npos)
+        << command << ": " << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "out.ply")) << command;
   }
 }
 

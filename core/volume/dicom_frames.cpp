@@ -149,6 +149,40 @@ bool close(const std::vector<double>& a, const std::vector<double>& b, double to
 
 }  // namespace
 
+// MONOCHROME1 only says how to display the values (the lowest white); ITK's DICOM reader turns
+// such an image into MONOCHROME2 by inverting the stored values, before the rescale, so the
+// samples were no longer in the file's units (-1024 HU read as 64511), exit 0.
+void check_photometric(const std::string& path, const std::string& photometric) {
+  if (photometric == "MONOCHROME1")
+    throw InputError(path +
+                     ": PhotometricInterpretation MONOCHROME1 (the lowest value shown white): "
+                     "ITK's DICOM reader inverts such samples, so they would not be in the "
+                     "file's units (CT's Hounsfield units); isotile does not read them");
+}
+
+// A pixel spacing of 0 (or less) is no distance: GDCM took 1 mm for it without a word.
+void check_pixel_spacing(const std::string& path, const std::string& element,
+                         const std::string& values) {
+  int count = 0;
+  bool positive = true;
+  std::size_t at = 0;
+  while (at <= values.size()) {
+    std::size_t end = values.find('\\', at);
+    if (end == std::string::npos) end = values.size();
+    std::string value = values.substr(at, end - at);
+    while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
+    while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+    char* stop = nullptr;
+    const double v = std::strtod(value.c_str(), &stop);
+    positive = positive && !value.empty() && *stop == '\0' && std::isfinite(v) && v > 0;
+    ++count;
+    at = end + 1;
+  }
+  if (count != 2 || !positive)
+    throw InputError(path + ": " + element + " holds '" + values +
+                     "'; a pixel spacing is two positive distances (GDCM takes 1 mm for a 0)");
+}
+
 DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   DicomFrames out;
   gdcm::Reader reader;
@@ -165,27 +199,15 @@ DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames) {
   const gdcm::Tag spacing_tag = GdcmSpacingTag::GetSpacingTagFromMediaStorage(storage);
   out.spacing_known = spacing_tag == gdcm::Tag(0xFFFF, 0xFFFF) || has(spacing_tag);
   out.spacing_element = element_name(spacing_tag);
-  // MONOCHROME1 only says how to display the values (the lowest white); ITK's DICOM reader turns
-  // such an image into MONOCHROME2 by inverting the stored values, before the rescale, so the
-  // samples were no longer in the file's units (-1024 HU read as 64511), exit 0.
   if (has(kPhotometric)) {
-    std::vector<std::string> photometric = text_values(ds.GetDataElement(kPhotometric));
-    if (!photometric.empty() && photometric.front() == "MONOCHROME1")
-      throw InputError(path +
-                       ": PhotometricInterpretation MONOCHROME1 (the lowest value shown white): "
-                       "ITK's DICOM reader inverts such samples, so they would not be in the "
-                       "file's units (CT's Hounsfield units); isotile does not read them");
+    const std::vector<std::string> photometric = text_values(ds.GetDataElement(kPhotometric));
+    if (!photometric.empty()) check_photometric(path, photometric.front());
   }
-  // A pixel spacing of 0 (or less) is no distance: GDCM took 1 mm for it without a word.
   if ((spacing_tag == kPixelSpacing || spacing_tag == kImagerPixelSpacing) && has(spacing_tag)) {
-    const gdcm::DataElement& e = ds.GetDataElement(spacing_tag);
-    const std::vector<double> v = decimals(e, path);
-    if (v.size() != 2 || !(v[0] > 0) || !(v[1] > 0)) {
-      std::string values;
-      for (const std::string& x : text_values(e)) values += (values.empty() ? "" : "\\") + x;
-      throw InputError(path + ": " + out.spacing_element + " holds '" + values +
-                       "'; a pixel spacing is two positive distances (GDCM takes 1 mm for a 0)");
-    }
+    std::string values;
+    for (const std::string& x : text_values(ds.GetDataElement(spacing_tag)))
+      values += (values.empty() ? "" : "\\") + x;
+    check_pixel_spacing(path, out.spacing_element, values);
   }
   if (!ds.FindDataElement(kPerFrameGroups)) {
     if (frames < 2) return out;

@@ -51,4 +51,12 @@ struct DicomFrames {
 // some frames have a position and others none, or RT Dose's offsets are not one per frame.
 DicomFrames read_dicom_frames(const std::string& path, std::int64_t frames);
 
+// The checks read_dicom_frames makes of one file's image, for the slices of a series, whose
+// values ITK's reader gives: throw InputError for PhotometricInterpretation MONOCHROME1 (ITK
+// inverts its samples), and for a pixel spacing (`element` named in the message, `values` its
+// text, "0.5\\0.5") that is not two positive distances (GDCM takes 1 mm for a 0).
+void check_photometric(const std::string& path, const std::string& photometric);
+void check_pixel_spacing(const std::string& path, const std::string& element,
+                         const std::string& values);
+
 }  // namespace isotile

@@ -370,6 +370,7 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
   std::vector<FileHeader> h;
   h.reserve(files.size());
   ItkImageInfo info;
+  std::vector<std::string> spacing_text;  // each DICOM slice's PixelSpacing, as its file says
   for (std::size_t k = 0; k < files.size(); ++k) {
     h.push_back(read_header(*io, files[k]));
     if (!dicom || files.size() == 1) continue;
@@ -403,6 +404,10 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
                          "; the slices of a series cannot be ordered without it");
       }
     }
+    // What read_dicom_frames checks in the first file, in every slice: ITK reads each by itself,
+    // so one MONOCHROME1 slice among MONOCHROME2 ones came out inverted, exit 0.
+    check_photometric(files[k], series_tag(gdcm, "0028|0004"));
+    spacing_text.push_back(series_tag(gdcm, "0028|0030"));
     // Each slice's rescale, as GDCM applies it to that slice.
     const double slope = gdcm.GetRescaleSlope(), intercept = gdcm.GetRescaleIntercept();
     RescaleRange& r = info.rescale_range;
@@ -448,6 +453,14 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
     info.direction = first.direction;
     info.origin = first.origin;
     if (dicom) {
+      // Where GDCM reads PixelSpacing for this kind of image (CT, MR...), a 0 in a later slice
+      // was read as 1 mm: named as the first slice's is, not as a spacing that differs (or as
+      // none where the first slice's is 1 mm).
+      geometry = read_dicom_frames(files[0], 1);
+      const std::string& element = geometry.spacing_element;
+      if (element.rfind("PixelSpacing ", 0) == 0)
+        for (std::size_t k = 1; k < files.size(); ++k)
+          if (!spacing_text[k].empty()) check_pixel_spacing(files[k], element, spacing_text[k]);
       for (std::size_t k = 0; k < files.size(); ++k)
         for (int c = 0; c < 3; ++c)
           if (std::abs(h[k].direction[3 * c] - first.direction[3 * c]) > 1e-4 ||
@@ -470,7 +483,6 @@ ItkImageInfo stack_info(const ItkInput& input, std::vector<std::string> files) {
           input.path, origins, {first.direction[2], first.direction[5], first.direction[8]},
           {"slice", "slices"},
           [&](std::size_t k) { return fs::path(files[k]).filename().string(); });
-      geometry = read_dicom_frames(files[0], 1);
       std::vector<std::string> sorted(files.size());
       for (std::size_t k = 0; k < files.size(); ++k) sorted[k] = files[stack.order[k]];
       files = std::move(sorted);
