@@ -844,6 +844,37 @@ TEST_F(VolumeIo, TextSamplesThatAreNotTheirTypesNumbersAreRefused) {
   }
 }
 
+// Text in several data files, after a line skip and a byte skip in each (teem skips both in
+// every file and reads an equal share from each): checked file by file, as one file is (300
+// read 44 there too, exit 0).
+TEST_F(VolumeIo, TextSamplesInSeveralDataFilesAndAfterSkipsAreChecked) {
+  const std::string file = path("m.nrrd");
+  write_file(file,
+             "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n"
+             "line skip: 1\nbyte skip: 2\ndata file: LIST\na.txt\nb.txt\n");
+  const auto data = [&](const std::string& a, const std::string& b) {
+    write_file(path("a.txt"), "first line\n: " + a + "\n");
+    write_file(path("b.txt"), "first line\n: " + b + "\n");
+  };
+  data("1 2 3 4", "5 6 7 8");
+  const Volume v = read_nrrd(file);
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(v.data<std::uint8_t>()[i], i + 1) << i;
+  data("1 2 3 4", "5 6 300 8");
+  std::string msg = message_of<InputError>([&] { read_nrrd(file); });
+  EXPECT_TRUE(contains(msg, "b.txt: NRRD ascii sample 6 (x=0, y=1, z=1) is '300', out of the"))
+      << msg;
+  data("1 2 3 1e2", "5 6 7 8");
+  msg = message_of<InputError>([&] { read_nrrd(file); });
+  EXPECT_TRUE(contains(msg, "a.txt: NRRD ascii sample 3 (x=1, y=1, z=0) is '1e2'")) << msg;
+  // One detached file after a byte skip alone.
+  write_file(file,
+             "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n"
+             "byte skip: 3\ndata file: a.txt\n");
+  write_file(path("a.txt"), "xx\n1 2 3 4 5 6 7 -5\n");
+  msg = message_of<InputError>([&] { read_nrrd(file); });
+  EXPECT_TRUE(contains(msg, "a.txt: NRRD ascii sample 7 (x=1, y=1, z=1) is '-5'")) << msg;
+}
+
 TEST_F(VolumeIo, NrrdNonFinite) {
   std::vector<float> values(8, 1.0f);
   values[5] = std::numeric_limits<float>::infinity();

@@ -289,24 +289,40 @@ std::uint64_t after_lines(const std::string& file, std::uint64_t lines) {
 
 // Where an ascii-encoded NRRD's text lies, for verify_text_samples: teem casts each token
 // through an int (300 in a uchar file read 44) and stops at the first character that is not a
-// digit (1e2 read 1). Nothing for other encodings, several data files and byte skips (teem's
-// alone to read).
-std::optional<TextSamples> ascii_text(const std::string& path, const NrrdHeader& header) {
+// digit (1e2 read 1). One piece per data file: teem reads an equal share of the samples from
+// each, after its line skip and then its byte skip (in the header's own file, teem has read past
+// them already: data_start()). Nothing for other encodings.
+std::vector<TextSamples> ascii_text(const std::string& path, const NrrdHeader& header) {
   const auto& [nrrd, nio] = header;
-  if (nio->encoding != nrrdEncodingAscii || nio->dataFNArr->len > 1 || nio->byteSkip != 0)
-    return std::nullopt;
-  const std::optional<DataStart> start = data_start(path, *nio);
-  if (!start) return std::nullopt;
+  if (nio->encoding != nrrdEncodingAscii || nio->byteSkip < 0) return {};
   const HeaderInfo h = header_info(path, *nrrd);
+  const std::int64_t count = h.dims[0] * h.dims[1] * h.dims[2];
+  const unsigned files = nio->dataFNArr->len;
   TextSamples t;
-  t.file = start->file;
-  t.offset = start->offset;
-  if (nio->lineSkip > 0 && nio->dataFNArr->len == 1) t.offset = after_lines(t.file, nio->lineSkip);
   t.type = h.type;
-  t.count = h.dims[0] * h.dims[1] * h.dims[2];
   t.commas = true;
   t.what = "NRRD ascii";
-  return t;
+  if (files <= 1) {
+    const std::optional<DataStart> start = data_start(path, *nio);
+    if (!start) return {};
+    t.file = start->file;
+    t.offset = start->offset;
+    if (files == 1)
+      t.offset = after_lines(t.file, nio->lineSkip) + static_cast<std::uint64_t>(nio->byteSkip);
+    t.count = count;
+    return {t};
+  }
+  std::vector<TextSamples> pieces;
+  t.count = count / files;
+  for (unsigned k = 0; k < files; ++k) {
+    std::filesystem::path data = nio->dataFN[k];
+    if (data.is_relative()) data = std::filesystem::path(path).parent_path() / data;
+    t.file = data.string();
+    t.offset = after_lines(t.file, nio->lineSkip) + static_cast<std::uint64_t>(nio->byteSkip);
+    t.first = k * t.count;
+    pieces.push_back(t);
+  }
+  return pieces;
 }
 
 // nrrd_data_layout() from a loaded header.
@@ -385,8 +401,8 @@ Volume read_nrrd(const std::string& path) {
                      std::to_string(volume.byte_size()));
   std::memcpy(volume.bytes(), nrrd->data, volume.byte_size());
   nrrd.reset();
-  if (const std::optional<TextSamples> text = ascii_text(path, header))
-    verify_text_samples(*text, volume.bytes(), volume.dims());
+  for (const TextSamples& text : ascii_text(path, header))
+    verify_text_samples(text, volume.bytes(), volume.dims());
   check_finite(volume.view(), path);
   return volume;
 }

@@ -46,8 +46,8 @@ void verify_text_samples(const TextSamples& text, const void* samples, const Ind
     throw InputError(text.file + ": " + text.what + " " + at(n) + " is '" + token + "', " + why);
   };
   std::string token;
-  std::int64_t n = 0;
-  while (n < text.count && f >> token) {
+  std::int64_t n = text.first;
+  while (n < text.first + text.count && f >> token) {
     std::string_view t = token;
     if (text.commas) {
       if (t == ",") continue;

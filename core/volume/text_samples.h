@@ -21,13 +21,17 @@ struct TextSamples {
   // over (as teem passes them); MetaImage's text is whitespace only.
   bool commas = false;
   std::string what;  // "NRRD ascii", "MetaImage text": the message's name for the encoding
+  // The index of the text's first sample in the volume: a NRRD's samples in several data files
+  // are checked file by file.
+  std::int64_t first = 0;
 };
 
 // Reads the text token by token and throws InputError, naming `file`, the sample's index and
 // position and its token, where a token is not a number the type holds (integers: an optional
 // sign and digits, within the type's range; floats: a whole number in C's syntax, nan and inf
-// included, which check_finite refuses later), or where `samples` (count of them, of `type`, as
-// the library read them) holds another value. Fewer tokens than samples is left to the library.
+// included, which check_finite refuses later), or where `samples` (the whole volume's, of `type`,
+// as the library read them; the text holds `count` of them from `first`) holds another value.
+// Fewer tokens than samples is left to the library.
 void verify_text_samples(const TextSamples& text, const void* samples, const Index3& dims);
 
 }  // namespace isotile
