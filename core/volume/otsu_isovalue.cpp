@@ -5,7 +5,6 @@
 
 #include <bit>
 #include <cmath>
-#include <sstream>
 
 #include "core/errors.h"
 
@@ -45,13 +44,6 @@ void finish(ValueHistogram& h) {
   }
   h.min = first < 0 ? 0.0 : h.lo[first];
   h.max = last < 0 ? 0.0 : h.hi[last];
-}
-
-std::string number(double v) {
-  std::ostringstream s;
-  s.precision(10);
-  s << v;
-  return s.str();
 }
 
 }  // namespace
@@ -99,7 +91,7 @@ ValueHistogram value_histogram(const VolumeView& view) {
 double otsu_isovalue(const ValueHistogram& h) {
   if (h.samples == 0) throw InputError("no samples to choose an isovalue from");
   if (!(h.min < h.max))
-    throw InputError("every sample is " + number(h.min) +
+    throw InputError("every sample is " + number_text(h.min) +
                      ": no isovalue separates an inside from an outside");
   // Each bin's samples stand at the middle of its bounds (exact for every bin holding one value,
   // as every bin of an 8- or 16-bit volume below 256 does).
