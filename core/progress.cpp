@@ -41,6 +41,9 @@ void say_warning(const Warn& to, const std::string& line) {
 Progress::Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks)
     : parent_(&parent), parent_stage_(stage), brick_(brick), bricks_(bricks > 0 ? bricks : 1) {}
 
+Progress::Progress(Progress& parent, double from, double to)
+    : parent_(&parent), share_(true), share_from_(from), share_to_(to) {}
+
 void Progress::set_brick(std::int64_t brick, std::int64_t bricks) {
   std::lock_guard lock(mutex_);
   brick_ = brick;
@@ -60,7 +63,7 @@ void Progress::begin(Stage stage, std::int64_t total) {
 void Progress::finish() {
   check();
   std::lock_guard lock(mutex_);
-  if (!parent_) {
+  if (!parent_ || share_) {
     done_ = total_;
     report({stage_, brick_, bricks_, 1.0});
     return;
@@ -78,6 +81,14 @@ void Progress::advance(std::int64_t units) {
 
 void Progress::report(const ProgressUpdate& update) {
   if (!parent_) return report_root(update);
+  if (share_) {
+    // As the parent's own report (under the parent's mutex_, taken after this one's): a brick's
+    // child maps it into its brick's series as it would its own stage.
+    std::lock_guard lock(parent_->mutex_);
+    parent_->report({update.stage, parent_->brick_, parent_->bricks_,
+                     share_from_ + (share_to_ - share_from_) * update.fraction});
+    return;
+  }
   // A child (under its own mutex_): its stages are a series (stage_series_fraction), so the
   // brick's fraction grows through any number of them and stays below 1 until finish().
   const int n = std::max(child_stages_, 1);

@@ -21,6 +21,11 @@
 // other's stage: the child's own stages (read, count, extract of the core extraction inside the
 // brick) become a growing fraction below 1 of the parent's `stage` for that brick, and finish()
 // reports the brick done (fraction 1). Children share their parent's cancel.
+//
+// Shares: work done in passes within one stage (the simplifier's two) reports each pass through a
+// share of its Progress (Progress(parent, from, to)), whose stage's fraction, 0 to 1, is told to
+// the parent as from to `to`: the stage's fraction only grows across the passes, where each
+// pass's begin() started it again at 0.
 #pragma once
 
 #include <algorithm>
@@ -77,6 +82,8 @@ class Progress {
   explicit Progress(ProgressCallback callback) : callback_(std::move(callback)) {}
   // Reports to `parent` as brick `brick` of `bricks` of its `stage` (see Nesting above).
   Progress(Progress& parent, Stage stage, std::int64_t brick, std::int64_t bricks);
+  // Reports its stages to `parent` as the share [from, to] of the parent's (see Shares above).
+  Progress(Progress& parent, double from, double to);
   Progress(const Progress&) = delete;
   Progress& operator=(const Progress&) = delete;
 
@@ -118,6 +125,8 @@ class Progress {
   Stage parent_stage_ = Stage::Extract;
   int child_stages_ = 0;       // a child's begin() calls so far
   double child_reported_ = 0;  // the highest fraction a child told its parent
+  bool share_ = false;         // a share of its parent's stage, from share_from_ to share_to_
+  double share_from_ = 0, share_to_ = 1;
   std::mutex mutex_;           // the stage's state
   std::mutex callback_mutex_;  // one callback at a time (taken after a child's or own mutex_)
   Stage stage_ = Stage::Read;

@@ -196,6 +196,38 @@ TEST(Progress, ChildReportsWithinItsBrick) {
   EXPECT_THROW(child.advance(), Cancelled);
 }
 
+// A share reports its stages as its part of the parent's current one, in the parent's brick; in
+// a child, as the child's own stage within its brick.
+TEST(Progress, SharesReportTheirPartOfTheStage) {
+  Recorder rec;
+  Progress root(rec.callback());
+  for (const auto& [from, to] : {std::pair{0.0, 0.25}, std::pair{0.25, 1.0}}) {
+    Progress share(root, from, to);
+    share.begin(Stage::Simplify, 2);
+    share.advance(2);
+  }
+  const std::vector<double> want = {0, 0.25, 0.25, 1};
+  ASSERT_EQ(rec.updates.size(), want.size());
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    EXPECT_EQ(rec.updates[i].stage, Stage::Simplify) << i;
+    EXPECT_DOUBLE_EQ(rec.updates[i].fraction, want[i]) << i;
+  }
+  rec.updates.clear();
+  Progress child(root, Stage::Simplify, 2, 5);
+  Progress share(child, 0.5, 1.0);
+  share.begin(Stage::Simplify, 1);
+  share.advance();
+  ASSERT_EQ(rec.updates.size(), 2u);
+  for (const ProgressUpdate& u : rec.updates) {
+    EXPECT_EQ(u.brick, 2);
+    EXPECT_EQ(u.bricks, 5);
+    EXPECT_LT(u.fraction, 1.0);
+  }
+  EXPECT_LT(rec.updates[0].fraction, rec.updates[1].fraction);
+  root.cancel();
+  EXPECT_THROW(share.advance(), Cancelled);
+}
+
 // A stop condition beside the callback: asked after it at every report, a child's included; true
 // cancels the run; cleared, it is asked no more.
 TEST(Progress, StopWhenCancelsAtTheNextReport) {
@@ -304,6 +336,14 @@ TEST(Progress, SimplifyReportsRoundsAndStops) {
   o.progress = nullptr;
   EXPECT_EQ(with.triangles, simplify(mesh, o).triangles);
   expect_monotonic_runs(rec.updates, "simplify");
+  // The two passes as one stage, each in its share: it starts at 0 once and never goes back (the
+  // second pass started it again at 0 after the first reached 1).
+  EXPECT_EQ(std::count_if(rec.updates.begin(), rec.updates.end(),
+                          [](const ProgressUpdate& u) { return u.fraction == 0; }),
+            1);
+  EXPECT_EQ(std::count_if(rec.updates.begin(), rec.updates.end(),
+                          [](const ProgressUpdate& u) { return u.fraction == 1; }),
+            1);
   // Per pass: its begin, rounds of collapses and then one per region finished; more calls than
   // regions alone would make.
   std::int64_t below_regions = 0;

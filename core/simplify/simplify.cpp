@@ -325,7 +325,7 @@ double round_ceiling(const std::vector<std::vector<double>>& costs, std::uint64_
 // reduction evenly instead of where it costs least); without one (an error bound only), each
 // region collapses all it may. The regions are then put back together in cell order.
 PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
-                    const RegionOptions& base, const SimplifyOptions& options,
+                    const RegionOptions& base, const SimplifyOptions& options, Progress* progress,
                     SimplifyStats& stats) {
   const std::int64_t cells = grid.total();
   std::vector<std::uint64_t> start(cells + 1, 0);
@@ -396,10 +396,10 @@ PassResult run_pass(const WorkMesh& in, const Grid& grid, std::uint64_t target,
     sims[r].emplace(std::move(reg), base);
   });
 
-  // Progress (Stage::Simplify, one begin per pass): the faces still to go before the target, as
-  // each round of collapses removes them (without a target: one per region collapsed), then one
-  // per region finished. Regions check for cancel within a round too (RegionSimplifier).
-  Progress* const progress = options.progress;
+  // Progress (Stage::Simplify, begun by each pass in its share of the run's): the faces still to go
+  // before the target, as each round of collapses removes them (without a target: one per region
+  // collapsed), then one per region finished. Regions check for cancel within a round too
+  // (RegionSimplifier).
   const std::uint64_t faces_in = in.triangles.size();
   const std::uint64_t to_go = target == 0 ? nr : (faces_in > target ? faces_in - target : 0);
   progress_begin(progress, Stage::Simplify, static_cast<std::int64_t>(to_go + nr));
@@ -625,13 +625,25 @@ Welded simplify_work(WorkMesh m, std::uint64_t target, const SimplifyOptions& op
     const double held = kSeamFaces * static_cast<double>(count_shared(m, grid)) * (1 - keep);
     target1 = std::min<std::uint64_t>(faces, target + static_cast<std::uint64_t>(held));
   }
+  // Both passes report as one stage, each through its share, sized by the units it counts (the
+  // faces it removes, one per region) with as many regions in the second as in the first.
+  std::optional<Progress> first_pass, second_pass;
+  if (options.progress) {
+    const double regions = static_cast<double>(faces / kRegionFaces + 1);
+    const double first = static_cast<double>(target > 0 ? faces - target1 : 0) + regions;
+    const double second = static_cast<double>(target > 0 ? target1 - target : 0) + regions;
+    const double split = first / (first + second);
+    first_pass.emplace(*options.progress, 0.0, split);
+    second_pass.emplace(*options.progress, split, 1.0);
+  }
+  const auto share = [](std::optional<Progress>& p) { return p ? &*p : nullptr; };
   const std::uint64_t unlinked_before = stats.unlinked_faces;
-  PassResult p1 = run_pass(m, grid, target1, ro, options, stats);
+  PassResult p1 = run_pass(m, grid, target1, ro, options, share(first_pass), stats);
   stats.regions += p1.regions;
   // Faces OpenMesh cannot link pass through both passes: counted once, not once per pass.
   const std::uint64_t unlinked_first = stats.unlinked_faces - unlinked_before;
   stats.unlinked_faces = unlinked_before;
-  PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, options, stats);
+  PassResult p2 = run_pass(p1.mesh, shifted(grid), target, ro, options, share(second_pass), stats);
   stats.unlinked_faces =
       unlinked_before + std::max(unlinked_first, stats.unlinked_faces - unlinked_before);
   stats.seam_regions += p2.regions;
