@@ -154,14 +154,45 @@ OutputTarget resolve_output(const std::filesystem::path& path) {
   }
 }
 
-bool same_file(const std::filesystem::path& a, const std::filesystem::path& b) {
+namespace {
+
+// Where a path that does not lead to a file yet would be created: its links followed one by one
+// (a dangling link's target is what gets created), then made absolute with `.`, `..` and the
+// links of its existing folders resolved. weakly_canonical alone left a relative path whose
+// first folder does not exist as it was ("o.ply" against "./o.ply" made absolute), and took a
+// dangling link for a name of its own.
+std::filesystem::path where_created(std::filesystem::path p) {
+  for (int hop = 0; hop < 40; ++hop) {
+    struct stat st {};
+    if (::lstat(p.c_str(), &st) != 0 || !S_ISLNK(st.st_mode)) break;
+    std::error_code ec;
+    const std::filesystem::path to = std::filesystem::read_symlink(p, ec);
+    if (ec) break;
+    p = to.is_absolute() ? to : p.parent_path() / to;
+  }
   std::error_code ec;
-  if (std::filesystem::exists(a, ec) && std::filesystem::exists(b, ec))
-    return std::filesystem::equivalent(a, b, ec);
-  const std::filesystem::path ca = std::filesystem::weakly_canonical(a, ec);
-  if (ec) return false;
-  const std::filesystem::path cb = std::filesystem::weakly_canonical(b, ec);
-  return !ec && ca == cb;
+  const std::filesystem::path absolute = std::filesystem::absolute(p, ec);
+  if (ec) return p.lexically_normal();
+  const std::filesystem::path canonical = std::filesystem::weakly_canonical(absolute, ec);
+  return ec ? absolute.lexically_normal() : canonical;
+}
+
+}  // namespace
+
+bool same_file(const std::filesystem::path& a, const std::filesystem::path& b) {
+  // Where both lead to a file, its device and inode: std::filesystem::equivalent answers only
+  // for regular files and folders in libstdc++, and took a pipe behind /dev/stdout for none.
+  // /dev/null takes any number of writers.
+  struct stat sa {
+  }, sb{}, null{};
+  const bool has_a = ::stat(a.c_str(), &sa) == 0, has_b = ::stat(b.c_str(), &sb) == 0;
+  if (has_a && has_b) {
+    if (sa.st_dev != sb.st_dev || sa.st_ino != sb.st_ino) return false;
+    return !(::stat("/dev/null", &null) == 0 && null.st_dev == sa.st_dev &&
+             null.st_ino == sa.st_ino);
+  }
+  if (has_a != has_b) return false;
+  return where_created(a) == where_created(b);
 }
 
 OutputTarget check_output(const std::filesystem::path& path, bool positioned_writes) {

@@ -49,8 +49,10 @@ struct OutputTarget {
 // closed descriptor, a link loop.
 OutputTarget resolve_output(const std::filesystem::path& path);
 
-// Whether two paths name one file: the same file where both exist (links included), else the
-// same absolute path once `.`, `..` and links of the existing part are resolved.
+// Whether two paths name one file: the same device and inode where both lead to a file (links
+// followed; a pipe or terminal behind /dev/stdout included, /dev/null never), else the same
+// place of creation: every link followed, a dangling one's target included, and the path made
+// absolute with `.`, `..` and the links of its existing folders resolved.
 bool same_file(const std::filesystem::path& a, const std::filesystem::path& b);
 
 // resolve_output(), and for writers that place records at offsets out of order (write_at: the
