@@ -161,6 +161,19 @@ TEST_F(CliCancel, OneSigtermEndsARunBlockedOnItsInput) {
   EXPECT_LT(r.seconds, 30) << "ended by the test's own SIGKILL?";
 }
 
+// Other signals whose default action ends the process (a soft CPU-time limit's SIGXCPU, the user
+// and timer signals) left the hidden temporary behind; they end it as before, without it.
+TEST_F(CliCancel, EndingSignalsLeaveNoTemporary) {
+  for (const int sig : {SIGXCPU, SIGUSR1, SIGALRM}) {
+    const Cancelled r = run_and_signal(
+        dir_, {"extract", "field:gyroid:384", "--iso", "0", "--ascii", "-o", "out.ply"},
+        "isotile: write: 10%", sig);
+    ASSERT_TRUE(WIFSIGNALED(r.status)) << sig << ": status " << r.status << ":\n" << r.err;
+    EXPECT_EQ(WTERMSIG(r.status), sig);
+    EXPECT_TRUE(r.left.empty()) << sig << ": left behind: " << r.left.front();
+  }
+}
+
 // stderr piped into a reader that stops (`2>&1 | head`): the progress line that meets the closed
 // pipe ends the process by SIGPIPE, and the temporary goes with it.
 TEST_F(CliCancel, SigpipeOnStderrLeavesNoTemporary) {

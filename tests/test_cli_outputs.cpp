@@ -390,7 +390,18 @@ TEST_F(CliOutputs, AnOutputThatIsAnotherOutputOrTheInputIsRefused) {
       {"simplify m.ply out.ply --ratio 0.5 --stats m.ply", "the same file as the input"},
       {"simplify m.ply m.ply --ratio 0.5", "the output m.ply is the same file as the input"},
       {"simplify m.ply out.ply --ratio 0.5 --stats out.ply", "the same file as the output"},
+      // Neither there yet, spelled two ways (the stats replaced the mesh, exit 0), or one a
+      // dangling link to the other.
+      {"extract field:sphere:16 -o ./out.ply --stats out.ply", "the same file as the output"},
+      {"extract field:sphere:16 -o out.ply --stats " + (dir_ / "out.ply").string(),
+       "the same file as the output"},
+      {"extract field:sphere:16 -o out.ply --stats sub/../out.ply", "the same file as the output"},
+      {"simplify m.ply ./out.ply --ratio 0.5 --stats out.ply", "the same file as the output"},
+      {"extract field:sphere:16 -o out.ply --render to_out.png", "the same file as the output"},
+      {"extract field:sphere:16 -o out.ply --stats to_out.json", "the same file as the output"},
   };
+  fs::create_symlink("out.ply", dir_ / "to_out.png");
+  fs::create_symlink("out.ply", dir_ / "to_out.json");
   for (const Bad& b : cases) {
     const CliResult r = run(b.args);
     EXPECT_EQ(r.code, 1) << b.args;
@@ -418,6 +429,21 @@ TEST_F(CliOutputs, StatsOnAStandardOutputThatIsTheOutputAreRefused) {
                    "standard output, where demo prints its statistics, is the output "
                    "isotile-demo.ply (one would replace the other)"))
       << demo.err;
+  // Standard output a pipe and the output a link to it: std::filesystem::equivalent took a pipe
+  // for no file, and the mesh and the stats went down the pipe together, exit 0.
+  fs::create_symlink("/dev/stdout", dir_ / "out.ply");
+  for (const auto& [cmd, error] : {std::pair{"extract field:sphere:12 -o out.ply --stats -",
+                                             "- is the same file as the output"},
+                                   std::pair{"demo -o out.ply", "is the output out.ply"}}) {
+    shell("\"$ISOTILE\" -q " + std::string(cmd) + " 2>err.txt | cat >piped.bin");
+    const std::string err = slurp(dir_ / "err.txt");
+    EXPECT_NE(err.find(error), std::string::npos) << cmd << ": " << err;
+    EXPECT_EQ(fs::file_size(dir_ / "piped.bin"), 0u) << cmd;
+  }
+  // /dev/null takes any number of writers.
+  fs::create_symlink("/dev/null", dir_ / "null.ply");
+  const CliResult null = run("extract field:sphere:12 -q -o null.ply --stats /dev/null");
+  EXPECT_EQ(null.code, 0) << null.err;
   // Elsewhere it is written there.
   const CliResult r = shell("\"$ISOTILE\" -q extract field:sphere:12 -o m.ply --stats - >s.json");
   EXPECT_EQ(r.code, 0) << r.err;
@@ -426,6 +452,26 @@ TEST_F(CliOutputs, StatsOnAStandardOutputThatIsTheOutputAreRefused) {
 
 // The stats' "threads" is what ran: --threads, or the cores where there are fewer (it said the
 // limit asked for); a count TBB cannot reserve is a usage error, not "out of memory".
+// A closed stderr (`2>&-`): the output's temporary took descriptor 2, and the progress lines went
+// into the mesh, exit 0; out of core they overwrote records in the middle. The same bytes as
+// with stderr open, in core, out of core and simplified; a closed stdout still fails `--stats -`.
+TEST_F(CliOutputs, ClosedStandardDescriptorsTakeNoOutput) {
+  for (const std::string& args : {std::string("extract field:gyroid:24 -o m.ply"),
+                                  std::string("extract field:gyroid:24 -o m.ply --memory 64KiB"),
+                                  std::string("extract field:gyroid:24 -o m.ply --simplify 0.5"),
+                                  std::string("demo -o m.ply >/dev/null")}) {
+    ASSERT_EQ(shell("\"$ISOTILE\" " + args + " 2>/dev/null").code, 0) << args;
+    const std::string open = slurp(dir_ / "m.ply");
+    fs::remove(dir_ / "m.ply");
+    // In braces: shell() sends the command's stderr to a file after it.
+    EXPECT_EQ(shell("{ \"$ISOTILE\" " + args + " 2>&-; }").code, 0) << args;
+    EXPECT_EQ(slurp(dir_ / "m.ply"), open) << args;
+  }
+  const CliResult r = shell("{ \"$ISOTILE\" -q extract field:gyroid:24 -o s.ply --stats - >&-; }");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(says(r, "standard output")) << r.err;
+}
+
 TEST_F(CliOutputs, TheStatsSayTheThreadsThatRan) {
   const auto cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   for (const int asked : {1, 64}) {

@@ -10,11 +10,13 @@
 // Progress and timings go to stderr unless --quiet; machine-readable output goes to stdout or to
 // the --stats file. This file parses the command line and dispatches: each subcommand lives in
 // tiler/cli/*_command.cpp, and the extraction's work in the library (tiler/pipeline.h).
+#include <fcntl.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -97,18 +99,66 @@ void handle(int sig, void (*handler)(int)) {
   if (!g_ignored[sig]) std::signal(sig, handler);
 }
 
+// Signals whose default action ends the process other than the cancel signals: SIGQUIT (its core
+// dump), SIGPIPE (stderr or stdout piped into a reader that stopped, as `2>&1 | head` does), a
+// soft CPU-time limit's SIGXCPU (ulimit -t, a batch scheduler's), and the timers and user
+// signals nothing here uses (SIGALRM until a cancel sets the grace timer's handler). Each left
+// the output's hidden temporary behind.
+constexpr int kEndingSignals[] = {SIGQUIT, SIGPIPE,   SIGXCPU, SIGUSR1,
+                                  SIGUSR2, SIGVTALRM, SIGPROF, SIGALRM};
+
+// A crash (this process's code or a library's: Mesa's llvmpipe under an address-space limit)
+// removes the temporaries and says so in one line before the default action (the core dump).
+// Not under a sanitizer, whose own report of the crash is the one to read.
+extern "C" void on_crash(int sig) {
+  remove_pending_temporaries();
+  // Built by hand: snprintf is not async-signal-safe.
+  char line[96] = "isotile: error: crashed (signal ";
+  std::size_t n = std::strlen(line);
+  if (sig >= 10) line[n++] = static_cast<char>('0' + sig / 10);
+  line[n++] = static_cast<char>('0' + sig % 10);
+  static const char kRest[] = "); its unfinished files were removed\n";
+  std::memcpy(line + n, kRest, sizeof kRest - 1);
+  n += sizeof kRest - 1;
+  [[maybe_unused]] const ssize_t written = ::write(2, line, n);
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+
 // Every signal that ends the process removes the temporaries first (on_signal), then takes its
-// default action: the cancel signals, SIGQUIT (its core dump) and SIGPIPE (stderr or stdout
-// piped into a reader that stopped, as `2>&1 | head` does). SIGXFSZ is ignored instead: a write
-// past the file-size limit (ulimit -f) then fails with EFBIG, which the writers report as an
-// error ("File too large") and clean up after, as after a full disk.
+// default action. SIGXFSZ is ignored instead: a write past the file-size limit (ulimit -f) then
+// fails with EFBIG, which the writers report as an error ("File too large") and clean up after,
+// as after a full disk.
 void install_signal_handlers() {
-  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE})
-    g_ignored[sig] = ignored_on_entry(sig);
+  for (int sig : kCancelSignals) g_ignored[sig] = ignored_on_entry(sig);
+  for (int sig : kEndingSignals) g_ignored[sig] = ignored_on_entry(sig);
   for (int sig : kCancelSignals) handle(sig, on_signal);
-  handle(SIGQUIT, on_signal);
-  handle(SIGPIPE, on_signal);
+  for (int sig : kEndingSignals) handle(sig, on_signal);
   std::signal(SIGXFSZ, SIG_IGN);
+  if (!kSanitized)
+    for (int sig : {SIGSEGV, SIGBUS, SIGABRT, SIGFPE, SIGILL}) std::signal(sig, on_crash);
+}
+
+// A descriptor 0, 1 or 2 the caller closed (`2>&-`) would be the next file opened: the output's
+// temporary, into which the progress lines on stderr then went, exit 0. Each closed one is held
+// by /dev/null opened the other way (stdin for writing, stdout and stderr for reading), so that
+// the descriptor stays taken and its use still fails as on a closed one: `--stats -` says
+// standard output is not writable.
+void hold_closed_standard_descriptors() {
+  for (int fd = 0; fd < 3; ++fd) {
+    if (::fcntl(fd, F_GETFD) >= 0 || errno != EBADF) continue;
+    // The lowest free descriptor: this one, as the lower ones are open.
+    const int held = ::open("/dev/null", (fd == 0 ? O_WRONLY : O_RDONLY) | O_NOCTTY);
+    if (held != fd) {
+      if (held >= 0) ::close(held);
+      ::_exit(1);  // no /dev/null: nothing can be said or written safely
+    }
+  }
 }
 
 volatile std::sig_atomic_t g_cancel_signal = 0;
@@ -165,6 +215,7 @@ int failed_or_cancelled(const char* what) {
 tbb::global_control* g_isotile_thread_limit = nullptr;
 
 int main(int argc, char** argv) {
+  hold_closed_standard_descriptors();
   install_signal_handlers();
   if (launched_by_mpi()) {
 #ifdef ISOTILE_HAVE_MPI
