@@ -119,6 +119,9 @@ TEST_F(CliOutputs, AFullDeviceIsAnErrorAndStaysADevice) {
   EXPECT_EQ(r.code, 1);
   EXPECT_TRUE(says(r, "cannot write full: No space left on device")) << r.err;
   EXPECT_TRUE(is_char_device("full"));
+  // The run failed: its mesh is not written either (it was, before the stats failed).
+  EXPECT_FALSE(fs::exists(dir_ / "s.ply"));
+  ASSERT_EQ(run("extract field:sphere:16 -o s.ply -q").code, 0);
   r = run("extract field:sphere:16 -o full.ply -q");
   EXPECT_EQ(r.code, 1);
   EXPECT_TRUE(says(r, "cannot write full.ply: No space left on device")) << r.err;
@@ -467,9 +470,14 @@ TEST_F(CliOutputs, ClosedStandardDescriptorsTakeNoOutput) {
     EXPECT_EQ(shell("{ \"$ISOTILE\" " + args + " 2>&-; }").code, 0) << args;
     EXPECT_EQ(slurp(dir_ / "m.ply"), open) << args;
   }
+  // The stats failing after the mesh was written: the old mesh stays (the new one had replaced it
+  // before the stats were written, exit 1), and no temporary is left.
+  std::ofstream(dir_ / "s.ply") << "old";
   const CliResult r = shell("{ \"$ISOTILE\" -q extract field:gyroid:24 -o s.ply --stats - >&-; }");
   EXPECT_EQ(r.code, 1);
   EXPECT_TRUE(says(r, "standard output")) << r.err;
+  EXPECT_EQ(slurp(dir_ / "s.ply"), "old");
+  EXPECT_EQ(stray_files({"m.ply", "s.ply", "stderr.txt"}), std::vector<std::string>{});
 }
 
 TEST_F(CliOutputs, TheStatsSayTheThreadsThatRan) {

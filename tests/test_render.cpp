@@ -464,6 +464,24 @@ TEST_F(Render, ExtractRenderDrawsTheWrittenMesh) {
   EXPECT_TRUE(slurp(dir_ / "tiled.png") == direct);
 }
 
+// A picture that fails after the mesh was written (no context here): exit 1 and every output as
+// it was, in core and out of core (the new mesh had replaced the old one, beside the old stats).
+TEST_F(Render, AFailedPictureLeavesTheOutputsAsTheyWere) {
+  for (const std::string& memory : {std::string(), std::string(" --memory 60KiB")}) {
+    std::ofstream(dir_ / "m.ply") << "old mesh";
+    std::ofstream(dir_ / "s.json") << "old stats";
+    const CliResult r =
+        run("extract field:torus:40 -q -o m.ply --stats s.json --render m.png" + memory,
+            "ISOTILE_GL=off");
+    EXPECT_EQ(r.code, 1) << memory;
+    EXPECT_NE(r.err.find("no OpenGL context"), std::string::npos) << memory << ": " << r.err;
+    EXPECT_EQ(slurp(dir_ / "m.ply"), "old mesh") << memory;
+    EXPECT_EQ(slurp(dir_ / "s.json"), "old stats") << memory;
+    EXPECT_FALSE(fs::exists(dir_ / "m.png")) << memory;
+    EXPECT_EQ(stray_files({"m.ply", "s.json"}), std::vector<std::string>{}) << memory;
+  }
+}
+
 // A render run ends GL in the known order: nothing left alive at exit (tests/gl_exit_check.c).
 TEST_F(Render, LeavesNothingAliveAtExit) {
   REQUIRE_GL_CLI();

@@ -22,6 +22,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "core/errors.h"
@@ -314,9 +315,20 @@ int main(int argc, char** argv) {
     return fail("out of memory", false);
   }
 
-  // Whatever went to standard output must have reached it: a failed write is exit 1.
-  const auto finished = [](int rc) {
+  // The files of a run that writes several (extract, simplify, demo: the mesh, --stats, --render)
+  // are renamed into place together at its end, once all went well: a run that failed or was
+  // cancelled after its mesh was written (a stats file that cannot be written, a Ctrl-C during
+  // the --stats measures or --render) had replaced the old mesh already.
+  std::optional<HeldCommits> held;
+  if (*extract_cmd || *simplify_cmd || *demo_cmd) held.emplace();
+  // Whatever went to standard output must have reached it: a failed write is exit 1. A cancel
+  // that came during a step without progress reports (the measures) cancels the run still.
+  const auto finished = [&](int rc) {
     if (rc == 0) flush_stdout();
+    if (rc == 0 && held) {
+      g_progress.check();
+      held->commit();
+    }
     return rc;
   };
   // The commands whose work reports through g_progress are cancelled by the first signal; the
@@ -365,8 +377,10 @@ int main(int argc, char** argv) {
     }
     return 0;
   }();
-  // The work is over (a cancel that came too late for it changes nothing now).
+  // The work is over (a cancel that came too late for it changes nothing now); what it held and
+  // did not commit is removed.
   ::alarm(0);
+  held.reset();
 
   // A known order at the end (docs/gl.md): TBB's workers joined, then the GL context and what was
   // made on it deleted, before exit() runs static destructors and the drivers' own exit handlers.

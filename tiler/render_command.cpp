@@ -6,6 +6,7 @@
 #include <cstdlib>
 
 #include "core/errors.h"
+#include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "tiler/cli/cli_common.h"
 #ifdef ISOTILE_HAVE_GL
@@ -156,9 +157,12 @@ double render_extracted(const Mesh& mesh, const std::string& picture, bool quiet
 
 double render_extracted_file(const std::string& mesh_file, const std::string& picture, bool quiet) {
 #ifdef ISOTILE_HAVE_GL
-  return draw([&](const gl::RenderOptions& ro,
-                  gl::RenderStats* st) { return gl::render_mesh_file(mesh_file, ro, st); },
-              render_options(RenderArgs{}), picture, quiet);
+  return draw(
+      [&](const gl::RenderOptions& ro, gl::RenderStats* st) {
+        // The run's mesh under its temporary name, where the CLI holds its renames.
+        return gl::render_mesh_file(HeldCommits::readable(mesh_file).string(), ro, st);
+      },
+      render_options(RenderArgs{}), picture, quiet);
 #else
   (void)mesh_file;
   (void)picture;

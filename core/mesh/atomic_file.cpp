@@ -9,9 +9,12 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <new>
+#include <stdexcept>
 #include <string>
 #include <system_error>
+#include <vector>
 
 #include "core/errors.h"
 
@@ -237,11 +240,15 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   prefix.append(".tmp-");
   prefix.append(std::to_string(static_cast<long>(::getpid())));
   prefix.append("-");
+  // The target's extension last, so that a reader of the temporary (--render of a mesh whose
+  // rename is held: HeldCommits) tells its format as by the target's name.
+  std::string extension = final_.extension().string();
+  if (extension.size() > 16) extension.clear();
   // "x" makes creation exclusive; a leftover from a killed process with a reused pid must not be
   // shared, so try the next number instead.
   for (int attempt = 0; attempt < 100; ++attempt) {
     const unsigned long n = g_counter.fetch_add(1, std::memory_order_relaxed);
-    temp_ = final_.parent_path() / (prefix + std::to_string(n));
+    temp_ = final_.parent_path() / (prefix + std::to_string(n) + extension);
     file_ = std::fopen(temp_.c_str(), "wbx");
     if (file_ || errno != EEXIST) break;
   }
@@ -301,6 +308,57 @@ void AtomicFile::write_at(std::uint64_t offset, const void* data, std::size_t n)
   }
 }
 
+namespace {
+
+struct Held {
+  std::filesystem::path target, final, temp;
+  int slot = -1;
+};
+std::mutex g_held_mutex;
+std::vector<Held>* g_held = nullptr;  // while a HeldCommits lives
+
+}  // namespace
+
+HeldCommits::HeldCommits() {
+  std::lock_guard lock(g_held_mutex);
+  if (g_held) throw std::logic_error("HeldCommits: one at a time");
+  g_held = new std::vector<Held>();
+}
+
+HeldCommits::~HeldCommits() {
+  std::lock_guard lock(g_held_mutex);
+  for (const Held& h : *g_held) {
+    ::unlink(h.temp.c_str());
+    release_slot(h.slot);
+  }
+  delete g_held;
+  g_held = nullptr;
+}
+
+void HeldCommits::commit() {
+  std::lock_guard lock(g_held_mutex);
+  std::vector<Held>& held = *g_held;
+  for (std::size_t i = 0; i < held.size(); ++i) {
+    std::error_code ec;
+    std::filesystem::rename(held[i].temp, held[i].final, ec);
+    if (ec) {
+      // This one and those after it stay temporaries: the destructor removes them.
+      held.erase(held.begin(), held.begin() + static_cast<std::ptrdiff_t>(i));
+      throw IoError("cannot write " + held.front().target.string() + ": " + ec.message());
+    }
+    release_slot(held[i].slot);
+  }
+  held.clear();
+}
+
+std::filesystem::path HeldCommits::readable(const std::filesystem::path& path) {
+  std::lock_guard lock(g_held_mutex);
+  if (g_held)
+    for (const Held& h : *g_held)
+      if (h.target == path) return h.temp;
+  return path;
+}
+
 void AtomicFile::commit() {
   if (!file_) throw IoError("cannot write " + target_.string() + ": file already closed");
   auto fail = [&](int err) {
@@ -314,6 +372,15 @@ void AtomicFile::commit() {
   file_ = nullptr;
   if (std::fclose(f) != 0) fail(errno);
   if (in_place_) return;
+  {
+    std::lock_guard lock(g_held_mutex);
+    if (g_held) {
+      g_held->push_back({target_, final_, temp_, slot_});
+      slot_ = -1;
+      temp_.clear();
+      return;
+    }
+  }
   std::error_code ec;
   // Over the link's target, not the link: a symbolic link to a regular file stays a link.
   std::filesystem::rename(temp_, final_, ec);

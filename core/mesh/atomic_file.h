@@ -1,9 +1,10 @@
 // A file that appears under its final name only when complete.
 //
-// Data goes to "<dir>/.<name>.tmp-<pid>-<n>"; commit() flushes, fsyncs and renames it over the
-// target. Destroying an uncommitted AtomicFile removes the temporary file. The names of all open
-// temporaries are also kept in a process-wide list so that remove_pending_temporaries() (called
-// from the CLI's SIGINT/SIGTERM handler; async-signal-safe) can delete them on Ctrl-C.
+// Data goes to "<dir>/.<name>.tmp-<pid>-<n><ext>" (<ext> the name's extension); commit() flushes,
+// fsyncs and renames it over the target. Destroying an uncommitted AtomicFile removes the temporary
+// file. The names of all open temporaries are also kept in a process-wide list so that
+// remove_pending_temporaries() (called from the CLI's SIGINT/SIGTERM handler; async-signal-safe)
+// can delete them on Ctrl-C.
 //
 // Only a regular file is ever renamed over (resolve_output below says what a path is):
 // - a path that does not exist yet, or a regular file: the temporary-then-rename write (a
@@ -93,6 +94,27 @@ class AtomicFile {
   std::filesystem::path temp_;
   std::FILE* file_ = nullptr;
   int slot_ = -1;
+};
+
+// A run's renames held back to its end: while a HeldCommits lives, AtomicFile::commit() of a file
+// written by rename flushes, syncs and closes it as before and leaves it under its temporary name
+// (remove_pending_temporaries() still removes it); commit() renames every held file over its
+// target, in the order they were committed, and a HeldCommits ended without commit() removes
+// them. The CLI holds a run's outputs so that a run that fails or is cancelled after its mesh is
+// written (a stats file that cannot be written, the --stats measures, --render) leaves every
+// output as it was, where the mesh had already replaced the old one. One at a time, per process.
+class HeldCommits {
+ public:
+  HeldCommits();
+  ~HeldCommits();
+  HeldCommits(const HeldCommits&) = delete;
+  HeldCommits& operator=(const HeldCommits&) = delete;
+  // Renames the held files; throws IoError naming the first that cannot be renamed (it and those
+  // after it are removed; those before it are in place).
+  void commit();
+  // Where the data written for `path` is: a held file's temporary, else `path` (for a reader of
+  // an output the same run wrote: --render out of core draws the mesh file).
+  static std::filesystem::path readable(const std::filesystem::path& path);
 };
 
 // Async-signal-safe: unlinks every temporary of a live AtomicFile, and every tracked one.
