@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <csignal>
 #include <cstdint>
 #include <ctime>
 #include <filesystem>
@@ -33,6 +34,7 @@
 #include "core/extract/cell_mask.h"
 #include "core/extract/cell_ranges.h"
 #include "core/extract/extract.h"
+#include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
 #include "core/mesh/mesh_topology.h"
@@ -559,6 +561,49 @@ py::object make_mesh_tuple(Mesh&& mesh) {
                         index_array(m.quads, m.positions.size(), owner), normals);
 }
 
+// SIGTERM and SIGHUP (timeout(1), kill, a batch scheduler, a closed terminal) end a Python process
+// at once where nothing handles them, and a run's temporary was left behind (out of core, one of
+// the mesh's size). While runs last, the signals that Python left at their default action remove
+// the temporaries first and then take it; a handler set from Python (signal.signal) is left
+// alone. Ctrl-C is Python's KeyboardInterrupt, which cancels the run (ProgressBridge).
+extern "C" void remove_temporaries_and_end(int sig) {
+  remove_pending_temporaries();
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+class TemporariesOnSignals {
+ public:
+  TemporariesOnSignals() {
+    std::lock_guard lock(mutex_);
+    if (runs_++ > 0) return;
+    for (int i = 0; i < 2; ++i) {
+      struct sigaction current {};
+      ours_[i] = ::sigaction(kSignals[i], nullptr, &current) == 0 &&
+                 current.sa_handler == SIG_DFL &&
+                 std::signal(kSignals[i], remove_temporaries_and_end) != SIG_ERR;
+    }
+  }
+  ~TemporariesOnSignals() {
+    std::lock_guard lock(mutex_);
+    if (--runs_ > 0) return;
+    for (int i = 0; i < 2; ++i) {
+      struct sigaction current {};
+      if (ours_[i] && ::sigaction(kSignals[i], nullptr, &current) == 0 &&
+          current.sa_handler == remove_temporaries_and_end)
+        std::signal(kSignals[i], SIG_DFL);
+      ours_[i] = false;
+    }
+  }
+  TemporariesOnSignals(const TemporariesOnSignals&) = delete;
+  TemporariesOnSignals& operator=(const TemporariesOnSignals&) = delete;
+
+ private:
+  static constexpr int kSignals[2] = {SIGTERM, SIGHUP};
+  static inline std::mutex mutex_;
+  static inline int runs_ = 0;
+  static inline bool ours_[2] = {};
+};
+
 // Runs the pipeline on `source` (a path, a VolumeHandle, or a 3-D array [z, y, x] with spacing,
 // origin and direction in x, y, z). Returns (mesh tuple or None, stats JSON text or None).
 py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
@@ -651,6 +696,7 @@ py::tuple run_pipeline_py(const py::object& source, const py::dict& options,
 
   PipelineResult result;
   std::exception_ptr failure;
+  const TemporariesOnSignals temporaries_on_signals;
   {
     py::gil_scoped_release release;
     std::mutex mutex;

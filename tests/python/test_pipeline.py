@@ -8,6 +8,7 @@ import os
 import pathlib
 import signal
 import subprocess
+import sys
 import time
 import warnings
 
@@ -515,6 +516,30 @@ def test_ctrl_c_raises_keyboard_interrupt_within_half_a_second_and_leaves_no_fil
     finally:
         timer.cancel()
     assert time.monotonic() - start < 0.05 + 0.5
+    assert left_in(tmp_path) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_end_the_process_and_leave_no_temporary(tmp_path, sig):
+    # Nothing in Python handles them: the process ends at once, and the run's temporary (out of
+    # core, the mesh's size) was left behind.
+    script = (
+        "import sys, isotile\n"
+        "def started(stage, brick, bricks, fraction):\n"
+        "    if stage == 'extract' and brick == 2:\n"
+        "        print('started', flush=True)\n"
+        "    return True\n"
+        "isotile.extract('field:gyroid:256', output='m.ply', memory='256KiB', stats=False,\n"
+        "                progress=started)\n")
+    child = subprocess.Popen([sys.executable, "-c", script], cwd=tmp_path, stdout=subprocess.PIPE,
+                             text=True)
+    try:
+        assert child.stdout.readline() == "started\n"
+        child.send_signal(sig)
+        assert child.wait(timeout=60) == -sig
+    finally:
+        child.kill()
+        child.wait()
     assert left_in(tmp_path) == []
 
 
