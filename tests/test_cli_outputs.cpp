@@ -721,6 +721,16 @@ TEST_F(CliOutputs, IsoAutoFindsASurfaceInEveryField) {
     EXPECT_EQ(j["iso_auto"]["rule"], "otsu");
     EXPECT_LT(j["iso_auto"]["min"].get<double>(), j["iso"].get<double>());
     EXPECT_GT(j["iso_auto"]["max"].get<double>(), j["iso"].get<double>());
+    // The printed value is the one that ran, to the last bit (ten digits printed 1 for
+    // 1.0000000000753726), in extract's line and info's.
+    const auto printed = [](const std::string& text, const std::string& after) {
+      const std::size_t at = text.find(after);
+      return at == std::string::npos ? -1.0
+                                     : std::strtod(text.c_str() + at + after.size(), nullptr);
+    };
+    EXPECT_EQ(printed(r.err, "--iso auto: "), j["iso"].get<double>()) << r.err;
+    const CliResult info_text = run("info " + in);
+    EXPECT_EQ(printed(info_text.out, "iso auto "), j["iso"].get<double>()) << info_text.out;
     // `info` names the same value.
     const CliResult info = run("info " + in + " --json");
     ASSERT_EQ(info.code, 0) << info.err;

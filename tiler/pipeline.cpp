@@ -4,7 +4,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <sstream>
 #include <utility>
 
 #include "core/errors.h"
@@ -138,11 +137,11 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
 
 StatsJson choose_isovalue(const ValueHistogram& histogram, double& iso, const Log& log) {
   iso = otsu_isovalue(histogram);
-  std::ostringstream s;
-  s.precision(10);
-  s << "--iso auto: " << iso << " (Otsu's threshold; the samples range from " << histogram.min
-    << " to " << histogram.max << ")";
-  if (log) log(s.str());
+  // Every number as the shortest text that reads back as it: ten digits printed 1 for
+  // 1.0000000000753726, and the mesh of that printed value was another.
+  if (log)
+    log("--iso auto: " + number_text(iso) + " (Otsu's threshold; the samples range from " +
+        number_text(histogram.min) + " to " + number_text(histogram.max) + ")");
   return {{"rule", "otsu"}, {"min", histogram.min}, {"max", histogram.max}};
 }
 

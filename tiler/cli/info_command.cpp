@@ -185,7 +185,8 @@ int run_info(const InfoArgs& args) {
     std::printf("  %12g .. %-12g %llu\n", lo + b * width, lo + (b + 1) * width,
                 static_cast<unsigned long long>(hist[b]));
   if (auto_iso)
-    std::printf("iso auto %.10g (Otsu's threshold: what extract --iso auto chooses)\n", *auto_iso);
+    std::printf("iso auto %s (Otsu's threshold: what extract --iso auto chooses)\n",
+                number_text(*auto_iso).c_str());
   return 0;
 }
 
