@@ -73,6 +73,7 @@ class ScratchFile {
     }
     if (fd_ < 0)
       throw IoError("cannot create a scratch file in " + d + ": " + std::strerror(errno));
+    dir_ = d;
   }
   ~ScratchFile() {
     if (fd_ >= 0) ::close(fd_);
@@ -87,8 +88,8 @@ class ScratchFile {
       const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(size_));
       if (w <= 0) {
         if (w < 0 && errno == EINTR) continue;
-        throw IoError(std::string("cannot write a scratch file beside the output: ") +
-                      std::strerror(errno));
+        // In the output's folder, or the temporary one where the output is written in place.
+        throw IoError("cannot write a scratch file in " + dir_ + ": " + std::strerror(errno));
       }
       p += w;
       n -= static_cast<std::size_t>(w);
@@ -113,6 +114,7 @@ class ScratchFile {
  private:
   int fd_ = -1;
   std::uint64_t size_ = 0;
+  std::string dir_;  // where it was made, for messages
 };
 
 // One octant of one simplified brick (or slice) in the spill file: its vertices (with keys and
