@@ -166,6 +166,19 @@ TEST(BrickPlan, MemorySizesParseWithUnits) {
   for (const char* bad : {"", "MiB", "-5MiB", "0", "12XB", "1e30GB", "nan", "0x1000", "1e3K", " 1M",
                           "1M ", "0.5", ".", "1.2.3M", "+4K", "inf"})
     EXPECT_THROW(parse_memory_size(bad), InputError) << bad;
+  // Whole numbers of bytes exactly (through a double, 2^63 - 1 became 2^63); past 1.8e19 bytes,
+  // too large, not "expected a positive number".
+  EXPECT_EQ(parse_memory_size("9223372036854775807"), 9223372036854775807ull);
+  EXPECT_EQ(parse_memory_size("9007199254740993B"), 9007199254740993ull);
+  for (const char* huge : {"18446744073709551614", "16777215T", "99999999999999999999TB"}) {
+    try {
+      parse_memory_size(huge);
+      ADD_FAILURE() << huge;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("is more bytes than isotile counts"), std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 // Every method and output format, budgets from a few cells per brick to the whole volume.

@@ -198,11 +198,20 @@ std::uint64_t parse_memory_size(const std::string& text) {
   else if (unit == "tb")
     scale = 1e12;
   // Below one byte ("0.5") is no budget either, rather than one of 0 bytes.
-  if (used == 0 || scale == 0 || !(value * scale >= 1) || !std::isfinite(value * scale) ||
-      value * scale >= 1.8e19)
+  if (used == 0 || scale == 0 || !(value * scale >= 1))
     throw InputError("bad memory size '" + text +
                      "': expected a positive number with an optional unit (B, K or KiB, M or MiB, "
                      "G or GiB, T or TiB; KB, MB, GB, TB), e.g. 256MiB");
+  if (!std::isfinite(value * scale) || value * scale >= 1.8e19)
+    throw InputError("memory size '" + text + "' is more bytes than isotile counts (at most " +
+                     "1.8e19, 16 EiB)");
+  // A whole number of bytes exactly (through a double, 2^63 - 1 became 2^63).
+  std::uint64_t whole = 0;
+  if (!point && std::from_chars(text.data(), text.data() + used, whole).ptr == text.data() + used &&
+      scale == std::floor(scale)) {
+    const auto factor = static_cast<std::uint64_t>(scale);
+    if (whole <= UINT64_MAX / factor) return whole * factor;
+  }
   return static_cast<std::uint64_t>(value * scale);
 }
 
