@@ -539,6 +539,9 @@ TEST_F(CliOutputs, BadNumbersAreOneLineErrors) {
       {"--iso nan", "--iso must be a finite number or 'auto', got 'nan'"},
       {"--iso inf", "--iso must be a finite number or 'auto'"},
       {"--iso 1x", "--iso must be a finite number or 'auto', got '1x'"},
+      // Blanks before it were passed over (strtod's), after it refused: refused either way.
+      {"--iso ' 0.25'", "--iso must be a finite number or 'auto', got ' 0.25'"},
+      {"--iso '0.25 '", "--iso must be a finite number or 'auto', got '0.25 '"},
       // A fourth value, or a trailing comma, was dropped without a word.
       {"--spacing 1,1,1,7", "--spacing must be three comma-separated numbers, got '1,1,1,7'"},
       {"--origin 1,2,3,", "--origin must be three comma-separated numbers"},

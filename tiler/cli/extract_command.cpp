@@ -3,6 +3,7 @@
 // launcher an out-of-core run goes distributed (tiler/mpi_extract.h).
 #include "tiler/cli/commands.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 
@@ -89,7 +90,9 @@ PipelineOptions pipeline_options(const ExtractArgs& args) {
   if (!args.iso.empty() && !o.iso_auto) {
     char* end = nullptr;
     const double iso = std::strtod(args.iso.c_str(), &end);
-    if (end == args.iso.c_str() || *end != '\0' || !std::isfinite(iso))
+    // No blank before it either (strtod passes over those), as none is taken after it.
+    if (end == args.iso.c_str() || *end != '\0' || !std::isfinite(iso) ||
+        std::isspace(static_cast<unsigned char>(args.iso.front())))
       throw InputError("--iso must be a finite number or 'auto', got '" + args.iso + "'");
     o.iso = iso;
   }
