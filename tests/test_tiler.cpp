@@ -564,6 +564,31 @@ TEST_F(Tiler, AnInputThatChangesDuringTheRunIsAnError) {
   }
   EXPECT_TRUE(changed);
   EXPECT_FALSE(fs::exists(out));
+  // Grown: a brick's read finds it, and the finding is said once (it was said again as where
+  // "the run stopped at").
+  fs::remove(file);
+  put(1);
+  changed = false;
+  Progress growing([&](const ProgressUpdate& u) {
+    if (u.stage == Stage::Extract && !changed) {
+      changed = true;
+      std::ofstream(file, std::ios::binary | std::ios::app) << std::string(1000, '\0');
+    }
+    return true;
+  });
+  to.progress = &growing;
+  try {
+    extract_tiled(*open_volume_source(file.string(), {}), to, out);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    const std::string said = "the input changed during the run";
+    const std::size_t first = what.find(said);
+    EXPECT_NE(first, std::string::npos) << what;
+    EXPECT_EQ(what.find(said, first + 1), std::string::npos) << what;
+  }
+  EXPECT_TRUE(changed);
+  EXPECT_FALSE(fs::exists(out));
 }
 
 // Macet max's halo (138 samples) against a budget for one-cell bricks of nucleon (41^3): 64,000

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/errors.h"
@@ -167,6 +168,8 @@ TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
     try {
       source.check_unchanged();
     } catch (const InputError& changed) {
+      // Where the run stopped at this very finding (a brick's read checks too), it is said once.
+      if (std::string_view(e.what()).find(changed.what()) != std::string_view::npos) throw;
       throw InputError(std::string(changed.what()) + " (the run stopped at: " + e.what() + ")");
     }
     throw;
