@@ -27,7 +27,11 @@ void check(const char* where) {
   char buf[128];
   std::snprintf(buf, sizeof buf, "OpenGL error 0x%04x in %s", e, where);
   if (e == GL_OUT_OF_MEMORY)
-    throw CapacityError(std::string(buf) + " (device memory exhausted: try a smaller --memory)");
+    // Said for both of its callers: render has no --memory (llvmpipe's device memory is the
+    // process's, which ulimit -v bounds).
+    throw CapacityError(std::string(buf) +
+                        " (device memory exhausted: extract with a smaller --memory, or render a "
+                        "smaller --size)");
   throw Error(buf);
 }
 
