@@ -174,6 +174,24 @@ TEST_F(CliCancel, EndingSignalsLeaveNoTemporary) {
   }
 }
 
+// A crash (here a SIGSEGV sent as the kernel would send it) removes the temporaries and says so in
+// one line before the default action. Sanitizer builds keep their own report instead.
+TEST_F(CliCancel, ACrashLeavesNoTemporaryAndSaysSo) {
+#ifdef ISOTILE_SANITIZED
+  GTEST_SKIP() << "a sanitizer build reports crashes itself: isotile installs no handler there";
+#else
+  const Cancelled r = run_and_signal(
+      dir_, {"extract", "field:gyroid:384", "--iso", "0", "--ascii", "-o", "out.ply"},
+      "isotile: write: 10%", SIGSEGV);
+  ASSERT_TRUE(WIFSIGNALED(r.status)) << "status " << r.status << ":\n" << r.err;
+  EXPECT_EQ(WTERMSIG(r.status), SIGSEGV);
+  EXPECT_NE(r.err.find("isotile: error: crashed (signal 11); its unfinished files were removed\n"),
+            std::string::npos)
+      << r.err;
+  EXPECT_TRUE(r.left.empty()) << "left behind: " << r.left.front();
+#endif
+}
+
 // stderr piped into a reader that stops (`2>&1 | head`): the progress line that meets the closed
 // pipe ends the process by SIGPIPE, and the temporary goes with it.
 TEST_F(CliCancel, SigpipeOnStderrLeavesNoTemporary) {
