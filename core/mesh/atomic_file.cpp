@@ -186,11 +186,12 @@ bool same_file(const std::filesystem::path& a, const std::filesystem::path& b) {
   // Where both lead to a file, its device and inode: std::filesystem::equivalent answers only
   // for regular files and folders in libstdc++, and took a pipe behind /dev/stdout for none.
   // /dev/null takes any number of writers.
-  struct stat sa {
-  }, sb{}, null{};
+  struct stat sa {};
+  struct stat sb {};
   const bool has_a = ::stat(a.c_str(), &sa) == 0, has_b = ::stat(b.c_str(), &sb) == 0;
   if (has_a && has_b) {
     if (sa.st_dev != sb.st_dev || sa.st_ino != sb.st_ino) return false;
+    struct stat null {};
     return !(::stat("/dev/null", &null) == 0 && null.st_dev == sa.st_dev &&
              null.st_ino == sa.st_ino);
   }
