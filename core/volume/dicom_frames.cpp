@@ -51,13 +51,10 @@ std::string element_name(const gdcm::Tag& t) {
   return std::string(keyword && *keyword ? std::string(keyword) + " " : "") + tag_text(t);
 }
 
-// A text element's values ("1.5\\-2\\3" -> "1.5", "-2", "3"), without their padding; none where
-// the element holds no bytes.
-std::vector<std::string> text_values(const gdcm::DataElement& e) {
+// A text element's values ("1.5\\-2\\3" -> "1.5", "-2", "3"), without their padding; one empty
+// value for empty text.
+std::vector<std::string> split_values(const std::string& text) {
   std::vector<std::string> out;
-  const gdcm::ByteValue* bytes = e.GetByteValue();
-  if (!bytes) return out;
-  const std::string text(bytes->GetPointer(), bytes->GetLength());
   std::size_t at = 0;
   while (at <= text.size()) {
     std::size_t end = text.find('\\', at);
@@ -69,6 +66,13 @@ std::vector<std::string> text_values(const gdcm::DataElement& e) {
     at = end + 1;
   }
   return out;
+}
+
+// split_values of an element's bytes; none where the element holds no bytes.
+std::vector<std::string> text_values(const gdcm::DataElement& e) {
+  const gdcm::ByteValue* bytes = e.GetByteValue();
+  if (!bytes) return {};
+  return split_values(std::string(bytes->GetPointer(), bytes->GetLength()));
 }
 
 // What the frames of a multi-frame file without per-frame positions run over, by its
@@ -163,22 +167,14 @@ void check_photometric(const std::string& path, const std::string& photometric) 
 // A pixel spacing of 0 (or less) is no distance: GDCM took 1 mm for it without a word.
 void check_pixel_spacing(const std::string& path, const std::string& element,
                          const std::string& values) {
-  int count = 0;
+  const std::vector<std::string> split = split_values(values);
   bool positive = true;
-  std::size_t at = 0;
-  while (at <= values.size()) {
-    std::size_t end = values.find('\\', at);
-    if (end == std::string::npos) end = values.size();
-    std::string value = values.substr(at, end - at);
-    while (!value.empty() && (value.back() == ' ' || value.back() == '\0')) value.pop_back();
-    while (!value.empty() && value.front() == ' ') value.erase(value.begin());
+  for (const std::string& value : split) {
     char* stop = nullptr;
     const double v = std::strtod(value.c_str(), &stop);
     positive = positive && !value.empty() && *stop == '\0' && std::isfinite(v) && v > 0;
-    ++count;
-    at = end + 1;
   }
-  if (count != 2 || !positive)
+  if (split.size() != 2 || !positive)
     throw InputError(path + ": " + element + " holds '" + values +
                      "'; a pixel spacing is two positive distances (GDCM takes 1 mm for a 0)");
 }
