@@ -80,12 +80,6 @@ int fail(const char* what, bool agreed) {
   return 1;
 }
 
-extern "C" void on_signal(int sig) {
-  remove_pending_temporaries();
-  std::signal(sig, SIG_DFL);
-  std::raise(sig);
-}
-
 // The signals that end a run: Ctrl-C, kill, a closed terminal.
 constexpr int kCancelSignals[] = {SIGINT, SIGTERM, SIGHUP};
 
@@ -112,7 +106,6 @@ constexpr int kEndingSignals[] = {SIGQUIT, SIGPIPE,   SIGXCPU, SIGUSR1,
 // removes the temporaries and says so in one line before the default action (the core dump).
 // Not under a sanitizer, whose own report of the crash is the one to read.
 extern "C" void on_crash(int sig) {
-  remove_pending_temporaries();
   // Built by hand: snprintf is not async-signal-safe.
   char line[96] = "isotile: error: crashed (signal ";
   std::size_t n = std::strlen(line);
@@ -122,8 +115,7 @@ extern "C" void on_crash(int sig) {
   std::memcpy(line + n, kRest, sizeof kRest - 1);
   n += sizeof kRest - 1;
   [[maybe_unused]] const ssize_t written = ::write(2, line, n);
-  std::signal(sig, SIG_DFL);
-  std::raise(sig);
+  remove_temporaries_and_reraise(sig);
 }
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 constexpr bool kSanitized = true;
@@ -131,15 +123,15 @@ constexpr bool kSanitized = true;
 constexpr bool kSanitized = false;
 #endif
 
-// Every signal that ends the process removes the temporaries first (on_signal), then takes its
-// default action. SIGXFSZ is ignored instead: a write past the file-size limit (ulimit -f) then
-// fails with EFBIG, which the writers report as an error ("File too large") and clean up after,
-// as after a full disk.
+// Every signal that ends the process removes the temporaries first, then takes its default
+// action (remove_temporaries_and_reraise). SIGXFSZ is ignored instead: a write past the file-size
+// limit (ulimit -f) then fails with EFBIG, which the writers report as an error ("File too large")
+// and clean up after, as after a full disk.
 void install_signal_handlers() {
   for (int sig : kCancelSignals) g_ignored[sig] = ignored_on_entry(sig);
   for (int sig : kEndingSignals) g_ignored[sig] = ignored_on_entry(sig);
-  for (int sig : kCancelSignals) handle(sig, on_signal);
-  for (int sig : kEndingSignals) handle(sig, on_signal);
+  for (int sig : kCancelSignals) handle(sig, remove_temporaries_and_reraise);
+  for (int sig : kEndingSignals) handle(sig, remove_temporaries_and_reraise);
   std::signal(SIGXFSZ, SIG_IGN);
   if (!kSanitized)
     for (int sig : {SIGSEGV, SIGBUS, SIGABRT, SIGFPE, SIGILL}) std::signal(sig, on_crash);
@@ -178,11 +170,12 @@ extern "C" void on_cancel_timeout(int) {
 // The first cancel signal (extract, simplify, demo) cancels the run through g_progress (only a
 // lock-free atomic store here: async-signal-safe); the work stops at its next unit, its files are
 // removed as the exception unwinds, and main prints "isotile: cancelled" and exits 128 + the
-// signal. A second one ends the process at once (on_signal), as does the grace period's end.
+// signal. A second one ends the process at once (removing the temporaries), as does the grace
+// period's end.
 extern "C" void on_cancel_signal(int sig) {
   g_cancel_signal = sig;
   g_progress.cancel();
-  for (int s : kCancelSignals) handle(s, on_signal);
+  for (int s : kCancelSignals) handle(s, remove_temporaries_and_reraise);
   std::signal(SIGALRM, on_cancel_timeout);
   ::alarm(kCancelGraceSeconds);
 }

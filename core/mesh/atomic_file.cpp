@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <mutex>
@@ -411,6 +412,12 @@ void remove_pending_temporaries() noexcept {
   for (int i = 0; i < kSlots; ++i) {
     if (g_ready[i].load(std::memory_order_acquire)) ::unlink(g_paths[i]);
   }
+}
+
+extern "C" void remove_temporaries_and_reraise(int sig) {
+  remove_pending_temporaries();
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
 }
 
 int track_temporary(const std::filesystem::path& path) noexcept {

@@ -120,6 +120,10 @@ class HeldCommits {
 // Async-signal-safe: unlinks every temporary of a live AtomicFile, and every tracked one.
 void remove_pending_temporaries() noexcept;
 
+// A handler for the signals that end the process (the CLI's, the Python module's during a run):
+// remove_pending_temporaries(), then the signal's default action.
+extern "C" void remove_temporaries_and_reraise(int sig);
+
 // Tracks a temporary another process's AtomicFile created and this one writes into too (an MPI
 // rank), so that this process's SIGINT/SIGTERM removes it as well; -1 when the table is full.
 int track_temporary(const std::filesystem::path& path) noexcept;

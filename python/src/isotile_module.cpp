@@ -566,11 +566,6 @@ py::object make_mesh_tuple(Mesh&& mesh) {
 // the mesh's size). While runs last, the signals that Python left at their default action remove
 // the temporaries first and then take it; a handler set from Python (signal.signal) is left
 // alone. Ctrl-C is Python's KeyboardInterrupt, which cancels the run (ProgressBridge).
-extern "C" void remove_temporaries_and_end(int sig) {
-  remove_pending_temporaries();
-  std::signal(sig, SIG_DFL);
-  std::raise(sig);
-}
 class TemporariesOnSignals {
  public:
   TemporariesOnSignals() {
@@ -580,7 +575,7 @@ class TemporariesOnSignals {
       struct sigaction current {};
       ours_[i] = ::sigaction(kSignals[i], nullptr, &current) == 0 &&
                  current.sa_handler == SIG_DFL &&
-                 std::signal(kSignals[i], remove_temporaries_and_end) != SIG_ERR;
+                 std::signal(kSignals[i], remove_temporaries_and_reraise) != SIG_ERR;
     }
   }
   ~TemporariesOnSignals() {
@@ -589,7 +584,7 @@ class TemporariesOnSignals {
     for (int i = 0; i < 2; ++i) {
       struct sigaction current {};
       if (ours_[i] && ::sigaction(kSignals[i], nullptr, &current) == 0 &&
-          current.sa_handler == remove_temporaries_and_end)
+          current.sa_handler == remove_temporaries_and_reraise)
         std::signal(kSignals[i], SIG_DFL);
       ours_[i] = false;
     }
