@@ -21,6 +21,8 @@ std::string_view stage_name(Stage stage) {
       return "macet search";
     case Stage::Simplify:
       return "simplify";
+    case Stage::SimplifySeams:
+      return "simplify seams";
     case Stage::Write:
       return "write";
   }

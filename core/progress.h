@@ -42,7 +42,9 @@
 namespace isotile {
 
 // The stages of a run, in the order a run usually meets them.
-enum class Stage { Read, Histogram, Count, Extract, MacetSearch, Simplify, Write };
+// SimplifySeams: the out-of-core simplification's last pass, over the cells that straddle its
+// bricks' seams (after Simplify, brick by brick).
+enum class Stage { Read, Histogram, Count, Extract, MacetSearch, Simplify, SimplifySeams, Write };
 std::string_view stage_name(Stage stage);  // "read", "histogram", "count", "extract", ...
 
 // Stages whose number is not known ahead, mapped onto [0, 1) so that the sum only grows: stage n

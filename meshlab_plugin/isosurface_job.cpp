@@ -159,7 +159,8 @@ PipelineOptions pipeline_options(const IsosurfaceParams& p) {
 // The library's progress (its stage, the brick, the fraction of the stage in that brick) onto
 // MeshLab's bar and status line: reading to 25%, the histogram of --iso auto brick by brick to
 // 30%, the extraction's stages (count, extract, Macet's search) from 30% to 60%, simplification
-// from 60% to 90%, the bricks' file after that. The extraction's stages are several, each from 0
+// from 60% to 90% (brick by brick: the bricks to 85%, their seams to 90%), the bricks' file after
+// that. The extraction's stages are several, each from 0
 // to 1 and their number not known ahead: a series over the span (core's stage_series_fraction).
 // Bricks in flight at once finish out of order, so the bar takes the highest value told so far:
 // it only moves forward.
@@ -179,7 +180,9 @@ class BarMapping {
     double from = 0.02, width = 0.23;
     if (u.stage == Stage::Histogram) from = 0.25, width = 0.05;
     if (extraction) from = 0.3, width = 0.3;
-    if (u.stage == Stage::Simplify) from = 0.6, width = 0.3;
+    // Brick by brick, the seams' pass follows the bricks': its share is the last sixth.
+    if (u.stage == Stage::Simplify) from = 0.6, width = u.bricks > 1 ? 0.25 : 0.3;
+    if (u.stage == Stage::SimplifySeams) from = 0.85, width = 0.05;
     if (u.stage == Stage::Write) from = 0.9, width = 0;
     // The extraction's stages are a series (their number is not known ahead).
     bar_ = std::max(bar_, from + width * (extraction ? stage_series_fraction(n_, done) : done));
@@ -199,6 +202,8 @@ class BarMapping {
         return "reading the samples' histogram for the isovalue";
       case Stage::Simplify:
         return u.bricks > 1 ? "simplify" + bricks : "simplifying";
+      case Stage::SimplifySeams:
+        return "simplifying the bricks' seams";
       case Stage::Write:
         return "writing";
       default:

@@ -437,6 +437,28 @@ TEST_F(ProgressFiles, TiledSimplificationCancelledLeavesNothing) {
   for (std::int64_t b = 0; b < r.plan.total(); ++b) EXPECT_EQ(simplified[b], 1) << b;
   // Reports inside the bricks too, not only one per brick.
   EXPECT_GT(rec.updates.size(), 4 * static_cast<std::size_t>(r.plan.total()));
+  // The seams' pass follows every brick as a stage of its own, 0 to 1 and only growing (reported
+  // as `simplify` of one brick, its fraction restarted from 0 after the bricks' `simplify`).
+  std::size_t last_brick_report = 0, first_seam = rec.updates.size();
+  for (std::size_t i = 0; i < rec.updates.size(); ++i) {
+    const ProgressUpdate& u = rec.updates[i];
+    if (u.stage == Stage::Simplify) {
+      EXPECT_GT(u.bricks, 1) << i;
+      last_brick_report = i;
+    }
+    if (u.stage == Stage::SimplifySeams) first_seam = std::min(first_seam, i);
+  }
+  ASSERT_LT(first_seam, rec.updates.size());
+  EXPECT_GT(first_seam, last_brick_report);
+  EXPECT_EQ(rec.updates[first_seam].fraction, 0.0);
+  double seam_fraction = 0;
+  for (std::size_t i = first_seam; i < rec.updates.size(); ++i)
+    if (rec.updates[i].stage == Stage::SimplifySeams) {
+      EXPECT_EQ(rec.updates[i].bricks, 1) << i;
+      EXPECT_GE(rec.updates[i].fraction, seam_fraction) << i;
+      seam_fraction = rec.updates[i].fraction;
+    }
+  EXPECT_EQ(seam_fraction, 1.0);
 
   const auto calls = static_cast<std::int64_t>(rec.updates.size());
   const std::int64_t last_brick = r.plan.total() - 1;

@@ -260,7 +260,7 @@ class TiledSimplification {
                 ? std::min(1.0, static_cast<double>(target) / static_cast<double>(spilled_faces_))
                 : 1.0;
     if (opt_.progress) opt_.progress->set_brick(0, 1);
-    progress_begin(opt_.progress, Stage::Simplify, cells);
+    progress_begin(opt_.progress, Stage::SimplifySeams, cells);
     for (std::int64_t c = 0; c < cells; ++c) {
       const std::vector<std::int64_t>& cuts = cell_parts_[static_cast<std::size_t>(c)];
       for (std::size_t i = 0; i <= cuts.size(); ++i)
