@@ -138,7 +138,8 @@ TEST_F(CliOutputs, StandardOutputWriteErrorsExitOne) {
   for (const std::string args :
        {"extract field:sphere:16 -o t.ply -q --stats -", "info field:sphere:16",
         "info field:sphere:16 --json", "quality s.ply", "quality s.ply --json",
-        "simplify s.ply u.ply --ratio 0.5 -q --stats -", "demo -o d.ply -q", "--help"}) {
+        "simplify s.ply u.ply --ratio 0.5 -q --stats -", "demo -o d.ply -q", "--help",
+        "extract --help", "--version"}) {
     const CliResult r = shell("\"$ISOTILE\" " + args + " >full");
     EXPECT_EQ(r.code, 1) << args;
     EXPECT_TRUE(says(r, "cannot write standard output: No space left on device"))

@@ -279,9 +279,13 @@ int main(int argc, char** argv) {
     if (g_mpi && g_mpi->rank != 0) return e.get_exit_code() == 0 ? 0 : 2;
 #endif
     // --help and --version exit 0; every usage error exits 2, whatever CLI11's own code is.
+    errno = 0;
     if (app.exit(e) != 0) return 2;
+    // CLI11 ends --version's line with std::endl: a failure is met there, and its reason is
+    // errno's now (the flush below fails again without setting it).
+    const int printing = errno;
     try {
-      flush_stdout();
+      flush_stdout(printing);
     } catch (const isotile::Error& io) {
       return fail(io.what(), false);
     }

@@ -133,13 +133,13 @@ RawOptions InputArgs::raw_options() const {
 
 // Standard output's buffered writes that failed (a full disk, a closed pipe's EPIPE, /dev/full):
 // an IoError, so that the run exits 1 instead of 0 with the output lost.
-void flush_stdout() {
+void flush_stdout(int earlier_errno) {
   // std::cout writes through stdout's buffer (synced with stdio), so its flush is stdout's: the
   // first failing flush sets errno, the second only confirms.
   errno = 0;
   std::cout.flush();
   const bool flushed = std::fflush(stdout) == 0;
-  const int err = errno;
+  const int err = errno != 0 ? errno : earlier_errno;
   if (flushed && !std::ferror(stdout) && std::cout.good()) return;
   throw IoError(std::string("cannot write standard output") +
                 (err != 0 ? std::string(": ") + std::strerror(err) : std::string()));

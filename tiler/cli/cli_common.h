@@ -63,8 +63,9 @@ struct InputArgs {
 };
 
 // Standard output's buffered writes that failed (a full disk, a closed pipe's EPIPE, /dev/full):
-// an IoError, so that the run exits 1 instead of 0 with the output lost.
-void flush_stdout();
+// an IoError, so that the run exits 1 instead of 0 with the output lost. `earlier_errno`: the
+// reason of a write that failed before the flush (errno then), where the flush sets none.
+void flush_stdout(int earlier_errno = 0);
 
 // `text` into `path` (written whole or not at all), or to standard output for "-".
 void write_text(const std::string& path, const std::string& text);
