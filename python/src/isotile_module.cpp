@@ -753,6 +753,33 @@ std::uint32_t vertex_index(Index idx, py::ssize_t vertices, const std::string& r
   return static_cast<std::uint32_t>(idx);
 }
 
+// `a` as a C-ordered array of T, converted by NumPy. Only arrays of numbers (bool, integers,
+// floats) are taken: NumPy would also parse strings and drop complex numbers' imaginary parts.
+// The conversion's own errors (MemoryError) come out as they are, where pybind11's ensure()
+// swallowed them (a null array: read as data, a crash). A float64 past float32's range becomes
+// inf without NumPy's overflow warning (under warnings made errors, that warning was the error
+// raised): the caller's check names it.
+template <class T>
+py::array_t<T, py::array::forcecast | py::array::c_style> numbers_as(const py::array& a,
+                                                                     const std::string& what) {
+  const char kind = a.dtype().kind();
+  if (kind != 'b' && kind != 'i' && kind != 'u' && kind != 'f')
+    throw py::type_error(what + " must be an array of real numbers, not " +
+                         a.dtype().attr("name").cast<std::string>());
+  const py::object quiet = py::module_::import("numpy").attr("errstate")(
+      py::arg("over") = "ignore", py::arg("invalid") = "ignore");
+  quiet.attr("__enter__")();
+  try {
+    // Its constructor, unlike ensure(), throws error_already_set on failure.
+    py::array_t<T, py::array::forcecast | py::array::c_style> converted(a);
+    quiet.attr("__exit__")(py::none(), py::none(), py::none());
+    return converted;
+  } catch (...) {
+    quiet.attr("__exit__")(py::none(), py::none(), py::none());
+    throw;
+  }
+}
+
 // A mesh from arrays (vertices (V, 3), triangles (F, 3), quads (Q, 4) or None, normals (V, 3)
 // or None), for every function that takes one (quality, simplify, write_mesh): copied, as Mesh
 // owns its arrays. Positions that are not finite (NaN, inf, or float64 past float32's range)
@@ -767,8 +794,7 @@ Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py:
                             ") array");
   };
   rows(vertices, 3, "vertices");
-  const auto v = py::array_t<float, py::array::forcecast | py::array::c_style>::ensure(vertices);
-  if (!v) throw py::type_error("vertices must be numeric");
+  const auto v = numbers_as<float>(vertices, "vertices");
   mesh.positions.resize(static_cast<std::size_t>(v.shape(0)));
   std::copy_n(v.data(), 3 * v.shape(0),
               mesh.positions.empty() ? nullptr : mesh.positions[0].data());
@@ -779,7 +805,7 @@ Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py:
       throw py::type_error(std::string(what) + " must be an integer array");
     const auto read = [&](auto type) {
       using Index = decltype(type);
-      const auto f = py::array_t<Index, py::array::forcecast | py::array::c_style>::ensure(a);
+      const auto f = numbers_as<Index>(a, what);
       out.resize(static_cast<std::size_t>(f.shape(0)));
       for (py::ssize_t i = 0; i < f.shape(0); ++i)
         for (int c = 0; c < width; ++c)
@@ -798,9 +824,16 @@ Mesh mesh_of_arrays(const py::array& vertices, const py::array& faces, const py:
     const py::array na = normals.cast<py::array>();
     rows(na, 3, "normals");
     if (na.shape(0) != v.shape(0)) throw py::value_error("normals must have one row per vertex");
-    const auto n = py::array_t<float, py::array::forcecast | py::array::c_style>::ensure(na);
+    const auto n = numbers_as<float>(na, "normals");
     mesh.normals.resize(mesh.positions.size());
     std::copy_n(n.data(), 3 * n.shape(0), mesh.normals.empty() ? nullptr : mesh.normals[0].data());
+    for (std::size_t i = 0; i < mesh.normals.size(); ++i)
+      for (const float c : mesh.normals[i])
+        if (!std::isfinite(c))
+          throw py::value_error(
+              "normals: row " + std::to_string(i) + " has a value that is not a finite number (" +
+              std::to_string(c) +
+              (std::isinf(c) ? ": infinite, or past float32's largest, 3.4e38" : "") + ")");
   }
   return mesh;
 }

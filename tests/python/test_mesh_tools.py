@@ -2,6 +2,7 @@
 # `quality --json` and `simplify` on the same mesh.
 import json
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -99,10 +100,40 @@ def test_quality_of_no_faces_and_nan_positions(tmp_path):
         v[3, 0] = bad
         for call in (lambda: isotile.quality(v, faces),
                      lambda: isotile.simplify(v, faces, ratio=0.5)):
+            # With warnings made errors too: NumPy's warning of the cast of 1e39 to float32 was
+            # the error raised, as "vertices must be numeric".
             with pytest.raises(ValueError, match="vertices: vertex 3 has a coordinate that is not "
                                                  "a finite number " + what):
-                with np.errstate(over="ignore"):  # NumPy's cast of 1e39 to float32
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error")
                     call()
+
+
+def test_arrays_that_are_not_real_numbers_are_refused(tmp_path):
+    # NumPy would parse strings and drop imaginary parts; normals that failed to convert were read
+    # as an array (a crash), and non-finite ones were written.
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    faces = np.array([[0, 1, 2]])
+    out = tmp_path / "m.ply"
+    for bad, name in ((np.array([["0", "0", "1"]] * 3), "str"), (tri.astype(complex), "complex"),
+                      (tri.astype(object), "object")):
+        with pytest.raises(TypeError, match="vertices must be an array of real numbers, not " +
+                                            name):
+            isotile.quality(bad, faces)
+        with pytest.raises(TypeError, match="normals must be an array of real numbers, not " +
+                                            name):
+            isotile.Mesh(tri, faces, None, bad).save(out)
+    for bad, what in ((np.nan, r"\(nan\)"), (1e39, r"\(inf: infinite, or past float32's")):
+        normals = np.zeros((3, 3))
+        normals[2, 1] = bad
+        with pytest.raises(ValueError, match="normals: row 2 has a value that is not a finite "
+                                             "number " + what):
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                isotile.Mesh(tri, faces, None, normals).save(out)
+    assert not out.exists()
+    isotile.Mesh(tri, faces, None, np.array([[0, 0, 1]] * 3)).save(out)
+    assert isotile.read_mesh(out).normals.tolist() == [[0, 0, 1]] * 3
 
 
 def test_threads_past_the_cores_print_nothing(capfd):
