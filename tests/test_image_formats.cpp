@@ -4,6 +4,7 @@
 // and truncated headers give one clear error line.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <cmath>
@@ -1140,6 +1141,7 @@ class DicomDir : public CliTest {
   void copy(int number, const std::string& as = "", bool other_series = false, int shift_z = 0) {
     char name[32];
     std::snprintf(name, sizeof name, "%08d.dcm", number);
+    ASSERT_TRUE(fs::is_regular_file(series_ / name)) << name;  // the series holds 41 to 120
     std::string bytes = testing::slurp(series_ / name);
     if (shift_z != 0) {
       const std::size_t tag =
@@ -1360,7 +1362,7 @@ TEST_F(DicomDir, ASliceOffTheStacksAxisIsNamed) {
 TEST_F(DicomDir, AnEntryThatIsNotAFileIsNamed) {
   REQUIRE_ITK();
   ISOTILE_REQUIRE_SHARED(series_);
-  for (int n = 40; n < 60; ++n) copy(n);
+  for (int n = 41; n < 60; ++n) copy(n);
   fs::create_directory(dir_ / "sub");
   ASSERT_EQ(run("info . --json").code, 0);
   fs::create_symlink("nowhere", dir_ / "zz_dangling");
@@ -1716,6 +1718,48 @@ TEST_F(DicomFiles, ASliceWithoutPositionOrSpacingIsNamed) {
                               "vectors at right angles (row and column lengths 1 and 1.00499"),
             std::string::npos)
       << refusal(".");
+}
+
+// A slice cut short (empty, or a few bytes of its header) is a file GDCM's scan of the folder
+// passes by: at either end of the series the volume was read a slice short, exit 0 (in the middle
+// it was called a gap). Refused, naming it, where it is named as DICOM or is empty without an
+// extension; other files beside the series (a README) are still passed by.
+TEST_F(DicomFiles, ASliceCutShortIsNamedNotLeftOut) {
+  REQUIRE_ITK();
+  for (int k = 0; k < 4; ++k) write_slice("s" + std::to_string(k) + ".dcm", k, at(1.5 * k));
+  std::ofstream(dir_ / "README") << "four slices\n";
+  expect_volume(".", {0, 1, 2, 3}, first_);
+  for (const std::string name : {"s3.dcm", "s0.dcm"}) {
+    for (const std::uintmax_t size : {0, 100}) {
+      fs::resize_file(dir_ / name, size);
+      for (const std::string input : {".", "s1.dcm"}) {
+        const std::string err = refusal(input);
+        EXPECT_NE(
+            err.find(name + ": named as DICOM but no DICOM data set GDCM reads in a folder (" +
+                     std::to_string(size) + " bytes): a slice cut short?"),
+            std::string::npos)
+            << input << ": " << err;
+      }
+    }
+    write_slice(name, name == "s0.dcm" ? 0 : 3, at(name == "s0.dcm" ? 0 : 4.5));
+  }
+  fs::rename(dir_ / "s3.dcm", dir_ / "IM3");
+  expect_volume(".", {0, 1, 2, 3}, first_);
+  fs::resize_file(dir_ / "IM3", 0);
+  EXPECT_NE(refusal(".").find("IM3: an empty file in the DICOM series' folder: a slice cut short?"),
+            std::string::npos)
+      << refusal(".");
+  fs::remove(dir_ / "IM3");
+  expect_volume(".", {0, 1, 2}, first_);
+  // A slice that cannot be read (only where the tests run as another user than root, whom a
+  // file's mode does not stop).
+  if (::geteuid() != 0) {
+    fs::permissions(dir_ / "s2.dcm", fs::perms::none);
+    EXPECT_NE(refusal(".").find("s2.dcm: Permission denied (a file in the DICOM series' folder"),
+              std::string::npos)
+        << refusal(".");
+    fs::permissions(dir_ / "s2.dcm", fs::perms::owner_read | fs::perms::owner_write);
+  }
 }
 
 // Positions written with two decimals (0.625 mm slices: 0, 0.63, 1.25, 1.88, ...) are even: each

@@ -243,7 +243,26 @@ void check_dicom_file(const std::string& path, bool given) {
     file.read(0, first, 8);
     const char vr[3] = {static_cast<char>(first[4]), static_cast<char>(first[5]), 0};
     const bool explicit_vr = known_vr(vr) && (first[0] & 1) == 0;
-    if (!given && !explicit_vr) return;
+    if (!given && !explicit_vr) {
+      // GDCM's scan of the folder passes such a file by, and the series is read without it: a
+      // slice at either end went missing without a word (a gap between slices is refused). A
+      // file named as DICOM, or an empty one without an extension (scanners often write slices
+      // without one), is a slice cut short: refused. Other files (a README) are left alone.
+      const std::string ext = fs::path(path).extension().string();
+      std::string lower;
+      for (const char c : ext)
+        lower += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      if (lower == ".dcm" || lower == ".ima" || lower == ".dicom" ||
+          (lower.empty() && file.size() == 0))
+        throw InputError(
+            path + ": " +
+            (lower.empty() ? std::string("an empty file in the DICOM series' folder")
+                           : "named as DICOM but no DICOM data set GDCM reads in a folder (" +
+                                 std::to_string(file.size()) + " bytes)") +
+            ": a slice cut short? The series would be read without it; copy it again or move "
+            "it out of the folder");
+      return;
+    }
     DicomWalk w{file, path};
     w.implicit = !explicit_vr;
     try {
@@ -313,8 +332,12 @@ void check_dicom_input(const std::string& input) {
     if (e.is_regular_file(ec) && !(file && fs::equivalent(e.path(), input, ec))) {
       try {
         check_dicom_file(e.path().string(), false);
-      } catch (const IoError&) {
-        // A file beside the series that cannot be opened: GDCM's scan passes it by too.
+      } catch (const IoError& unreadable) {
+        // GDCM's scan passes it by too, and the series was read without it (a slice at either
+        // end missing without a word, in the middle called a gap).
+        throw InputError(std::string(unreadable.what()) +
+                         " (a file in the DICOM series' folder: GDCM would pass it by and read "
+                         "the series without it; make it readable or move it out)");
       }
     }
 }

@@ -70,9 +70,12 @@ ImageHeaderCheck check_metaimage_header(const std::string& path);
 // every element must lie within the file and the pixel data must hold the Rows x Columns x
 // samples x frames its header says (GDCM reads a cut-off slice as zeros with a warning only, and
 // aborts on some cut-off headers). Files without the marker are left to GDCM, unless `given` (the
-// input named by the user), when they must parse as an implicit-VR data set.
+// input named by the user), when they must parse as an implicit-VR data set, or unless GDCM's
+// scan of a folder would pass them by while they are named as DICOM (.dcm, .ima, .dicom) or
+// are empty without an extension: slices cut short, refused (the series was read without them).
 void check_dicom_file(const std::string& path, bool given = false);
 // The same for the DICOM files of a series input: the directory's files, or those beside a file.
+// A file there that cannot be read is refused too (GDCM passes it by).
 void check_dicom_input(const std::string& input);
 
 // TIFF files (classic and BigTIFF), every page's directory walked before ITK sees them: the
