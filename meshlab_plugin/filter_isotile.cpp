@@ -205,7 +205,8 @@ QString FilterIsotile::filterInfo(FilterIDType filter) const {
              "(boundary vertices do not move) and well-shaped triangles (no new triangle below "
              "the radius-ratio floor; flips and tangential relaxation afterwards), with plane "
              "quadrics for the error. Non-manifold vertices and edges are kept as they are. "
-             "Per-face quality becomes the radius ratio.";
+             "Per-face quality becomes the radius ratio. The whole layer is simplified (a face "
+             "selection is not a limit, and is not kept).";
   }
   return {};
 }
@@ -233,8 +234,10 @@ int FilterIsotile::postCondition(QAction* a) const {
 
 void FilterIsotile::initParameterSet(QAction* a, MeshDocument& /*md*/, RichParameterList& par) {
   if (ID(a) == FP_SIMPLIFY) {
-    par.addParam(RichFloat("ratio", 0.1f, "Faces kept (fraction)",
-                           "The fraction of the faces to keep, in (0, 1]; used when 'faces' is 0"));
+    par.addParam(
+        RichFloat("ratio", 0.1f, "Faces kept (fraction)",
+                  "The fraction of the faces to keep, in (0, 1]; used when 'Faces kept (count)' is "
+                  "0. 0 with a 'Maximum error': that bound alone"));
     par.addParam(RichInt("faces", 0, "Faces kept (count)",
                          "The number of faces to keep; 0: use the fraction"));
     par.addParam(RichFloat("max_error", 0.0f, "Maximum error",
@@ -395,7 +398,7 @@ bool FilterIsotile::isosurface(MeshDocument& md, const RichParameterList& par,
         r.iso, p.iso_auto ? " (automatic: Otsu's threshold of the samples)" : "");
   else
     Log("isotile: isovalue %.10g", r.iso);
-  Log("isotile: %llu triangles, %zu vertices; radius ratio min %.4f, mean %.4f; %lld brick(s) "
+  Log("isotile: %llu triangles, %zu vertices; radius ratio min %.4g, mean %.4g; %lld brick(s) "
       "on %s; %.2f s",
       static_cast<unsigned long long>(r.mesh.triangles.size()), r.mesh.positions.size(),
       r.quality.min, r.quality.mean, static_cast<long long>(r.bricks), r.backend.c_str(),
@@ -421,7 +424,8 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
   p.faces = static_cast<std::uint64_t>(std::max(0, par.getInt("faces")));
   p.max_error = typed(par.getFloat("max_error"));
   p.min_quality = typed(par.getFloat("min_quality"));
-  if (par.getInt("faces") < 0) return fail("faces must be 0 (use the fraction) or more");
+  if (par.getInt("faces") < 0)
+    return fail("'Faces kept (count)' must be 0 (use the fraction) or more");
 
   // The layer as plain arrays (deleted elements left out).
   isotile::Mesh in;
@@ -440,6 +444,9 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
       t[k] = index[static_cast<std::size_t>(vcg::tri::Index(m->cm, f.cV(k)))];
     in.triangles.push_back(t);
   }
+  // A face selection is not a limit here: the whole layer is simplified (said in the log).
+  std::uint64_t selected = 0;
+  for (const CFaceO& f : m->cm.face) selected += !f.IsD() && f.IsS();
   // What the new faces and vertices can carry over: the quality ramp the isosurface filter
   // painted is painted again from the new quality; other colours and texture coordinates
   // belonged to faces and vertices that no longer exist.
@@ -472,7 +479,7 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
   fill(*m, out);
   if (recolour) colour_by_quality(*m);
   const isotile::QualityStats q = isotile::triangle_quality(out);
-  Log("isotile: simplified %llu to %llu triangles; radius ratio min %.4f, mean %.4f; %llu "
+  Log("isotile: simplified %llu to %llu triangles; radius ratio min %.4g, mean %.4g; %llu "
       "non-manifold vertices split and welded back; %.2f s",
       static_cast<unsigned long long>(stats.faces_before),
       static_cast<unsigned long long>(out.triangles.size()), q.min, q.mean,
@@ -480,9 +487,22 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
   if (recolour) Log("isotile: faces coloured again by their new quality");
   if (!dropped.isEmpty())
     Log("isotile: dropped the layer's %s: they belonged to the faces and vertices the "
-        "simplification replaced (colour by quality again with Filters > Color Creation and "
-        "Processing)",
+        "simplification replaced",
         qUtf8Printable(dropped.join(", ")));
+  if (selected > 0)
+    Log("isotile: the whole layer was simplified; its selection of %llu faces was not kept (it "
+        "named faces that no longer exist)",
+        static_cast<unsigned long long>(selected));
+  // As `isotile simplify` warns, at MeshLab's warning level; the layer is the result all the same.
+  if (const std::string missed = isotile::target_missed(stats); !missed.empty()) {
+    // Vertices mostly on borders: faces that share corners without sharing vertices (a mesh
+    // saved unwelded, every face with its own three), which no collapse may join.
+    const bool unwelded = 2 * stats.boundary_vertices > in.positions.size();
+    Log(GLLogStream::WARNING, "isotile: warning: %s%s", missed.c_str(),
+        unwelded ? "; most vertices lie on borders: an unwelded mesh? Merge its vertices first "
+                   "(Filters > Cleaning and Repairing > Remove Duplicate Vertices)"
+                 : "");
+  }
   return true;
 }
 

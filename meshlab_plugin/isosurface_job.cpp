@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
@@ -72,6 +73,21 @@ struct PrivateFolder {
   PrivateFolder& operator=(const PrivateFolder&) = delete;
 };
 
+// The system's temporary folder, as an isotile error where there is none (TMPDIR naming a
+// folder that does not exist: Qt's tempPath() is then empty, and the standard library's
+// filesystem_error named neither the folder nor TMPDIR).
+fs::path temporary_folder() {
+  std::error_code ec;
+  fs::path dir = fs::temp_directory_path(ec);
+  if (ec) {
+    const char* env = std::getenv("TMPDIR");
+    throw IoError("no temporary folder for the bricks' mesh" +
+                  (env ? std::string(" (TMPDIR is '") + env + "')" : std::string()) + ": " +
+                  ec.message() + "; set TMPDIR to a folder that exists, or 'Memory' to 0");
+  }
+  return dir;
+}
+
 std::string format_value(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.10g", v);
@@ -82,8 +98,14 @@ std::string format_value(double v) {
 std::string file_stem(const std::string& file) {
   std::string name = fs::path(file).filename().string();
   if (name.empty()) name = fs::path(file).parent_path().filename().string();  // "dir/"
+  // Any case: scanners and older tools write SLICE.DCM, EMBRYO.TIF.
   auto strip = [&](std::string_view ext) {
-    if (name.size() > ext.size() && name.compare(name.size() - ext.size(), ext.size(), ext) == 0) {
+    const auto matches = [](char e, char n) {
+      return std::tolower(static_cast<unsigned char>(n)) == static_cast<unsigned char>(e);
+    };
+    if (name.size() > ext.size() &&
+        std::equal(ext.begin(), ext.end(), name.end() - static_cast<std::ptrdiff_t>(ext.size()),
+                   matches)) {
       name.resize(name.size() - ext.size());
       return true;
     }
@@ -122,22 +144,22 @@ std::vector<std::string> drop_other_methods_fields(Method method, ExtractOptions
 PipelineOptions pipeline_options(const IsosurfaceParams& p) {
   PipelineOptions po;
   ExtractOptions& o = po.extract;
-  o.method = static_cast<Method>(checked_choice(p.method, kMethodNames, "method"));
-  o.quality = checked_choice(p.macet_quality, kMacetQualityNames, "macet_quality") == 1
+  o.method = static_cast<Method>(checked_choice(p.method, kMethodNames, "'Method'"));
+  o.quality = checked_choice(p.macet_quality, kMacetQualityNames, "'Macet quality'") == 1
                   ? MacetQuality::Max
                   : MacetQuality::Fast;
   o.macet_relax = p.macet_relax;
-  const int solver = checked_choice(p.dc_solver, kDcSolverNames, "dc_solver");
+  const int solver = checked_choice(p.dc_solver, kDcSolverNames, "'DC solver'");
   o.dc_solver = solver == 1   ? DcSolver::Particle
                 : solver == 2 ? DcSolver::Qef
                               : DcSolver::MassPoint;
-  o.dc_hermite = checked_choice(p.dc_hermite, kDcHermiteNames, "dc_hermite") == 1
+  o.dc_hermite = checked_choice(p.dc_hermite, kDcHermiteNames, "'DC Hermite'") == 1
                      ? DcHermite::Eno
                      : DcHermite::Central;
-  o.dc_vertices = checked_choice(p.dc_vertices, kDcVerticesNames, "dc_vertices") == 1
+  o.dc_vertices = checked_choice(p.dc_vertices, kDcVerticesNames, "'DC vertices'") == 1
                       ? DcVertices::Cell
                       : DcVertices::Patch;
-  const int backend = checked_choice(p.backend, kBackendNames, "backend");
+  const int backend = checked_choice(p.backend, kBackendNames, "'Backend'");
   o.backend = backend == 1   ? Backend::Cpu
               : backend == 2 ? Backend::GeometryShader
               : backend == 3 ? Backend::HistoPyramid
@@ -145,7 +167,7 @@ PipelineOptions pipeline_options(const IsosurfaceParams& p) {
   o.normals = p.normals;
   // The dialog's way to the automatic isovalue is nan, which the CLI's message does not know.
   if (!p.iso_auto && !std::isfinite(p.iso))
-    throw InputError("iso must be a finite number, or nan for the automatic isovalue");
+    throw InputError("'Isovalue' must be a finite number, or nan for the automatic isovalue");
   po.iso_auto = p.iso_auto;
   if (!p.iso_auto) po.iso = p.iso;
   po.simplify = p.simplify;
@@ -282,6 +304,10 @@ std::string in_dialog_terms(std::string message) {
       {"--backend", "'Backend'"},
       {"--normals", "'Gradient normals'"},
       {"--iso", "'Isovalue'"},
+      // The library's checks of the options struct name its fields.
+      {"macet_relax must", "'Macet relax' must"},
+      {"simplify must", "'Simplify' must"},
+      {"big-endian", "'Raw byte order' big"},
   };
   return rename_options(std::move(message), kTerms);
 }
@@ -305,8 +331,9 @@ static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,
       drop_other_methods_fields(options.extract.method, options.extract);
   PipelineInput input;
   input.path = p.file;
+  // Spelled as the CLI's options, which in_dialog_terms() turns into the dialog's labels.
   input.raw = parse_input_text(
-      {.dims = p.dims, .type = p.type, .spacing = p.spacing, .origin = "", .endian = p.endian}, "");
+      {.dims = p.dims, .type = p.type, .spacing = p.spacing, .origin = "", .endian = p.endian});
   input.raw.series = p.series;
   const std::string method(method_name(options.extract.method));
   BarMapping bar(progress, fs::path(p.file).filename().string(), method);
@@ -318,7 +345,7 @@ static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,
   std::optional<PrivateFolder> tmp;
   fs::path mesh_file;
   if (!options.memory.empty()) {
-    tmp.emplace(temp_dir.empty() ? fs::temp_directory_path() : fs::path(temp_dir));
+    tmp.emplace(temp_dir.empty() ? temporary_folder() : fs::path(temp_dir));
     mesh_file = tmp->path / "bricks.ply";
     options.output = mesh_file.string();
   }
@@ -354,10 +381,20 @@ static IsosurfaceResult run_isosurface_checked(const IsosurfaceParams& p,
   r.triangles_extracted = run.triangles_extracted;
   r.quality = run.quality;
   r.unused_fields = std::move(unused);
-  r.layer_name = layer_name(p.file, run.series_description, method, run.iso);
+  // A DICOM series without a description is named after its folder: the file chosen is any one
+  // of its slices (00000060.dcm and 00000075.dcm gave two names to one series).
+  std::error_code ec;
+  const bool slice_of_series = !run.series_uid.empty() && !fs::is_directory(p.file, ec);
+  r.layer_name = layer_name(slice_of_series && run.series_description.empty()
+                                ? fs::absolute(p.file, ec).parent_path().string() + "/"
+                                : p.file,
+                            run.series_description, method, run.iso);
   r.description = p.file;
-  if (!run.series_description.empty() || !run.series_uid.empty())
-    r.description += ", DICOM series '" + run.series_description + "' (" + run.series_uid + ")";
+  if (!run.series_uid.empty())
+    r.description += ", DICOM series " +
+                     (run.series_description.empty() ? std::string("without a description")
+                                                     : "'" + run.series_description + "'") +
+                     " (" + run.series_uid + ")";
   r.description += ", " + std::string(kMethodNames[p.method]);
   if (options.extract.method == Method::Macet)
     r.description += std::string(" ") + kMacetQualityNames[p.macet_quality];
@@ -378,7 +415,20 @@ Mesh run_simplify(const Mesh& mesh, const SimplifyParams& p, SimplifyStats* stat
   o.faces = p.faces;
   o.max_error = p.max_error;
   o.min_quality = p.min_quality;
-  return simplify(mesh, o, stats);
+  try {
+    return simplify(mesh, o, stats);
+  } catch (const InputError& e) {
+    // The library's checks of the options, in the dialog's labels.
+    static const std::pair<std::string_view, std::string_view> kTerms[] = {
+        {"simplify: give a ratio, a face count or a maximum error",
+         "give 'Faces kept (fraction)', 'Faces kept (count)' or 'Maximum error'"},
+        {"simplify: the ratio", "'Faces kept (fraction)'"},
+        {"simplify: the maximum error", "'Maximum error'"},
+        {"simplify: the quality floor", "'Quality floor'"},
+        {"simplify: the mesh", "the layer"},
+    };
+    throw InputError(rename_options(e.what(), kTerms));
+  }
 }
 
 }  // namespace isotile::meshlab

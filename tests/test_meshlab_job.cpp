@@ -89,6 +89,9 @@ TEST_F(MeshlabJob, LayerNamesHaveNoDotsAndDifferWhenTaken) {
   EXPECT_EQ(layer_name("/d/scan.v2.nrrd", "", "dc", 3), "scan_v2 dc iso3");
   EXPECT_EQ(layer_name("/d/1-001.dcm", "T1 3D/SAG 1.0mm", "mc", 300), "T1 3D_SAG 1_0mm mc iso300");
   EXPECT_EQ(layer_name("/d/series/", "", "mc", 1), "series mc iso1");
+  // Extensions in any case (the file dialog offers *.TIF, *.DCM).
+  EXPECT_EQ(layer_name("/d/EMBRYO.TIF", "", "mc", 35), "EMBRYO mc iso35");
+  EXPECT_EQ(layer_name("NUC_41x41x41_uint8.RAW.GZ", "", "mc", 35), "NUC_41x41x41_uint8 mc iso35");
   // Ten digits: 1234567.5 and 1234570 are other layers' names (%g made both iso1_23457e+06).
   EXPECT_EQ(layer_name("big.raw", "", "mc", 1234567.5), "big mc iso1234567_5");
   const std::vector<std::string> layers = {"a mc iso1", "a mc iso1 (2)"};
@@ -265,28 +268,28 @@ TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
       {[](IsosurfaceParams& p) { p.file = ""; }, "'file' field is empty"},
       {[](IsosurfaceParams& p) { p.file = "/nonexistent/v_8x8x8_uint8.raw"; }, "no such file"},
       {[](IsosurfaceParams& p) { p.file = ISOTILE_TEST_DATA; }, "no DICOM series found"},
-      {[](IsosurfaceParams& p) { p.dims = "41,x,41"; }, "dims must be three"},
-      {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown type 'uint12'"},
-      {[](IsosurfaceParams& p) { p.endian = "middle"; }, "endian must be"},
-      {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "spacing must be three"},
+      {[](IsosurfaceParams& p) { p.dims = "41,x,41"; }, "'Raw dims' must be three"},
+      {[](IsosurfaceParams& p) { p.type = "uint12"; }, "unknown 'Raw type' 'uint12'"},
+      {[](IsosurfaceParams& p) { p.endian = "middle"; }, "'Raw byte order' must be"},
+      {[](IsosurfaceParams& p) { p.spacing = "1,1"; }, "'Spacing' must be three"},
       {[](IsosurfaceParams& p) { p.series = "1.2.840"; }, "'DICOM series' applies to DICOM only"},
-      {[](IsosurfaceParams& p) { p.method = 3; }, "method must be one of 0 Marching Cubes"},
-      {[](IsosurfaceParams& p) { p.backend = -1; }, "backend must be one of"},
+      {[](IsosurfaceParams& p) { p.method = 3; }, "'Method' must be one of 0 Marching Cubes"},
+      {[](IsosurfaceParams& p) { p.backend = -1; }, "'Backend' must be one of"},
       {[](IsosurfaceParams& p) {
          p.method = 2;
          p.dc_vertices = 2;
        },
-       "dc_vertices must be one of 0 patch, 1 cell"},
+       "'DC vertices' must be one of 0 patch, 1 cell"},
       {[](IsosurfaceParams& p) {
          p.method = 1;
          p.macet_relax = 0.7;
        },
-       "macet_relax must be in [0, 0.5), got 0.7"},
+       "'Macet relax' must be in [0, 0.5), got 0.7"},
       {[](IsosurfaceParams& p) { p.simplify = -1e-9; },
-       "simplify must be in (0, 1] (1: off), got -1e-09"},
+       "'Simplify' must be in (0, 1] (1: off), got -1e-09"},
       {[](IsosurfaceParams& p) { p.memory = "much"; }, "much"},
-      {[](IsosurfaceParams& p) { p.simplify = 1.5; }, "simplify must be in (0, 1]"},
-      {[](IsosurfaceParams& p) { p.iso = INFINITY; }, "iso must be a finite number"},
+      {[](IsosurfaceParams& p) { p.simplify = 1.5; }, "'Simplify' must be in (0, 1]"},
+      {[](IsosurfaceParams& p) { p.iso = INFINITY; }, "'Isovalue' must be a finite number"},
   };
   for (const Case& c : cases) {
     IsosurfaceParams p = nucleon();
@@ -294,6 +297,12 @@ TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
     const std::string m = message_of(p);
     EXPECT_NE(m.find(c.says), std::string::npos) << "wanted '" << c.says << "', got: " << m;
   }
+  // Raw fields on a file that is not raw: the dialog's labels, the byte order's too.
+  IsosurfaceParams p = nucleon();
+  p.file = "field:sphere:8";
+  p.endian = "big";
+  const std::string m = message_of(p);
+  EXPECT_NE(m.find("'Raw byte order' big apply only to raw files"), std::string::npos) << m;
 }
 
 // The dialog shows every method's fields and keeps their last values: another method's fields
@@ -353,7 +362,18 @@ TEST_F(MeshlabJob, SimplifyFilterTargets) {
   const Mesh faces = run_simplify(r.mesh, {.ratio = 0.9, .faces = 500}, nullptr);
   EXPECT_NEAR(static_cast<double>(faces.triangles.size()), 500, 10);
   EXPECT_EQ(mesh_topology(faces).euler, mesh_topology(r.mesh).euler);
-  EXPECT_THROW(run_simplify(r.mesh, {.ratio = 0}, nullptr), InputError);
+  // The library's refusals in the dialog's labels.
+  for (const auto& [params, says] : std::vector<std::pair<SimplifyParams, std::string>>{
+           {{.ratio = 0}, "give 'Faces kept (fraction)', 'Faces kept (count)' or 'Maximum error'"},
+           {{.ratio = 1.5}, "'Faces kept (fraction)' must be in (0, 1], got 1.5"},
+           {{.ratio = 0.5, .min_quality = 2}, "'Quality floor' must be in [0, 1]"}}) {
+    try {
+      run_simplify(r.mesh, params, nullptr);
+      ADD_FAILURE() << says;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), says);
+    }
+  }
 }
 
 // A file of a DICOM series reads the series; the mesh comes in its world frame, in core and in
@@ -394,6 +414,37 @@ TEST_F(MeshlabJob, DicomFileGivesTheSeriesInWorldCoordinates) {
   p.memory = "";
   p.series = "1.2.3";
   EXPECT_NE(message_of(p).find("no DICOM series with UID 1.2.3"), std::string::npos);
+}
+
+// A DICOM series without a SeriesDescription is named after its folder, whichever slice was
+// chosen (it was named after the slice: two names for one series), and the log says so.
+TEST_F(MeshlabJob, ASeriesWithoutADescriptionIsNamedAfterItsFolder) {
+  const std::filesystem::path series =
+      std::filesystem::path(ISOTILE_SHARED_DATA) / "dicom_uih_t1_head_slab";
+  if (!std::filesystem::exists(series)) ISOTILE_SKIP(SharedData, "no shared data at " << series);
+  if (!itk_available()) ISOTILE_SKIP(Itk, "built without ITK");
+  const std::filesystem::path folder = dir_ / "head scan";
+  std::filesystem::create_directory(folder);
+  for (const char* name : {"00000060.dcm", "00000061.dcm", "00000062.dcm", "00000063.dcm"}) {
+    std::string bytes = slurp(series / name);
+    // SeriesDescription (0008,103E), LO: its value blanked, its length kept.
+    const std::size_t tag = bytes.find(std::string("\x08\x00\x3e\x10LO", 6));
+    ASSERT_NE(tag, std::string::npos) << name;
+    const std::size_t length = static_cast<unsigned char>(bytes[tag + 6]) |
+                               static_cast<std::size_t>(static_cast<unsigned char>(bytes[tag + 7]))
+                                   << 8;
+    bytes.replace(tag + 8, length, std::string(length, ' '));
+    std::ofstream(folder / name, std::ios::binary) << bytes;
+  }
+  for (const char* name : {"00000060.dcm", "00000063.dcm"}) {
+    IsosurfaceParams p;
+    p.file = (folder / name).string();
+    p.iso = 300;
+    const IsosurfaceResult r = run_isosurface(p, "", {});
+    EXPECT_EQ(r.layer_name, "head scan mc iso300") << name;
+    EXPECT_NE(r.description.find("DICOM series without a description ("), std::string::npos)
+        << r.description;
+  }
 }
 
 }  // namespace

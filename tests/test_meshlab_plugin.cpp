@@ -452,6 +452,59 @@ TEST_F(MeshlabServer, SimplifyRecoloursTheQualityRampAndDropsOtherColours) {
   EXPECT_EQ(r.out.find("coloured again"), std::string::npos) << r.log;
 }
 
+// A layer the simplify filter cannot bring to its target (faces saved unwelded, each with its
+// own three vertices: every vertex on a border, which no collapse may move) gives the CLI's
+// warning at MeshLab's warning level, with the way out MeshLab offers; it said only "simplified
+// 10464 to 10464 triangles". A face selection is not a limit, and the log says it is gone.
+TEST_F(MeshlabServer, TheSimplifyFilterSaysWhatItMissedAndWhatItIgnored) {
+  const isotile::Mesh welded = cli(kNucleon + " --iso 60.5");
+  isotile::Mesh soup;
+  for (const isotile::Tri& t : welded.triangles) {
+    isotile::Tri own;
+    for (int k = 0; k < 3; ++k) {
+      own[k] = static_cast<std::uint32_t>(soup.positions.size());
+      soup.positions.push_back(welded.positions[t[k]]);
+    }
+    soup.triangles.push_back(own);
+  }
+  isotile::write_mesh(soup, dir_ / "soup.ply", {});
+  const std::string only_simplify =
+      "<!DOCTYPE FilterScript>\n<FilterScript>\n" + kSimplifyFilter + "</FilterScript>\n";
+  ServerRun r = run(only_simplify, "out.ply", "-i soup.ply");
+  ASSERT_EQ(r.code, 0) << r.log;
+  const std::string warning = "isotile: warning: simplification stopped at " +
+                              std::to_string(soup.triangles.size()) + " triangles";
+  EXPECT_NE(r.out.find(warning), std::string::npos) << r.log;
+  EXPECT_NE(r.out.find("an unwelded mesh? Merge its vertices first (Filters > Cleaning and "
+                       "Repairing > Remove Duplicate Vertices)"),
+            std::string::npos)
+      << r.log;
+  EXPECT_NE(slurp(dir_ / "err.txt").find("LOG: 1 " + warning), std::string::npos)
+      << r.log;  // GLLogStream::WARNING
+  // The welded layer reaches its target: no warning; with every face selected, the log says the
+  // whole layer was simplified (MeshLab's Select All, from its own plugin).
+  isotile::write_mesh(welded, dir_ / "welded.ply", {});
+  fs::create_symlink("/usr/lib/x86_64-linux-gnu/meshlab/plugins/libfilter_select.so",
+                     dir_ / "prefix/lib/x86_64-linux-gnu/meshlab/plugins/libfilter_select.so");
+  const std::string select_all =
+      " <filter name=\"Select All\">\n"
+      "  <Param type=\"RichBool\" name=\"allFaces\" value=\"true\"/>\n"
+      "  <Param type=\"RichBool\" name=\"allVerts\" value=\"true\"/>\n"
+      " </filter>\n";
+  r = run("<!DOCTYPE FilterScript>\n<FilterScript>\n" + select_all + kSimplifyFilter +
+              "</FilterScript>\n",
+          "out.ply", "-i welded.ply");
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_EQ(r.out.find("isotile: warning:"), std::string::npos) << r.log;
+  EXPECT_NE(r.out.find("isotile: the whole layer was simplified; its selection of " +
+                       std::to_string(welded.triangles.size()) + " faces was not kept"),
+            std::string::npos)
+      << r.log;
+  r = run(only_simplify, "out.ply", "-i welded.ply");
+  ASSERT_EQ(r.code, 0) << r.log;
+  EXPECT_EQ(r.out.find("selection"), std::string::npos) << r.log;
+}
+
 // meshlabserver prints progress texts with no line break: the plugin's end their own lines.
 TEST_F(MeshlabServer, ProgressAndMessagesOneALine) {
   const ServerRun r = run(then_simplify(script({{"file", kNucleon}, {"iso", "60.5"}})));
