@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -258,6 +259,20 @@ TEST_F(MeshlabJob, TheBrickFileLivesInAPrivateFolder) {
     ++entries;
   }
   EXPECT_EQ(entries, 5);
+  // No temporary folder (TMPDIR names one that does not exist; Qt then gives none): said so,
+  // where the standard library's filesystem_error named neither.
+  const char* was = std::getenv("TMPDIR");
+  const std::string before = was ? was : "";
+  ::setenv("TMPDIR", (dir / "gone").c_str(), 1);
+  const std::string m = message_of(p);
+  if (was)
+    ::setenv("TMPDIR", before.c_str(), 1);
+  else
+    ::unsetenv("TMPDIR");
+  EXPECT_NE(m.find("no temporary folder for the bricks' mesh (TMPDIR is '" +
+                   (dir / "gone").string() + "')"),
+            std::string::npos)
+      << m;
 }
 
 TEST_F(MeshlabJob, BadFieldsSayWhatIsWrong) {
