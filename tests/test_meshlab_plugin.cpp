@@ -309,11 +309,11 @@ TEST_F(MeshlabServer, BadInputFailsWithAMessageAndNoOutput) {
     const char* says;
   } cases[] = {
       {{{"file", "/nonexistent/volume_8x8x8_uint8.raw"}}, "no such file"},
-      {{{"file", kNucleon}, {"dims", "41,41"}}, "dims must be three comma-separated numbers"},
-      {{{"file", kNucleon}, {"type", "uint12"}}, "unknown type 'uint12'"},
-      {{{"file", kNucleon}, {"dc_vertices", "2"}, {"method", "2"}}, "dc_vertices must be one of"},
+      {{{"file", kNucleon}, {"dims", "41,41"}}, "'Raw dims' must be three comma-separated numbers"},
+      {{{"file", kNucleon}, {"type", "uint12"}}, "unknown 'Raw type' 'uint12'"},
+      {{{"file", kNucleon}, {"dc_vertices", "2"}, {"method", "2"}}, "'DC vertices' must be one of"},
       {{{"file", kNucleon}, {"memory", "lots"}}, "lots"},
-      {{{"file", kNucleon}, {"simplify", "0"}}, "simplify"},
+      {{{"file", kNucleon}, {"simplify", "0"}}, "'Simplify' must be in (0, 1]"},
       {{{"file", kNucleon}, {"series", "1.2.3"}}, "'DICOM series' applies to DICOM only"},
       {{{"file", kNucleon}, {"iso", "1000"}}, "no surface at isovalue"},
   };
