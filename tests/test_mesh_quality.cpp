@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "core/errors.h"
 #include "core/mesh/mesh_quality.h"
 
 namespace isotile {
@@ -56,6 +57,21 @@ Mesh constructed_set() {
   for (int i = 0; i < 10; ++i) m.triangles.push_back({0, 1, 2});
   for (int i = 0; i < 989; ++i) m.triangles.push_back({0, 1, 3});
   return m;
+}
+
+// A face index past the positions (a mesh built by the library's caller) is an InputError, as in
+// every other measure; it was read past the positions (a crash).
+TEST(TriangleQuality, AnIndexPastThePositionsIsRefused) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 1, 100000000}};
+  EXPECT_THROW(triangle_quality(m), InputError);
+  m.triangles = {{0, 1, 2}};
+  m.quads = {{0, 1, 3, 4}};
+  EXPECT_THROW(triangle_quality(m), InputError);
+  EXPECT_THROW(split_quad(m.positions, m.quads[0]), InputError);
+  m.quads = {{0, 1, 3, 2}};
+  EXPECT_EQ(triangle_quality(m).triangles, 3u);
 }
 
 TEST(TriangleQuality, ConstructedSet) {

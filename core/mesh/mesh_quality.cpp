@@ -11,7 +11,10 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
+
+#include "core/errors.h"
 
 namespace isotile {
 
@@ -104,10 +107,17 @@ static_assert(kFineBins <= std::numeric_limits<FineBin>::max() + std::size_t{1})
 }  // namespace
 
 QuadSplit split_quad(const std::vector<Vec3f>& positions, const Quad& q) {
+  for (const std::uint32_t v : q)
+    if (v >= positions.size())
+      throw InputError("quad references vertex " + std::to_string(v) + " but there are " +
+                       std::to_string(positions.size()) + " vertices");
   return split_quad_inline(positions, q);
 }
 
 QualityStats triangle_quality(const Mesh& mesh) {
+  // A mesh from outside (the library's caller) may hold any index: read past the positions, it
+  // was a crash here, an InputError in every other measure.
+  check_face_indices(mesh);
   QualityStats stats;
   const std::size_t n = mesh.triangles.size() + 2 * mesh.quads.size();
   stats.triangles = n;

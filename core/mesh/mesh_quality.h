@@ -34,6 +34,7 @@ struct QuadSplit {
   std::array<Tri, 2> triangles;
   std::array<double, 2> quality;  // their radius ratios
 };
+// Throws InputError where the quad references a vertex past `positions`.
 QuadSplit split_quad(const std::vector<Vec3f>& positions, const Quad& q);
 
 struct QualityStats {
@@ -73,7 +74,8 @@ struct RatioSum {
   }
 };
 
-// Deterministic for any thread count (integer counts and RatioSum).
+// Deterministic for any thread count (integer counts and RatioSum). Throws InputError where a
+// face references a vertex past the positions (check_face_indices).
 QualityStats triangle_quality(const Mesh& mesh);
 
 }  // namespace isotile
