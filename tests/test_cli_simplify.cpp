@@ -206,6 +206,30 @@ TEST_F(CliSimplify, OutOfCoreReportsItsBrickPlan) {
   EXPECT_EQ(stray_files({"t.ply", "u.ply"}), std::vector<std::string>{});
 }
 
+// A budget too small to simplify brick by brick names the budget that runs: below even the
+// extraction's need it named that need (115519 bytes on the nucleon), and a run given it was
+// refused again with the simplification's (284719).
+TEST_F(CliSimplify, ABudgetTooSmallNamesOneThatRuns) {
+  const std::string run_at = "extract " + std::string(ISOTILE_TEST_DATA) +
+                             "/nucleon_41x41x41_uint8.raw.gz --iso 49.5 --simplify 0.25 -o s.ply "
+                             "-q --memory ";
+  std::string named;
+  for (const std::string budget : {"64KiB", "200000"}) {
+    const Result r = run(run_at + budget);
+    EXPECT_EQ(r.code, 1) << r.err;
+    const std::string needs = "needs ";
+    const std::size_t at = r.err.find(needs);
+    ASSERT_NE(at, std::string::npos) << r.err;
+    const std::string figure = std::to_string(std::stoull(r.err.substr(at + needs.size())));
+    if (!named.empty()) EXPECT_EQ(figure, named) << r.err;
+    named = figure;
+  }
+  const Result r = run(run_at + named);
+  EXPECT_EQ(r.code, 0) << "--memory " << named << ": " << r.err;
+  const std::string one_less = std::to_string(std::stoull(named) - 1);
+  EXPECT_EQ(run(run_at + one_less).code, 1);
+}
+
 TEST_F(CliSimplify, QualityMeasuresTheDistanceToAReference) {
   ASSERT_EQ(run("extract field:sphere:40 -q -o a.ply").code, 0);
   ASSERT_EQ(run("simplify a.ply b.ply --ratio 0.1 -q").code, 0);

@@ -617,8 +617,25 @@ TEST(BrickPlan, BricksThatWouldReadTheVolumeTooManyTimesOverAreRefused) {
   EXPECT_LE(read_amplification(plan_bricks(o.volume_dims, o), o.halo), 64);
   o.memory = least - 1;
   EXPECT_THROW(plan_bricks(o.volume_dims, o), InputError);
+  EXPECT_EQ(least_memory(o.volume_dims, o), least);
+  // Below one cell's need the refusal names the same budget (it named one cell's, which was then
+  // refused for the reads).
+  o.memory = 1000;
+  try {
+    plan_bricks(o.volume_dims, o);
+    ADD_FAILURE() << "planned within 1000 bytes";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("one brick of one cell needs " +
+                                         std::to_string(brick_bytes({1, 1, 1}, o)) +
+                                         " bytes; give at least " + std::to_string(least) +
+                                         " bytes (bricks that small, each read with its halo of "
+                                         "138 samples, would read the volume more than 64 times"),
+              std::string::npos)
+        << e.what();
+  }
   o.max_read_amplification = 0;  // no limit
   o.memory = brick_bytes({1, 1, 1}, o);
+  EXPECT_EQ(least_memory(o.volume_dims, o), o.memory);
   EXPECT_EQ(plan_bricks(o.volume_dims, o).total(), 64000);
   // One brick reads the volume once; bricks of MC's halo (1) far from the limit.
   o.halo = 1;

@@ -4,6 +4,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "core/errors.h"
@@ -101,43 +102,72 @@ BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
   return row_plan;
 }
 
-bool fits_amplification(const Index3& dims, BrickPlanOptions options, std::uint64_t memory) {
-  options.memory = memory;
+// A plan within `options.memory` that reads the volume at most max_read_amplification times
+// over, or none.
+std::optional<BrickPlan> feasible_plan(const Index3& dims, const BrickPlanOptions& options) {
+  std::optional<BrickPlan> plan;
   try {
-    return read_amplification(plan_within(dims, options), options.halo) <=
-           options.max_read_amplification;
+    plan = plan_within(dims, options);
   } catch (const InputError&) {
-    return false;
+    return std::nullopt;
   }
+  if (options.max_read_amplification > 0 &&
+      read_amplification(*plan, options.halo) > options.max_read_amplification)
+    return std::nullopt;
+  return plan;
 }
 
 }  // namespace
 
-BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
-  const BrickPlan plan = plan_within(dims, options);
-  if (options.max_read_amplification <= 0) return plan;
-  const double amplification = read_amplification(plan, options.halo);
-  if (amplification <= options.max_read_amplification) return plan;
-  // The smallest budget whose plan reads the volume at most that many times over (a budget for
-  // the whole volume reads it once, so there is one).
+std::uint64_t least_memory(const Index3& dims, BrickPlanOptions options) {
+  // A budget for the whole volume as one brick always plans (it reads the volume once); below
+  // it, plans only grow more feasible with the budget, so a bisection finds the least.
   Index3 cells;
   for (int a = 0; a < 3; ++a) cells[a] = std::max<std::int64_t>(dims[a] - 1, 1);
-  std::uint64_t lo = options.memory, hi = std::max(brick_bytes(cells, options), options.memory);
+  std::uint64_t lo = 0, hi = brick_bytes(cells, options);
   while (lo + 1 < hi) {
     const std::uint64_t mid = lo + (hi - lo) / 2;
-    (fits_amplification(dims, options, mid) ? hi : lo) = mid;
+    options.memory = mid;
+    (feasible_plan(dims, options) ? hi : lo) = mid;
+  }
+  return hi;
+}
+
+BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
+  std::optional<BrickPlan> plan;
+  std::string one_cell;  // plan_within's refusal: not even the least brick fits
+  try {
+    plan = plan_within(dims, options);
+  } catch (const InputError& e) {
+    one_cell = e.what();
+  }
+  const double amplification = plan ? read_amplification(*plan, options.halo) : 0;
+  if (plan &&
+      (options.max_read_amplification <= 0 || amplification <= options.max_read_amplification))
+    return *plan;
+  // Each refusal names the least budget that plans, so that the budget it names runs.
+  const std::uint64_t least = least_memory(dims, options);
+  const std::string limit =
+      std::to_string(static_cast<std::int64_t>(options.max_read_amplification));
+  if (!plan) {
+    BrickPlanOptions any_reads = options;
+    any_reads.max_read_amplification = 0;
+    if (least_memory(dims, any_reads) == least) throw InputError(one_cell);
+    throw InputError(one_cell + "; give at least " + std::to_string(least) +
+                     " bytes (bricks that small, each read with its halo of " +
+                     std::to_string(options.halo) + " samples, would read the volume more than " +
+                     limit + " times over)");
   }
   auto text = [](const Index3& v) {
     return std::to_string(v[0]) + "x" + std::to_string(v[1]) + "x" + std::to_string(v[2]);
   };
   throw InputError("memory budget of " + std::to_string(options.memory) +
                    " bytes is too small for a halo of " + std::to_string(options.halo) +
-                   " samples: its " + std::to_string(plan.total()) + " bricks of " +
-                   text(plan.brick) + " cells, each read with its halo, would read the volume " +
+                   " samples: its " + std::to_string(plan->total()) + " bricks of " +
+                   text(plan->brick) + " cells, each read with its halo, would read the volume " +
                    std::to_string(static_cast<std::int64_t>(std::ceil(amplification))) +
-                   " times over (at most " +
-                   std::to_string(static_cast<std::int64_t>(options.max_read_amplification)) +
-                   "); give at least " + std::to_string(hi) + " bytes");
+                   " times over (at most " + limit + "); give at least " + std::to_string(least) +
+                   " bytes");
 }
 
 double read_amplification(const BrickPlan& plan, int halo) {

@@ -62,8 +62,12 @@ std::uint64_t brick_bytes(const Index3& cells, const BrickPlanOptions& options);
 // Throws InputError when not even a brick of one cell (one cell layer, for slabs) fits, and when
 // the bricks that fit, each grown by its halo, would read the volume more than
 // max_read_amplification times over (a halo as large as Macet max's, 138 samples, against a
-// small budget), naming the smallest budget that keeps to it.
+// small budget); either names the least budget that plans (least_memory()), so that a run given
+// it is not refused again.
 BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options);
+
+// The least `options.memory` for which plan_bricks() gives a plan (the figure its refusals name).
+std::uint64_t least_memory(const Index3& dims, BrickPlanOptions options);
 
 // How many times over the bricks of `plan`, each grown by `halo` samples on every side (clipped
 // to the volume), read the volume's samples: 1 for one brick; more as bricks get thin against

@@ -196,7 +196,18 @@ class TiledSimplification {
     // of a gzip'd source must hold), counting again if the bricks changed.
     auto t0 = Clock::now();
     BrickPlanOptions po = reader_.plan_options(opt_.memory, opt_.max_read_amplification);
-    plan_ = plan_bricks(n_, po);
+    // A budget too small even to extract is counted within the least that extracts, so that the
+    // refusal below names what simplifying needs: refused at once, it named the extraction's
+    // need, and a run given that was refused again with more.
+    BrickPlanOptions counting = po;
+    bool too_small = false;
+    try {
+      plan_ = plan_bricks(n_, po);
+    } catch (const InputError&) {
+      too_small = true;
+      counting.memory = least_memory(n_, po);
+      plan_ = plan_bricks(n_, counting);
+    }
     std::vector<std::uint64_t> brick_vertices, brick_faces, plane_faces;
     count(brick_vertices, brick_faces, plane_faces);
     const double plane_cells = static_cast<double>(n_[0] - 1) * static_cast<double>(n_[1] - 1);
@@ -204,7 +215,8 @@ class TiledSimplification {
         static_cast<double>(*std::max_element(plane_faces.begin(), plane_faces.end())) /
         plane_cells;
     po.output_bytes_per_cell += densest * kSimplifyBytesPerFace;
-    const BrickPlan replanned = plan_bricks(n_, po);
+    const BrickPlan replanned = plan_bricks(n_, po);  // throws, naming the budget that plans
+    if (too_small) throw Error("brick plan: a budget the extraction refused gave a plan");
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
       count(brick_vertices, brick_faces, plane_faces);
