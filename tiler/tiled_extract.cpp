@@ -3,13 +3,16 @@
 #include <tbb/parallel_pipeline.h>
 
 #include <chrono>
+#include <cmath>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
+#include "core/mesh/mesh_io.h"
 #include "core/progress.h"
 #include "tiler/brick_extraction.h"
 #include "tiler/source_histogram.h"
@@ -150,10 +153,33 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
   return result;
 }
 
+// What run_pipeline() checks before it calls the tiler, checked again for the library's callers
+// (a NaN spacing wrote NaN positions, a NaN isovalue an empty mesh, a simplify of 1.5 or NaN no
+// simplification, and binary PLY went into a file named .stl, all without a word).
+void check_tiled_input(const VolumeSource& source, const TiledOptions& options,
+                       const std::filesystem::path& output) {
+  check_grid_geometry(source.dims, source.spacing, source.origin, source.world, "the volume");
+  if (!std::isfinite(options.extract.iso))
+    throw InputError("--iso must be a finite number, got " + number_text(options.extract.iso));
+  if (!(options.simplify > 0 && options.simplify <= 1))
+    throw InputError("simplify must be in (0, 1] (1: off), got " + number_text(options.simplify));
+  std::optional<MeshFormat> named;
+  try {
+    named = mesh_format_from_path(output);
+  } catch (const InputError&) {
+    // No mesh extension (a device, a name of the caller's): the options say.
+  }
+  if (named && *named != options.format)
+    throw InputError(output.string() + ": its extension names another format than " +
+                     (options.format == MeshFormat::Stl ? "STL" : "PLY") +
+                     ", which TiledOptions::format asks for");
+}
+
 }  // namespace
 
 TiledResult extract_tiled(VolumeSource& source, const TiledOptions& options,
                           const std::filesystem::path& output) {
+  check_tiled_input(source, options, output);
   // Before the first pass: the streamed writer places each brick's records at their offsets
   // (positioned writes); the simplifying one writes its file front to back at the end.
   check_output(output, options.simplify >= 1);

@@ -431,6 +431,7 @@ bool ends_with(const std::string& s, const char* suffix) {
 
 std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw,
                                                  std::uint64_t memory_budget) {
+  check_raw_overrides(raw);
   const bool native_big = std::endian::native == std::endian::big;
   std::unique_ptr<VolumeSource> source;
   const InputKind kind = input_kind(input);

@@ -18,6 +18,7 @@
 #include "core/errors.h"
 #include "core/extract/dual_contouring_patches.h"
 #include "core/extract/dual_contouring_table.h"
+#include "core/extract/extract.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/isovalue_ties.h"
 #include "core/extract/marching_cubes_tables.h"
@@ -975,6 +976,7 @@ DcPatchRepairs dual_contouring_patch_repairs(const VolumeView& view, double iso)
 }
 
 Mesh dual_contouring(const VolumeView& view, const DualContouringOptions& options) {
+  check_extraction_input(view, options.iso);
   check_options(options);
   return visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);

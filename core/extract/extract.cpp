@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdlib>
 #include <string>
 
@@ -145,7 +146,23 @@ void check_option_method(std::string_view option, Method method) {
 }
 
 std::string_view method_name(Method m) {
-  return kMethodNames[static_cast<int>(m)];
+  const int i = static_cast<int>(m);
+  if (i < 0 || i >= kMethodCount) throw InputError("unknown method " + std::to_string(i));
+  return kMethodNames[i];
+}
+
+void check_extraction_input(const VolumeView& view, double iso) {
+  if (!std::isfinite(iso))
+    throw InputError("--iso must be a finite number, got " + number_text(iso));
+  scalar_size(view.type);  // throws for a type outside the enum
+  for (int a = 0; a < 3; ++a)
+    if (view.dims[a] < 0 || view.global_dims[a] < 0)
+      throw InputError("a volume view's dims must not be negative");
+  if (view.sample_count() > 0 && view.data == nullptr)
+    throw InputError("a volume view of " + std::to_string(view.sample_count()) +
+                     " samples without data (a null pointer)");
+  const Index3 dims = view.global_dims[0] > 0 ? view.global_dims : view.dims;
+  check_grid_geometry(dims, view.spacing, view.origin, view.world, "the volume");
 }
 
 std::string_view backend_name(Backend b) {
@@ -285,6 +302,8 @@ void accumulate_gpu_report(std::optional<GpuReport>& total, const GpuReport& par
 }
 
 Mesh extract(const VolumeView& view, const ExtractOptions& options, BackendChoice* ran) {
+  check_extraction_input(view, options.iso);
+  method_name(options.method);  // throws for a method outside the enum
   const int m = static_cast<int>(options.method);
   BackendChoice choice = choose_backend(options);
   const Backend b = choice.backend;

@@ -68,6 +68,15 @@ void check_method_options(const ExtractOptions& options);
 // whenever it is given.
 void check_option_method(std::string_view option, Method method);
 
+// InputError unless `view` and `iso` can make a mesh: iso finite; a scalar type of the enum; dims
+// not negative; data where there are samples; the grid's geometry (check_grid_geometry: spacing
+// finite and positive, origin and world frame finite, positions within float32). extract(),
+// macet() and dual_contouring() check it first: a zero or negative spacing made a flat or
+// inside-out mesh, a NaN one NaN vertices, a NaN isovalue an empty mesh, all without a word. The
+// samples themselves are not read twice: NaN or Inf samples are check_finite()'s to refuse
+// (core/volume/volume_io.h; the pipeline calls it), and make NaN vertices here.
+void check_extraction_input(const VolumeView& view, double iso);
+
 // Samples beyond a brick's cells that `options` needs the view to hold.
 int extract_halo(const ExtractOptions& options);
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/extract/extract.h"
 #include "core/extract/inside_bits.h"
 #include "core/extract/macet_field.h"
 #include "core/extract/macet_relax.h"
@@ -577,6 +578,7 @@ void check_macet_options(const MacetOptions& options) {
 }
 
 Mesh macet(const VolumeView& view, const MacetOptions& options) {
+  check_extraction_input(view, options.iso);
   check_macet_options(options);
   if (options.relax > 0) {
     // The relaxed samples are doubles; the Field converts every sample to double anyway, so the

@@ -396,6 +396,10 @@ void write_stl(const Mesh& mesh, AtomicFile& file, Progress* progress) {
 }
 
 MeshFormat text_form_checked(MeshFormat format, bool ascii) {
+  // A format outside the enum (a cast from a number) wrote an empty file, reported as written.
+  if (format != MeshFormat::Ply && format != MeshFormat::Obj && format != MeshFormat::Stl &&
+      format != MeshFormat::Off)
+    throw InputError("unknown mesh format " + std::to_string(static_cast<int>(format)));
   if (format == MeshFormat::Stl && ascii)
     throw InputError("--ascii writes PLY as text; STL is written binary only");
   return format;

@@ -391,6 +391,7 @@ void read_plain_data(const PlainData& plain, Volume& volume) {
 }
 
 Volume read_raw(const std::string& path, const RawOptions& options) {
+  check_raw_overrides(options);
   // Opened before the name is judged, so a mistyped path is reported as missing rather than as
   // lacking --dims.
   struct stat st {};

@@ -1,6 +1,9 @@
 #include "core/volume/scalar_type.h"
 
 #include <array>
+#include <string>
+
+#include "core/errors.h"
 
 namespace isotile {
 
@@ -22,14 +25,23 @@ constexpr std::array<TypeInfo, kScalarTypeCount> kTypes = {{
 }};
 }  // namespace
 
+// A type outside the enum (a cast from a number) is an error, not a read past the table.
+static const TypeInfo& type_entry(ScalarType type) {
+  const int i = static_cast<int>(type);
+  if (i < 0 || i >= kScalarTypeCount)
+    throw InputError("unknown scalar type " + std::to_string(i) + " (ScalarType has " +
+                     std::to_string(kScalarTypeCount) + ")");
+  return kTypes[i];
+}
+
 std::size_t scalar_size(ScalarType type) {
-  return kTypes[static_cast<int>(type)].size;
+  return type_entry(type).size;
 }
 std::string_view scalar_name(ScalarType type) {
-  return kTypes[static_cast<int>(type)].name;
+  return type_entry(type).name;
 }
 bool is_floating(ScalarType type) {
-  return kTypes[static_cast<int>(type)].floating;
+  return type_entry(type).floating;
 }
 
 std::optional<ScalarType> parse_scalar_type(std::string_view name) {

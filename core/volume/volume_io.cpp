@@ -333,6 +333,10 @@ NonFinite count_samples(const VolumeView& view, Bad bad) {
       });
 }
 
+std::string override_text(const Vec3d& v) {
+  return number_text(v[0]) + "," + number_text(v[1]) + "," + number_text(v[2]);
+}
+
 // --spacing and --origin replace what the file says; the origin moves the world frame too.
 void apply_overrides(const RawOptions& raw, Vec3d& spacing, Vec3d& origin,
                      std::optional<WorldFrame>& world) {
@@ -353,6 +357,20 @@ void apply_overrides(const RawOptions& raw, Volume& volume) {
 }
 
 }  // namespace
+
+void check_raw_overrides(const RawOptions& raw) {
+  if (raw.spacing)
+    for (const double v : *raw.spacing)
+      if (!(std::isfinite(v) && v > 0))
+        throw InputError("--spacing must be three finite numbers above 0, got " +
+                         override_text(*raw.spacing));
+  if (raw.origin)
+    for (const double v : *raw.origin)
+      if (!std::isfinite(v))
+        throw InputError("--origin must be three finite numbers, got " +
+                         override_text(*raw.origin));
+  if (raw.type) scalar_size(*raw.type);  // throws for a type outside the enum
+}
 
 InputKind input_kind(const std::string& input) {
   if (parse_field_spec(input)) return InputKind::Field;
@@ -412,6 +430,7 @@ bool is_itk_kind(InputKind kind) {
 }
 
 VolumeHeader read_volume_header(const std::string& input, const RawOptions& raw) {
+  check_raw_overrides(raw);
   const InputKind kind = input_kind(input);
   VolumeHeader h;
   h.format = input_kind_name(kind);
@@ -480,6 +499,7 @@ void check_plain_size(const std::string& file, std::uint64_t size, std::uint64_t
 }
 
 Volume read_volume(const std::string& input, const RawOptions& raw) {
+  check_raw_overrides(raw);
   if (const std::optional<FieldSpec> spec = parse_field_spec(input)) {
     reject_raw_only_options(input, raw, "procedural field");
     if (!raw.series.empty()) throw InputError(input + ": --series applies to DICOM only");

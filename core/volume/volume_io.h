@@ -42,6 +42,13 @@ struct RawOptions {
   Progress* progress = nullptr;
 };
 
+// InputError where `raw` overrides the geometry with one that makes no mesh: a spacing that is
+// not finite and above 0 (zero flattens the mesh, a negative one turns it inside out), an origin
+// that is not finite; and where it gives a scalar type outside the enum. read_volume(),
+// read_volume_header(), read_raw() and open_volume_source() check it first (the CLI's parsing
+// refused such text; the library took the values).
+void check_raw_overrides(const RawOptions& raw);
+
 // What a raw file's name says, if it follows NAME_XxYxZ_TYPE.raw[.gz].
 struct RawNameInfo {
   Index3 dims;
