@@ -81,6 +81,7 @@ isotile_export_library(isotile_core NAME core
     core/simplify/quadric.h
     core/simplify/simplify.h
     core/volume/otsu_isovalue.h
+    core/volume/procedural_fields.h
     core/volume/scalar_type.h
     core/volume/volume.h
     core/volume/volume_io.h

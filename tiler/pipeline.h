@@ -51,7 +51,8 @@ struct PipelineInput {
 
 struct PipelineOptions {
   // The isovalue: a finite number; unset, a field's own (a volume file has none: InputError);
-  // iso_auto: Otsu's threshold of the samples' histogram (core/volume/otsu_isovalue.h).
+  // iso_auto: Otsu's threshold of the samples' histogram (core/volume/otsu_isovalue.h), which
+  // takes the place of `iso` where both are set.
   std::optional<double> iso;
   bool iso_auto = false;
   // Method, backend, normals, Dual Contouring's and Macet's options. Its iso, cells, progress and

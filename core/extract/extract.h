@@ -46,8 +46,9 @@ struct ExtractOptions {
   MacetQuality quality = MacetQuality::Fast;
   double macet_relax = 0.0;  // MacetOptions::relax: 0 keeps vertices on the trilinear surface
   // Brick mode (global cell indices; empty: every cell of the view): the tiler extracts one
-  // brick at a time from a view holding it plus extract_halo() samples. See the brick contract in
-  // core/extract/marching_cubes.h and core/extract/brick_sites.h.
+  // brick at a time from a view holding it plus extract_halo() samples. The brick contract is
+  // set out in the source tree's core/extract/marching_cubes.h and core/extract/brick_sites.h
+  // (not installed: the extractors' internals).
   Box3 cells{};
   // Told of the extraction's progress (Stage::Count, Stage::Extract, Stage::MacetSearch); null:
   // nobody listens. Cancelling throws Cancelled.
