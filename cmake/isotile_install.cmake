@@ -85,6 +85,7 @@ isotile_export_library(isotile_core NAME core
     core/volume/scalar_type.h
     core/volume/volume.h
     core/volume/volume_io.h
+    core/version.h
   FIND_PACKAGES "TBB CONFIG" ZLIB "Eigen3 NO_MODULE" OpenMesh
   DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenmesh-dev libgmp-dev libmpfr-dev
                  libdeflate-dev)

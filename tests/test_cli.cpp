@@ -16,6 +16,7 @@
 #include "cli_support.h"
 #include "core/extract/dual_contouring.h"
 #include "core/mesh/mesh_io.h"
+#include "core/version.h"
 #include "core/volume/volume_io.h"
 
 namespace fs = std::filesystem;
@@ -37,6 +38,15 @@ std::string last_line(std::string s) {
   while (!s.empty() && s.back() == '\n') s.pop_back();
   const auto nl = s.rfind('\n');
   return nl == std::string::npos ? s : s.substr(nl + 1);
+}
+
+// --version is the library's version (one definition, core/version.h), which a program linked
+// against the library can ask for.
+TEST_F(Cli, VersionIsTheLibrarys) {
+  const Result r = run("--version");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.out, "isotile " + std::string(isotile::version()) + "\n");
+  EXPECT_EQ(std::count(isotile::version().begin(), isotile::version().end(), '.'), 2);
 }
 
 TEST_F(Cli, HelpForEverySubcommand) {

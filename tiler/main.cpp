@@ -27,6 +27,7 @@
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
+#include "core/version.h"
 #ifdef ISOTILE_HAVE_GL
 #include "shaders/gl_backends.h"
 #include "shaders/gl_context.h"
@@ -238,7 +239,7 @@ int main(int argc, char** argv) {
   // A fixed name: usage lines (and the man page generated from them) say "isotile", not argv[0].
   CLI::App app{"isotile: high-quality isosurface meshes from volumes on uniform grids", "isotile"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "isotile " ISOTILE_VERSION);
+  app.set_version_flag("--version", "isotile " + std::string(isotile::version()));
   // Every option's default in --help (and so in the man page), inherited by the subcommands.
   app.option_defaults()->always_capture_default();
   int threads = 0;

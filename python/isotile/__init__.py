@@ -31,6 +31,7 @@ from . import _isotile
 __all__ = ["marching_cubes", "quality", "simplify", "backends", "extract", "read_volume",
            "Volume", "Mesh", "read_mesh", "write_mesh", "Cancelled", "NoSurface"]
 
+__version__ = _isotile.__version__  # the C++ library's, as `isotile --version` prints it
 Cancelled = _isotile.Cancelled
 # No face at the isovalue: both a ValueError (extract's bad inputs) and a RuntimeError (what
 # scikit-image's marching_cubes raises).

@@ -40,6 +40,7 @@
 #include "core/mesh/mesh_topology.h"
 #include "core/mesh/self_intersections.h"
 #include "core/simplify/simplify.h"
+#include "core/version.h"
 #include "core/volume/finite_range.h"
 #include "core/volume/volume_io.h"
 #include "tiler/input_options.h"
@@ -898,6 +899,7 @@ std::string in_python_terms(std::string message) {
 
 PYBIND11_MODULE(_isotile, m) {
   m.doc() = "isotile's C++ libraries for NumPy arrays (use the isotile package, not this module)";
+  m.attr("__version__") = std::string(isotile::version());
 #ifdef ISOTILE_PYTHON_GL
   isotile::gl::register_gl_backends();
 #endif

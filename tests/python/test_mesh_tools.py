@@ -143,3 +143,8 @@ def test_threads_past_the_cores_print_nothing(capfd):
     q = isotile.quality(p, f, threads=(os.cpu_count() or 1) + 3)
     assert q["closed"] is True
     assert capfd.readouterr().err == ""
+
+
+def test_the_version_is_the_librarys():
+    assert run_cli("--version") == f"isotile {isotile.__version__}\n"
+    assert isotile.__version__.count(".") == 2
