@@ -117,9 +117,24 @@ std::optional<BrickPlan> feasible_plan(const Index3& dims, const BrickPlanOption
   return plan;
 }
 
+// A volume of no samples, a negative halo or samples of no bytes plan nothing sensible (dims
+// 0x0x0 "would read the volume -9223372036854775808 times over"), and more samples than an
+// int64 counts overflow the bricks' count.
+void check_plan_input(const Index3& dims, const BrickPlanOptions& options) {
+  for (int a = 0; a < 3; ++a)
+    if (dims[a] < 1)
+      throw InputError("brick plan: the volume's dims must be positive, got " +
+                       std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                       std::to_string(dims[2]));
+  if (options.halo < 0 || options.sample_bytes == 0 || options.sample_buffers < 1)
+    throw InputError("brick plan: a negative halo, samples of 0 bytes or no sample buffer");
+  checked_volume_bytes(ScalarType::UInt8, dims);  // CapacityError past an int64 of samples
+}
+
 }  // namespace
 
 std::uint64_t least_memory(const Index3& dims, BrickPlanOptions options) {
+  check_plan_input(dims, options);
   // A budget for the whole volume as one brick always plans (it reads the volume once); below
   // it, plans only grow more feasible with the budget, so a bisection finds the least.
   Index3 cells;
@@ -134,17 +149,7 @@ std::uint64_t least_memory(const Index3& dims, BrickPlanOptions options) {
 }
 
 BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
-  // A volume of no samples, a negative halo or samples of no bytes plan nothing sensible (dims
-  // 0x0x0 "would read the volume -9223372036854775808 times over"), and more samples than an
-  // int64 counts overflow the bricks' count.
-  for (int a = 0; a < 3; ++a)
-    if (dims[a] < 1)
-      throw InputError("brick plan: the volume's dims must be positive, got " +
-                       std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                       std::to_string(dims[2]));
-  if (options.halo < 0 || options.sample_bytes == 0 || options.sample_buffers < 1)
-    throw InputError("brick plan: a negative halo, samples of 0 bytes or no sample buffer");
-  checked_volume_bytes(ScalarType::UInt8, dims);  // CapacityError past an int64 of samples
+  check_plan_input(dims, options);
   std::optional<BrickPlan> plan;
   std::string one_cell;  // plan_within's refusal: not even the least brick fits
   try {

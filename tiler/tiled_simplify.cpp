@@ -215,7 +215,8 @@ class TiledSimplification {
         static_cast<double>(*std::max_element(plane_faces.begin(), plane_faces.end())) /
         plane_cells;
     po.output_bytes_per_cell += densest * kSimplifyBytesPerFace;
-    const BrickPlan replanned = plan_bricks(n_, po);  // throws, naming the budget that plans
+    // Throws where po.memory is too small for simplifying, naming the budget that plans.
+    const BrickPlan replanned = plan_bricks(n_, po);
     if (too_small) throw Error("brick plan: a budget the extraction refused gave a plan");
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
