@@ -184,6 +184,18 @@ if [ "$mode" = prefix ]; then
   if grep -q 'isotile::gl' "$found/isotileTargets.cmake"; then
     grep -q '^gl backends registered$' <<<"$out" || fail "all_headers did not register GL"
   fi
+  # A component the package lacks is named (check_required_components said only that
+  # isotile_FOUND was false).
+  mkdir -p "$tmp/bogus"
+  printf '%s\n' 'cmake_minimum_required(VERSION 3.25)' 'project(bogus LANGUAGES CXX)' \
+    'find_package(isotile 0.1 CONFIG REQUIRED COMPONENTS core bogus)' >"$tmp/bogus/CMakeLists.txt"
+  if cmake -S "$tmp/bogus" -B "$tmp/bogus/b" -G Ninja -DCMAKE_PREFIX_PATH="$prefix" \
+    >"$tmp/bogus.log" 2>&1; then
+    fail "find_package(isotile COMPONENTS core bogus) succeeded"
+  fi
+  grep -q "isotile has no component 'bogus'" "$tmp/bogus.log" ||
+    { cat "$tmp/bogus.log"; fail "an unknown component is not named"; }
+  echo "check_install: an unknown component is named"
   echo "check_install: prefix install and consumer OK"
   exit 0
 fi
