@@ -14,6 +14,7 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
+#include "core/extract/macet.h"
 #include "core/mesh/mesh_io.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
@@ -199,6 +200,12 @@ TEST_F(LibraryInputs, PlansAndFormatsOutsideTheirRangeAreRefused) {
   EXPECT_FALSE(fs::exists(dir_ / "x.ply"));
   refuses([&] { scalar_size(static_cast<ScalarType>(200)); }, "unknown scalar type 200",
           "type 200");
+  // Macet max's sweeps: INT_MAX took minutes in macet_halo() alone (the reach grows with their
+  // square) and overflowed it.
+  MacetOptions sweeps{.quality = MacetQuality::Max, .max_sweeps = std::numeric_limits<int>::max()};
+  refuses([&] { macet_halo(sweeps); }, "max_sweeps must be in [0, 100]", "INT_MAX sweeps");
+  sweeps.max_sweeps = 100;
+  EXPECT_GT(macet_halo(sweeps), macet_halo({.quality = MacetQuality::Max}));
 }
 
 }  // namespace

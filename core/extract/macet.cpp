@@ -555,6 +555,7 @@ class Extractor {
 }  // namespace
 
 int macet_halo(const MacetOptions& options) {
+  check_macet_options(options);
   // An emitted edge ends at most one sample past the cells. Its end point's smoothing reads the
   // crossings of the cells around its edges (end points one sample further), whose pushes read
   // one sample more: 3. Its root search and normal stay within that. Max: the emitted end points
@@ -569,8 +570,11 @@ int macet_halo(const MacetOptions& options) {
 }
 
 void check_macet_options(const MacetOptions& options) {
-  if (options.max_sweeps < 0)
-    throw InputError("macet: max_sweeps must not be negative, got " +
+  // Each sweep widens the halo by 45 samples, and the reach is computed in time growing with the
+  // square of the sweeps: INT_MAX took minutes in macet_halo() alone and overflowed it.
+  constexpr int kMaxSweeps = 100;
+  if (options.max_sweeps < 0 || options.max_sweeps > kMaxSweeps)
+    throw InputError("macet: max_sweeps must be in [0, " + std::to_string(kMaxSweeps) + "], got " +
                      std::to_string(options.max_sweeps));
   if (!(options.relax >= 0 && options.relax < 0.5))
     throw InputError("macet: relax must lie in [0, 0.5) edge lengths, got " +

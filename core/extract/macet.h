@@ -35,7 +35,8 @@ struct MacetOptions {
   double iso = 0.0;
   bool normals = false;  // unit normals from the interpolated central-difference gradient
   MacetQuality quality = MacetQuality::Fast;
-  // Max only: Gauss-Seidel sweeps of the local search (each sweep visits all eight colours).
+  // Max only: Gauss-Seidel sweeps of the local search (each sweep visits all eight colours), in
+  // [0, 100].
   int max_sweeps = 3;
   // Relaxation of sign-pinned samples (core/extract/macet_relax.h), in edge lengths, in [0, 0.5): 0
   // keeps every vertex on the volume's trilinear interpolant. A sample in a one-sample-thin
@@ -54,14 +55,14 @@ struct MacetOptions {
 
 // Samples beyond the cells that brick mode reads: 3 for Fast; for Max 6 plus how far its colour
 // steps can carry a change (48, 93, 138 for 1, 2, 3 sweeps; docs/macet.md); one more with relax
-// (a relaxed sample depends on its neighbours).
+// (a relaxed sample depends on its neighbours). Throws as check_macet_options() does.
 int macet_halo(const MacetOptions& options);
 
-// Throws InputError for a negative max_sweeps or a relax outside [0, 0.5), and CapacityError when
-// the mesh would need more than 2^32 - 1 vertices.
+// Throws InputError for max_sweeps outside [0, 100] or a relax outside [0, 0.5), and CapacityError
+// when the mesh would need more than 2^32 - 1 vertices.
 Mesh macet(const VolumeView& view, const MacetOptions& options);
 
-// InputError for options macet() refuses (negative max_sweeps, relax outside [0, 0.5)); for
+// InputError for options macet() refuses (max_sweeps outside [0, 100], relax outside [0, 0.5)); for
 // other implementations of the method (the GL paths).
 void check_macet_options(const MacetOptions& options);
 
