@@ -437,16 +437,15 @@ bool FilterIsotile::simplify(MeshDocument& md, const RichParameterList& par, vcg
     in.positions.push_back(
         {static_cast<float>(v.P()[0]), static_cast<float>(v.P()[1]), static_cast<float>(v.P()[2])});
   }
+  std::uint64_t selected = 0;  // not a limit here: the whole layer is simplified (the log says)
   for (const CFaceO& f : m->cm.face) {
     if (f.IsD()) continue;
+    selected += f.IsS();
     isotile::Tri t;
     for (int k = 0; k < 3; ++k)
       t[k] = index[static_cast<std::size_t>(vcg::tri::Index(m->cm, f.cV(k)))];
     in.triangles.push_back(t);
   }
-  // A face selection is not a limit here: the whole layer is simplified (said in the log).
-  std::uint64_t selected = 0;
-  for (const CFaceO& f : m->cm.face) selected += !f.IsD() && f.IsS();
   // What the new faces and vertices can carry over: the quality ramp the isosurface filter
   // painted is painted again from the new quality; other colours and texture coordinates
   // belonged to faces and vertices that no longer exist.

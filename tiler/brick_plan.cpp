@@ -47,6 +47,15 @@ constexpr std::int64_t kMinRowBrick = 64;
 
 namespace {
 
+// Bytes of the least brick: one cell, or for slabs one cell layer (the budget below which
+// plan_within() has no plan).
+std::uint64_t least_brick_bytes(const Index3& dims, const BrickPlanOptions& options) {
+  Index3 c;
+  for (int a = 0; a < 3; ++a)
+    c[a] = options.slabs && a < 2 ? std::max<std::int64_t>(dims[a] - 1, 1) : 1;
+  return brick_bytes(c, options);
+}
+
 BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
   BrickPlan plan;
   plan.dims = dims;
@@ -76,7 +85,7 @@ BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
     throw InputError("memory budget of " + std::to_string(options.memory) +
                      " bytes is too small: one " +
                      (options.slabs ? "slab of one cell layer" : "brick of one cell") + " needs " +
-                     std::to_string(brick_bytes(shape(1, false), options)) + " bytes");
+                     std::to_string(least_brick_bytes(dims, options)) + " bytes");
   const auto plan_of = [&](const Index3& c) {
     BrickPlan p = plan;
     for (int a = 0; a < 3; ++a) {
@@ -166,9 +175,7 @@ BrickPlan plan_bricks(const Index3& dims, const BrickPlanOptions& options) {
   const std::string limit =
       std::to_string(static_cast<std::int64_t>(options.max_read_amplification));
   if (!plan) {
-    BrickPlanOptions any_reads = options;
-    any_reads.max_read_amplification = 0;
-    if (least_memory(dims, any_reads) == least) throw InputError(one_cell);
+    if (least == least_brick_bytes(dims, options)) throw InputError(one_cell);
     throw InputError(one_cell + "; give at least " + std::to_string(least) +
                      " bytes (bricks that small, each read with its halo of " +
                      std::to_string(options.halo) + " samples, would read the volume more than " +

@@ -199,14 +199,12 @@ class TiledSimplification {
     // A budget too small even to extract is counted within the least that extracts, so that the
     // refusal below names what simplifying needs: refused at once, it named the extraction's
     // need, and a run given that was refused again with more.
-    BrickPlanOptions counting = po;
-    bool too_small = false;
     try {
       plan_ = plan_bricks(n_, po);
     } catch (const InputError&) {
-      too_small = true;
-      counting.memory = least_memory(n_, po);
-      plan_ = plan_bricks(n_, counting);
+      BrickPlanOptions least = po;
+      least.memory = least_memory(n_, po);
+      plan_ = plan_bricks(n_, least);
     }
     std::vector<std::uint64_t> brick_vertices, brick_faces, plane_faces;
     count(brick_vertices, brick_faces, plane_faces);
@@ -215,9 +213,9 @@ class TiledSimplification {
         static_cast<double>(*std::max_element(plane_faces.begin(), plane_faces.end())) /
         plane_cells;
     po.output_bytes_per_cell += densest * kSimplifyBytesPerFace;
-    // Throws where po.memory is too small for simplifying, naming the budget that plans.
+    // Throws where po.memory is too small for simplifying (always where it was for extracting:
+    // more bytes per cell), naming the budget that plans.
     const BrickPlan replanned = plan_bricks(n_, po);
-    if (too_small) throw Error("brick plan: a budget the extraction refused gave a plan");
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
       count(brick_vertices, brick_faces, plane_faces);
