@@ -17,6 +17,7 @@
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
+#include "core/file_names.h"
 #include "core/mesh/mesh_io.h"
 #include "core/progress.h"
 #include "tiler/input_options.h"
@@ -100,12 +101,7 @@ std::string file_stem(const std::string& file) {
   if (name.empty()) name = fs::path(file).parent_path().filename().string();  // "dir/"
   // Any case: scanners and older tools write SLICE.DCM, EMBRYO.TIF.
   auto strip = [&](std::string_view ext) {
-    const auto matches = [](char e, char n) {
-      return std::tolower(static_cast<unsigned char>(n)) == static_cast<unsigned char>(e);
-    };
-    if (name.size() > ext.size() &&
-        std::equal(ext.begin(), ext.end(), name.end() - static_cast<std::ptrdiff_t>(ext.size()),
-                   matches)) {
+    if (name.size() > ext.size() && ends_with_ci(name, ext)) {
       name.resize(name.size() - ext.size());
       return true;
     }

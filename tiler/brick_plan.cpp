@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 
 namespace isotile {
 
@@ -228,9 +229,7 @@ std::uint64_t parse_memory_size(const std::string& text) {
   // user's in MeshLab, where a comma-point locale made strtod stop at the '.').
   if (!digit || std::from_chars(text.data(), text.data() + used, value).ptr != text.data() + used)
     used = 0;
-  std::string unit = text.substr(used);
-  std::transform(unit.begin(), unit.end(), unit.begin(),
-                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  const std::string unit = ascii_lower(text.substr(used));
   double scale = 0;
   if (unit.empty() || unit == "b")
     scale = 1;

@@ -6,6 +6,7 @@
 #include <cstdlib>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "tiler/cli/cli_common.h"
@@ -16,13 +17,6 @@
 namespace isotile {
 
 namespace {
-
-bool ends_with_png(const std::string& path) {
-  if (path.size() < 4) return false;
-  std::string ext = path.substr(path.size() - 4);
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".png";
-}
 
 // "WxH" with both whole numbers in [1, 65535].
 void parse_size(const std::string& s, int& w, int& h) {
@@ -101,7 +95,8 @@ double draw(Render render, const gl::RenderOptions& o, const std::string& pictur
 }  // namespace
 
 void check_picture_path(const std::string& path) {
-  if (!ends_with_png(path)) throw InputError("the picture must be a .png file, got '" + path + "'");
+  if (!ends_with_ci(path, ".png"))
+    throw InputError("the picture must be a .png file, got '" + path + "'");
 }
 
 CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {

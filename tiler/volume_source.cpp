@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/procedural_fields.h"
 
 namespace isotile {
@@ -419,14 +420,6 @@ class InMemorySource final : public VolumeSource {
   Volume volume_;
 };
 
-bool ends_with(const std::string& s, const char* suffix) {
-  const std::size_t n = std::strlen(suffix);
-  if (s.size() < n) return false;
-  for (std::size_t i = 0; i < n; ++i)
-    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
-  return true;
-}
-
 }  // namespace
 
 std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const RawOptions& raw,
@@ -501,7 +494,7 @@ std::unique_ptr<VolumeSource> open_volume_source(const std::string& input, const
                        "drop --memory");
     const RawLayout r = resolve_raw_layout(input, raw);
     const PlainLayout layout{input, 0, r.type, r.dims, (raw.endian == Endian::Big) != native_big};
-    if (ends_with(input, ".gz"))
+    if (ends_with_ci(input, ".gz"))
       source = std::make_unique<GzipRawSource>(layout, "the name ends in .gz");
     else
       source = std::make_unique<RawFileSource>(layout);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/mesh_quality.h"
@@ -21,8 +22,7 @@
 namespace isotile {
 
 MeshFormat mesh_format_from_path(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const std::string ext = lower_extension(path);
   if (ext == ".ply") return MeshFormat::Ply;
   if (ext == ".obj") return MeshFormat::Obj;
   if (ext == ".stl") return MeshFormat::Stl;

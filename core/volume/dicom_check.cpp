@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/file_bytes.h"
 #include "core/volume/image_headers.h"
 
@@ -248,10 +249,7 @@ void check_dicom_file(const std::string& path, bool given) {
       // slice at either end went missing without a word (a gap between slices is refused). A
       // file named as DICOM, or an empty one without an extension (scanners often write slices
       // without one), is a slice cut short: refused. Other files (a README) are left alone.
-      const std::string ext = fs::path(path).extension().string();
-      std::string lower;
-      for (const char c : ext)
-        lower += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      const std::string lower = lower_extension(path);
       if (lower == ".dcm" || lower == ".ima" || lower == ".dicom" ||
           (lower.empty() && file.size() == 0))
         throw InputError(

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/file_bytes.h"
 
 namespace isotile {
@@ -63,14 +64,6 @@ std::optional<ScalarType> nifti_type(int datatype) {
     default:
       return std::nullopt;
   }
-}
-
-bool ends_with_ci(const std::string& s, const std::string& suffix) {
-  if (s.size() < suffix.size()) return false;
-  for (std::size_t i = 0; i < suffix.size(); ++i)
-    if (std::tolower(static_cast<unsigned char>(s[s.size() - suffix.size() + i])) != suffix[i])
-      return false;
-  return true;
 }
 
 }  // namespace

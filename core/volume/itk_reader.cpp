@@ -27,6 +27,7 @@
 #include <sstream>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 
 // ITK's own copy of libtiff (libitktiff) warns on stderr about every private tag it does not
 // know, e.g. ImageJ's 50838/50839 on each page; its header is not installed.
@@ -555,9 +556,7 @@ std::vector<std::string> sorted_files(const fs::path& dir, bool (*keep)(const fs
 }
 
 bool tiff_name(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
+  const std::string ext = lower_extension(p);
   return ext == ".tif" || ext == ".tiff";
 }
 

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -226,8 +227,7 @@ MrcLayout mrc_layout(const std::string& path) {
   // ISPG 0 is an image or a stack of images (MRC2014), and `.mrcs` the name cryo-EM software
   // (RELION) gives stacks of 2-D particle images: read as a volume, its images would
   // be laid one on another along z. A volume written with ISPG 0 under another name is read.
-  std::string name = std::filesystem::path(path).filename().string();
-  for (char& ch : name) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  const std::string name = ascii_lower(std::filesystem::path(path).filename().string());
   if (ispg == 0 && dims[2] > 1 && (name.ends_with(".mrcs") || name.ends_with(".mrcs.gz")))
     throw InputError(path + ": a stack of " + std::to_string(m.n[2]) +
                      " 2-D images (.mrcs, space group ISPG 0), not a volume; if it holds one "

@@ -23,6 +23,7 @@
 #include <tbb/partitioner.h>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/volume_io.h"
 
 namespace isotile {
@@ -50,9 +51,7 @@ std::optional<NameMatch> match_raw_name(const std::string& path) {
   if (!std::regex_match(name, m, kPattern)) return std::nullopt;
   NameMatch out;
   for (int a = 0; a < 3; ++a) out.dims[a] = m[a + 1].str();
-  out.type = m[4].str();
-  std::transform(out.type.begin(), out.type.end(), out.type.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  out.type = ascii_lower(m[4].str());
   return out;
 }
 
@@ -68,12 +67,7 @@ std::string dims_string(const Index3& d) {
 }
 
 bool ends_with_gz(const std::string& path) {
-  const std::string name = std::filesystem::path(path).filename().string();
-  if (name.size() < 3) return false;
-  std::string ext = name.substr(name.size() - 3);
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
-  return ext == ".gz";
+  return ends_with_ci(std::filesystem::path(path).filename().string(), ".gz");
 }
 
 std::string size_mismatch(const std::string& path, const char* holds, std::uint64_t have,

@@ -20,6 +20,7 @@
 #include <fstream>
 
 #include "core/errors.h"
+#include "core/file_names.h"
 #include "core/volume/image_headers.h"
 #include "core/volume/itk_reader.h"
 #include "core/volume/numbered_files.h"
@@ -28,21 +29,6 @@
 namespace isotile {
 
 namespace {
-
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
-
-bool ends_with_ci(const std::string& s, const char* suffix) {
-  const std::size_t n = std::strlen(suffix);
-  if (s.size() < n) return false;
-  for (std::size_t i = 0; i < n; ++i)
-    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
-  return true;
-}
 
 // DICOM Part 10 files carry "DICM" after a 128-byte preamble.
 bool has_dicom_marker(const std::string& path) {
