@@ -9,7 +9,11 @@ include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
 set(ISOTILE_CMAKE_DIR "${CMAKE_INSTALL_LIBDIR}/cmake/isotile")
-set(ISOTILE_FIND_DEPENDENCIES "")
+# One export set per component (isotile_<component>Targets.cmake), each with its find_dependency()
+# lines (ISOTILE_FIND_<component>), so that the config loads, and finds the dependencies of, only
+# the components asked for: CMake checks every imported target's link interface when it loads an
+# export set. ISOTILE_COMPONENTS lists them in the order they are loaded.
+set(ISOTILE_COMPONENTS "")
 set(ISOTILE_DEV_DEBIAN_DEPENDS "")
 
 # Exports one library as isotile::<NAME> in the dev component.
@@ -22,8 +26,17 @@ set(ISOTILE_DEV_DEBIAN_DEPENDS "")
 #   DEBIAN_DEPENDS the Debian -dev packages that provide those (libisotile-dev's Depends)
 #   INTERNAL       a helper target that is only exported because a library's link interface
 #                  names it (no component of its own, no headers)
+#   COMPONENT      with INTERNAL: the component whose library links it (its export set)
 function(isotile_export_library target)
-  cmake_parse_arguments(arg "INTERNAL" "NAME" "HEADERS;FIND_PACKAGES;DEBIAN_DEPENDS" ${ARGN})
+  cmake_parse_arguments(arg "INTERNAL" "NAME;COMPONENT" "HEADERS;FIND_PACKAGES;DEBIAN_DEPENDS"
+                        ${ARGN})
+  set(component ${arg_NAME})
+  if(arg_INTERNAL)
+    set(component ${arg_COMPONENT})
+  else()
+    list(APPEND ISOTILE_COMPONENTS ${component})
+    set(ISOTILE_COMPONENTS "${ISOTILE_COMPONENTS}" PARENT_SCOPE)
+  endif()
   set_target_properties(${target} PROPERTIES EXPORT_NAME ${arg_NAME})
   # Include folders inside the source or build tree mean nothing once installed.
   get_target_property(dirs ${target} INTERFACE_INCLUDE_DIRECTORIES)
@@ -46,16 +59,13 @@ function(isotile_export_library target)
     set(headers FILE_SET isotile_headers DESTINATION "${CMAKE_INSTALL_INCLUDEDIR}/isotile"
                 COMPONENT dev)
   endif()
-  install(TARGETS ${target} EXPORT isotileTargets
+  install(TARGETS ${target} EXPORT isotile_${component}Targets
           ARCHIVE DESTINATION "${CMAKE_INSTALL_LIBDIR}" COMPONENT dev ${headers}
           INCLUDES DESTINATION "${CMAKE_INSTALL_INCLUDEDIR}/isotile")
   foreach(pkg IN LISTS arg_FIND_PACKAGES)
-    string(APPEND ISOTILE_FIND_DEPENDENCIES "find_dependency(${pkg})\n")
+    string(APPEND ISOTILE_FIND_${component} "  find_dependency(${pkg})\n")
   endforeach()
-  if(NOT arg_INTERNAL)
-    string(APPEND ISOTILE_FIND_DEPENDENCIES "set(isotile_${arg_NAME}_FOUND TRUE)\n")
-  endif()
-  set(ISOTILE_FIND_DEPENDENCIES "${ISOTILE_FIND_DEPENDENCIES}" PARENT_SCOPE)
+  set(ISOTILE_FIND_${component} "${ISOTILE_FIND_${component}}" PARENT_SCOPE)
   list(APPEND ISOTILE_DEV_DEBIAN_DEPENDS ${arg_DEBIAN_DEPENDS})
   set(ISOTILE_DEV_DEBIAN_DEPENDS "${ISOTILE_DEV_DEBIAN_DEPENDS}" PARENT_SCOPE)
 endfunction()
@@ -63,7 +73,7 @@ endfunction()
 # The exported libraries: the one place to add another (docs/install.md). Dependencies in the
 # order the config must find them: TBB's own config before anything that could find OpenVDB's
 # FindTBB module.
-isotile_export_library(isotile_teem NAME teem INTERNAL DEBIAN_DEPENDS libteem-dev)
+isotile_export_library(isotile_teem NAME teem INTERNAL COMPONENT core DEBIAN_DEPENDS libteem-dev)
 isotile_export_library(isotile_core NAME core
   HEADERS
     core/errors.h
@@ -90,19 +100,19 @@ isotile_export_library(isotile_core NAME core
   DEBIAN_DEPENDS libtbb-dev zlib1g-dev libeigen3-dev libopenmesh-dev libgmp-dev libmpfr-dev
                  libdeflate-dev)
 # The OpenVDB reader's library, linked privately by core (after TBB's config is found).
-isotile_export_library(isotile_vdb NAME vdb INTERNAL FIND_PACKAGES OpenVDB
+isotile_export_library(isotile_vdb NAME vdb INTERNAL COMPONENT core FIND_PACKAGES OpenVDB
   DEBIAN_DEPENDS libopenvdb-dev libboost-iostreams-dev)
 # The ITK readers' library, linked privately by core: consumers of the static core need ITK's
 # libraries too. Debian's ITK config runs FindHDF5, whose checks need the C language: enabled for
 # the consumer, so that a C++-only project can use the package.
 if(ISOTILE_ITK)
-  string(APPEND ISOTILE_FIND_DEPENDENCIES
-         "if(NOT CMAKE_C_COMPILER_LOADED)\n  enable_language(C)\nendif()\n")
-  isotile_export_library(isotile_itk NAME itk INTERNAL
+  string(APPEND ISOTILE_FIND_core
+         "  if(NOT CMAKE_C_COMPILER_LOADED)\n    enable_language(C)\n  endif()\n")
+  isotile_export_library(isotile_itk NAME itk INTERNAL COMPONENT core
     FIND_PACKAGES "ITK 5.2 CONFIG COMPONENTS ITKIOImageBase ITKIONIFTI ITKIOMeta ITKIOGDCM ITKIOTIFF"
     DEBIAN_DEPENDS libinsighttoolkit5-dev)
 else()
-  isotile_export_library(isotile_itk NAME itk INTERNAL)
+  isotile_export_library(isotile_itk NAME itk INTERNAL COMPONENT core)
 endif()
 # The tiler's pipeline hands its statistics out as nlohmann::json (header-only); it links MPI's C
 # library when built with distributed extraction.
@@ -124,15 +134,23 @@ isotile_export_library(isotile_tiler NAME tiler
   FIND_PACKAGES ${tiler_packages}
   DEBIAN_DEPENDS ${tiler_debian})
 if(TARGET isotile_gl)
-  isotile_export_library(isotile_glad NAME glad INTERNAL)
+  isotile_export_library(isotile_glad NAME glad INTERNAL COMPONENT gl)
   isotile_export_library(isotile_gl NAME gl
     HEADERS shaders/gl_backends.h shaders/stage_clock.h
     FIND_PACKAGES "OpenGL COMPONENTS EGL" PNG
     DEBIAN_DEPENDS libegl-dev libpng-dev)
 endif()
 
-install(EXPORT isotileTargets NAMESPACE isotile:: DESTINATION "${ISOTILE_CMAKE_DIR}"
-        COMPONENT dev)
+# Each component's block of the config: its dependencies, then its targets.
+set(ISOTILE_LOAD_COMPONENTS "")
+foreach(component IN LISTS ISOTILE_COMPONENTS)
+  install(EXPORT isotile_${component}Targets NAMESPACE isotile:: DESTINATION "${ISOTILE_CMAKE_DIR}"
+          COMPONENT dev)
+  string(APPEND ISOTILE_LOAD_COMPONENTS
+         "if(\"${component}\" IN_LIST _isotile_load)\n${ISOTILE_FIND_${component}}"
+         "  include(\"\${CMAKE_CURRENT_LIST_DIR}/isotile_${component}Targets.cmake\")\n"
+         "  set(isotile_${component}_FOUND TRUE)\nendif()\n")
+endforeach()
 configure_package_config_file(
   "${CMAKE_CURRENT_LIST_DIR}/isotileConfig.cmake.in"
   "${PROJECT_BINARY_DIR}/cmake/isotileConfig.cmake"
