@@ -74,4 +74,41 @@ TEST_F(CliLimits, AWorkerThreadThatCannotStartIsAnErrorNotAHang) {
     GTEST_SKIP() << "no address-space limit here stopped a worker thread and nothing else";
 }
 
+// An in-core run whose samples cannot fit in what the process may have is refused before the
+// read, naming the need, the limit and a --memory budget, and that budget then runs within the
+// same limit and gives the in-core file. Before, under overcommit the OOM killer ended such a run
+// part-way through the read (SIGKILL, no message); under ulimit -v the allocation failed after
+// the header was read ("cannot allocate 512 MiB for a volume ...", with no way out named).
+TEST_F(CliLimits, AVolumeThatCannotFitIsRefusedBeforeTheReadWithABudgetThatRuns) {
+#ifdef ISOTILE_SANITIZED
+  GTEST_SKIP() << "sanitizer runtimes reserve terabytes of address space: ulimit -v cannot apply";
+#endif
+  // 488 MiB of address space: less than the 512 MiB of samples of a 512^3 float32 field.
+  const std::string limit = "ulimit -v 500000 &&";
+  write_old_output();
+  const CliResult refused = run("-q extract field:gyroid:512 --iso 0 -o out.ply", limit);
+  EXPECT_EQ(refused.code, 1) << refused.err;
+  EXPECT_EQ(refused.err.rfind("isotile: error: field:gyroid:512: in core, its samples alone take "
+                              "512 MiB, more than the ",
+                              0),
+            0u)
+      << refused.err;
+  EXPECT_NE(refused.err.find("(left by ulimit -v)"), std::string::npos) << refused.err;
+  EXPECT_EQ(refused.err.find('\n'), refused.err.size() - 1) << "one line\n" << refused.err;
+  EXPECT_EQ(slurp(dir_ / "out.ply"), "old\n");
+  EXPECT_EQ(stray_files({"out.ply"}), std::vector<std::string>{});
+
+  const std::string marker = "within SIZE (e.g. ";
+  const std::size_t at = refused.err.find(marker);
+  ASSERT_NE(at, std::string::npos) << refused.err;
+  const std::string budget =
+      refused.err.substr(at + marker.size(), refused.err.find(')', at) - at - marker.size());
+  const CliResult streamed =
+      run("-q extract field:gyroid:512 --iso 0 --memory " + budget + " -o streamed.ply", limit);
+  ASSERT_EQ(streamed.code, 0) << "--memory " << budget << ": " << streamed.err;
+  ASSERT_EQ(run("-q extract field:gyroid:512 --iso 0 -o in_core.ply").code, 0);
+  EXPECT_TRUE(slurp(dir_ / "streamed.ply") == slurp(dir_ / "in_core.ply"))
+      << "--memory " << budget << " gave another file than in core";
+}
+
 }  // namespace

@@ -13,6 +13,7 @@
 #include "core/mesh/mesh_io.h"
 #include "core/mesh/self_intersections.h"
 #include "core/volume/procedural_fields.h"
+#include "tiler/available_memory.h"
 #include "tiler/brick_plan.h"
 #include "tiler/gpu_report_json.h"
 #include "tiler/source_histogram.h"
@@ -295,9 +296,13 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
     checked_volume_bytes(view.type, view.dims);
     check_finite(view, input.path);
   } else {
-    log("reading " + input.path);
     RawOptions raw = input.raw;
     raw.progress = options.progress;
+    // Before the read: a volume that cannot fit is refused at once, not killed part-way through.
+    if (const std::optional<std::uint64_t> need = in_core_bytes(input.path, raw, eo))
+      if (const std::optional<AvailableMemory> available = available_memory())
+        check_in_core_fits(*need, *available, input.path, options.warn);
+    log("reading " + input.path);
     volume = read_volume(input.path, raw);
     t_read = seconds_since(t0);
     // Only extract() and the repairs below read the samples; the rest of this run uses the

@@ -212,7 +212,8 @@ Volume::Volume(ScalarType type, Index3 dims, Vec3d spacing, Vec3d origin)
     throw CapacityError("cannot allocate " + std::to_string(bytes_ >> 20) +
                         " MiB for a volume of " + std::to_string(dims[0]) + "x" +
                         std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
-                        std::string(scalar_name(type)));
+                        std::string(scalar_name(type)) +
+                        ": too large to read whole; --memory SIZE extracts it brick by brick");
   }
 }
 

@@ -865,6 +865,8 @@ std::string in_python_terms(std::string message) {
   static const std::pair<std::string_view, std::string_view> kTerms[] = {
       {"--iso auto", "iso=\"auto\""},
       {"--allow-empty", "allow_empty=True"},
+      // Out of core a run needs a file to stream into as well.
+      {"give --memory SIZE", "give memory=\"SIZE\" and output=\"FILE\""},
       {"--method macet", "method=\"macet\""},
       {"--method dc", "method=\"dc\""},
       {"--method mc", "method=\"mc\""},

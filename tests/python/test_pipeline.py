@@ -543,6 +543,31 @@ def test_sigterm_and_sighup_end_the_process_and_leave_no_temporary(tmp_path, sig
     assert left_in(tmp_path) == []
 
 
+def test_a_volume_that_cannot_fit_is_refused_with_a_budget_that_runs(tmp_path):
+    # In a child whose address space leaves 300 MiB: the 512 MiB of a 512^3 field cannot be read
+    # in core. The refusal names the keywords, and the budget it gives runs within the same limit
+    # and writes the in-core run's file.
+    script = (
+        "import re, resource, isotile\n"
+        "with open('/proc/self/status') as f:\n"
+        "    vm = next(int(l.split()[1]) for l in f if l.startswith('VmSize:')) * 1024\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (vm + (300 << 20), resource.RLIM_INFINITY))\n"
+        "try:\n"
+        "    isotile.extract('field:gyroid:512', iso=0)\n"
+        "except MemoryError as e:\n"
+        "    print(e)\n"
+        "    budget = re.search(r'within SIZE \\(e\\.g\\. (\\w+)\\)', str(e)).group(1)\n"
+        "    isotile.extract('field:gyroid:512', iso=0, memory=budget, output='streamed.ply',\n"
+        "                    stats=False)\n")
+    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "in core, its samples alone take 512 MiB" in r.stdout, r.stdout
+    assert 'give memory="SIZE" and output="FILE" to extract it brick by brick' in r.stdout
+    isotile.write_mesh(tmp_path / "in_core.ply", isotile.extract("field:gyroid:512", iso=0))
+    assert (tmp_path / "streamed.ply").read_bytes() == (tmp_path / "in_core.ply").read_bytes()
+
+
 # --- mesh files ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", ["m.ply", "m.obj", "m.stl", "m.off"])
