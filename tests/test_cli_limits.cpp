@@ -111,4 +111,36 @@ TEST_F(CliLimits, AVolumeThatCannotFitIsRefusedBeforeTheReadWithABudgetThatRuns)
       << "--memory " << budget << " gave another file than in core";
 }
 
+// `info` on a volume larger than the process can hold reads it slab by slab and says what an
+// unlimited run says. Before, it read the volume whole: refused by its allocation under
+// ulimit -v, killed part-way through by the OOM killer under overcommit.
+TEST_F(CliLimits, InfoOnAVolumeLargerThanMemoryReadsItSlabBySlab) {
+#ifdef ISOTILE_SANITIZED
+  GTEST_SKIP() << "sanitizer runtimes reserve terabytes of address space: ulimit -v cannot apply";
+#endif
+  // 128 MiB of uint8 waves, and 97 MiB of address space.
+  const std::filesystem::path raw = dir_ / "waves_512x512x512_uint8.raw";
+  {
+    std::vector<char> plane(512 * 512);
+    std::ofstream f(raw, std::ios::binary);
+    for (int z = 0; z < 512; ++z) {
+      for (int y = 0; y < 512; ++y)
+        for (int x = 0; x < 512; ++x)
+          plane[static_cast<std::size_t>(y * 512 + x)] =
+              static_cast<char>((x * 7 + y * 3 + z * 5 + (x * y) % 11) % 251);
+      f.write(plane.data(), static_cast<std::streamsize>(plane.size()));
+    }
+  }
+  const std::string limit = "ulimit -v 100000 &&";
+  for (const std::string json : {"", " --json"}) {
+    const CliResult whole = run("info " + raw.filename().string() + json);
+    ASSERT_EQ(whole.code, 0) << whole.err;
+    const CliResult slabs = run("info " + raw.filename().string() + json, limit);
+    ASSERT_EQ(slabs.code, 0) << slabs.err;
+    EXPECT_EQ(slabs.out, whole.out);
+    EXPECT_NE(whole.out.find("134217728"), std::string::npos) << whole.out;
+  }
+  std::filesystem::remove(raw);
+}
+
 }  // namespace

@@ -11,6 +11,14 @@ namespace isotile {
 
 ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget,
                                 Progress* progress) {
+  ValueHistogram h;
+  for_each_slab(source, memory_budget, progress,
+                [&](const VolumeView& slab) { merge(h, value_histogram(slab)); });
+  return h;
+}
+
+void for_each_slab(VolumeSource& source, std::uint64_t memory_budget, Progress* progress,
+                   const std::function<void(const VolumeView&)>& each) {
   const std::uint64_t sample = scalar_size(source.type);
   const std::uint64_t row = static_cast<std::uint64_t>(source.dims[0]) * sample;
   const std::uint64_t plane = row * static_cast<std::uint64_t>(source.dims[1]);
@@ -30,7 +38,6 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
   progress_begin(progress, Stage::Histogram,
                  rows ? source.dims[2] * y_parts : (source.dims[2] + step - 1) / step);
   source.rewind();
-  ValueHistogram h;
   std::vector<char> buffer;
   for (std::int64_t z = 0; z < source.dims[2];) {
     Box3 box;
@@ -39,7 +46,7 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
         box = {{0, y, z}, {source.dims[0], std::min(source.dims[1], y + step), z + 1}};
         buffer.resize(static_cast<std::size_t>(box.extent(0) * box.extent(1)) * sample);
         source.read(box, buffer.data());
-        merge(h, value_histogram(brick_view(source, box, buffer.data())));
+        each(brick_view(source, box, buffer.data()));
         progress_advance(progress);
       }
       ++z;
@@ -48,12 +55,11 @@ ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budge
     box = {{0, 0, z}, {source.dims[0], source.dims[1], std::min(source.dims[2], z + step)}};
     buffer.resize(static_cast<std::size_t>(plane * static_cast<std::uint64_t>(box.extent(2))));
     source.read(box, buffer.data());
-    merge(h, value_histogram(brick_view(source, box, buffer.data())));
+    each(brick_view(source, box, buffer.data()));
     progress_advance(progress);
     z = box.hi[2];
   }
   source.rewind();
-  return h;
 }
 
 void throw_no_surface(VolumeSource& source, std::uint64_t memory_budget, double iso) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <utility>
@@ -22,6 +23,10 @@ namespace isotile {
 // then, so that one takes well under 0.1 s); null: nobody listens.
 ValueHistogram source_histogram(VolumeSource& source, std::uint64_t memory_budget,
                                 Progress* progress = nullptr);
+
+// That pass itself: `each` is handed every slab in order, as a view of the source's box.
+void for_each_slab(VolumeSource& source, std::uint64_t memory_budget, Progress* progress,
+                   const std::function<void(const VolumeView&)>& each);
 
 // What throw_no_surface throws: an InputError with the CLI's message, and its parts, so that a
 // front end with other ways out (the MeshLab plugin's fields) can word its own advice around

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -17,7 +18,10 @@
 #include "core/volume/otsu_isovalue.h"
 #include "core/volume/procedural_fields.h"
 #include "core/volume/volume_io.h"
+#include "tiler/available_memory.h"
+#include "tiler/source_histogram.h"
 #include "tiler/stats_json.h"
+#include "tiler/volume_source.h"
 
 namespace isotile::cli {
 
@@ -82,28 +86,58 @@ int run_info(const InfoArgs& args) {
   const bool has_header =
       kind != InputKind::Raw && kind != InputKind::Field && kind != InputKind::Vdb;
   const VolumeHeader header = has_header ? read_volume_header(in.input, raw) : VolumeHeader{};
-  const Volume volume = read_volume(in.input, raw);
-  const VolumeView v = volume.view();
+  // A volume too large to hold here is read slab by slab, twice (its range, then its bins),
+  // within a quarter of what the process can have; in core it would be killed part-way through
+  // the read, or refused by its allocation.
+  Volume volume;
+  std::unique_ptr<VolumeSource> source;
+  std::uint64_t slab_budget = 0;
+  if (const std::optional<std::uint64_t> need = in_core_bytes(in.input, raw, {}))
+    if (const std::optional<AvailableMemory> available = available_memory();
+        available && *need > available->without_swap) {
+      slab_budget = std::max<std::uint64_t>(available->without_swap / 4, std::uint64_t{1} << 20);
+      source = open_volume_source(in.input, raw);
+    }
+  if (!source) volume = read_volume(in.input, raw);
+  // The streamed volume's frame; its samples are read slab by slab below.
+  const VolumeView v =
+      source ? brick_view(*source, Box3{{0, 0, 0}, source->dims}, nullptr) : volume.view();
+  const std::uint64_t bytes = checked_volume_bytes(v.type, v.dims);
   // The geometry extract refuses (a negative or zero spacing, a singular direction, positions
   // float32 cannot hold): info said such a file was fine, exit 0.
   check_grid_geometry(v.dims, v.spacing, v.origin, v.world, in.input);
-  const auto [lo, hi] = value_range(v);
+  ValueHistogram fine;  // Otsu's, for iso auto
+  if (source) {
+    for_each_slab(*source, slab_budget, nullptr, [&](const VolumeView& slab) {
+      check_finite(slab, in.input);
+      merge(fine, value_histogram(slab));
+    });
+  } else {
+    fine = value_histogram(v);
+  }
+  const auto [lo, hi] = source ? std::pair(fine.min, fine.max) : value_range(v);
   constexpr int kBins = 16;
   std::array<std::uint64_t, kBins> hist{};
-  // A cheap whole-volume histogram: one pass, per-slab counts merged in slab order.
-  std::vector<std::array<std::uint64_t, kBins>> slabs(v.dims[2]);
   const double width = hi > lo ? (hi - lo) / kBins : 1.0;
-  tbb::parallel_for(std::int64_t{0}, v.dims[2], [&](std::int64_t k) {
-    auto& h = slabs[k];
-    h.fill(0);
-    for (std::int64_t j = 0; j < v.dims[1]; ++j)
-      for (std::int64_t i = 0; i < v.dims[0]; ++i) {
-        const int b = static_cast<int>((v.value(i, j, k) - lo) / width);
-        ++h[std::clamp(b, 0, kBins - 1)];
-      }
-  });
-  for (const auto& h : slabs)
-    for (int b = 0; b < kBins; ++b) hist[b] += h[b];
+  // A cheap histogram: one pass, per-plane counts merged in plane order.
+  const auto add_bins = [&](const VolumeView& part) {
+    std::vector<std::array<std::uint64_t, kBins>> planes(part.dims[2]);
+    tbb::parallel_for(std::int64_t{0}, part.dims[2], [&](std::int64_t k) {
+      auto& h = planes[k];
+      h.fill(0);
+      for (std::int64_t j = 0; j < part.dims[1]; ++j)
+        for (std::int64_t i = 0; i < part.dims[0]; ++i) {
+          const int b = static_cast<int>((part.value(i, j, k) - lo) / width);
+          ++h[std::clamp(b, 0, kBins - 1)];
+        }
+    });
+    for (const auto& h : planes)
+      for (int b = 0; b < kBins; ++b) hist[b] += h[b];
+  };
+  if (source)
+    for_each_slab(*source, slab_budget, nullptr, add_bins);
+  else
+    add_bins(v);
   const WorldFrame world = v.world ? *v.world : WorldFrame{v.origin, kIdentity3};
 
   json j;
@@ -132,7 +166,7 @@ int run_info(const InfoArgs& args) {
     j["series_uid"] = header.series_uid;
     j["series_description"] = header.series_description;
   }
-  j["bytes"] = volume.byte_size();
+  j["bytes"] = bytes;
   j["min"] = lo;
   j["max"] = hi;
   json bins = json::array();
@@ -142,7 +176,7 @@ int run_info(const InfoArgs& args) {
   // What `extract --iso auto` would choose (null for a volume of one value: no threshold).
   std::optional<double> auto_iso;
   try {
-    auto_iso = otsu_isovalue(value_histogram(v));
+    auto_iso = otsu_isovalue(fine);
   } catch (const InputError&) {
   }
   j["iso_auto"] = auto_iso ? json(*auto_iso) : json(nullptr);
@@ -156,7 +190,7 @@ int run_info(const InfoArgs& args) {
   std::printf("dims     %lld x %lld x %lld\n", static_cast<long long>(v.dims[0]),
               static_cast<long long>(v.dims[1]), static_cast<long long>(v.dims[2]));
   std::printf("type     %s (%zu bytes)\n", std::string(scalar_name(v.type)).c_str(),
-              volume.byte_size());
+              static_cast<std::size_t>(bytes));
   std::printf(
       "spacing  %g, %g, %g%s\n", v.spacing[0], v.spacing[1], v.spacing[2],
       has_header && !header.spacing_unit.empty() ? (" " + header.spacing_unit).c_str() : "");
