@@ -63,6 +63,46 @@ TEST(OtsuIsovalue, HistogramsOfPartsMergeIntoTheWhole) {
   EXPECT_LT(otsu_isovalue(whole), whole.max);
 }
 
+// 8- and 16-bit integers are counted value by value, then binned; every other type sample by
+// sample. Both must give the same histogram: each integer volume against its float32 copy (whose
+// values are the same numbers), a 3-D view with several planes so that threads split it.
+template <class T>
+void expect_same_histogram_as_float(ScalarType type, std::int64_t lo, std::int64_t hi) {
+  const Index3 dims{37, 11, 23};
+  std::vector<T> v(static_cast<std::size_t>(dims[0] * dims[1] * dims[2]));
+  std::vector<float> f(v.size());
+  std::uint64_t state = 12345;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    state = state * 6364136223846793005u + 1442695040888963407u;
+    // Clustered values with the ends of the type's range among them.
+    const std::int64_t span = hi - lo + 1;
+    std::int64_t x =
+        lo + static_cast<std::int64_t>((state >> 33) % static_cast<std::uint64_t>(span));
+    if (i % 7 == 0) x = (i % 14 == 0) ? lo : hi;
+    if (i % 5 == 0) x = lo + span / 3;
+    v[i] = static_cast<T>(x);
+    f[i] = static_cast<float>(v[i]);
+  }
+  const ValueHistogram a = value_histogram(dense_view(v.data(), type, dims));
+  const ValueHistogram b = value_histogram(dense_view(f.data(), ScalarType::Float32, dims));
+  EXPECT_EQ(a.samples, v.size());
+  EXPECT_EQ(a.samples, b.samples);
+  EXPECT_EQ(a.min, b.min);
+  EXPECT_EQ(a.max, b.max);
+  EXPECT_EQ(a.count, b.count);
+  EXPECT_EQ(a.lo, b.lo);
+  EXPECT_EQ(a.hi, b.hi);
+  EXPECT_EQ(otsu_isovalue(a), otsu_isovalue(b));
+}
+
+TEST(OtsuIsovalue, SmallIntegersCountedByValueGiveTheSampleBySampleHistogram) {
+  expect_same_histogram_as_float<std::uint8_t>(ScalarType::UInt8, 0, 255);
+  expect_same_histogram_as_float<std::int8_t>(ScalarType::Int8, -128, 127);
+  expect_same_histogram_as_float<std::uint16_t>(ScalarType::UInt16, 0, 65535);
+  expect_same_histogram_as_float<std::int16_t>(ScalarType::Int16, -32768, 32767);
+  expect_same_histogram_as_float<std::int16_t>(ScalarType::Int16, -1200, 3000);
+}
+
 TEST(OtsuIsovalue, AConstantVolumeHasNoThreshold) {
   std::vector<float> v(64, 3.5f);
   try {

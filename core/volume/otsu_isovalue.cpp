@@ -5,6 +5,8 @@
 
 #include <bit>
 #include <cmath>
+#include <type_traits>
+#include <vector>
 
 #include "core/errors.h"
 
@@ -20,7 +22,8 @@ int bin_of(double v) {
   return static_cast<int>(key >> 16);
 }
 
-void add(ValueHistogram& h, double v) {
+// `n` samples of value v.
+void add(ValueHistogram& h, double v, std::uint64_t n = 1) {
   if (std::isnan(v)) return;
   const int b = bin_of(v);
   if (h.count[b] == 0) {
@@ -29,7 +32,33 @@ void add(ValueHistogram& h, double v) {
     h.lo[b] = std::min(h.lo[b], v);
     h.hi[b] = std::max(h.hi[b], v);
   }
-  ++h.count[b];
+  h.count[b] += n;
+}
+
+// 8- and 16-bit integers: a count per value (256 or 65536 of them), then each value's count into
+// its bin; the same histogram as sample by sample, at a fraction of the work per sample (one
+// increment instead of a conversion to float, a bin and a minimum and maximum). Threads count
+// planes apart and add up.
+template <typename T>
+void add_small_integers(const VolumeView& view, ValueHistogram& out) {
+  using U = std::make_unsigned_t<T>;
+  constexpr std::size_t kValues = std::size_t{1} << (8 * sizeof(T));
+  const T* data = view.typed<T>();
+  tbb::enumerable_thread_specific<std::vector<std::uint64_t>> local(
+      [] { return std::vector<std::uint64_t>(kValues, 0); });
+  tbb::parallel_for(std::int64_t{0}, view.dims[2], [&](std::int64_t k) {
+    std::vector<std::uint64_t>& counts = local.local();
+    for (std::int64_t j = 0; j < view.dims[1]; ++j) {
+      const T* row = data + view.offset(0, j, k);
+      for (std::int64_t i = 0; i < view.dims[0]; ++i)
+        ++counts[static_cast<U>(row[i * view.strides[0]])];
+    }
+  });
+  std::vector<std::uint64_t> counts(kValues, 0);
+  for (const std::vector<std::uint64_t>& c : local)
+    for (std::size_t v = 0; v < kValues; ++v) counts[v] += c[v];
+  for (std::size_t v = 0; v < kValues; ++v)
+    if (counts[v] > 0) add(out, static_cast<double>(static_cast<T>(static_cast<U>(v))), counts[v]);
 }
 
 // samples, min and max from the bins (the lowest bin's lowest sample, the highest's highest).
@@ -68,8 +97,15 @@ ValueHistogram value_histogram(const VolumeView& view) {
   // One histogram per thread (1.5 MiB each), merged at the end: counts, minima and maxima do
   // not depend on which thread saw which slab.
   tbb::enumerable_thread_specific<ValueHistogram> local;
+  ValueHistogram out;
+  bool counted = false;
   visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
+    if constexpr (std::is_integral_v<T> && sizeof(T) <= 2) {
+      add_small_integers<T>(view, out);
+      counted = true;
+      return;
+    }
     const T* data = view.typed<T>();
     tbb::parallel_for(std::int64_t{0}, view.dims[2], [&](std::int64_t k) {
       ValueHistogram& h = local.local();
@@ -80,7 +116,10 @@ ValueHistogram value_histogram(const VolumeView& view) {
       }
     });
   });
-  ValueHistogram out;
+  if (counted) {
+    finish(out);
+    return out;
+  }
   for (ValueHistogram& h : local) {
     finish(h);
     merge(out, h);
