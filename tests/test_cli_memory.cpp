@@ -141,4 +141,20 @@ TEST_F(CliBudget, ASurfaceThatOverflowsTheBudgetIsSaidOnce) {
   EXPECT_EQ(within.err, "");
 }
 
+// A budget above what the process can have is taken (a small volume plans far less) but said,
+// once, under --quiet too; the summary line counts one brick as one.
+TEST_F(CliBudget, ABudgetAboveTheMachinesMemoryIsSaid) {
+  const Result big = run("extract field:sphere:16 --memory 1000TiB -o big.ply");
+  ASSERT_EQ(big.code, 0) << big.err;
+  EXPECT_NE(big.err.find("isotile: warning: --memory 1000TiB is more than the "), std::string::npos)
+      << big.err;
+  EXPECT_NE(big.err.find(" vertices in 1 brick of 15x15x15 cells\n"), std::string::npos) << big.err;
+  const Result quiet = run("extract field:sphere:16 --memory 1000TiB -q -o quiet.ply");
+  ASSERT_EQ(quiet.code, 0) << quiet.err;
+  EXPECT_EQ(quiet.err.rfind("isotile: warning: --memory 1000TiB is more than the ", 0), 0u)
+      << quiet.err;
+  EXPECT_EQ(std::count(quiet.err.begin(), quiet.err.end(), '\n'), 1) << quiet.err;
+  EXPECT_EQ(run("extract field:sphere:16 --memory 1MiB -q -o small.ply").err, "");
+}
+
 }  // namespace

@@ -61,6 +61,14 @@ TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions&
   TiledOptions to;
   to.extract = extract;
   to.memory = parse_memory_size(options.memory);
+  // A budget the machine cannot give is taken (the plan may need less), but said: bricks
+  // planned to fill it could swap, or end in the OOM killer.
+  if (const std::optional<AvailableMemory> available = available_memory();
+      available && to.memory > available->most)
+    say_warning(options.warn, "--memory " + options.memory + " is more than the " +
+                                  bytes_text(available->most) +
+                                  " of memory this process can have (" + available->said_by +
+                                  "): bricks planned to fill it may not fit");
   to.allow_empty = options.allow_empty;
   to.format = format;
   to.simplify = options.simplify;
@@ -74,6 +82,17 @@ TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions&
   to.progress = options.progress;
   to.warn = options.warn;
   return to;
+}
+
+std::string tiled_summary(const TiledResult& r, bool simplified) {
+  const std::int64_t bricks = r.plan.total();
+  return (simplified
+              ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
+              : std::string("extracted ")) +
+         std::to_string(r.triangles) + " triangles, " + std::to_string(r.vertices) +
+         " vertices in " + std::to_string(bricks) + (bricks == 1 ? " brick of " : " bricks of ") +
+         std::to_string(r.plan.brick[0]) + "x" + std::to_string(r.plan.brick[1]) + "x" +
+         std::to_string(r.plan.brick[2]) + " cells";
 }
 
 namespace {
@@ -105,12 +124,7 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
       std::string(scalar_name(source->type)) + ") brick by brick within " + options.memory +
       (source->in_memory() ? " (this input cannot be read by region: read whole first)" : ""));
   const TiledResult r = extract_tiled(*source, to, options.output);
-  log((to.simplify < 1
-           ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
-           : std::string("extracted ")) +
-      std::to_string(r.triangles) + " triangles, " + std::to_string(r.vertices) + " vertices in " +
-      std::to_string(r.plan.total()) + " bricks of " + std::to_string(r.plan.brick[0]) + "x" +
-      std::to_string(r.plan.brick[1]) + "x" + std::to_string(r.plan.brick[2]) + " cells");
+  log(tiled_summary(r, to.simplify < 1));
   result.iso = to.extract.iso;
   result.backend = r.backend;
   result.bricks = r.plan.total();

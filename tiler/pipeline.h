@@ -140,9 +140,13 @@ StatsJson choose_isovalue(const ValueHistogram& histogram, double& iso,
 
 // The tiler's options of an out-of-core run of `options` (memory, format, simplify, progress,
 // quality measures when the stats are wanted); throws InputError for what a streamed run cannot
-// do (ASCII, --check-intersections).
+// do (ASCII, --check-intersections); warns of a budget above what the process can have.
 TiledOptions tiled_options(const PipelineOptions& options, const ExtractOptions& extract,
                            MeshFormat format);
+
+// "extracted N triangles[, simplified to M], V vertices in B bricks of XxYxZ cells": an
+// out-of-core run's summary line.
+std::string tiled_summary(const TiledResult& result, bool simplified);
 
 // The statistics of an out-of-core run (single process or MPI).
 struct TiledStatsInput {

@@ -133,13 +133,7 @@ int run_extract_distributed(const ExtractArgs& args, PipelineOptions o, Clock::t
   g_distributed = false;
   if (g_mpi->rank != 0) return 0;
   const TiledResult& r = d.tiled;
-  progress(
-      (to.simplify < 1
-           ? "extracted " + std::to_string(r.triangles_extracted) + " triangles, simplified to "
-           : std::string("extracted ")) +
-      std::to_string(r.triangles) + " triangles, " + std::to_string(r.vertices) + " vertices in " +
-      std::to_string(r.plan.total()) + " bricks of " + std::to_string(r.plan.brick[0]) + "x" +
-      std::to_string(r.plan.brick[1]) + "x" + std::to_string(r.plan.brick[2]) + " cells");
+  progress(tiled_summary(r, to.simplify < 1));
   if (!args.stats.empty()) {
     json j = tiled_stats({.input = args.in.input,
                           .output = args.output,
