@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cerrno>
 #include <chrono>
@@ -82,10 +83,12 @@ class ScratchFile {
   ScratchFile& operator=(const ScratchFile&) = delete;
 
   std::uint64_t size() const { return size_; }
-  void append(const void* data, std::size_t n) {
+  void append(const void* data, std::size_t n) { write_at(size_, data, n); }
+  // Anywhere, past the end too (the gap reads as zeros until written).
+  void write_at(std::uint64_t offset, const void* data, std::size_t n) {
     const char* p = static_cast<const char*>(data);
     while (n > 0) {
-      const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(size_));
+      const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(offset));
       if (w <= 0) {
         if (w < 0 && errno == EINTR) continue;
         // In the output's folder, or the temporary one where the output is written in place.
@@ -93,7 +96,8 @@ class ScratchFile {
       }
       p += w;
       n -= static_cast<std::size_t>(w);
-      size_ += static_cast<std::uint64_t>(w);
+      offset += static_cast<std::uint64_t>(w);
+      size_ = std::max(size_, offset);
     }
   }
   void read(std::uint64_t offset, void* out, std::size_t n) const {
@@ -169,7 +173,8 @@ class TiledSimplification {
         dir_(scratch_folder(output)),
         chunks_spill_(dir_),
         vertices_(dir_),
-        faces_(dir_) {
+        faces_(dir_),
+        shared_spill_(dir_) {
     if (options.format != MeshFormat::Ply && options.format != MeshFormat::Stl)
       throw InputError("streamed (--memory) output is binary PLY or STL");
     if (!(options.simplify > 0)) throw InputError("the simplification ratio must be in (0, 1]");
@@ -272,11 +277,15 @@ class TiledSimplification {
                 : 1.0;
     if (opt_.progress) opt_.progress->set_brick(0, 1);
     progress_begin(opt_.progress, Stage::SimplifySeams, cells);
+    plan_units(result);
     for (std::int64_t c = 0; c < cells; ++c) {
       const std::vector<std::int64_t>& cuts = cell_parts_[static_cast<std::size_t>(c)];
-      for (std::size_t i = 0; i <= cuts.size(); ++i)
+      for (std::size_t i = 0; i <= cuts.size(); ++i) {
         seam_cell(c, i == 0 ? std::numeric_limits<std::int64_t>::min() : cuts[i - 1],
                   i < cuts.size() ? cuts[i] : std::numeric_limits<std::int64_t>::max(), result);
+        retire(unit_);
+        ++unit_;
+      }
       progress_advance(opt_.progress);
     }
     result.seconds_seams = since(t0);
@@ -379,6 +388,10 @@ class TiledSimplification {
         double c = 0;
         for (std::uint32_t v : p.triangles[f]) c += grid_coord(p.positions[v], a) / 3;
         if (c >= 0.5 * static_cast<double>(cells.lo[a] + cells.hi[a])) o |= 1 << a;
+        // How far a face's centroid, which places it, lies from its vertices: how far from a
+        // vertex the seam pass may still meet it.
+        for (std::uint32_t v : p.triangles[f])
+          reach_ = std::max(reach_, std::abs(c - grid_coord(p.positions[v], a)));
       }
       octant[f] = static_cast<std::uint8_t>(o);
     }
@@ -672,11 +685,21 @@ class TiledSimplification {
     const std::size_t vbytes = normals_ ? 24 : 12;
     for (std::size_t v = 0; v < p.positions.size(); ++v) {
       if (shared[v]) {
-        auto [it, fresh] = shared_index_.try_emplace(p.keys[v], shared_.size());
-        if (fresh) shared_.push_back({p.positions[v], {0, 0, 0}});
+        auto [it, fresh] = shared_.try_emplace(p.keys[v]);
+        SharedVertex& sv = it->second;
+        if (fresh) {
+          // Held until the last unit that can meet it, then written at its rank. A vertex met
+          // again after that would be written twice: an error, never a mesh with a crack.
+          const std::int64_t last = last_unit(p.positions[v]);
+          if (last < unit_)
+            throw Error("the seams' pass met a vertex past the last cell that could hold it");
+          sv.rank = shared_count_++;
+          sv.position = p.positions[v];
+          retiring_[static_cast<std::size_t>(last)].push_back(p.keys[v]);
+        }
         if (normals_)
-          for (int k = 0; k < 3; ++k) shared_[it->second].normal[k] += normal[v][k];
-        index[v] = kShared | it->second;
+          for (int k = 0; k < 3; ++k) sv.normal[k] += normal[v][k];
+        index[v] = kShared | sv.rank;
       } else {
         index[v] = interior_++;
         records.resize(records.size() + vbytes);
@@ -732,7 +755,7 @@ class TiledSimplification {
 
   void assemble(const std::filesystem::path& output, TiledResult& result) {
     result.faces = result.triangles;
-    result.vertices = interior_ + shared_.size();
+    result.vertices = interior_ + shared_count_;
     AtomicFile file(output);
     if (opt_.format == MeshFormat::Stl) {
       if (result.triangles > std::numeric_limits<std::uint32_t>::max())
@@ -749,16 +772,8 @@ class TiledSimplification {
     const std::string header = ply_header(result.vertices, result.faces, normals_, false, index64);
     file.write(header.data(), header.size());
     copy(vertices_, vertices_.size(), file);
-    std::vector<char> records;
-    for (const SharedVertex& v : shared_) {
-      char buf[24];
-      char* r = buf;
-      for (float x : frame_position(opt_.frame, to_float(v.position))) r = put_le(r, x);
-      if (normals_)
-        for (float x : frame_normal(opt_.frame, unit(v.normal))) r = put_le(r, x);
-      records.insert(records.end(), buf, r);
-    }
-    if (!records.empty()) file.write(records.data(), records.size());
+    if (!shared_.empty()) throw Error("the seams' pass left vertices unwritten");
+    copy(shared_spill_, shared_count_ * (normals_ ? 24 : 12), file);
     // Faces, with the shared vertices' ranks turned into indices after the interior ones.
     constexpr std::uint64_t kShared = std::uint64_t{1} << 63;
     const std::size_t per_block = 1 << 15;  // triangles
@@ -783,9 +798,78 @@ class TiledSimplification {
     file.commit();
   }
 
+  // The seams' pass runs units (a seam cell, or one z-part of it) in order; a vertex on a unit's
+  // boundary, shared with units to come, is held until the last unit whose faces can use it.
+  // Held to the end, they grew with the volume: 2048x2048x512 at --memory 1GiB peaked at 1.46
+  // times the budget. The last such unit is the one holding the point `reach_` + 1 beyond the
+  // vertex along every axis: the seam cells and their parts are placed by face centroids, which
+  // lie at most `reach_` from their vertices along each axis, and run z-major.
+  void plan_units(const TiledResult& result) {
+    seam_cells_ = result.seam_cells;
+    unit_base_.assign(cell_parts_.size() + 1, 0);
+    for (std::size_t c = 0; c < cell_parts_.size(); ++c)
+      unit_base_[c + 1] = unit_base_[c] + static_cast<std::int64_t>(cell_parts_[c].size()) + 1;
+    retiring_.assign(static_cast<std::size_t>(unit_base_.back()), {});
+    for (int a = 0; a < 3; ++a) {
+      brick_bounds_[a].clear();
+      for (std::int64_t i = 0; i < plan_.count[a]; ++i) {
+        Index3 bi{0, 0, 0};
+        bi[a] = i;
+        const Box3 cells = plan_.cells((bi[2] * plan_.count[1] + bi[1]) * plan_.count[0] + bi[0]);
+        if (i == 0) brick_bounds_[a].push_back(cells.lo[a]);
+        brick_bounds_[a].push_back(cells.hi[a]);
+      }
+    }
+    unit_ = 0;
+  }
+
+  // The seam cell along axis a of grid coordinate x: its brick's half (lower or upper, as spill()
+  // splits by the brick's middle plane), grouped as for_each_octant() groups them.
+  std::int64_t seam_cell_along(int a, double x) const {
+    const std::vector<std::int64_t>& b = brick_bounds_[a];
+    const auto at = std::upper_bound(b.begin(), b.end() - 1, x);
+    const std::int64_t bi = std::max<std::int64_t>(0, (at - b.begin()) - 1);
+    const double mid = 0.5 * static_cast<double>(b[static_cast<std::size_t>(bi)] +
+                                                 b[static_cast<std::size_t>(bi) + 1]);
+    const std::int64_t h = 2 * bi + (x >= mid ? 1 : 0);
+    return std::min<std::int64_t>((h + 1) / (2 * seam_group_[a]), seam_cells_[a] - 1);
+  }
+
+  std::int64_t last_unit(const Vec3d& p) const {
+    const double far = reach_ + 1;
+    std::int64_t j[3];
+    for (int a = 0; a < 3; ++a) j[a] = seam_cell_along(a, grid_coord(p, a) + far);
+    const std::int64_t c = (j[2] * seam_cells_[1] + j[1]) * seam_cells_[0] + j[0];
+    const std::vector<std::int64_t>& cuts = cell_parts_[static_cast<std::size_t>(c)];
+    const double z = std::floor(grid_coord(p, 2) + far);
+    const auto part =
+        std::upper_bound(cuts.begin(), cuts.end(), z,
+                         [](double v, std::int64_t cut) { return v < static_cast<double>(cut); }) -
+        cuts.begin();
+    return unit_base_[static_cast<std::size_t>(c)] + part;
+  }
+
+  // Writes the vertices whose last unit was u at their ranks, and lets them go.
+  void retire(std::int64_t u) {
+    std::vector<std::uint64_t>& keys = retiring_[static_cast<std::size_t>(u)];
+    const std::size_t vbytes = normals_ ? 24 : 12;
+    for (const std::uint64_t key : keys) {
+      const auto it = shared_.find(key);
+      char buf[24];
+      char* r = buf;
+      for (float x : frame_position(opt_.frame, to_float(it->second.position))) r = put_le(r, x);
+      if (normals_)
+        for (float x : frame_normal(opt_.frame, unit(it->second.normal))) r = put_le(r, x);
+      shared_spill_.write_at(it->second.rank * vbytes, buf, vbytes);
+      shared_.erase(it);
+    }
+    keys = {};
+  }
+
   struct SharedVertex {
-    Vec3d position;
-    Vec3d normal;
+    std::uint64_t rank = 0;
+    Vec3d position{0, 0, 0};
+    Vec3d normal{0, 0, 0};
   };
 
   VolumeSource& src_;
@@ -805,8 +889,16 @@ class TiledSimplification {
   std::uint64_t spilled_faces_ = 0;
   double keep_ = 1;  // fraction of the spilled faces the seam pass keeps
   double planned_so_far_ = 0, kept_so_far_ = 0;  // the seam cells' shares and what they kept
-  std::unordered_map<std::uint64_t, std::uint64_t> shared_index_;
-  std::vector<SharedVertex> shared_;
+  // The seams' pass: vertices held by key, with their ranks among shared vertices.
+  std::unordered_map<std::uint64_t, SharedVertex> shared_;
+  std::uint64_t shared_count_ = 0;
+  ScratchFile shared_spill_;  // their records, by rank
+  double reach_ = 0;          // largest distance of a spilled face's centroid from a vertex of it
+  Index3 seam_cells_{1, 1, 1};
+  std::array<std::vector<std::int64_t>, 3> brick_bounds_;  // bricks' bounds along each axis
+  std::vector<std::int64_t> unit_base_;                    // first unit of each seam cell
+  std::vector<std::vector<std::uint64_t>> retiring_;       // keys by their last unit
+  std::int64_t unit_ = 0;                                  // the unit running
   std::uint64_t interior_ = 0;
   QualityAccumulator quality_;
 };
