@@ -1,5 +1,6 @@
 // The isotile command line as scripts use it: exit codes, one-line errors, stats JSON keys, and
 // that a failure never leaves a partial or clobbered output behind.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -336,31 +337,56 @@ TEST_F(Cli, BadMemoryBudgetsAreOneLineErrors) {
 
 namespace {
 
-// Ctrl-C in the middle of a long bricked run leaves neither the output nor a temporary behind.
-TEST_F(Cli, InterruptedBrickedRunLeavesNoFiles) {
+// Starts a long bricked run in the work folder and returns once its second pass (the one that
+// writes the mesh) has begun; -1 where it never did.
+pid_t start_bricked_run_and_wait_for_its_writing(const fs::path& dir) {
   const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
+  if (pid < 0) return -1;
   if (pid == 0) {
-    if (::chdir(dir_.c_str()) != 0) ::_exit(127);
+    if (::chdir(dir.c_str()) != 0) ::_exit(127);
     std::freopen("err.txt", "w", stderr);
     ::execl(ISOTILE_CLI, ISOTILE_CLI, "extract", "field:gyroid:400", "--memory", "1MiB", "-o",
             "g.ply", static_cast<char*>(nullptr));
     ::_exit(127);
   }
-  // Wait until the second pass has begun writing (its temporary exists), then interrupt.
-  bool writing = false;
-  for (int i = 0; i < 600 && !writing; ++i) {
+  // The extract pass's progress lines ("isotile: extract: 2/N bricks") follow the count's.
+  for (int i = 0; i < 600; ++i) {
     ::usleep(50000);
-    for (const auto& e : fs::directory_iterator(dir_))
-      if (e.path().filename().string().find(".g.ply.tmp") == 0) writing = true;
+    if (slurp(dir / "err.txt").find("isotile: extract: ") != std::string::npos) return pid;
   }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, nullptr, 0);
+  return -1;
+}
+
+// Ctrl-C in the middle of a long bricked run leaves neither the output nor a temporary behind.
+TEST_F(Cli, InterruptedBrickedRunLeavesNoFiles) {
+  const pid_t pid = start_bricked_run_and_wait_for_its_writing(dir_);
+  ASSERT_GT(pid, 0) << "the extract pass never began: " << slurp(dir_ / "err.txt");
   ::kill(pid, SIGINT);
   int status = 0;
   ASSERT_EQ(::waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(writing) << "no temporary output appeared";
   // Ctrl-C cancels through the library's Progress: "isotile: cancelled", exit status 130.
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 130) << "the run was not cancelled";
   EXPECT_NE(slurp(dir_ / "err.txt").find("isotile: cancelled\n"), std::string::npos);
+  EXPECT_EQ(stray_files({"err.txt"}), std::vector<std::string>{});
+}
+
+// A run killed outright (SIGKILL: the OOM killer, a batch system's hard limit), which no handler
+// sees, leaves nothing either: the mesh is written to a file without a name until it is complete.
+// Before, a hidden ".g.ply.tmp-PID-N.ply" of the mesh's size stayed beside the output.
+TEST_F(Cli, AKilledBrickedRunLeavesNoFiles) {
+  if (const int fd = ::open(dir_.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600); fd >= 0)
+    ::close(fd);
+  else
+    GTEST_SKIP() << dir_ << " cannot hold files without a name (no O_TMPFILE): a killed run "
+                 << "leaves its named temporary there";
+  const pid_t pid = start_bricked_run_and_wait_for_its_writing(dir_);
+  ASSERT_GT(pid, 0) << "the extract pass never began: " << slurp(dir_ / "err.txt");
+  ::kill(pid, SIGKILL);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
   EXPECT_EQ(stray_files({"err.txt"}), std::vector<std::string>{});
 }
 

@@ -1186,6 +1186,7 @@ TEST(AtomicFile, UncommittedLeavesNothing) {
   {
     AtomicFile f(target);
     f.write("new data", 8);
+    (void)f.temp_path();                  // named, where it had no name yet
     EXPECT_EQ(dir.entries().size(), 2u);  // the target and the temporary beside it
   }
   EXPECT_EQ(read_bytes(target), "old");
@@ -1289,12 +1290,52 @@ TEST(AtomicFile, AFifoIsWrittenInPlace) {
   EXPECT_EQ(fs::status(fifo).type(), fs::file_type::fifo);
 }
 
+// Whether files without a name can be made in `dir` (O_TMPFILE: ext4, XFS, Btrfs, tmpfs; not
+// every network or overlay file system).
+bool takes_unnamed_files(const std::filesystem::path& dir) {
+  const int fd = ::open(dir.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
+  if (fd < 0) return false;
+  ::close(fd);
+  return true;
+}
+
+// Until commit() the data has no name in the folder: a process killed outright (SIGKILL) leaves
+// nothing. It gets one when asked for it (MPI ranks open it by name), and commit() gives it the
+// target's.
+TEST(AtomicFile, AnUncommittedFileHasNoNameUntilAskedForOne) {
+  TempDir dir;
+  if (!takes_unnamed_files(dir.path()))
+    GTEST_SKIP() << dir.path() << " cannot hold files without a name (no O_TMPFILE)";
+  AtomicFile a(dir / "a.bin");
+  a.write("abc", 3);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{});
+  const std::filesystem::path named = a.temp_path();
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{named.filename().string()});
+  a.write("d", 1);
+  a.commit();
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"a.bin"});
+  std::ifstream in(dir / "a.bin", std::ios::binary);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), "abcd");
+  // Never named: committed straight to the target; discarded without a trace.
+  {
+    AtomicFile b(dir / "b.bin");
+    b.write("b", 1);
+    b.commit();
+    AtomicFile c(dir / "c.bin");
+    c.write("c", 1);
+  }
+  EXPECT_EQ(dir.entries(), (std::vector<std::string>{"a.bin", "b.bin"}));
+}
+
 TEST(AtomicFile, SignalCleanupRemovesTemporaries) {
   TempDir dir;
   {
     AtomicFile a(dir / "a.bin");
     AtomicFile b(dir / "b.bin");
     a.write("a", 1);
+    // Named, as MPI ranks' shared temporaries are (unnamed ones need no cleanup).
+    (void)a.temp_path();
+    (void)b.temp_path();
     EXPECT_EQ(dir.entries().size(), 2u);
     remove_pending_temporaries();
     EXPECT_TRUE(dir.entries().empty());

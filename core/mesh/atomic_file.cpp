@@ -246,11 +246,28 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   // rename is held: HeldCommits) tells its format as by the target's name.
   std::string extension = final_.extension().string();
   if (extension.size() > 16) extension.clear();
+  const std::filesystem::path dir = final_.parent_path().empty() ? "." : final_.parent_path();
+  temp_prefix_ = (dir / prefix).string();
+  temp_extension_ = extension;
+  // Without a name first: a process killed before commit() (SIGKILL, the OOM killer) leaves
+  // nothing, where a named temporary of the mesh's size stayed, hidden, beside the output. Its
+  // name comes through /proc/self/fd at commit(), so it is used only where that is there.
+  const int fd = ::open(dir.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0666);
+  if (fd >= 0) {
+    if (::access(("/proc/self/fd/" + std::to_string(fd)).c_str(), F_OK) == 0 &&
+        (file_ = ::fdopen(fd, "wb")) != nullptr) {
+      anonymous_ = true;
+      buffer_.reset(new (std::nothrow) char[kBufferSize]);
+      if (buffer_) std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferSize);
+    } else {
+      ::close(fd);
+    }
+  }
   // "x" makes creation exclusive; a leftover from a killed process with a reused pid must not be
   // shared, so try the next number instead.
-  for (int attempt = 0; attempt < 100; ++attempt) {
+  for (int attempt = 0; !anonymous_ && attempt < 100; ++attempt) {
     const unsigned long n = g_counter.fetch_add(1, std::memory_order_relaxed);
-    temp_ = final_.parent_path() / (prefix + std::to_string(n) + extension);
+    temp_ = temp_prefix_ + std::to_string(n) + temp_extension_;
     file_ = std::fopen(temp_.c_str(), "wbx");
     if (file_ || errno != EEXIST) break;
   }
@@ -266,11 +283,35 @@ AtomicFile::AtomicFile(const std::filesystem::path& target) : target_(target) {
   struct stat old {};
   if (t.kind == OutputTarget::Kind::RegularFile && ::stat(final_.c_str(), &old) == 0)
     (void)::fchmod(fileno(file_), (old.st_mode & 01777) | S_IRUSR | S_IWUSR);
+  if (anonymous_) return;
   slot_ = claim_slot(temp_.string());
   if (slot_ >= 0) {
     g_buffers[slot_] = static_cast<char*>(std::malloc(kBufferSize));
     if (g_buffers[slot_]) std::setvbuf(file_, g_buffers[slot_], _IOFBF, kBufferSize);
   }
+}
+
+void AtomicFile::name_temporary() {
+  if (!anonymous_) return;
+  const std::string self = "/proc/self/fd/" + std::to_string(::fileno(file_));
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    const unsigned long n = g_counter.fetch_add(1, std::memory_order_relaxed);
+    const std::string name = temp_prefix_ + std::to_string(n) + temp_extension_;
+    if (::linkat(AT_FDCWD, self.c_str(), AT_FDCWD, name.c_str(), AT_SYMLINK_FOLLOW) == 0) {
+      temp_ = name;
+      anonymous_ = false;
+      slot_ = claim_slot(name);
+      return;
+    }
+    if (errno != EEXIST) break;
+  }
+  const int err = errno;
+  throw IoError("cannot write " + target_.string() + ": " + describe(err));
+}
+
+const std::filesystem::path& AtomicFile::temp_path() {
+  name_temporary();
+  return temp_;
 }
 
 AtomicFile::~AtomicFile() {
@@ -370,6 +411,12 @@ void AtomicFile::commit() {
   if (std::fflush(file_) != 0) fail(errno);
   // A device or pipe has nothing to sync (fsync fails with EINVAL there).
   if (!in_place_ && ::fsync(::fileno(file_)) != 0) fail(errno);
+  try {
+    name_temporary();
+  } catch (const IoError&) {
+    discard();
+    throw;
+  }
   std::FILE* f = file_;
   file_ = nullptr;
   if (std::fclose(f) != 0) fail(errno);

@@ -1,8 +1,11 @@
 // A file that appears under its final name only when complete.
 //
-// Data goes to "<dir>/.<name>.tmp-<pid>-<n><ext>" (<ext> the name's extension); commit() flushes,
-// fsyncs and renames it over the target. Destroying an uncommitted AtomicFile removes the temporary
-// file. The names of all open temporaries are also kept in a process-wide list so that
+// Data goes to a file without a name in the target's folder (O_TMPFILE), which vanishes however
+// the process ends, SIGKILL and the OOM killer included; commit() flushes and fsyncs it, links it
+// as "<dir>/.<name>.tmp-<pid>-<n><ext>" (<ext> the name's extension) and renames that over the
+// target. Where the file system has no O_TMPFILE (or /proc is missing), the data goes to that
+// named temporary from the start. Destroying an uncommitted AtomicFile removes the temporary. The
+// names of all named temporaries are also kept in a process-wide list so that
 // remove_pending_temporaries() (called from the CLI's SIGINT/SIGTERM handler; async-signal-safe)
 // can delete them on Ctrl-C.
 //
@@ -72,7 +75,8 @@ class AtomicFile {
 
   std::FILE* stream() { return file_; }
   // Where the data goes until commit(): other writers of the same file (MPI ranks) open it there.
-  const std::filesystem::path& temp_path() const { return temp_; }
+  // Gives a temporary without a name its name first (a process killed from then on leaves it).
+  const std::filesystem::path& temp_path();
   // Writes n bytes; throws IoError on a short write (e.g. disk full).
   void write(const void* data, std::size_t n);
   // Writes n bytes at byte `offset`, wherever the stream is (a file written out of order, e.g.
@@ -87,11 +91,16 @@ class AtomicFile {
 
  private:
   void discard() noexcept;
+  void name_temporary();
   std::filesystem::path target_;
   std::filesystem::path final_;  // target_ with its symbolic links followed
   bool in_place_ = false;
-  std::unique_ptr<char[]> buffer_;  // in place: stdio's buffer (a temporary's sits with its slot)
+  // stdio's buffer in place and for a temporary without a name (a named one's sits with its slot)
+  std::unique_ptr<char[]> buffer_;
   std::filesystem::path temp_;
+  // The temporary's name but for its number: "<dir>/.<name>.tmp-<pid>-" and "<ext>".
+  std::string temp_prefix_, temp_extension_;
+  bool anonymous_ = false;  // an O_TMPFILE not linked yet
   std::FILE* file_ = nullptr;
   int slot_ = -1;
 };
