@@ -123,14 +123,33 @@ std::string bytes_text(std::uint64_t bytes) {
   return text;
 }
 
+// ZFS's cache (the ARC) gives memory back under pressure, down to its minimum, but MemAvailable
+// does not count it: on a ZFS machine whose ARC holds half the memory, runs that fit would be
+// refused. Its shrinkable part, from the kstats of the module, where it is loaded.
+std::uint64_t zfs_arc_shrinkable() {
+  std::ifstream in("/proc/spl/kstat/zfs/arcstats");
+  std::string name;
+  std::uint64_t type = 0, value = 0, size = 0, minimum = 0;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream f(line);
+    if (!(f >> name >> type >> value)) continue;
+    if (name == "size") size = value;
+    if (name == "c_min") minimum = value;
+  }
+  return size > minimum ? size - minimum : 0;
+}
+
 std::optional<AvailableMemory> available_memory() {
   const std::optional<std::uint64_t> ram = proc_kb("/proc/meminfo", "MemAvailable");
   if (!ram) return std::nullopt;
+  const std::uint64_t arc = zfs_arc_shrinkable();
   const std::uint64_t swap = proc_kb("/proc/meminfo", "SwapFree").value_or(0);
   AvailableMemory m;
-  m.without_swap = *ram;
-  m.most = *ram + swap;
+  m.without_swap = *ram + arc;
+  m.most = m.without_swap + swap;
   m.said_by = "MemAvailable " + bytes_text(*ram) +
+              (arc > 0 ? ", ZFS's cache " + bytes_text(arc) : std::string()) +
               (swap > 0 ? ", free swap " + bytes_text(swap) : std::string(", no free swap"));
   const std::uint64_t group = cgroup_left();
   if (group < m.most) {

@@ -16,7 +16,8 @@
 namespace isotile {
 
 struct AvailableMemory {
-  // What the process can take without swapping: the kernel's MemAvailable, lowered where a
+  // What the process can take without swapping: the kernel's MemAvailable (and what ZFS's cache
+  // would give back, which it does not count), lowered where a
   // control group's limit (memory.max, memory.limit_in_bytes) or an address-space limit
   // (ulimit -v) leaves less.
   std::uint64_t without_swap = 0;
