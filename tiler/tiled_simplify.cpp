@@ -4,7 +4,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <cerrno>
 #include <chrono>
@@ -277,7 +276,7 @@ class TiledSimplification {
                 : 1.0;
     if (opt_.progress) opt_.progress->set_brick(0, 1);
     progress_begin(opt_.progress, Stage::SimplifySeams, cells);
-    plan_units(result);
+    plan_units();
     for (std::int64_t c = 0; c < cells; ++c) {
       const std::vector<std::int64_t>& cuts = cell_parts_[static_cast<std::size_t>(c)];
       for (std::size_t i = 0; i <= cuts.size(); ++i) {
@@ -442,7 +441,7 @@ class TiledSimplification {
   // faces the bricks left: fewer locked cell boundaries, fewer faces held back by them.
   void plan_seams(TiledResult& result) {
     Index3 k{1, 1, 1};
-    auto along = [&](int a, std::int64_t g) { return 2 * plan_.count[a] / (2 * g) + 1; };
+    const auto along = [&](int a, std::int64_t g) { return seam_cells_along(a, g); };
     auto largest = [&](const Index3& g) {
       std::unordered_map<std::int64_t, std::uint64_t> faces;
       for_each_octant(g, [&](std::int64_t cell, std::size_t slot) {
@@ -560,18 +559,27 @@ class TiledSimplification {
     result.seam_parts = parts;
   }
 
+  // Seam cells along axis a when a cell groups g bricks, and the one holding half-brick h (the
+  // lower half of brick h / 2 when h is even).
+  std::int64_t seam_cells_along(int a, std::int64_t g) const {
+    return 2 * plan_.count[a] / (2 * g) + 1;
+  }
+  static std::int64_t seam_cell_of_half(std::int64_t h, std::int64_t g) {
+    return (h + 1) / (2 * g);
+  }
+
   // Calls f(cell, slot) for every octant slot (brick * 8 + octant) of the plan, with the seam
   // cell it falls in when cells group `g` bricks per axis.
   template <class F>
   void for_each_octant(const Index3& g, F&& f) const {
     Index3 cells;
-    for (int a = 0; a < 3; ++a) cells[a] = 2 * plan_.count[a] / (2 * g[a]) + 1;
+    for (int a = 0; a < 3; ++a) cells[a] = seam_cells_along(a, g[a]);
     for (std::int64_t b = 0; b < plan_.total(); ++b) {
       const std::int64_t bi[3] = {b % plan_.count[0], b / plan_.count[0] % plan_.count[1],
                                   b / plan_.count[0] / plan_.count[1]};
       for (int o = 0; o < 8; ++o) {
         std::int64_t j[3];
-        for (int a = 0; a < 3; ++a) j[a] = (2 * bi[a] + ((o >> a) & 1) + 1) / (2 * g[a]);
+        for (int a = 0; a < 3; ++a) j[a] = seam_cell_of_half(2 * bi[a] + ((o >> a) & 1), g[a]);
         f((j[2] * cells[1] + j[1]) * cells[0] + j[0], static_cast<std::size_t>(b) * 8 + o);
       }
     }
@@ -804,42 +812,32 @@ class TiledSimplification {
   // times the budget. The last such unit is the one holding the point `reach_` + 1 beyond the
   // vertex along every axis: the seam cells and their parts are placed by face centroids, which
   // lie at most `reach_` from their vertices along each axis, and run z-major.
-  void plan_units(const TiledResult& result) {
-    seam_cells_ = result.seam_cells;
+  void plan_units() {
     unit_base_.assign(cell_parts_.size() + 1, 0);
     for (std::size_t c = 0; c < cell_parts_.size(); ++c)
       unit_base_[c + 1] = unit_base_[c] + static_cast<std::int64_t>(cell_parts_[c].size()) + 1;
     retiring_.assign(static_cast<std::size_t>(unit_base_.back()), {});
-    for (int a = 0; a < 3; ++a) {
-      brick_bounds_[a].clear();
-      for (std::int64_t i = 0; i < plan_.count[a]; ++i) {
-        Index3 bi{0, 0, 0};
-        bi[a] = i;
-        const Box3 cells = plan_.cells((bi[2] * plan_.count[1] + bi[1]) * plan_.count[0] + bi[0]);
-        if (i == 0) brick_bounds_[a].push_back(cells.lo[a]);
-        brick_bounds_[a].push_back(cells.hi[a]);
-      }
-    }
     unit_ = 0;
   }
 
   // The seam cell along axis a of grid coordinate x: its brick's half (lower or upper, as spill()
   // splits by the brick's middle plane), grouped as for_each_octant() groups them.
   std::int64_t seam_cell_along(int a, double x) const {
-    const std::vector<std::int64_t>& b = brick_bounds_[a];
-    const auto at = std::upper_bound(b.begin(), b.end() - 1, x);
-    const std::int64_t bi = std::max<std::int64_t>(0, (at - b.begin()) - 1);
-    const double mid = 0.5 * static_cast<double>(b[static_cast<std::size_t>(bi)] +
-                                                 b[static_cast<std::size_t>(bi) + 1]);
-    const std::int64_t h = 2 * bi + (x >= mid ? 1 : 0);
-    return std::min<std::int64_t>((h + 1) / (2 * seam_group_[a]), seam_cells_[a] - 1);
+    const std::int64_t bi =
+        plan_.owner(a, std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor(x))));
+    const std::int64_t lo = bi * plan_.brick[a];
+    const double mid = 0.5 * static_cast<double>(lo + std::min(lo + plan_.brick[a], n_[a] - 1));
+    return std::min(seam_cell_of_half(2 * bi + (x >= mid ? 1 : 0), seam_group_[a]),
+                    seam_cells_along(a, seam_group_[a]) - 1);
   }
 
   std::int64_t last_unit(const Vec3d& p) const {
     const double far = reach_ + 1;
     std::int64_t j[3];
     for (int a = 0; a < 3; ++a) j[a] = seam_cell_along(a, grid_coord(p, a) + far);
-    const std::int64_t c = (j[2] * seam_cells_[1] + j[1]) * seam_cells_[0] + j[0];
+    const std::int64_t c =
+        (j[2] * seam_cells_along(1, seam_group_[1]) + j[1]) * seam_cells_along(0, seam_group_[0]) +
+        j[0];
     const std::vector<std::int64_t>& cuts = cell_parts_[static_cast<std::size_t>(c)];
     const double z = std::floor(grid_coord(p, 2) + far);
     const auto part =
@@ -894,11 +892,9 @@ class TiledSimplification {
   std::uint64_t shared_count_ = 0;
   ScratchFile shared_spill_;  // their records, by rank
   double reach_ = 0;          // largest distance of a spilled face's centroid from a vertex of it
-  Index3 seam_cells_{1, 1, 1};
-  std::array<std::vector<std::int64_t>, 3> brick_bounds_;  // bricks' bounds along each axis
-  std::vector<std::int64_t> unit_base_;                    // first unit of each seam cell
-  std::vector<std::vector<std::uint64_t>> retiring_;       // keys by their last unit
-  std::int64_t unit_ = 0;                                  // the unit running
+  std::vector<std::int64_t> unit_base_;               // first unit of each seam cell
+  std::vector<std::vector<std::uint64_t>> retiring_;  // keys by their last unit
+  std::int64_t unit_ = 0;                             // the unit running
   std::uint64_t interior_ = 0;
   QualityAccumulator quality_;
 };
