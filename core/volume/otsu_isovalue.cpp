@@ -35,6 +35,20 @@ void add(ValueHistogram& h, double v, std::uint64_t n = 1) {
   h.count[b] += n;
 }
 
+// samples, min and max from the bins (the lowest bin's lowest sample, the highest's highest).
+void finish(ValueHistogram& h) {
+  h.samples = 0;
+  int first = -1, last = -1;
+  for (int b = 0; b < ValueHistogram::kBins; ++b) {
+    if (h.count[b] == 0) continue;
+    h.samples += h.count[b];
+    if (first < 0) first = b;
+    last = b;
+  }
+  h.min = first < 0 ? 0.0 : h.lo[first];
+  h.max = last < 0 ? 0.0 : h.hi[last];
+}
+
 // 8- and 16-bit integers: a count per value (256 or 65536 of them), then each value's count into
 // its bin; the same histogram as sample by sample, at a fraction of the work per sample (one
 // increment instead of a conversion to float, a bin and a minimum and maximum). Threads count
@@ -59,20 +73,7 @@ void add_small_integers(const VolumeView& view, ValueHistogram& out) {
     for (std::size_t v = 0; v < kValues; ++v) counts[v] += c[v];
   for (std::size_t v = 0; v < kValues; ++v)
     if (counts[v] > 0) add(out, static_cast<double>(static_cast<T>(static_cast<U>(v))), counts[v]);
-}
-
-// samples, min and max from the bins (the lowest bin's lowest sample, the highest's highest).
-void finish(ValueHistogram& h) {
-  h.samples = 0;
-  int first = -1, last = -1;
-  for (int b = 0; b < ValueHistogram::kBins; ++b) {
-    if (h.count[b] == 0) continue;
-    h.samples += h.count[b];
-    if (first < 0) first = b;
-    last = b;
-  }
-  h.min = first < 0 ? 0.0 : h.lo[first];
-  h.max = last < 0 ? 0.0 : h.hi[last];
+  finish(out);
 }
 
 }  // namespace
@@ -94,32 +95,26 @@ void merge(ValueHistogram& into, const ValueHistogram& other) {
 }
 
 ValueHistogram value_histogram(const VolumeView& view) {
-  // One histogram per thread (1.5 MiB each), merged at the end: counts, minima and maxima do
-  // not depend on which thread saw which slab.
-  tbb::enumerable_thread_specific<ValueHistogram> local;
   ValueHistogram out;
-  bool counted = false;
+  // Otherwise one histogram per thread (1.5 MiB each), merged at the end: counts, minima and
+  // maxima do not depend on which thread saw which slab.
+  tbb::enumerable_thread_specific<ValueHistogram> local;
   visit_scalar(view.type, [&](auto tag) {
     using T = decltype(tag);
     if constexpr (std::is_integral_v<T> && sizeof(T) <= 2) {
       add_small_integers<T>(view, out);
-      counted = true;
-      return;
+    } else {
+      const T* data = view.typed<T>();
+      tbb::parallel_for(std::int64_t{0}, view.dims[2], [&](std::int64_t k) {
+        ValueHistogram& h = local.local();
+        for (std::int64_t j = 0; j < view.dims[1]; ++j) {
+          const T* row = data + view.offset(0, j, k);
+          for (std::int64_t i = 0; i < view.dims[0]; ++i)
+            add(h, static_cast<double>(row[i * view.strides[0]]));
+        }
+      });
     }
-    const T* data = view.typed<T>();
-    tbb::parallel_for(std::int64_t{0}, view.dims[2], [&](std::int64_t k) {
-      ValueHistogram& h = local.local();
-      for (std::int64_t j = 0; j < view.dims[1]; ++j) {
-        const T* row = data + view.offset(0, j, k);
-        for (std::int64_t i = 0; i < view.dims[0]; ++i)
-          add(h, static_cast<double>(row[i * view.strides[0]]));
-      }
-    });
   });
-  if (counted) {
-    finish(out);
-    return out;
-  }
   for (ValueHistogram& h : local) {
     finish(h);
     merge(out, h);
