@@ -139,11 +139,12 @@ void BrickExtraction::scan(TiledResult& result) {
       plan_.total(),
       [&](std::int64_t b) {
         const auto i = static_cast<std::size_t>(b);
-        // The part's own face records beyond the 16 bytes a face that estimate() counts for
-        // them (a PLY face's 13, or 25 with 64-bit indices): an STL triangle takes 50, a DC
-        // quad two of them. Uncounted, 2048x2048x512 to STL at --memory 256MiB peaked at up to
-        // 1.42 times the budget.
-        double extra_per_face = std::max(0.0, static_cast<double>(face_bytes_) - 16.0);
+        // The part's own face records beyond what estimate() counts for them (a PLY face's 13
+        // bytes; 25 with 64-bit indices): an STL triangle takes 50, a DC quad two of them.
+        // Uncounted, 2048x2048x512 to STL at --memory 256MiB peaked at up to 1.42 times the
+        // budget.
+        double extra_per_face =
+            std::max(0.0, static_cast<double>(face_bytes_) - BrickReader::kFaceRecordBytes);
         // Records of the part before, still being written while this one is extracted.
         if (overlap_ && brick_faces_[i] > 0)
           extra_per_face += static_cast<double>(face_bytes_) +

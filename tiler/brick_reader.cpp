@@ -119,7 +119,7 @@ std::uint64_t BrickReader::estimate(const Box3& cells, std::uint64_t vertices, s
   const double samples = static_cast<double>(r.extent(0)) * static_cast<double>(r.extent(1)) *
                          static_cast<double>(r.extent(2));
   const double per_vertex = (ex_.normals ? 24.0 : 12.0) + 8 + 8 + (ex_.normals ? 24 : 12);
-  const double per_face = 16.0 + 4 * 8 + extra_per_face;
+  const double per_face = kFaceRecordBytes + 4 * 8 + extra_per_face;
   const double sample_buffers = read_ahead_ ? 2 : 1;
   double state = samples * state_bytes_per_sample();
   if (ex_.method == Method::Macet) {

@@ -53,6 +53,9 @@ class BrickReader {
   // The same in two steps: the samples counting needs, then the count from a view of them.
   Box3 count_box(const Box3& cells) const;
   BrickCounts count(const Box3& cells, const VolumeView& view) const;
+  // A face's record as estimate() counts it: a PLY triangle's 13 bytes and their runs. A writer
+  // whose records are larger adds the difference to `extra_per_face`.
+  static constexpr double kFaceRecordBytes = 16;
   // Working set of one brick: samples with halo and their bits, the mesh, keys, final indices,
   // the records being written, and `extra_per_face` bytes for each face (a later stage's).
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
