@@ -5,7 +5,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +15,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "cli_support.h"
 #include "core/extract/dual_contouring.h"
@@ -239,6 +242,41 @@ TEST_F(Cli, InfoDescribesTheVolume) {
   EXPECT_EQ(total, 21u * 21u * 21u);
   EXPECT_LT(j["min"].get<double>(), 0.5);
   EXPECT_GT(j["max"].get<double>(), 0.5);
+}
+
+// The 16 bins: where each of Otsu's bins holds one value (an 8-bit volume) they are its sums,
+// without another pass; otherwise a pass counts them (16-bit values above 256 share bins). Both
+// must be what counting every sample gives: floor((v - min) / ((max - min) / 16)), the top value
+// in the last bin.
+TEST_F(Cli, InfoBinsCountEverySample) {
+  const auto check = [&](auto type, const std::string& name, int span, int offset) {
+    using T = decltype(type);
+    std::vector<T> v(37 * 29 * 23);
+    std::uint64_t state = 7;
+    for (T& x : v) {
+      state = state * 6364136223846793005u + 1442695040888963407u;
+      x = static_cast<T>(static_cast<int>((state >> 40) % static_cast<std::uint64_t>(span)) +
+                         offset);
+    }
+    {
+      std::ofstream f(dir_ / name, std::ios::binary);
+      f.write(reinterpret_cast<const char*>(v.data()),
+              static_cast<std::streamsize>(v.size() * sizeof(v[0])));
+    }
+    const auto [mn, mx] = std::minmax_element(v.begin(), v.end());
+    const double lo = *mn, width = (static_cast<double>(*mx) - lo) / 16;
+    std::vector<std::uint64_t> expected(16, 0);
+    for (const T x : v)
+      ++expected[static_cast<std::size_t>(std::clamp(static_cast<int>((x - lo) / width), 0, 15))];
+    const Result r = run("info " + name + " --json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    std::vector<std::uint64_t> got;
+    for (const auto& bin : j["histogram"]) got.push_back(bin["count"].get<std::uint64_t>());
+    EXPECT_EQ(got, expected) << name;
+  };
+  check(std::uint8_t{}, "r_37x29x23_uint8.raw", 251, 3);
+  check(std::int16_t{}, "r_37x29x23_int16.raw", 5003, -1700);
 }
 
 TEST_F(Cli, QualityMeasuresAWrittenMesh) {

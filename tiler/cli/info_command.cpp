@@ -86,13 +86,18 @@ int run_info(const InfoArgs& args) {
   const bool has_header =
       kind != InputKind::Raw && kind != InputKind::Field && kind != InputKind::Vdb;
   const VolumeHeader header = has_header ? read_volume_header(in.input, raw) : VolumeHeader{};
-  // A volume too large to hold here is read slab by slab, twice (its range, then its bins),
+  // A volume too large to hold here is read slab by slab (twice where Otsu's bins do not give the
+  // 16 bins: its range, then its bins),
   // within a quarter of what the process can have; in core it would be killed part-way through
   // the read, or refused by its allocation.
   Volume volume;
   std::unique_ptr<VolumeSource> source;
   std::uint64_t slab_budget = 0;
-  if (const std::optional<std::uint64_t> need = in_core_bytes(in.input, raw, {}))
+  // The header read above tells the size where there is one.
+  const std::optional<std::uint64_t> need =
+      has_header ? std::optional(checked_volume_bytes(header.type, header.dims))
+                 : in_core_bytes(in.input, raw, {});
+  if (need)
     if (const std::optional<AvailableMemory> available = available_memory();
         available && *need > available->without_swap) {
       slab_budget = std::max<std::uint64_t>(available->without_swap / 4, std::uint64_t{1} << 20);
@@ -119,25 +124,34 @@ int run_info(const InfoArgs& args) {
   constexpr int kBins = 16;
   std::array<std::uint64_t, kBins> hist{};
   const double width = hi > lo ? (hi - lo) / kBins : 1.0;
-  // A cheap histogram: one pass, per-plane counts merged in plane order.
+  // Where each of Otsu's bins holds one value (8-bit volumes, and others of values below 256 in
+  // magnitude or few enough), the 16 bins are its sums; otherwise one more pass, per-plane counts
+  // merged in plane order.
+  bool one_value_a_bin = true;
+  for (int b = 0; b < ValueHistogram::kBins && one_value_a_bin; ++b)
+    one_value_a_bin = fine.count[b] == 0 || fine.lo[b] == fine.hi[b];
+  const auto bin_of = [&](double value) {
+    return std::clamp(static_cast<int>((value - lo) / width), 0, kBins - 1);
+  };
   const auto add_bins = [&](const VolumeView& part) {
     std::vector<std::array<std::uint64_t, kBins>> planes(part.dims[2]);
     tbb::parallel_for(std::int64_t{0}, part.dims[2], [&](std::int64_t k) {
       auto& h = planes[k];
       h.fill(0);
       for (std::int64_t j = 0; j < part.dims[1]; ++j)
-        for (std::int64_t i = 0; i < part.dims[0]; ++i) {
-          const int b = static_cast<int>((part.value(i, j, k) - lo) / width);
-          ++h[std::clamp(b, 0, kBins - 1)];
-        }
+        for (std::int64_t i = 0; i < part.dims[0]; ++i) ++h[bin_of(part.value(i, j, k))];
     });
     for (const auto& h : planes)
       for (int b = 0; b < kBins; ++b) hist[b] += h[b];
   };
-  if (source)
+  if (one_value_a_bin) {
+    for (int b = 0; b < ValueHistogram::kBins; ++b)
+      if (fine.count[b] > 0) hist[bin_of(fine.lo[b])] += fine.count[b];
+  } else if (source) {
     for_each_slab(*source, slab_budget, nullptr, add_bins);
-  else
+  } else {
     add_bins(v);
+  }
   const WorldFrame world = v.world ? *v.world : WorldFrame{v.origin, kIdentity3};
 
   json j;
