@@ -141,6 +141,13 @@ TEST_F(CliLimits, InfoOnAVolumeLargerThanMemoryReadsItSlabBySlab) {
     EXPECT_NE(whole.out.find("134217728"), std::string::npos) << whole.out;
   }
   std::filesystem::remove(raw);
+  // Float samples, whose isovalue histogram holds many values a bin: a second pass counts the 16
+  // bins (512 MiB of a field under 488 MiB of address space).
+  const CliResult whole = run("info field:gyroid:512 --json");
+  ASSERT_EQ(whole.code, 0) << whole.err;
+  const CliResult slabs = run("info field:gyroid:512 --json", "ulimit -v 500000 &&");
+  ASSERT_EQ(slabs.code, 0) << slabs.err;
+  EXPECT_EQ(slabs.out, whole.out);
 }
 
 }  // namespace
