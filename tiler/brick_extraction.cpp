@@ -150,10 +150,24 @@ void BrickExtraction::scan(TiledResult& result) {
           extra_per_face += static_cast<double>(face_bytes_) +
                             static_cast<double>(vertex_bytes_ * brick_vertices_[i]) /
                                 static_cast<double>(brick_faces_[i]);
-        return reader_.slice(plan_.cells(b), brick_vertices_[i], brick_faces_[i], opt_.memory,
+        return reader_.slice(plan_.cells(b), brick_vertices_[i], plane_faces(b), opt_.memory,
                              extra_per_face);
       },
       opt_.memory, opt_.warn);
+}
+
+std::vector<std::uint64_t> BrickExtraction::plane_faces(std::int64_t b) const {
+  const Box3 cells = plan_.cells(b);
+  const Box3 rows = owned_samples(cells, n_);
+  const std::int64_t column = plan_.owner(0, cells.lo[0]);
+  std::vector<std::uint64_t> planes(static_cast<std::size_t>(cells.extent(2)), 0);
+  for (std::int64_t z = rows.lo[2]; z < rows.hi[2]; ++z) {
+    // The volume's last sample plane, which the last brick along z owns, has no cells above.
+    const std::int64_t plane = std::min(z, cells.hi[2] - 1) - cells.lo[2];
+    for (std::int64_t y = rows.lo[1]; y < rows.hi[1]; ++y)
+      planes[static_cast<std::size_t>(plane)] += fseg_->count(fseg_->index(y, z, column));
+  }
+  return planes;
 }
 
 std::string BrickExtraction::header() const {
@@ -176,12 +190,7 @@ std::vector<Box3> BrickExtraction::parts(std::int64_t b, TiledResult& result) {
   const BrickReader::Slicing& cut = cuts_[static_cast<std::size_t>(b)];
   const std::int64_t slices = cut.count;
   std::vector<Box3> out;
-  for (std::int64_t s = 0; s < slices; ++s) {
-    Box3 part = cells;
-    part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
-    part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
-    out.push_back(part);
-  }
+  for (std::int64_t s = 0; s < slices; ++s) out.push_back(z_slice(cells, s, slices));
   result.bricks_extracted += slices;
   result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
   return out;

@@ -125,6 +125,8 @@ class BrickExtraction {
  private:
   std::uint64_t scatter(const RowCounts& rc, std::int64_t column, std::uint64_t mult,
                         SegmentTable& table);
+  // Brick b's faces per z-plane of its cells, from the face table once scanned.
+  std::vector<std::uint64_t> plane_faces(std::int64_t b) const;
   // The final index of every vertex a brick lists, and whether the brick owns (writes) it.
   void edge_vertex_index(const VolumeView& view, const Box3& cells,
                          std::vector<std::uint64_t>& index, std::vector<char>& is_owned);

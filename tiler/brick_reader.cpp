@@ -135,18 +135,42 @@ std::uint64_t BrickReader::estimate(const Box3& cells, std::uint64_t vertices, s
       static_cast<double>(kept_bytes()));
 }
 
+Box3 z_slice(const Box3& cells, std::int64_t s, std::int64_t count) {
+  Box3 part = cells;
+  part.lo[2] = cells.lo[2] + cells.extent(2) * s / count;
+  part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / count;
+  return part;
+}
+
 BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertices,
-                                        std::uint64_t faces, std::uint64_t memory,
-                                        double extra_per_face, bool odd) const {
-  // Thinner slices carry relatively more halo, so the count grows until the thickest slice fits
-  // (its share of the output taken as even), or every slice is one cell thick. Slices run in
-  // ascending z, so a sequential source (gzip'd slabs) reads them as it reads thinner slabs.
+                                        const std::vector<std::uint64_t>& plane_faces,
+                                        std::uint64_t memory, double extra_per_face,
+                                        bool odd) const {
+  // Thinner slices carry relatively more halo, so the count grows until the largest slice fits,
+  // or every slice is one cell thick. Slices run in ascending z, so a sequential source (gzip'd
+  // slabs) reads them as it reads thinner slabs. Each slice is estimated with the faces its
+  // planes hold: taken as an even share, a brick of bonsai tiled 4x4 cut in three at --memory
+  // 64MiB gave one slice 59.6k faces of the 49.4k planned, 1.37 times its estimate.
   const std::int64_t depth = cells.extent(2);
-  auto thickest = [&](std::int64_t slices) {
-    Box3 part = cells;
-    part.hi[2] = cells.lo[2] + (depth + slices - 1) / slices;
-    const auto n = static_cast<std::uint64_t>(slices);
-    return estimate(part, (vertices + n - 1) / n, (faces + n - 1) / n, extra_per_face);
+  if (static_cast<std::int64_t>(plane_faces.size()) != depth)
+    throw Error("BrickReader::slice: " + std::to_string(plane_faces.size()) +
+                " plane counts for a brick " + std::to_string(depth) + " cells deep");
+  std::vector<std::uint64_t> below(plane_faces.size() + 1, 0);  // faces below each plane
+  for (std::size_t z = 0; z < plane_faces.size(); ++z) below[z + 1] = below[z] + plane_faces[z];
+  const std::uint64_t faces = below.back();
+  auto largest = [&](std::int64_t slices) {
+    std::uint64_t most = 0;
+    for (std::int64_t i = 0; i < slices; ++i) {
+      const Box3 part = z_slice(cells, i, slices);
+      const std::uint64_t f = below[static_cast<std::size_t>(part.hi[2] - cells.lo[2])] -
+                              below[static_cast<std::size_t>(part.lo[2] - cells.lo[2])];
+      const auto v = faces == 0 ? 0
+                                : static_cast<std::uint64_t>(std::ceil(
+                                      static_cast<double>(vertices) * static_cast<double>(f) /
+                                      static_cast<double>(faces)));
+      most = std::max(most, estimate(part, v, f, extra_per_face));
+    }
+    return most;
   };
   Slicing s{1, estimate(cells, vertices, faces, extra_per_face)};
   if (s.bytes <= memory) return s;
@@ -155,7 +179,7 @@ BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertice
   for (;;) {
     // An even count would cut at the brick's middle plane (see tiled_simplify.cpp).
     if (odd && s.count % 2 == 0 && s.count < depth) ++s.count;
-    s.bytes = thickest(s.count);
+    s.bytes = largest(s.count);
     if (s.bytes <= memory) return s;
     if (s.count >= depth) break;
     ++s.count;
@@ -170,7 +194,7 @@ BrickReader::Slicing BrickReader::slice(const Box3& cells, std::uint64_t vertice
   s.least = s.bytes;           // one-cell slices'
   for (std::int64_t count = 1; count < depth; ++count)
     if (!odd || count % 2 == 1) {
-      fewer.push_back({count, thickest(count)});
+      fewer.push_back({count, largest(count)});
       s.least = std::min(s.least, fewer.back().bytes);
     }
   const double allowed = static_cast<double>(s.least) * (s.least >= 2 * memory ? 1.25 : 1.0);

@@ -24,6 +24,9 @@ Box3 grow(const Box3& cells, int halo, const Index3& n);
 // last brick along an axis.
 Box3 owned_samples(const Box3& cells, const Index3& n);
 
+// Slice s of `count` z-slices of a brick: its columns, its z-range cut evenly.
+Box3 z_slice(const Box3& cells, std::int64_t s, std::int64_t count);
+
 class BrickReader {
  public:
   // Resolves the backend once, so that every brick runs on the same one.
@@ -60,9 +63,11 @@ class BrickReader {
   // the records being written, and `extra_per_face` bytes for each face (a later stage's).
   std::uint64_t estimate(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
                          double extra_per_face = 0) const;
-  // Once a brick's output is counted: into how many z-slices (same columns, so the segment
-  // tables still apply) it must be cut for each to fit `memory`, and the thickest slice's
-  // estimate. `odd`: never an even count (which would cut at the brick's middle plane).
+  // Once a brick's output is counted: into how many z-slices (z_slice(), same columns, so the
+  // segment tables still apply) it must be cut for each to fit `memory`, and the largest slice's
+  // estimate. `plane_faces`: the brick's faces per z-plane of its cells (cells.extent(2) of
+  // them), so that a slice is estimated with the faces it holds, its vertices in proportion.
+  // `odd`: never an even count (which would cut at the brick's middle plane).
   struct Slicing {
     std::int64_t count;
     std::uint64_t bytes;
@@ -70,8 +75,9 @@ class BrickReader {
     // can; 0 where the slices fit.
     std::uint64_t least = 0;
   };
-  Slicing slice(const Box3& cells, std::uint64_t vertices, std::uint64_t faces,
-                std::uint64_t memory, double extra_per_face = 0, bool odd = false) const;
+  Slicing slice(const Box3& cells, std::uint64_t vertices,
+                const std::vector<std::uint64_t>& plane_faces, std::uint64_t memory,
+                double extra_per_face = 0, bool odd = false) const;
 
  private:
   std::uint64_t kept_bytes() const;

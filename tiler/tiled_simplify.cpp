@@ -211,7 +211,8 @@ class TiledSimplification {
       plan_ = plan_bricks(n_, least);
     }
     std::vector<std::uint64_t> brick_vertices, brick_faces, plane_faces;
-    count(brick_vertices, brick_faces, plane_faces);
+    std::vector<std::vector<std::uint64_t>> brick_planes;
+    count(brick_vertices, brick_faces, plane_faces, brick_planes);
     const double plane_cells = static_cast<double>(n_[0] - 1) * static_cast<double>(n_[1] - 1);
     const double densest =
         static_cast<double>(*std::max_element(plane_faces.begin(), plane_faces.end())) /
@@ -222,7 +223,7 @@ class TiledSimplification {
     const BrickPlan replanned = plan_bricks(n_, po);
     if (replanned.brick != plan_.brick) {
       plan_ = replanned;
-      count(brick_vertices, brick_faces, plane_faces);
+      count(brick_vertices, brick_faces, plane_faces, brick_planes);
     }
     if (!opt_.allow_empty && std::all_of(brick_faces.begin(), brick_faces.end(),
                                          [](std::uint64_t n) { return n == 0; })) {
@@ -238,7 +239,7 @@ class TiledSimplification {
     const std::vector<BrickReader::Slicing> cuts = slice_bricks(
         bricks,
         [&](std::int64_t b) {
-          return reader_.slice(plan_.cells(b), brick_vertices[b], brick_faces[b], opt_.memory,
+          return reader_.slice(plan_.cells(b), brick_vertices[b], brick_planes[b], opt_.memory,
                                kSimplifyBytesPerFace, true);
         },
         opt_.memory, opt_.warn);
@@ -252,11 +253,7 @@ class TiledSimplification {
       const BrickReader::Slicing& cut = cuts[static_cast<std::size_t>(b)];
       const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
-        Box3 part = cells;
-        part.lo[2] = cells.lo[2] + cells.extent(2) * s / slices;
-        part.hi[2] = cells.lo[2] + cells.extent(2) * (s + 1) / slices;
-        if (part.extent(2) == 0) continue;
-        simplify_brick(b, part, result, bricks);
+        simplify_brick(b, z_slice(cells, s, slices), result, bricks);
         ++result.bricks_extracted;
       }
       result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
@@ -308,23 +305,33 @@ class TiledSimplification {
   }
 
  private:
-  // Vertices and faces of every brick of the plan, and faces per z-plane of cells.
+  // Vertices and faces of every brick of the plan, and faces per z-plane of cells, over the
+  // volume and within each brick.
   void count(std::vector<std::uint64_t>& vertices, std::vector<std::uint64_t>& faces,
-             std::vector<std::uint64_t>& plane_faces) {
+             std::vector<std::uint64_t>& plane_faces,
+             std::vector<std::vector<std::uint64_t>>& brick_planes) {
     const std::int64_t bricks = plan_.total();
     vertices.assign(static_cast<std::size_t>(bricks), 0);
     faces.assign(static_cast<std::size_t>(bricks), 0);
     plane_faces.assign(static_cast<std::size_t>(n_[2] - 1), 0);
+    brick_planes.assign(static_cast<std::size_t>(bricks), {});
     const std::uint64_t mult = reader_.extract().method == Method::DualContouring ? 2 : 1;
     src_.rewind();
     for (std::int64_t b = 0; b < bricks; ++b) {
-      const BrickCounts c = reader_.count(plan_.cells(b));
+      const Box3 cells = plan_.cells(b);
+      const BrickCounts c = reader_.count(cells);
       for (std::uint32_t x : c.vertices.count) vertices[b] += x;
+      std::vector<std::uint64_t>& planes = brick_planes[static_cast<std::size_t>(b)];
+      planes.assign(static_cast<std::size_t>(cells.extent(2)), 0);
       const std::int64_t ny = c.faces.box.extent(1);
       for (std::size_t r = 0; r < c.faces.count.size(); ++r) {
-        faces[b] += c.faces.count[r] * mult;
-        plane_faces[c.faces.box.lo[2] + static_cast<std::int64_t>(r) / ny] +=
-            c.faces.count[r] * mult;
+        const std::int64_t z = c.faces.box.lo[2] + static_cast<std::int64_t>(r) / ny;
+        const std::uint64_t n = c.faces.count[r] * mult;
+        faces[b] += n;
+        plane_faces[static_cast<std::size_t>(std::min(z, n_[2] - 2))] += n;
+        // The volume's last sample plane (a last brick's, for sample-owned faces) has no cells
+        // above: its faces go with the plane below.
+        planes[static_cast<std::size_t>(std::min(z, cells.hi[2] - 1) - cells.lo[2])] += n;
       }
       if (opt_.progress) {
         opt_.progress->set_brick(b, bricks);
