@@ -65,8 +65,11 @@ TEST_F(TiledSimplify, ClosedSphereStaysClosedAtEveryBudget) {
   const std::string field = "field:sphere:80";
   const Volume v = make_field_volume({FieldKind::Sphere, 80});
   const Mesh whole = extract(v.view(), options(Method::Macet));
-  for (std::uint64_t memory :
-       {std::uint64_t{1} << 20, std::uint64_t{4} << 20, std::uint64_t{64} << 20}) {
+  // The smallest budget gives 64 bricks of 20^3 cells (1 MiB did before the simplifier's bytes
+  // per face were measured as resident memory; now it cuts them into slices, and the target is
+  // missed by 19%).
+  const std::uint64_t smallest = std::uint64_t{1536} << 10;
+  for (std::uint64_t memory : {smallest, std::uint64_t{4} << 20, std::uint64_t{64} << 20}) {
     TiledResult r;
     const Mesh m = run(field, options(Method::Macet), 0.1, memory, &r);
     EXPECT_EQ(r.triangles_extracted, whole.triangles.size()) << memory;
@@ -84,7 +87,7 @@ TEST_F(TiledSimplify, ClosedSphereStaysClosedAtEveryBudget) {
     EXPECT_GE(q.mean, 0.75) << memory;
     EXPECT_NEAR(r.quality.mean, q.mean, 1e-6) << memory;
     EXPECT_LT(testing::max_distance({FieldKind::Sphere, 80}, m), 0.25) << memory;
-    if (memory == std::uint64_t{1} << 20) {
+    if (memory == smallest) {
       EXPECT_GT(r.plan.total(), 8);
       EXPECT_GT(r.seam_cells[0] * r.seam_cells[1] * r.seam_cells[2], 1);
     }
@@ -95,10 +98,11 @@ TEST_F(TiledSimplify, GyroidBorderIsKeptExactlyAndTheMeshIsWatertight) {
   const std::string field = "field:gyroid:96";
   const Volume v = make_field_volume({FieldKind::Gyroid, 96});
   const Mesh whole = extract(v.view(), options(Method::Macet));
-  // 6 MiB gives 27 bricks of 32^3 cells. Much smaller bricks (a budget of 2-3 MiB here: 19-24
-  // cells across, a few final edges) leave the seams too little room: docs/simplify.md.
+  // 8 MiB gives 27 bricks of 32^3 cells (6 MiB did before the simplifier's bytes per face were
+  // measured as resident memory). Much smaller bricks (19-24 cells across, a few final edges)
+  // leave the seams too little room: docs/simplify.md.
   TiledResult r;
-  const Mesh m = run(field, options(Method::Macet), 0.1, std::uint64_t{6} << 20, &r);
+  const Mesh m = run(field, options(Method::Macet), 0.1, std::uint64_t{8} << 20, &r);
   EXPECT_GE(r.plan.total(), 8);
   EXPECT_EQ(testing::boundary_edges(m), testing::boundary_edges(whole));
   const std::array<Vec3f, 2> box{Vec3f{0, 0, 0}, Vec3f{95, 95, 95}};
@@ -145,7 +149,9 @@ TEST_F(TiledSimplify, SeamCellsOverTheBudgetAreSimplifiedInZParts) {
   const Volume v = make_field_volume({FieldKind::Sphere, 80});
   const ExtractOptions o = options(Method::MarchingCubes);
   const Mesh whole = extract(v.view(), o);
-  const std::uint64_t memory = 256 << 10;
+  // (At 256 KiB, since the simplifier's bytes per face were measured as resident memory, even
+  // one z-cell of the densest seam cell needs more: the run says so and goes over.)
+  const std::uint64_t memory = 384 << 10;
   TiledResult r;
   const Mesh m = run("field:sphere:80", o, 0.5, memory, &r);
   const std::int64_t cells = r.seam_cells[0] * r.seam_cells[1] * r.seam_cells[2];

@@ -34,13 +34,19 @@ double since(Clock::time_point t) {
 }
 
 // Simplification's working set per face of a piece (OpenMesh's mesh, the heap, quadrics, the
-// copies between passes): `isotile simplify` on bonsai's Macet mesh peaks 235 MB above reading
-// its 670k faces alone (350 bytes a face); a brick also holds its extraction (counted apart).
-constexpr double kSimplifyBytesPerFace = 450;
+// copies between passes) as resident memory, the allocator's holes included; a brick also holds
+// its extraction (counted apart). Measured per brick, the heap trimmed (malloc_trim) and the
+// peak RSS reset before each (bonsai tiled 4x4, MC and DC, --memory 64MiB; bonsai at 16 MiB;
+// gyroid 200 at 8 MiB, every method): up to 707 bytes a face for bricks near the budget, median
+// 550. At 450 (from `isotile simplify` of bonsai's Macet mesh: 350 above reading it), bonsai
+// tiled 4x4 at 64 MiB had bricks at up to 1.47 times their estimates (with slices then planned
+// as even shares of a brick's faces).
+constexpr double kSimplifyBytesPerFace = 720;
 // A seam cell also holds its octants as read, the piece built from them and the piece handed
-// back, and its reduction is milder (more faces survive per face read): gyroid 512 at 256 MiB
-// peaked at 750 bytes a face of its largest cell, bonsai at 32 MiB at 560.
-constexpr double kSeamBytesPerFace = 800;
+// back, and its reduction is milder (more faces survive per face read): per face of cells near
+// the budget, measured as above, up to 1005 bytes (median 880; smaller cells up to 1330, their
+// fixed costs spread over fewer faces). At 800, up to 1.37 times their estimates.
+constexpr double kSeamBytesPerFace = 1050;
 
 // A file for intermediate data, unlinked from the start: it vanishes however the process ends.
 // Scratch files go beside the output (its file system has room for the mesh), or, where the
