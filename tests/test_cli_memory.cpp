@@ -150,6 +150,26 @@ TEST_F(CliBudget, ASurfaceThatOverflowsTheBudgetIsSaidOnce) {
   EXPECT_EQ(within.err, "");
 }
 
+// The tiler's tables of counts (16 bytes per sample row per brick column, held whole, outside the
+// budget) are said where they take more than a quarter of it: the run goes over. Found on 2048 x
+// 2048 x 512 at 16 MiB, which peaked at 299 MiB without a word.
+TEST_F(CliBudget, TablesBeyondTheBudgetAreSaid) {
+  const Result small = run("extract field:sphere:128 --memory 256KiB -q -o small.ply --stats -");
+  ASSERT_EQ(small.code, 0) << small.err;
+  const auto stats = nlohmann::json::parse(small.out);
+  const std::int64_t columns = stats["brick_grid"][0].get<std::int64_t>();
+  ASSERT_GT(columns, 1);
+  EXPECT_EQ(small.err,
+            "isotile: warning: the memory budget of 262144 bytes leaves out the tiler's "
+            "tables of counts, " +
+                std::to_string(16 * 128 * 128 * columns) +
+                " bytes for this plan (16 per sample row per brick column: 16384 rows, " +
+                std::to_string(columns) +
+                " columns); the run goes over the budget (a larger one plans fewer "
+                "columns)\n");
+  EXPECT_EQ(run("extract field:sphere:128 --memory 64MiB -q -o large.ply").err, "");
+}
+
 // A budget above what the process can have is taken (a small volume plans far less) but said,
 // once, under --quiet too; the summary line counts one brick as one.
 TEST_F(CliBudget, ABudgetAboveTheMachinesMemoryIsSaid) {
