@@ -151,23 +151,29 @@ TEST_F(CliBudget, ASurfaceThatOverflowsTheBudgetIsSaidOnce) {
 }
 
 // The tiler's tables of counts (16 bytes per sample row per brick column, held whole, outside the
-// budget) are said where they take more than a quarter of it: the run goes over. Found on 2048 x
-// 2048 x 512 at 16 MiB, which peaked at 299 MiB without a word.
+// budget): where the cubes' would take more than a quarter of the budget, bricks span whole rows
+// (one column); where even those take more, the run says so. On 2048 x 2048 x 512 at 16 MiB the
+// cubes' tables (17 columns, 285 MB) peaked at 299 MiB without a word; whole rows: 43 MiB.
 TEST_F(CliBudget, TablesBeyondTheBudgetAreSaid) {
   const Result small = run("extract field:sphere:128 --memory 256KiB -q -o small.ply --stats -");
   ASSERT_EQ(small.code, 0) << small.err;
   const auto stats = nlohmann::json::parse(small.out);
-  const std::int64_t columns = stats["brick_grid"][0].get<std::int64_t>();
-  ASSERT_GT(columns, 1);
+  EXPECT_EQ(stats["brick_grid"][0].get<std::int64_t>(), 1);
+  EXPECT_EQ(stats["brick_cells"][0].get<std::int64_t>(), 127);
   EXPECT_EQ(small.err,
-            "isotile: warning: the memory budget of 262144 bytes leaves out the tiler's "
-            "tables of counts, " +
-                std::to_string(16 * 128 * 128 * columns) +
-                " bytes for this plan (16 per sample row per brick column: 16384 rows, " +
-                std::to_string(columns) +
-                " columns); the run goes over the budget (a larger one plans fewer "
-                "columns)\n");
+            "isotile: warning: the memory budget of 262144 bytes leaves out the tiler's tables of "
+            "counts, 262144 bytes for this plan (16 per sample row per brick column: 16384 rows, 1 "
+            "column); the run goes over the budget\n");
   EXPECT_EQ(run("extract field:sphere:128 --memory 64MiB -q -o large.ply").err, "");
+  // Where the cubes' tables fit, cubes stay (they read the least halo).
+  const Result cubes = run("extract field:sphere:128 --memory 4MiB -q -o cubes.ply --stats -");
+  ASSERT_EQ(cubes.code, 0) << cubes.err;
+  EXPECT_EQ(cubes.err, "");
+  EXPECT_GT(nlohmann::json::parse(cubes.out)["brick_grid"][0].get<std::int64_t>(), 1);
+  EXPECT_EQ(isotile::testing::slurp(dir_ / "small.ply"),
+            isotile::testing::slurp(dir_ / "large.ply"));
+  EXPECT_EQ(isotile::testing::slurp(dir_ / "cubes.ply"),
+            isotile::testing::slurp(dir_ / "large.ply"));
 }
 
 // A budget above what the process can have is taken (a small volume plans far less) but said,

@@ -100,6 +100,7 @@ BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
   // Whole rows when that still leaves bricks thick enough for a small halo overhead (or whole
   // y-z extents); cubes otherwise, which have the least halo per cell.
   const std::int64_t rows = largest(true);
+  if (options.whole_rows && rows > 0) return plan_of(shape(rows, true));
   const bool full_x = rows >= std::min<std::int64_t>(kMinRowBrick, std::min(cells[1], cells[2]));
   const BrickPlan cubes = plan_of(shape(largest(false), false));
   if (!full_x) return cubes;

@@ -40,6 +40,9 @@ struct BrickPlanOptions {
   // 300 s; under 1 s in core); gyroid 512 with Macet max reads 9.1 times over at 1 GiB, 63.6 at
   // 512 MiB. 0: no limit (the tests' tiny bricks, which stress the seams).
   double max_read_amplification = 64;
+  // Bricks span whole rows (one brick column) however thin, where cubes would read less: what
+  // the tiler holds per brick column outside the budget (its tables of counts) matters more.
+  bool whole_rows = false;
 };
 
 struct BrickPlan {
