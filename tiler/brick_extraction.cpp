@@ -53,8 +53,14 @@ bool BrickExtraction::empty_volume() const {
 }
 
 const BrickPlan& BrickExtraction::plan() {
+  // The two tables hold a count for every sample row per brick column, whole: the planner weighs
+  // them against cube bricks' many columns (brick_plan.h, column_bytes).
+  const std::uint64_t per_column =
+      2 * sizeof(std::uint64_t) * static_cast<std::uint64_t>(n_[1] * n_[2]);
   const auto options = [&] {
-    return reader_.plan_options(opt_.memory, opt_.max_read_amplification);
+    BrickPlanOptions po = reader_.plan_options(opt_.memory, opt_.max_read_amplification);
+    po.column_bytes = per_column;
+    return po;
   };
   try {
     plan_ = plan_bricks(n_, options());
@@ -64,30 +70,14 @@ const BrickPlan& BrickExtraction::plan() {
     set_overlap(false);
     plan_ = plan_bricks(n_, options());
   }
-  // The two tables hold a count for every sample row per brick column, whole, and no estimate
-  // counts them: the cube bricks of small budgets on large volumes have many columns (2048 x
-  // 2048 x 512 at 16 MiB: 17 columns, 285 MB of tables, a peak of 299 MiB; docs/tiler.md).
-  // Where they take more than a quarter of the budget, bricks span whole rows instead (one
-  // column, 17 MB there) if such a plan exists; where the tables still take more, the run goes
-  // over the budget, and says so first.
-  const auto table_bytes = [&] {
-    return 2 * sizeof(std::uint64_t) * static_cast<std::uint64_t>(n_[1] * n_[2]) *
-           static_cast<std::uint64_t>(plan_.count[0]);
-  };
-  if (table_bytes() > opt_.memory / 4 && plan_.count[0] > 1) {
-    BrickPlanOptions rows = options();
-    rows.whole_rows = true;
-    try {
-      plan_ = plan_bricks(n_, rows);
-    } catch (const InputError&) {
-      // No row plan within the budget and the read limit: the cubes stay.
-    }
-  }
-  if (table_bytes() > opt_.memory / 4) {
+  // No estimate counts the tables: where even the plan's take more than a quarter of the budget
+  // (whole rows of a large volume at a small budget), the run goes over it, and says so first.
+  const std::uint64_t table_bytes = per_column * static_cast<std::uint64_t>(plan_.count[0]);
+  if (table_bytes > opt_.memory / 4) {
     const std::int64_t columns = plan_.count[0];
     say_warning(opt_.warn, "the memory budget of " + std::to_string(opt_.memory) +
                                " bytes leaves out the tiler's tables of counts, " +
-                               std::to_string(table_bytes()) +
+                               std::to_string(table_bytes) +
                                " bytes for this plan (16 per sample row per " +
                                "brick column: " + std::to_string(n_[1] * n_[2]) + " rows, " +
                                std::to_string(columns) + (columns == 1 ? " column" : " columns") +

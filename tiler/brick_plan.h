@@ -40,9 +40,11 @@ struct BrickPlanOptions {
   // 300 s; under 1 s in core); gyroid 512 with Macet max reads 9.1 times over at 1 GiB, 63.6 at
   // 512 MiB. 0: no limit (the tests' tiny bricks, which stress the seams).
   double max_read_amplification = 64;
-  // Bricks span whole rows (one brick column) however thin, where cubes would read less: what
-  // the tiler holds per brick column outside the budget (its tables of counts) matters more.
-  bool whole_rows = false;
+  // Held per brick column besides any brick (the plain tiler's tables of counts, 16 bytes per
+  // sample row each): where the cubes' would take more than a quarter of the budget, bricks span
+  // whole rows (one column) however thin, if those read the volume within
+  // max_read_amplification.
+  std::uint64_t column_bytes = 0;
 };
 
 struct BrickPlan {
