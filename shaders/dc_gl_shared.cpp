@@ -68,8 +68,15 @@ std::string dc_defines(const DualContouringOptions& o, DcPass pass) {
   if (pass == DcPass::Faces && o.keep_quads) d += "#define KEEP_QUADS\n";
   if (pass != DcPass::Vertices) return d;
   if (o.solver == DcSolver::Particle) d += "#define DC_PARTICLE\n";
-  if (o.solver == DcSolver::Qef) d += "#define DC_QEF\n";
-  if (o.hermite == DcHermite::Eno) d += "#define DC_ENO\n";
+  // Core's constants by their bits (glsl_double()), not as decimals for the driver to parse.
+  if (o.solver == DcSolver::Qef) {
+    d += "#define DC_QEF\n";
+    d += "#define DC_JACOBI_NEGLIGIBLE " + glsl_double(dc::kJacobiNegligible) + "\n";
+  }
+  if (o.hermite == DcHermite::Eno) {
+    d += "#define DC_ENO\n";
+    d += "#define DC_ENO_KINK " + glsl_double(dc::kEnoKink) + "\n";
+  }
   if (o.normals) d += "#define NORMALS\n";
   return d;
 }

@@ -4,6 +4,7 @@
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <limits>
@@ -57,6 +58,15 @@ GLuint& vertex_array() {
 
 }  // namespace
 
+std::string glsl_double(double v) {
+  std::uint64_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "packDouble2x32(uvec2(0x%08xu, 0x%08xu))",
+                static_cast<unsigned>(bits & 0xffffffffu), static_cast<unsigned>(bits >> 32));
+  return buf;
+}
+
 std::string stage_source(const Stage& s, const std::string& defines) {
   std::string src = "#version 450 core\n";
   // `isotile render`'s vertex and fragment stages stand alone: mc_common.glsl is the extractors'.
@@ -68,6 +78,9 @@ std::string stage_source(const Stage& s, const std::string& defines) {
   }
   if (s.type == GL_COMPUTE_SHADER) src += "#define STAGE_COMPUTE\n";
   src += defines;
+  // The correctly rounded double square root every extractor's roots go through (its own
+  // line numbers, so that mc_common.glsl's and the stage's keep theirs after #line).
+  src += embedded_glsl("sqrt_rn.glsl");
   src += "#line 1\n";
   src += embedded_glsl("mc_common.glsl");
   // Dual Contouring's shaders share its Hermite data and placement; its output passes the

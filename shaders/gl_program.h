@@ -28,10 +28,14 @@ struct Stage {
   std::string_view file;  // a file of shaders/glsl/
 };
 
+// `v` as a GLSL double expression of its exact bits (packDouble2x32), for constants handed to the
+// shaders: a decimal literal would rest on the driver's parsing of it.
+std::string glsl_double(double v);
+
 // The source of one stage exactly as program() compiles it: "#version 450 core", the stage's
-// define, `defines`, mc_common.glsl, the included files the stage needs, then its file. The stages
-// of `isotile render` (render_*) are "#version 450 core", `defines` and their file only. Needs no
-// context (tests/test_glsl_variants.cpp checks every variant with glslang).
+// define, `defines`, sqrt_rn.glsl, mc_common.glsl, the included files the stage needs, then its
+// file. The stages of `isotile render` (render_*) are "#version 450 core", `defines` and their
+// file only. Needs no context (tests/test_glsl_variants.cpp checks every variant with glslang).
 std::string stage_source(const Stage& stage, const std::string& defines);
 
 // The key program() caches a program under: its defines and stage files.

@@ -18,13 +18,10 @@
 
 namespace isotile::gl {
 
-// Core's constants as GLSL double literals (printed exactly: 17 significant digits round-trip, with
-// an exponent so that 1 reads as a double).
+// Core's constants by their bits (glsl_double()), not as decimal literals for the driver to parse.
 std::string macet_defines() {
   auto d = [](const char* name, double v) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "#define %s %.16eLF\n", name, v);
-    return std::string(buf);
+    return "#define " + std::string(name) + " " + glsl_double(v) + "\n";
   };
   std::string s = "#define MACET\n";
   s += d("MACET_REACH", detail::kMacetReach);
@@ -34,6 +31,7 @@ std::string macet_defines() {
   s += d("MACET_SMOOTH_GUARD", detail::kMacetSmoothGuard);
   s += d("MACET_TIE_OFFSET", detail::kTieOffset);
   s += d("MACET_ROOT_TOLERANCE", detail::kRootTolerance);
+  s += d("MACET_ROOT_WIDTH", detail::kRootWidth);
   s += "#define MACET_HALVINGS " + std::to_string(detail::kMacetHalvings) + "\n";
   return s;
 }

@@ -116,13 +116,12 @@ SymmetricEigen symmetric_eigen(const double a[3][3]) {
     }
   constexpr int kPairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
   for (int sweep = 0; sweep < kJacobiSweeps; ++sweep) {
-    // A rotation for an off-diagonal element below 1e-18 of its diagonal changes the eigenvalues
-    // by less than their rounding; once a sweep finds none, the matrix is diagonal.
-    bool rotated = false;
+    bool rotated = false;  // kJacobiNegligible: once a sweep finds none, the matrix is diagonal
     for (const auto& pq : kPairs) {
       const int p = pq[0], q = pq[1];
       const double apq = m[p][q];
-      if (!(std::fabs(apq) > 1e-18 * (std::fabs(m[p][p]) + std::fabs(m[q][q])))) continue;
+      if (!(std::fabs(apq) > kJacobiNegligible * (std::fabs(m[p][p]) + std::fabs(m[q][q]))))
+        continue;
       rotated = true;
       const double theta = (m[q][q] - m[p][p]) / (2.0 * apq);
       double t = 1.0 / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
@@ -667,9 +666,9 @@ class Extractor {
           e1((f1 - b1 + a1) - f0) {}
     // A kink at or between the edge's samples: where the field is smooth across the edge the
     // misses are about the third difference with opposite signs (e0 = -e1 for a cubic); a kink
-    // makes them share a sign, and the larger exceed 0.4 of `rise` (see eno_plane).
+    // makes them share a sign, and the larger exceed kEnoKink of `rise` (see eno_plane).
     bool kinked(double rise) const {
-      return !(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > 0.4 * rise;
+      return !(e0 * e1 < 0) && std::max(std::fabs(e0), std::fabs(e1)) > dc::kEnoKink * rise;
     }
     double a0, b0, a1, b1, e0, e1;
   };

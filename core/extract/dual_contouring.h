@@ -162,6 +162,12 @@ std::array<double, 3> solve_qef(const CellQef& cell, const DualContouringOptions
 // at most kJacobiSweeps cyclic Jacobi sweeps: plain IEEE double arithmetic and sqrt, which the GL
 // paths repeat step for step (a closed form would need acos and cos, which GLSL lacks in double).
 inline constexpr int kJacobiSweeps = 6;
+// A rotation for an off-diagonal element below this fraction of its diagonal changes the
+// eigenvalues by less than their rounding; once a sweep finds none, the matrix is diagonal.
+inline constexpr double kJacobiNegligible = 1e-18;
+// ENO Hermite data: an edge is kinked where its two cubic pieces miss the far sample by errors of
+// one sign, the larger above this fraction of the edge's rise (dual_contouring.cpp's Pieces).
+inline constexpr double kEnoKink = 0.4;
 struct SymmetricEigen {
   double value[3];
   double vector[3][3];  // vector[e]: the eigenvector of value[e]

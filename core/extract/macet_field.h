@@ -191,8 +191,10 @@ struct Field {
   std::int64_t step[3];                 // stride to the next sample, 0 along a 1-sample axis
 };
 
-// find_root stops at a point whose |f - iso| is at most this fraction of the ends' difference.
+// find_root stops at a point whose |f - iso| is at most this fraction of the ends' difference, or
+// once its bracket is narrower than kRootWidth (of the segment).
 inline constexpr double kRootTolerance = 1e-5;
+inline constexpr double kRootWidth = 1e-5;
 
 // The crossing of f = iso on the segment p0 -> p1 whose ends have f - iso = f0 >= 0 > f1 or
 // f0 < 0 <= f1: Illinois-modified regula falsi on the trilinear interpolant, which converges
@@ -213,7 +215,7 @@ double find_root(const Field<T>& field, const P3& p0, const P3& p1, double f0, d
     const double denom = flo - fhi;
     t = denom != 0 ? lo + (hi - lo) * flo / denom : 0.5 * (lo + hi);
     if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
-    if (hi - lo < 1e-5) break;
+    if (hi - lo < kRootWidth) break;
     const P3 p{p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1]),
                p0[2] + t * (p1[2] - p0[2])};
     const double f = field.value(p, corners);

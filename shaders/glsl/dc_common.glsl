@@ -275,7 +275,7 @@ DcPieces dc_pieces(double fm2, double fm, double f0, double f1, double f2, doubl
 }
 bool dc_kinked(DcPieces q, double rise) {
   precise double prod = q.e0 * q.e1;
-  precise double lim = 0.4LF * rise;
+  precise double lim = DC_ENO_KINK * rise;
   return !(prod < 0.0LF) && dc_max(abs(q.e0), abs(q.e1)) > lim;
 }
 
@@ -284,7 +284,7 @@ bool dc_sign_bit(double v) { return (unpackDouble2x32(v).y & 0x80000000u) != 0u;
 // The root in [lo, hi] of a x^2 + b x + c from the non-cancelling quadratic formula.
 double dc_bracketed_root(double a, double b, double c, double lo, double hi) {
   precise double disc = b * b - (4.0LF * a) * c;
-  precise double root = sqrt(dc_max(disc, 0.0LF));
+  precise double root = sqrt_rn(dc_max(disc, 0.0LF));
   precise double q = -0.5LF * (b + (dc_sign_bit(b) ? -root : root));
   precise double ra = q / a;
   precise double rc = c / q;
@@ -380,7 +380,7 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
     n = with_component(n, a, side == 0 ? g0 : side == 1 ? g1 : mixed);
   }
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
-  double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;
+  double inv = len2 > 0.0LF ? 1.0LF / sqrt_rn(len2) : 0.0LF;
   h.n = n * inv;
 #endif
 #else
@@ -390,7 +390,7 @@ DcPlane dc_plane(ivec3 c, int e, double v[8]) {
   dvec3 g0 = dc_gradient(s0), g1 = dc_gradient(s1);
   precise dvec3 n = g0 + t * (g1 - g0);
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
-  double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;
+  double inv = len2 > 0.0LF ? 1.0LF / sqrt_rn(len2) : 0.0LF;
   h.n = n * inv;
 #endif
 #endif
@@ -417,13 +417,13 @@ dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
     for (int pair = 0; pair < 3; ++pair) {
       int p = pair == 2 ? 1 : 0, q = pair == 0 ? 1 : 2;
       double apq = m[q][p];
-      precise double negligible = 1e-18LF * (abs(m[p][p]) + abs(m[q][q]));
+      precise double negligible = DC_JACOBI_NEGLIGIBLE * (abs(m[p][p]) + abs(m[q][q]));
       if (!(abs(apq) > negligible)) continue;
       rotated = true;
       precise double theta = (m[q][q] - m[p][p]) / (2.0LF * apq);
-      precise double t = 1.0LF / (abs(theta) + sqrt(theta * theta + 1.0LF));
+      precise double t = 1.0LF / (abs(theta) + sqrt_rn(theta * theta + 1.0LF));
       if (theta < 0.0LF) t = -t;
-      precise double c = 1.0LF / sqrt(t * t + 1.0LF);
+      precise double c = 1.0LF / sqrt_rn(t * t + 1.0LF);
       precise double s = t * c;
       for (int k = 0; k < 3; ++k) {  // columns p and q
         precise double mkp = m[p][k], mkq = m[q][k];
@@ -530,7 +530,7 @@ vec3 dc_vertex_normal(ivec3 c, dvec3 x) {
     n -= (w * g) / u_spacing;
   }
   precise double len2 = ((n.x * n.x) + n.y * n.y) + n.z * n.z;
-  double inv = len2 > 0.0LF ? 1.0LF / sqrt(len2) : 0.0LF;
+  double inv = len2 > 0.0LF ? 1.0LF / sqrt_rn(len2) : 0.0LF;
   return vec3(n * inv);
 }
 

@@ -33,7 +33,7 @@ double dc_length(vec3 p, vec3 q) {
   precise double dy = double(p.y) - double(q.y);
   precise double dz = double(p.z) - double(q.z);
   precise double l2 = ((dx * dx) + dy * dy) + dz * dz;
-  return sqrt(l2);
+  return sqrt_rn(l2);
 }
 double dc_ratio(double la, double lb, double lc) {
   if (la == 0.0LF || lb == 0.0LF || lc == 0.0LF) return 0.0LF;

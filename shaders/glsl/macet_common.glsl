@@ -110,7 +110,7 @@ double find_root(dvec3 p0, dvec3 p1, double f0, double f1) {
     t = denom != 0.0LF ? lo + step : mid;
     if (!(t > lo && t < hi)) t = mid;
     precise double width = hi - lo;
-    if (width < 1e-5LF) break;
+    if (width < MACET_ROOT_WIDTH) break;
     precise dvec3 p = p0 + t * (p1 - p0);
     double f = field_value(p);
     if (abs(f) <= tol) break;
@@ -224,7 +224,7 @@ void macet_edge_vertex(ivec3 s, int axis, out vec3 pos, out vec3 nrm) {
 #ifdef NORMALS
   dvec3 g = world_gradient(p);
   precise double len2 = g.x * g.x + g.y * g.y + g.z * g.z;
-  double len = sqrt(len2);
+  double len = sqrt_rn(len2);
   precise double inv = len > 0.0LF ? -1.0LF / len : 0.0LF;
   for (int c = 0; c < 3; ++c) {
     precise double n = g[c] * inv;

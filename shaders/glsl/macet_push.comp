@@ -25,7 +25,7 @@ void main() {
       }
     }
   precise double len2 = push.x * push.x + push.y * push.y + push.z * push.z;
-  double len = sqrt(len2);
+  double len = sqrt_rn(len2);
   if (len > MACET_PUSH_CAP) {
     precise double scale = MACET_PUSH_CAP / len;
     push = push * scale;

@@ -94,7 +94,7 @@ void main() {
   dvec3 from = old.xyz;
   precise dvec3 to = from + acc;
   precise double len2 = to.x * to.x + to.y * to.y + to.z * to.z;
-  double len = sqrt(len2);
+  double len = sqrt_rn(len2);
   if (len > MACET_SMOOTH_CAP) {
     precise double scale = MACET_SMOOTH_CAP / len;
     to = to * scale;

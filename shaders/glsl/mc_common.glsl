@@ -198,7 +198,7 @@ void edge_vertex(ivec3 s, int axis, out vec3 pos, out vec3 nrm) {
   dvec3 g0 = gradient(s), g1 = gradient(s1);
   precise dvec3 n = -(g0 + t * (g1 - g0));
   precise double len2 = n.x * n.x + n.y * n.y + n.z * n.z;
-  double inv = len2 > 0.0 ? 1.0 / sqrt(len2) : 0.0;
+  double inv = len2 > 0.0 ? 1.0 / sqrt_rn(len2) : 0.0;
   nrm = vec3(n * inv);
 #endif
 }
