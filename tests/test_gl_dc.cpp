@@ -1,8 +1,8 @@
 // Dual Contouring on the OpenGL backends (HistoPyramid, geometry shader) against the CPU
 // reference (core/extract/dual_contouring.h): the same vertices in key order, the same faces in
-// the same order, positions within 1e-4 voxel (bit-equal on llvmpipe), for every vertex variant,
-// solver and Hermite choice, whole-volume, in slabs, in brick mode, with a
-// capture buffer that overflows. Small volumes: llvmpipe runs the shaders on the CPU.
+// the same order, positions and normals bit for bit, for every vertex variant, solver and Hermite
+// choice, whole-volume, in slabs, in brick mode, with a capture buffer that overflows. Small
+// volumes: llvmpipe runs the shaders on the CPU.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -51,10 +51,10 @@ std::string describe(const DualContouringOptions& o) {
   return s;
 }
 
-// The CPU's mesh: positions within 1e-4 voxel, normals within 1e-5.
+// The CPU's mesh bit for bit (gl_test_support.h).
 void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
                       const std::string& what) {
-  testing::expect_same_gl_mesh(gl, cpu, v, what, 1e-4, 1e-5);
+  testing::expect_same_gl_mesh(gl, cpu, v, what);
 }
 
 // Every variant: both vertex variants, the three solvers, both Hermite choices; quads and normals

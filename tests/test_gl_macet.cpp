@@ -1,5 +1,5 @@
 // Macet on the OpenGL paths (geometry shader, HistoPyramid) against the CPU reference
-// (core/extract/macet.h): the same triangles and vertex order, positions within 1e-4 voxel, for
+// (core/extract/macet.h): the same triangles and vertex order, positions bit for bit, for
 // fields, a real volume, odd dims, slabs, brick mode, a capture buffer that overflows, relaxation
 // and quality Max. Small volumes: llvmpipe runs Macet's double-precision passes on the CPU.
 #include <gtest/gtest.h>
@@ -41,10 +41,10 @@ gl::MacetGlOptions opts(const MacetOptions& m, std::int64_t slab = 0) {
   return o;
 }
 
-// The CPU's mesh: positions and normals within 1e-4 (voxels for positions).
+// The CPU's mesh bit for bit (gl_test_support.h).
 void expect_same_mesh(const Mesh& gl, const Mesh& cpu, const VolumeView& v,
                       const std::string& what) {
-  testing::expect_same_gl_mesh(gl, cpu, v, what, 1e-4, 1e-4);
+  testing::expect_same_gl_mesh(gl, cpu, v, what);
 }
 
 class GlMacet : public ::testing::TestWithParam<Path> {};
