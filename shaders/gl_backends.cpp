@@ -126,11 +126,16 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
   if (std::string why; !available(&why))
     throw InputError("backend '" + std::string(backend) + "': " + why);
   if (!report) return run(nullptr);
+  // One acquisition of the context for the run and its report. The end of a thread's outermost
+  // Scope releases the context and the thread's EGL state, and on NVIDIA's driver taking them
+  // again costs about 0.2 s (bench_backends on the H200: 231 ms a call on sphere 128, 1.8 ms
+  // with the context held across the calls; docs/gl.md): the report once took a second Scope
+  // after the run's own had ended.
+  Scope scope;
   const ProgramCacheCounts before = program_cache_counts();
   McStats stats;
   Mesh mesh = run(&stats);
   const ProgramCacheCounts after = program_cache_counts();
-  Scope scope;
   report->seconds.clear();
   for (int s = 0; s < kGlStageCount; ++s)
     report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
