@@ -5,7 +5,7 @@
 //   cmake -S . -B build-bench -DISOTILE_BUILD_BENCHMARKS=ON
 //   cmake --build build-bench --target bench_backends
 //   build-bench/tests/benchmarks/bench_backends [--threads N] [--repeat R] [--methods mc,macet,dc]
-//       [--data DIR] [--gyroid512]
+//       [--data DIR] [--gyroid512] [--hold-context]
 //
 // Dual Contouring runs with the CLI's defaults (patch vertices, mass point, central Hermite data)
 // and, as a second row per volume, the paper's particle minimizer (10 steps).
@@ -23,7 +23,12 @@
 // GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
 // triangles/s of the median whole-call times. Before the volumes, a table of the read-back's
 // GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h); `--methods none`
-// prints only that table.
+// prints only that table. Before it, what taking and releasing the context costs per call
+// (bench_context_cycles()). --hold-context keeps the context current on the main thread for the
+// whole run (one gl::Scope around it), where each extraction call otherwise takes it and, at its
+// end, releases it and the thread's EGL state (gl_context.h's Scope): run with and without it,
+// the difference is what that costs each call.
+#include <EGL/egl.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -34,6 +39,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -161,6 +167,67 @@ void bench_read_back(int repeat) {
   gl::use_default_read_back();
 }
 
+// What an extraction call pays to take the context and give it back (gl_context.h's Scope:
+// eglBindAPI and eglMakeCurrent; at the end of the thread's outermost Scope eglMakeCurrent with
+// no context and eglReleaseThread), and which of those calls costs it: the same EGL calls by
+// hand without eglReleaseThread and with it, a Scope taken while the context is current already,
+// and a small extraction (HistoPyramid MC on sphere 32) as an outermost call and inside a held
+// Scope. Each bare cycle ends with a glFinish(), so that work a driver leaves to the first GL call
+// after eglMakeCurrent is counted. Milliseconds per cycle, best of `repeat` rounds, on this
+// thread with no other Scope alive. OSMesa contexts: no rows by hand.
+void bench_context_cycles(int repeat) {
+  auto per_cycle = [&](int cycles, const std::function<void()>& cycle) {
+    double best = 1e30;
+    for (int r = 0; r < repeat; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      for (int c = 0; c < cycles; ++c) cycle();
+      best = std::min(best,
+                      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    return 1e3 * best / cycles;
+  };
+  auto row = [](const char* what, double ms) { std::printf("%-66s %8.3f\n", what, ms); };
+  auto bare_scope = [] {
+    gl::Scope scope;
+    glFinish();
+  };
+  const Volume sphere = make_field_volume({FieldKind::Sphere, 32});
+  const double iso = field_default_iso(FieldKind::Sphere);
+  auto small_extraction = [&] { gl::mc_histopyramid(sphere.view(), {.iso = iso}); };
+  small_extraction();  // programs compiled or loaded outside the timing
+  EGLDisplay display = EGL_NO_DISPLAY;
+  EGLContext context = EGL_NO_CONTEXT;
+  {
+    gl::Scope scope;
+    display = eglGetCurrentDisplay();
+    context = eglGetCurrentContext();
+  }
+  std::printf("\ncontext per take and release, ms (best of %d rounds)\n", repeat);
+  row("gl::Scope, outermost on this thread", per_cycle(20, bare_scope));
+  {
+    gl::Scope outer;
+    row("gl::Scope inside another (the context stays current)", per_cycle(20, bare_scope));
+  }
+  if (context != EGL_NO_CONTEXT) {
+    auto by_hand = [&](bool release_thread) {
+      return per_cycle(20, [&] {
+        eglBindAPI(EGL_OPENGL_API);
+        eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context);
+        glFinish();
+        eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+        if (release_thread) eglReleaseThread();
+      });
+    };
+    row("eglMakeCurrent, eglMakeCurrent(no context)", by_hand(false));
+    row("eglMakeCurrent, eglMakeCurrent(no context), eglReleaseThread", by_hand(true));
+  }
+  row("hp MC sphere 32, an outermost call", per_cycle(5, small_extraction));
+  {
+    gl::Scope outer;
+    row("hp MC sphere 32, inside a held gl::Scope", per_cycle(5, small_extraction));
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -170,7 +237,7 @@ int main(int argc, char** argv) {
   std::string methods = "mc,macet,dc";
   std::filesystem::path data = ISOTILE_SHARED_DATA;
   if (const char* env = std::getenv("ISOTILE_GPU_DATA"); env && *env) data = env;
-  bool gyroid512 = false;
+  bool gyroid512 = false, hold_context = false;
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
       threads = std::atoi(argv[++i]);
@@ -182,10 +249,12 @@ int main(int argc, char** argv) {
       data = argv[++i];
     } else if (std::strcmp(argv[i], "--gyroid512") == 0) {
       gyroid512 = true;
+    } else if (std::strcmp(argv[i], "--hold-context") == 0) {
+      hold_context = true;
     } else {
       std::fprintf(stderr,
                    "bench_backends: unknown argument '%s' (--threads N, --repeat R, --methods "
-                   "LIST, --data DIR, --gyroid512)\n",
+                   "LIST, --data DIR, --gyroid512, --hold-context)\n",
                    argv[i]);
       return 2;
     }
@@ -205,8 +274,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   const gl::DeviceInfo& dev = gl::device();
-  std::printf("device: %s (%s, %s), threads %d, median of %d runs\n", dev.renderer.c_str(),
-              dev.platform.c_str(), dev.version.c_str(), threads, repeat);
+  std::printf("device: %s (%s, %s), threads %d, median of %d runs%s\n", dev.renderer.c_str(),
+              dev.platform.c_str(), dev.version.c_str(), threads, repeat,
+              hold_context ? ", context held across the calls" : "");
+  bench_context_cycles(repeat);
+  std::optional<gl::Scope> hold;
+  if (hold_context) hold.emplace();
 
   std::vector<Case> cases;
   std::vector<std::pair<FieldKind, int>> fields = {
