@@ -113,20 +113,24 @@ for b in hp gs; do
   [ -f "$out/$b.json" ] && echo "gpu-measure: out of core gyroid $size $b: $(gl_stages "$out/$b.json" bricks)"
 done
 
-# 3. Every method on the GL paths through the CLI (auto stays on the CPU; the GL paths named).
+# 3. Every method on the GL paths through the CLI (auto stays on the CPU; the GL paths named): the
+# CPU's file byte for byte.
 for m in "--method mc --normals" "--method macet" "--method macet --quality max" "--method dc" \
-         "--method dc --dc-solver qef --dc-hermite eno"; do
+         "--method dc --dc-solver particle" "--method dc --dc-solver qef --dc-hermite eno"; do
   isotile extract field:marschner-lobb:96 -q $m --backend cpu -o "$out/m-cpu.ply"
   for b in hp gs; do
     isotile extract field:marschner-lobb:96 -q $m --backend "$b" -o "$out/m-$b.ply" \
       --stats "$out/m-$b.json"
     report "cli $b $m runs" $?
+    cmp -s "$out/m-cpu.ply" "$out/m-$b.ply"
+    report "cli $b $m same file as cpu" $?
   done
 done
+rm -f "$out"/m-*.ply
 
-# 4. The device's double arithmetic against the CPU's.
+# 4. The device's double arithmetic against the CPU's, and the shaders' sqrt_rn().
 gl_double_check 4000000
-report "double / and sqrt as the CPU" $?
+report "double /, precise a * b + c and sqrt_rn as the CPU" $?
 
 # 5. The HistoPyramid extractions again with one pyramid level per dispatch (a software device's
 # passes, without shared memory and barriers; the GPU's default is three), and with per-element
