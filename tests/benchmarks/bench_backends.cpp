@@ -173,12 +173,14 @@ void bench_read_back(int repeat) {
 // hand without eglReleaseThread and with it, a Scope taken while the context is current already,
 // and a small extraction (HistoPyramid MC on sphere 32) as an outermost call and inside a held
 // Scope. Each bare cycle ends with a glFinish(), so that work a driver leaves to the first GL call
-// after eglMakeCurrent is counted. Milliseconds per cycle, best of `repeat` rounds, on this
-// thread with no other Scope alive. OSMesa contexts: no rows by hand.
+// after eglMakeCurrent is counted. Milliseconds per cycle, best of at most 3 rounds (a cycle
+// took about 0.2 s on the H200), on this thread with no other Scope alive. OSMesa contexts: no
+// rows by hand.
 void bench_context_cycles(int repeat) {
+  const int rounds = std::min(repeat, 3);
   auto per_cycle = [&](int cycles, const std::function<void()>& cycle) {
     double best = 1e30;
-    for (int r = 0; r < repeat; ++r) {
+    for (int r = 0; r < rounds; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
       for (int c = 0; c < cycles; ++c) cycle();
       best = std::min(best,
@@ -202,15 +204,15 @@ void bench_context_cycles(int repeat) {
     display = eglGetCurrentDisplay();
     context = eglGetCurrentContext();
   }
-  std::printf("\ncontext per take and release, ms (best of %d rounds)\n", repeat);
-  row("gl::Scope, outermost on this thread", per_cycle(20, bare_scope));
+  std::printf("\ncontext per take and release, ms (best of %d rounds)\n", rounds);
+  row("gl::Scope, outermost on this thread", per_cycle(10, bare_scope));
   {
     gl::Scope outer;
-    row("gl::Scope inside another (the context stays current)", per_cycle(20, bare_scope));
+    row("gl::Scope inside another (the context stays current)", per_cycle(10, bare_scope));
   }
   if (context != EGL_NO_CONTEXT) {
     auto by_hand = [&](bool release_thread) {
-      return per_cycle(20, [&] {
+      return per_cycle(10, [&] {
         eglBindAPI(EGL_OPENGL_API);
         eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context);
         glFinish();
