@@ -103,6 +103,7 @@ std::unique_ptr<Context> g_context;  // set once created; lives until shutdown()
 std::vector<void (*)()> g_releases;  // at_shutdown()
 std::string g_failure;               // set once creation failed
 thread_local int t_depth = 0;
+int g_takes = 0;  // context_takes(); under g_mutex
 // start_context(): true from its call to shutdown(); its thread is joined by shutdown(), or at
 // exit by its destructor, before the objects above go.
 std::atomic<bool> g_started{false};
@@ -477,8 +478,16 @@ DeviceOrder hardware_device_order(int count) {
   return o;
 }
 
+// The description was filled when the context was made: no Scope, whose end would release the
+// context and the thread's EGL state (taking them again cost about 0.2 s on the H200, docs/gl.md),
+// so asking from outside a Scope (the backends' probe, once per extraction) costs a lock.
 const DeviceInfo& device() {
-  Scope scope;
+  std::lock_guard lock(g_mutex);
+  if (!g_context) {
+    create();
+    if (!g_context) throw InputError(g_failure);
+    if (t_depth == 0) g_context->release_thread();
+  }
   return g_context->info;
 }
 
@@ -494,6 +503,7 @@ bool available(std::string* why) {
 
 Scope::Scope() : lock_(g_mutex) {
   if (t_depth == 0) {
+    ++g_takes;
     if (!g_context) {
       create();
       if (!g_context) throw InputError(g_failure);
@@ -529,6 +539,11 @@ void shutdown() {
   c.release();
   c.destroy();
   g_context.reset();
+}
+
+int context_takes() {
+  std::lock_guard lock(g_mutex);
+  return g_takes;
 }
 
 bool context_alive() {

@@ -101,6 +101,11 @@ void shutdown();
 // Whether a context exists now (created and not shut down).
 bool context_alive();
 
+// How many times a thread's outermost Scope took the context in this process (made it or made it
+// current; the end of such a Scope gives it back): each take after a give-back cost about 0.2 s
+// on the H200 (docs/gl.md). For tests.
+int context_takes();
+
 // Holds the context current on the calling thread, and every other thread's GL work off it, for
 // its lifetime. Creates the context when needed (throws like device()). When the outermost Scope
 // of a thread ends, the context is released and, on EGL, so is the thread's EGL state, so that

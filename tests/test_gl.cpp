@@ -488,6 +488,30 @@ TEST(GlBackends, RegisteredInTheTable) {
     }
 }
 
+// Taking the context after the last outermost Scope gave it back cost about 0.2 s a time on the
+// H200 (docs/gl.md): an extraction through core's table, with the report the CLI and the tiler
+// ask for, takes it once, and the device's description asked outside a Scope (the backends'
+// probe does, once per extraction) does not take it.
+TEST(GlBackends, AnExtractionTakesTheContextOnce) {
+  REQUIRE_GL();
+  gl::register_gl_backends();
+  const Volume vol = make_field_volume({FieldKind::Sphere, 20});
+  gl::device();
+  int before = gl::context_takes();
+  gl::device();
+  EXPECT_EQ(gl::context_takes() - before, 0) << "device()";
+  for (Backend b : {Backend::GeometryShader, Backend::HistoPyramid})
+    for (Method m : {Method::MarchingCubes, Method::Macet, Method::DualContouring}) {
+      const ExtractOptions o{.method = m, .backend = b};
+      BackendChoice ran;
+      before = gl::context_takes();
+      const Mesh mesh = extract(vol.view(), o, &ran);
+      EXPECT_EQ(gl::context_takes() - before, 1) << method_name(m) << " on " << int(b);
+      EXPECT_TRUE(ran.gpu.has_value());
+      EXPECT_FALSE(mesh.triangles.empty());
+    }
+}
+
 // The context made on a thread of its own (start_context(), what `--backend gs|hp` does while the
 // volume is read): the first extraction waits for it and gives the CPU's mesh; starting again
 // while it exists does nothing; shutdown() ends it, and a later start makes a new one.
