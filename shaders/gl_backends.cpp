@@ -192,6 +192,12 @@ std::string probe(bool* hardware, bool hardware_only) {
   return {};
 }
 
+// hold_backend(): the context current on this thread until the handle goes (a Scope, whose
+// nested ones in the extractions then neither take nor give it back).
+std::shared_ptr<void> hold() {
+  return std::make_shared<Scope>();
+}
+
 }  // namespace
 
 ProgramCacheState program_cache_state() {
@@ -204,9 +210,9 @@ ProgramCacheState program_cache_state() {
 
 void register_gl_backends() {
   register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe, start_context,
-                   start_failure);
+                   start_failure, hold);
   register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context,
-                   start_failure);
+                   start_failure, hold);
 }
 
 }  // namespace isotile::gl
