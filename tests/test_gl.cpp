@@ -29,6 +29,8 @@
 #include "shaders/read_back.h"
 #include "shaders/sample_upload.h"
 #include "test_support.h"
+#include "tiler/tiled_extract.h"
+#include "tiler/volume_source.h"
 
 namespace isotile {
 namespace {
@@ -510,6 +512,41 @@ TEST(GlBackends, AnExtractionTakesTheContextOnce) {
       EXPECT_TRUE(ran.gpu.has_value());
       EXPECT_FALSE(mesh.triangles.empty());
     }
+}
+
+// The tiler extracts its bricks on one thread that keeps the context for the pass
+// (tiler/backend_lane.h), where each brick would take it and give it back on whichever thread the
+// pipeline ran it: a tiled run on a GL path takes it once, simplified or not, with the CPU's file.
+class GlTiled : public testing::TempDirTest {
+ protected:
+  GlTiled() : TempDirTest("isotile-gl-tiled-") {}
+};
+
+TEST_F(GlTiled, ARunTakesTheContextOnceForAllItsBricks) {
+  REQUIRE_GL();
+  gl::register_gl_backends();
+  gl::device();
+  for (const double simplify : {1.0, 0.5}) {
+    TiledOptions to;
+    to.extract.iso = 0;
+    to.extract.method = Method::Macet;
+    to.memory = std::uint64_t{512} << 10;
+    to.simplify = simplify;
+    std::string files[2];
+    std::int64_t bricks = 0;
+    for (const Backend b : {Backend::Cpu, Backend::HistoPyramid}) {
+      to.extract.backend = b;
+      const auto out = dir_ / (std::string(backend_name(b)) + ".ply");
+      const int before = gl::context_takes();
+      const TiledResult r = extract_tiled(*open_volume_source("field:gyroid:40", {}), to, out);
+      bricks = r.plan.total();
+      EXPECT_EQ(gl::context_takes() - before, b == Backend::Cpu ? 0 : 1)
+          << "simplify " << simplify << ", " << bricks << " bricks";
+      files[b == Backend::Cpu ? 0 : 1] = slurp(out);
+    }
+    EXPECT_GT(bricks, 3) << "simplify " << simplify;
+    EXPECT_TRUE(files[0] == files[1]) << "simplify " << simplify;
+  }
 }
 
 // The context made on a thread of its own (start_context(), what `--backend gs|hp` does while the
