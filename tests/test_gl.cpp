@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <thread>
 #include <type_traits>
 #include <vector>
 
@@ -29,6 +30,7 @@
 #include "shaders/read_back.h"
 #include "shaders/sample_upload.h"
 #include "test_support.h"
+#include "tiler/backend_lane.h"
 #include "tiler/tiled_extract.h"
 #include "tiler/volume_source.h"
 
@@ -547,6 +549,31 @@ TEST_F(GlTiled, ARunTakesTheContextOnceForAllItsBricks) {
     EXPECT_GT(bricks, 3) << "simplify " << simplify;
     EXPECT_TRUE(files[0] == files[1]) << "simplify " << simplify;
   }
+}
+
+// The lane itself: a GL backend's jobs run on its own thread, which holds the context (a Scope
+// there takes nothing), one result or exception back per job; the CPU's run in place. While the
+// lane lives, other threads wait for the context (hold_backend()): the counts are read on it.
+TEST(GlTiledLane, RunsJobsOnAThreadHoldingTheContext) {
+  REQUIRE_GL();
+  gl::register_gl_backends();
+  gl::device();
+  const std::thread::id here = std::this_thread::get_id();
+  {
+    BackendLane lane({.backend = Backend::HistoPyramid});
+    ASSERT_TRUE(lane.threaded());
+    const std::thread::id there = lane.run([] { return std::this_thread::get_id(); });
+    EXPECT_NE(there, here);
+    const int before = lane.run([] { return gl::context_takes(); });
+    for (int i = 0; i < 3; ++i) lane.run([] { gl::Scope scope; });
+    EXPECT_EQ(lane.run([] { return gl::context_takes(); }) - before, 0);
+    EXPECT_THROW(lane.run([]() -> int { throw Cancelled(); }), Cancelled);
+    EXPECT_EQ(lane.run([] { return 7; }), 7);  // still serving after a job threw
+    EXPECT_EQ(lane.run([] { return std::this_thread::get_id(); }), there);
+  }
+  BackendLane cpu({.backend = Backend::Cpu});
+  EXPECT_FALSE(cpu.threaded());
+  EXPECT_EQ(cpu.run([] { return std::this_thread::get_id(); }), here);
 }
 
 // The context made on a thread of its own (start_context(), what `--backend gs|hp` does while the
