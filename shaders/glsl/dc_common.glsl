@@ -421,9 +421,13 @@ dvec3 dc_solve_qef(dvec3 mass, dmat3 A, dvec3 b) {
       if (!(abs(apq) > negligible)) continue;
       rotated = true;
       precise double theta = (m[q][q] - m[p][p]) / (2.0LF * apq);
-      precise double t = 1.0LF / (abs(theta) + sqrt_rn(theta * theta + 1.0LF));
+      // The roots' arguments in precise variables of their own: `precise` need not reach into a
+      // call's argument, and a fused theta * theta + 1 is not the CPU's value.
+      precise double theta2 = theta * theta + 1.0LF;
+      precise double t = 1.0LF / (abs(theta) + sqrt_rn(theta2));
       if (theta < 0.0LF) t = -t;
-      precise double c = 1.0LF / sqrt_rn(t * t + 1.0LF);
+      precise double t2 = t * t + 1.0LF;
+      precise double c = 1.0LF / sqrt_rn(t2);
       precise double s = t * c;
       for (int k = 0; k < 3; ++k) {  // columns p and q
         precise double mkp = m[p][k], mkq = m[q][k];
