@@ -55,8 +55,7 @@ bool BrickExtraction::empty_volume() const {
 const BrickPlan& BrickExtraction::plan() {
   // The two tables hold a count for every sample row per brick column, whole: the planner weighs
   // them against cube bricks' many columns (brick_plan.h, column_bytes).
-  const std::uint64_t per_column =
-      2 * sizeof(std::uint64_t) * static_cast<std::uint64_t>(n_[1] * n_[2]);
+  const std::uint64_t per_column = 2 * SegmentTable::column_bytes(n_);
   const auto options = [&] {
     BrickPlanOptions po = reader_.plan_options(opt_.memory, opt_.max_read_amplification);
     po.column_bytes = per_column;
@@ -73,7 +72,7 @@ const BrickPlan& BrickExtraction::plan() {
   // No estimate counts the tables: where even the plan's take more than a quarter of the budget
   // (whole rows of a large volume at a small budget), the run goes over it, and says so first.
   const std::uint64_t table_bytes = per_column * static_cast<std::uint64_t>(plan_.count[0]);
-  if (table_bytes > opt_.memory / 4) {
+  if (static_cast<double>(table_bytes) > kColumnShare * static_cast<double>(opt_.memory)) {
     const std::int64_t columns = plan_.count[0];
     say_warning(opt_.warn, "the memory budget of " + std::to_string(opt_.memory) +
                                " bytes leaves out the tiler's tables of counts, " +

@@ -24,6 +24,10 @@ class SegmentTable {
  public:
   SegmentTable(const Index3& n, std::int64_t columns)
       : ny_(n[1]), columns_(columns), v_(static_cast<std::size_t>(n[1] * n[2] * columns) + 1) {}
+  // Bytes per brick column: a count per sample row (y, z).
+  static std::uint64_t column_bytes(const Index3& n) {
+    return sizeof(std::uint64_t) * static_cast<std::uint64_t>(n[1] * n[2]);
+  }
   std::size_t index(std::int64_t y, std::int64_t z, std::int64_t column) const {
     return static_cast<std::size_t>((z * ny_ + y) * columns_ + column);
   }

@@ -107,7 +107,7 @@ BrickPlan plan_within(const Index3& dims, const BrickPlanOptions& options) {
   // rows 43 MiB).
   if (!full_x && rows > 0 && cubes.count[0] > 1 &&
       static_cast<double>(options.column_bytes) * static_cast<double>(cubes.count[0]) >
-          static_cast<double>(options.memory) / 4) {
+          kColumnShare * static_cast<double>(options.memory)) {
     const BrickPlan thin_rows = plan_of(shape(rows, true));
     if (options.max_read_amplification <= 0 ||
         read_amplification(thin_rows, options.halo) <= options.max_read_amplification)

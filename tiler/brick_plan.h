@@ -41,11 +41,13 @@ struct BrickPlanOptions {
   // 512 MiB. 0: no limit (the tests' tiny bricks, which stress the seams).
   double max_read_amplification = 64;
   // Held per brick column besides any brick (the plain tiler's tables of counts, 16 bytes per
-  // sample row each): where the cubes' would take more than a quarter of the budget, bricks span
-  // whole rows (one column) however thin, if those read the volume within
+  // sample row each): where the cubes' would take more than kColumnShare of the budget, bricks
+  // span whole rows (one column) however thin, if those read the volume within
   // max_read_amplification.
   std::uint64_t column_bytes = 0;
 };
+// The share of the budget that the bytes held per brick column may take (column_bytes).
+inline constexpr double kColumnShare = 0.25;
 
 struct BrickPlan {
   Index3 dims{0, 0, 0};   // samples of the volume
