@@ -33,13 +33,13 @@ void BackendLane::serve(Backend backend) {
   }
   std::unique_lock lock(mutex_);
   for (;;) {
-    changed_.wait(lock, [&] { return stop_ || (job_ && !done_); });
-    if (!(job_ && !done_)) break;  // stopped, nothing left to run
+    changed_.wait(lock, [&] { return stop_ || job_; });
+    if (!job_) break;  // stopped, nothing left to run
     const std::function<void()>* job = job_;
     lock.unlock();
     (*job)();  // run() catches what the job throws
     lock.lock();
-    done_ = true;
+    job_ = nullptr;  // done
     changed_.notify_all();
   }
   lock.unlock();
@@ -50,10 +50,8 @@ void BackendLane::run_on_lane(const std::function<void()>& job) {
   std::lock_guard one(callers_);
   std::unique_lock lock(mutex_);
   job_ = &job;
-  done_ = false;
   changed_.notify_all();
-  changed_.wait(lock, [&] { return done_; });
-  job_ = nullptr;
+  changed_.wait(lock, [&] { return !job_; });
 }
 
 }  // namespace isotile

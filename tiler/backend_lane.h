@@ -74,7 +74,6 @@ class BackendLane {
   std::mutex mutex_;
   std::condition_variable changed_;
   const std::function<void()>* job_ = nullptr;  // the job handed over, until it has run
-  bool done_ = false;                           // job_ has run
   bool stop_ = false;
   std::mutex callers_;  // one run() at a time
   std::thread thread_;
