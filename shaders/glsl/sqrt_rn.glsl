@@ -54,21 +54,15 @@ double sqrt_rn_scale(double x, out int h) {
   return xs;
 }
 
-// sqrt(x) correctly rounded from a first guess of it (a test's), for every x >= 0 (subnormals
-// too); a negative, infinite or NaN x gets the device's sqrt.
+// sqrt(x) correctly rounded, for every x >= 0 (subnormals too), from a first guess of it (a
+// test's), or with `guess` 0 from the device's sqrt of x scaled into [1, 4) (a normal value
+// however small x is); a negative, infinite or NaN x gets the device's sqrt.
 double sqrt_rn_from(double x, double guess) {
   if (!(x > 0.0LF) || isinf(x)) return x == 0.0LF ? x : sqrt(x);
   int h;
   double xs = sqrt_rn_scale(x, h);
-  double c = clamp(guess * sqrt_rn_pow2(-h), 1.0LF, 2.0LF);
-  return sqrt_rn_step(xs, c) * sqrt_rn_pow2(h);
+  double c = guess > 0.0LF ? guess * sqrt_rn_pow2(-h) : sqrt(xs);
+  return sqrt_rn_step(xs, clamp(c, 1.0LF, 2.0LF)) * sqrt_rn_pow2(h);
 }
 
-// sqrt(x) correctly rounded, from the device's sqrt of x scaled into [1, 4) (a normal value
-// however small x is).
-double sqrt_rn(double x) {
-  if (!(x > 0.0LF) || isinf(x)) return x == 0.0LF ? x : sqrt(x);
-  int h;
-  double xs = sqrt_rn_scale(x, h);
-  return sqrt_rn_step(xs, clamp(sqrt(xs), 1.0LF, 2.0LF)) * sqrt_rn_pow2(h);
-}
+double sqrt_rn(double x) { return sqrt_rn_from(x, 0.0LF); }
