@@ -166,7 +166,7 @@ limit 360 bench_backends --threads 16 --repeat $bench_repeat --hold-context $big
   ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends "${PIPESTATUS[0]}"
 # What taking the context costs, and which EGL call costs it (gl.md, "On the NVIDIA H200").
-grep -A7 '^context per take' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
+grep -A6 '^context per take' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
 # The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
 grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
