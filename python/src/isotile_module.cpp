@@ -969,8 +969,16 @@ PYBIND11_MODULE(_isotile, m) {
   m.def(
       "backends",
       [] {
+        // Without the GIL: the GL backends' probe waits for the GL context's lock, which a run on
+        // another thread holds while its progress callback, on the context's thread, waits for
+        // the GIL.
+        std::vector<BackendCaps> caps;
+        {
+          py::gil_scoped_release release;
+          caps = capabilities();
+        }
         py::dict d;
-        for (const BackendCaps& c : capabilities())
+        for (const BackendCaps& c : caps)
           d[py::str(std::string(backend_name(c.backend)))] =
               c.available ? py::object(py::str("")) : py::object(py::str(c.why_unavailable));
         return d;

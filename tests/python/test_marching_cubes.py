@@ -535,3 +535,43 @@ def test_bool_samples_are_what_numpy_says():
                           isotile.extract(inside[:, ::-1], 0.5).vertices)
     with pytest.raises(ValueError, match="Surface level must be within volume data range"):
         isotile.marching_cubes(twos, 1.5)
+
+
+def test_gl_runs_report_progress_while_other_threads_ask_for_the_backends(tmp_path):
+    """A GL run's progress callback is called on the GL context's own thread (docs/gl.md) and takes
+    the GIL there, while the run's caller holds the GL context's lock; a thread that asks for
+    isotile.backends() (which needs that lock) must not hold the GIL while it waits, or neither
+    goes on. In a process of its own with a time limit, so that a deadlock fails the test."""
+    why = isotile.backends().get("hp")
+    if why:
+        skip("gl", f"backend hp unavailable: {why}")
+    script = tmp_path / "progress_and_backends.py"
+    script.write_text(textwrap.dedent("""
+        import threading
+        import numpy as np
+        import isotile
+        z, y, x = np.indices((40, 40, 40), dtype=np.float64)
+        vol = (15.0 - np.sqrt((z - 19.5) ** 2 + (y - 19.5) ** 2 + (x - 19.5) ** 2)).astype("f4")
+        cpu = isotile.extract(vol, 0.0, backend="cpu").vertices
+        stop = threading.Event()
+        asked = [0]
+        def ask():
+            while not stop.is_set():
+                isotile.backends()
+                asked[0] += 1
+        t = threading.Thread(target=ask)
+        t.start()
+        calls = [0]
+        def progress(stage, brick, bricks, fraction):
+            calls[0] += 1
+            return True
+        same = all(np.array_equal(isotile.extract(vol, 0.0, backend="hp",
+                                                  progress=progress).vertices, cpu)
+                   for _ in range(10))
+        stop.set()
+        t.join()
+        print(same, calls[0] > 0, asked[0] > 0)
+        """))
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["True", "True", "True"], r.stdout
