@@ -126,28 +126,26 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
   if (std::string why; !available(&why))
     throw InputError("backend '" + std::string(backend) + "': " + why);
   if (!report) return run(nullptr);
-  // One acquisition of the context for the run and its report. The end of a thread's outermost
-  // Scope releases the context and the thread's EGL state, and on NVIDIA's driver taking them
-  // again costs about 0.2 s (bench_backends on the H200: 231 ms a call on sphere 128, 1.8 ms
-  // with the context held across the calls; docs/gl.md): the report once took a second Scope
-  // after the run's own had ended.
-  Scope scope;
-  const ProgramCacheCounts before = program_cache_counts();
-  McStats stats;
-  Mesh mesh = run(&stats);
-  const ProgramCacheCounts after = program_cache_counts();
-  report->seconds.clear();
-  for (int s = 0; s < kGlStageCount; ++s)
-    report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
-  report->upload_bytes = stats.times.upload_bytes;
-  report->upload_seconds = stats.times[GlStage::Upload];
-  report->context_seconds = device().startup_seconds;
-  report->programs_loaded = after.loaded - before.loaded;
-  report->programs_compiled = after.compiled - before.compiled;
-  report->programs_rejected = after.rejected - before.rejected;
-  std::string why;
-  report->program_cache_off = program_cache_enabled(&why) ? "" : why;
-  return mesh;
+  // The run and its report in one job on the context's thread, where the program cache's counts
+  // before and after it are this run's alone.
+  return on_context_thread([&] {
+    const ProgramCacheCounts before = program_cache_counts();
+    McStats stats;
+    Mesh mesh = run(&stats);
+    const ProgramCacheCounts after = program_cache_counts();
+    report->seconds.clear();
+    for (int s = 0; s < kGlStageCount; ++s)
+      report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
+    report->upload_bytes = stats.times.upload_bytes;
+    report->upload_seconds = stats.times[GlStage::Upload];
+    report->context_seconds = device().startup_seconds;
+    report->programs_loaded = after.loaded - before.loaded;
+    report->programs_compiled = after.compiled - before.compiled;
+    report->programs_rejected = after.rejected - before.rejected;
+    std::string why;
+    report->program_cache_off = program_cache_enabled(&why) ? "" : why;
+    return mesh;
+  });
 }
 
 Mesh run_gs(const VolumeView& view, const ExtractOptions& o, GpuReport* r) {
@@ -192,12 +190,6 @@ std::string probe(bool* hardware, bool hardware_only) {
   return {};
 }
 
-// hold_backend(): the context current on this thread until the handle goes (a Scope, whose
-// nested ones in the extractions then neither take nor give it back).
-std::shared_ptr<void> hold() {
-  return std::make_shared<Scope>();
-}
-
 }  // namespace
 
 ProgramCacheState program_cache_state() {
@@ -210,9 +202,9 @@ ProgramCacheState program_cache_state() {
 
 void register_gl_backends() {
   register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe, start_context,
-                   start_failure, hold);
+                   start_failure);
   register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context,
-                   start_failure, hold);
+                   start_failure);
 }
 
 }  // namespace isotile::gl

@@ -6,12 +6,17 @@
 #include <glad/gl.h>
 #include <link.h>
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
+#include <functional>
 #include <memory>
 #include <string_view>
 #include <thread>
@@ -103,14 +108,103 @@ std::unique_ptr<Context> g_context;  // set once created; lives until shutdown()
 std::vector<void (*)()> g_releases;  // at_shutdown()
 std::string g_failure;               // set once creation failed
 thread_local int t_depth = 0;
-int g_takes = 0;  // context_takes(); under g_mutex
-// start_context(): true from its call to shutdown(); its thread is joined by shutdown(), or at
-// exit by its destructor, before the objects above go.
+int g_takes = 0;  // context_takes()
+// start_context(): true from its call to shutdown().
 std::atomic<bool> g_started{false};
-// Set by start_context()'s thread when it failed (g_failure says why), so that start_failure()
-// need not take g_mutex, which that thread holds while it tries.
+// Set by the context's thread when start_context()'s making of the context failed (g_failure says
+// why), so that start_failure() need not wait for that thread.
 std::atomic<bool> g_start_failed{false};
-std::jthread g_starter;
+
+// The context's own thread: it makes the context and keeps it current between the jobs it is
+// handed (on_context_thread()), so that an extraction takes nothing (on NVIDIA's driver taking
+// the context on a thread after it was given back cost about 0.2 s, docs/gl.md). It runs one job
+// at a time, each handed over by a thread that holds g_mutex and waits for it, so a job uses the
+// state below as its caller's deputy, without taking g_mutex itself (StateLock). The one job
+// nobody waits for is start_context()'s making of the context; whoever takes g_mutex next waits
+// for it first (settle()).
+class ContextThread {
+ public:
+  ContextThread() : thread_([this] { serve(); }) {}
+  // Hands `job` over (waiting for an unfinished one first) and returns at once.
+  void post(std::function<void()> job) {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return !job_; });
+    job_ = std::move(job);
+    changed_.notify_all();
+  }
+  // Returns once the job handed over has run.
+  void wait() {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return !job_; });
+  }
+  // Runs `job` there and waits for it.
+  void run(std::function<void()> job) {
+    post(std::move(job));
+    wait();
+  }
+  void stop_and_join() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    changed_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  void serve();
+
+  std::mutex mutex_;
+  std::condition_variable changed_, idle_;
+  std::function<void()> job_;  // handed over and not yet run
+  bool stop_ = false;
+  std::thread thread_;
+};
+
+// Made on first use and ended by shutdown(). Where a program never calls shutdown(), the thread
+// is left parked at exit (never destroyed, so never joined) and ends with the process, like the
+// context, which no exit handler of ours touches.
+ContextThread* g_thread = nullptr;
+thread_local bool t_context_thread = false;  // set on the context's thread
+bool g_current_there = false;                // the context is current on the context's thread
+
+void ContextThread::serve() {
+  t_context_thread = true;
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    changed_.wait(lock, [&] { return job_ || stop_; });
+    if (!job_) return;
+    lock.unlock();
+    job_();  // jobs catch what they throw
+    lock.lock();
+    job_ = nullptr;
+    idle_.notify_all();
+  }
+}
+
+ContextThread& context_thread() {
+  if (!g_thread) g_thread = new ContextThread;
+  return *g_thread;
+}
+
+// start_context()'s job, if it has not yet run: wait for it. Caller holds g_mutex.
+void settle() {
+  if (g_thread) g_thread->wait();
+}
+
+// g_mutex for the state above, taken and settled; on the context's thread nothing, its job's
+// caller holding it.
+class StateLock {
+ public:
+  StateLock() {
+    if (t_context_thread) return;
+    lock_ = std::unique_lock(g_mutex);
+    settle();
+  }
+
+ private:
+  std::unique_lock<std::recursive_mutex> lock_;
+};
 
 bool has_word(const char* list, std::string_view word) {
   if (!list) return false;
@@ -403,10 +497,34 @@ void create() {
   g_failure = "no usable OpenGL 4.5 context (" + reasons + ")";
 }
 
+// On the context's thread: makes the context there and leaves it current, or records why not.
+void make_context_there() {
+  try {
+    create();
+  } catch (const std::exception& e) {  // nothing may leave the thread
+    g_failure = std::string("no usable OpenGL 4.5 context: ") + e.what();
+  }
+  if (!g_context) return;
+  ++g_takes;
+  g_current_there = true;
+}
+
+// For a holder of g_mutex: the context, made on its thread where it is not made yet; false when
+// it cannot be (g_failure says why).
+bool ensure_context() {
+  if (g_context) return true;
+  if (!g_failure.empty()) return false;
+  if (t_context_thread)
+    make_context_there();
+  else
+    context_thread().run(make_context_there);
+  return g_context != nullptr;
+}
+
 }  // namespace
 
 bool hardware_device_present() {
-  std::lock_guard lock(g_mutex);
+  StateLock lock;
   if (g_context) return g_context->info.platform == "egl-device" && !g_context->info.software;
   if (!g_failure.empty()) return false;
   const char* env = std::getenv("ISOTILE_GL");
@@ -415,22 +533,16 @@ bool hardware_device_present() {
 }
 
 void start_context() {
-  std::lock_guard lock(g_mutex);
+  StateLock lock;
   if (g_context || !g_failure.empty() || g_started) return;
   if (const char* env = std::getenv("ISOTILE_GL"); env && std::string_view(env) == "off") {
     create();  // records the failure: nothing to wait for
     return;
   }
   g_started = true;
-  g_starter = std::jthread([] {
-    std::lock_guard held(g_mutex);  // taken once the caller's lock is released
-    try {
-      create();
-    } catch (const std::exception& e) {  // nothing may leave a thread
-      g_failure = std::string("no usable OpenGL 4.5 context: ") + e.what();
-    }
+  context_thread().post([] {
+    make_context_there();
     if (!g_context) g_start_failed = true;
-    if (g_context && t_depth == 0) g_context->release_thread();
   });
 }
 
@@ -440,7 +552,7 @@ bool context_started() {
 
 std::string start_failure() {
   if (!g_start_failed) return {};
-  std::lock_guard lock(g_mutex);  // its thread has released it, or is about to
+  StateLock lock;
   return g_failure;
 }
 
@@ -478,76 +590,113 @@ DeviceOrder hardware_device_order(int count) {
   return o;
 }
 
-// The description was filled when the context was made: no Scope, whose end would release the
-// context and the thread's EGL state (taking them again cost about 0.2 s on the H200, docs/gl.md),
-// so asking from outside a Scope (the backends' probe, once per extraction) costs a lock.
+// The description was filled when the context was made: no GL call, only the lock.
 const DeviceInfo& device() {
-  std::lock_guard lock(g_mutex);
-  if (!g_context) {
-    create();
-    if (!g_context) throw InputError(g_failure);
-    if (t_depth == 0) g_context->release_thread();
-  }
+  StateLock lock;
+  if (!ensure_context()) throw InputError(g_failure);
   return g_context->info;
 }
 
 bool available(std::string* why) {
-  std::lock_guard lock(g_mutex);
-  if (!g_context && g_failure.empty()) {
-    create();
-    if (g_context && t_depth == 0) g_context->release_thread();
-  }
+  StateLock lock;
+  if (!g_context && g_failure.empty()) ensure_context();
   if (why) *why = g_failure;
   return g_context != nullptr;
 }
 
-Scope::Scope() : lock_(g_mutex) {
+Scope::Scope() {
+  if (t_context_thread) {  // a job there: the context is current
+    ++t_depth;
+    return;
+  }
+  lock_ = std::unique_lock(g_mutex);
+  settle();
   if (t_depth == 0) {
+    if (!ensure_context()) throw InputError(g_failure);
+    // Lent by the context's thread, which takes it back with its next job.
+    if (g_current_there)
+      context_thread().run([] {
+        g_context->release();
+        g_current_there = false;
+      });
     ++g_takes;
-    if (!g_context) {
-      create();
-      if (!g_context) throw InputError(g_failure);
-    } else if (!g_context->make_current()) {
-      throw Error("OpenGL: making the context current failed");
-    }
+    if (!g_context->make_current()) throw Error("OpenGL: making the context current failed");
   }
   ++t_depth;
 }
 
 Scope::~Scope() {
-  if (--t_depth == 0 && g_context) g_context->release_thread();
+  if (--t_depth == 0 && !t_context_thread && g_context) g_context->release_thread();
+}
+
+void run_on_context_thread(const std::function<void()>& job) {
+  if (t_depth > 0) return job();  // the context is current here: a Scope, or a job there
+  StateLock lock;
+  if (!ensure_context()) throw InputError(g_failure);
+  // The caller's thread limit (a task_arena's, as the Python module's `threads`) for the job's
+  // parallel loops, which would otherwise run in the context thread's own default arena.
+  const int concurrency = tbb::this_task_arena::max_concurrency();
+  std::exception_ptr error;
+  context_thread().run([&] {
+    try {
+      if (!g_current_there) {  // back from a Scope elsewhere
+        ++g_takes;
+        if (!g_context->make_current()) throw Error("OpenGL: making the context current failed");
+        g_current_there = true;
+      }
+      t_depth = 1;
+      tbb::task_arena(concurrency).execute(job);
+    } catch (...) {
+      error = std::current_exception();
+    }
+    t_depth = 0;
+  });
+  if (error) std::rethrow_exception(error);
 }
 
 void at_shutdown(void (*release)()) {
-  std::lock_guard lock(g_mutex);
+  StateLock lock;
   if (std::find(g_releases.begin(), g_releases.end(), release) == g_releases.end())
     g_releases.push_back(release);
 }
 
 void shutdown() {
-  if (g_starter.joinable()) g_starter.join();  // its context is ended below like any other
-  std::lock_guard lock(g_mutex);
+  std::unique_lock lock(g_mutex);
+  settle();
   g_started = false;
-  if (!g_context) return;
-  Context& c = *g_context;
-  if (t_depth == 0 && c.make_current()) {
-    for (auto release : g_releases) release();
-    if (c.framebuffer) glDeleteFramebuffers(1, &c.framebuffer);
-    c.framebuffer = 0;
-    glFinish();
+  // The registered releases need the context current: where this thread holds a Scope it is
+  // current here, else on the context's thread (made current there when a Scope had it).
+  auto end = [](bool current) {
+    Context& c = *g_context;
+    if (current) {
+      for (auto release : g_releases) release();
+      if (c.framebuffer) glDeleteFramebuffers(1, &c.framebuffer);
+      c.framebuffer = 0;
+      glFinish();
+    }
+    c.release();
+    c.destroy();
+    g_context.reset();
+    g_current_there = false;
+  };
+  if (g_context && t_depth > 0)
+    end(true);
+  else if (g_context)
+    context_thread().run([&] { end(g_current_there || g_context->make_current()); });
+  if (g_thread) {
+    g_thread->stop_and_join();
+    delete g_thread;
+    g_thread = nullptr;
   }
-  c.release();
-  c.destroy();
-  g_context.reset();
 }
 
 int context_takes() {
-  std::lock_guard lock(g_mutex);
+  StateLock lock;
   return g_takes;
 }
 
 bool context_alive() {
-  std::lock_guard lock(g_mutex);
+  StateLock lock;
   return g_context != nullptr;
 }
 

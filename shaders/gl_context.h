@@ -1,11 +1,15 @@
-// The process's one headless OpenGL 4.5 core context, shared by the GL extractors.
+// The process's one headless OpenGL 4.5 core context, shared by the GL extractors, and its own
+// thread.
 //
 // Created on first use, trying in turn: EGL's device platform with a hardware device (a real GPU,
 // no window system needed), EGL's surfaceless platform (Mesa: llvmpipe on CPU-only machines), and
-// OSMesa loaded with dlopen (so machines with a GPU need not have it). Without a surface every draw
-// fails with GL_INVALID_FRAMEBUFFER_OPERATION, so a framebuffer object without attachments is
-// bound once the context exists. Functions come from a glad loader generated at build time (see
-// shaders/CMakeLists.txt; libepoxy aborts under OSMesa).
+// OSMesa loaded with dlopen (so machines with a GPU need not have it). The context is made on a
+// thread of its own, which keeps it current and runs the extractions (on_context_thread()): on
+// NVIDIA's driver, taking a context on a thread after it was given back cost about 0.2 s
+// (docs/gl.md), more than most extractions. A Scope on another thread borrows it from there.
+// Without a surface every draw fails with GL_INVALID_FRAMEBUFFER_OPERATION, so a framebuffer object
+// without attachments is bound once the context exists. Functions come from a glad loader generated
+// at build time (see shaders/CMakeLists.txt; libepoxy aborts under OSMesa).
 //
 // Environment (for tests and diagnosis):
 //   ISOTILE_GL=off                               no context: every GL backend reports unavailable
@@ -13,8 +17,12 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <mutex>
+#include <optional>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace isotile::gl {
@@ -51,9 +59,10 @@ const DeviceInfo& device();
 // True when a context can be (or was) created; never throws. `why` gets the reason when not.
 bool available(std::string* why = nullptr);
 
-// Makes the context on a thread of its own, so that the caller can go on (read its volume)
-// meanwhile: the first Scope, device() or available() waits for it. Does nothing when the context
-// exists, failed, or is being made; with ISOTILE_GL=off it fails at once, in the caller.
+// Makes the context on its thread without waiting, so that the caller can go on (read its volume)
+// meanwhile: the first Scope, device(), available() or on_context_thread() waits for it. Does
+// nothing when the context exists, failed, or is being made; with ISOTILE_GL=off it fails at once,
+// in the caller.
 void start_context();
 
 // Whether start_context() has begun making the context (since the last shutdown()), whatever
@@ -90,26 +99,46 @@ void at_shutdown(void (*release)());
 
 // Ends this process's use of GL in a known order: runs the registered releases with the context
 // current, deletes the context's framebuffer, destroys the context and terminates its EGL display
-// (or destroys the OSMesa context), and releases this thread's EGL state. Afterwards no GL or EGL
-// object is left to static destructors or to the drivers' own exit handlers (NVIDIA's libEGL
-// corrupted the heap at exit while TBB's workers were still running: docs/gl.md). Call it once
-// no thread uses GL any more; the CLI calls it after joining TBB's workers, the MeshLab plugin
-// when it is unloaded, and library users before leaving main(). A later GL call creates a new
-// context. Does nothing when no context exists.
+// (or destroys the OSMesa context), releases the EGL state of the context's thread and joins that
+// thread. Afterwards no GL or EGL object is left to static destructors or to the drivers' own
+// exit handlers (NVIDIA's libEGL corrupted the heap at exit while TBB's workers were still
+// running: docs/gl.md). Call it once no thread uses GL any more, and not from a job on the
+// context's thread; the CLI calls it after joining TBB's workers, the MeshLab plugin when it is
+// unloaded, and library users before leaving main(). A later GL call creates a new context and
+// thread. Does nothing when no context exists.
 void shutdown();
 
 // Whether a context exists now (created and not shut down).
 bool context_alive();
 
-// How many times a thread's outermost Scope took the context in this process (made it or made it
-// current; the end of such a Scope gives it back): each take after a give-back cost about 0.2 s
-// on the H200 (docs/gl.md). For tests.
+// How many times a thread made the context current in this process: its making, each Scope that
+// borrowed it from the context's thread (an outermost one on its thread) and each job after such
+// a Scope that took it back there. Extractions take nothing while no Scope borrows it. For tests.
 int context_takes();
 
+// Runs `job` on the context's thread with the context current there, and waits for it: its result
+// is returned and what it throws is thrown here. Jobs run one at a time, in the caller's thread
+// limit (its task_arena's concurrency). Where the calling thread has the context already (inside
+// a Scope, or a job) the job runs in place. Creates the context when needed (throws like
+// device()). The GL extractors' entries run through it.
+void run_on_context_thread(const std::function<void()>& job);
+template <class Job>
+auto on_context_thread(Job&& job) -> std::invoke_result_t<Job&> {
+  using R = std::invoke_result_t<Job&>;
+  if constexpr (std::is_void_v<R>) {
+    run_on_context_thread([&] { job(); });
+  } else {
+    std::optional<R> result;
+    run_on_context_thread([&] { result.emplace(job()); });
+    return std::move(*result);
+  }
+}
+
 // Holds the context current on the calling thread, and every other thread's GL work off it, for
-// its lifetime. Creates the context when needed (throws like device()). When the outermost Scope
-// of a thread ends, the context is released and, on EGL, so is the thread's EGL state, so that
-// worker threads that ran GL keep nothing of the driver's when they exit.
+// its lifetime: the outermost Scope of a thread borrows the context from the context's thread,
+// and at its end releases it and, on EGL, the thread's EGL state (so that worker threads that ran
+// GL keep nothing of the driver's when they exit). Inside a job on the context's thread a Scope
+// costs nothing. Creates the context when needed (throws like device()).
 class Scope {
  public:
   Scope();
@@ -118,7 +147,7 @@ class Scope {
   Scope& operator=(const Scope&) = delete;
 
  private:
-  std::unique_lock<std::recursive_mutex> lock_;
+  std::unique_lock<std::recursive_mutex> lock_;  // not taken on the context's thread
 };
 
 }  // namespace isotile::gl

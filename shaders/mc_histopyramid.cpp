@@ -30,39 +30,41 @@ Mesh mc_histopyramid(const VolumeView& view, const McOptions& o, McStats* stats)
 
 Mesh histopyramid_mesh(const VolumeView& view, const McOptions& o, McStats* stats,
                        const EdgeMethod& method) {
-  Scope scope;
-  for (int a = 0; a < 3; ++a)
-    if (view.dims[a] < 2) return {};
-  HpRun run;
-  run.cells = cells_to_extract(view, o.cells);
-  if (run.cells.empty()) return {};
-  run.iso = o.iso;
-  run.memory = o.memory;
-  run.max_brick_cells_z = o.max_brick_cells_z;
-  run.progress = o.progress;
-  HpMethod hp;
-  hp.halo = method.halo;
-  // Device bytes per sample besides it: its 16-bit code, the pyramid (8 bytes per 8 elements,
-  // and 1/7 more for the upper levels), the method's own buffers.
-  hp.bytes_per_sample = 2 + 8.0 / 7.0 + method.bytes_per_sample;
-  hp.largest_per_sample = method.largest_per_sample;
-  // The elements: the samples of the cells' closed box.
-  hp.elements = [](const Box3& cells) {
-    Box3 e = cells;
-    for (int a = 0; a < 3; ++a) ++e.hi[a];
-    return e;
-  };
-  std::string defines = o.normals ? "#define NORMALS\n" : "";
-  defines += method.defines;
-  hp.pyramid_defines = hp.classify_defines = hp.vertex_defines = hp.face_defines = defines;
-  hp.classify_file = "hp_classify.comp";
-  hp.vertex_file = "hp_vertices.comp";
-  hp.face_file = "hp_triangles.comp";
-  hp.faces = HpFaces::Triangles;
-  hp.normals = o.normals;
-  hp.bind_tables = [&] { bind_case_tables(method.table); };
-  hp.prepare = method.prepare;
-  return histopyramid_driver(view, run, hp, stats);
+  // On the context's thread, which keeps the context current (gl_context.h).
+  return on_context_thread([&]() -> Mesh {
+    for (int a = 0; a < 3; ++a)
+      if (view.dims[a] < 2) return {};
+    HpRun run;
+    run.cells = cells_to_extract(view, o.cells);
+    if (run.cells.empty()) return {};
+    run.iso = o.iso;
+    run.memory = o.memory;
+    run.max_brick_cells_z = o.max_brick_cells_z;
+    run.progress = o.progress;
+    HpMethod hp;
+    hp.halo = method.halo;
+    // Device bytes per sample besides it: its 16-bit code, the pyramid (8 bytes per 8 elements,
+    // and 1/7 more for the upper levels), the method's own buffers.
+    hp.bytes_per_sample = 2 + 8.0 / 7.0 + method.bytes_per_sample;
+    hp.largest_per_sample = method.largest_per_sample;
+    // The elements: the samples of the cells' closed box.
+    hp.elements = [](const Box3& cells) {
+      Box3 e = cells;
+      for (int a = 0; a < 3; ++a) ++e.hi[a];
+      return e;
+    };
+    std::string defines = o.normals ? "#define NORMALS\n" : "";
+    defines += method.defines;
+    hp.pyramid_defines = hp.classify_defines = hp.vertex_defines = hp.face_defines = defines;
+    hp.classify_file = "hp_classify.comp";
+    hp.vertex_file = "hp_vertices.comp";
+    hp.face_file = "hp_triangles.comp";
+    hp.faces = HpFaces::Triangles;
+    hp.normals = o.normals;
+    hp.bind_tables = [&] { bind_case_tables(method.table); };
+    hp.prepare = method.prepare;
+    return histopyramid_driver(view, run, hp, stats);
+  });
 }
 
 }  // namespace isotile::gl

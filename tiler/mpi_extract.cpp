@@ -25,7 +25,6 @@
 
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
-#include "tiler/backend_lane.h"
 #include "tiler/brick_extraction.h"
 #include "tiler/mpi_launch.h"
 #include "tiler/source_histogram.h"
@@ -474,8 +473,6 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
     };
     std::int64_t done = 0, todo = 0;
     for (std::int64_t b = 0; b < total; ++b) todo += owner[static_cast<std::size_t>(b)] == me;
-    // A GL backend's extractions run on one thread that keeps the context across the bricks.
-    BackendLane lane(bricks->extract_options());
     for (std::int64_t b = 0; b < total && error.empty(); ++b) {
       if (owner[static_cast<std::size_t>(b)] != me) continue;
       const auto tb = Clock::now();
@@ -486,7 +483,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
           options.progress->set_brick(done++, todo);
           options.progress->begin(Stage::Extract, 1);
         }
-        lane.run([&] { bricks->extract(b, write, quality, result); });
+        bricks->extract(b, write, quality, result);
         if (me == 0) progress_advance(options.progress);
       } catch (const std::exception& e) {
         error = brick_error(b, e);

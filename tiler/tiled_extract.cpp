@@ -14,7 +14,6 @@
 #include "core/mesh/atomic_file.h"
 #include "core/mesh/mesh_io.h"
 #include "core/progress.h"
-#include "tiler/backend_lane.h"
 #include "tiler/brick_extraction.h"
 #include "tiler/source_histogram.h"
 #include "tiler/tiled_simplify.h"
@@ -94,8 +93,6 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
     file.write_at(offset, data, n);
   };
   {
-    // A GL backend's extractions run on one thread that keeps the context across the parts.
-    BackendLane lane(bricks.extract_options());
     struct Part {
       std::int64_t brick;
       bool last;  // of its brick
@@ -135,9 +132,8 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
                   // The core extraction reports within its brick (core/progress.h, Nesting)
                   // while the writer below finishes the brick before.
                   ChildProgress child(options.progress, Stage::Extract, r.part->brick, total);
-                  return {r.part, std::make_shared<BrickRecords>(lane.run([&] {
-                            return bricks.extract_part(r.part->cells, r.view, quality, child.get());
-                          }))};
+                  return {r.part, std::make_shared<BrickRecords>(bricks.extract_part(
+                                      r.part->cells, r.view, quality, child.get()))};
                 }) &
             tbb::make_filter<Done, void>(tbb::filter_mode::serial_in_order, [&](const Done& d) {
               bricks.write(*d.records, write);

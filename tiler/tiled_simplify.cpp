@@ -17,7 +17,6 @@
 
 #include "core/errors.h"
 #include "core/mesh/atomic_file.h"
-#include "tiler/backend_lane.h"
 #include "tiler/brick_reader.h"
 #include "tiler/source_histogram.h"
 
@@ -255,13 +254,12 @@ class TiledSimplification {
     t0 = Clock::now();
     chunks_.assign(static_cast<std::size_t>(bricks) * 8, {});
     src_.rewind();
-    BackendLane lane(reader_.extract());  // a GL backend keeps its context across the bricks
     for (std::int64_t b = 0; b < bricks; ++b) {
       const Box3 cells = plan_.cells(b);
       const BrickReader::Slicing& cut = cuts[static_cast<std::size_t>(b)];
       const std::int64_t slices = cut.count;
       for (std::int64_t s = 0; s < slices; ++s) {
-        simplify_brick(b, z_slice(cells, s, slices), result, bricks, lane);
+        simplify_brick(b, z_slice(cells, s, slices), result, bricks);
         ++result.bricks_extracted;
       }
       result.largest_brick_bytes = std::max(result.largest_brick_bytes, cut.bytes);
@@ -360,8 +358,7 @@ class TiledSimplification {
         std::floor((grid_coord(a, 2) + grid_coord(b, 2) + grid_coord(c, 2)) / 3));
   }
 
-  void simplify_brick(std::int64_t b, const Box3& part, TiledResult& result, std::int64_t bricks,
-                      BackendLane& lane) {
+  void simplify_brick(std::int64_t b, const Box3& part, TiledResult& result, std::int64_t bricks) {
     // The extraction and the simplification report within the brick (core/progress.h).
     ChildProgress child(opt_.progress, Stage::Simplify, b, bricks);
     const VolumeView view = reader_.read(grow(part, reader_.halo(), n_));
@@ -370,7 +367,7 @@ class TiledSimplification {
     o.progress = child.get();
     o.normals = false;  // the simplified mesh gets area-weighted normals
     BackendChoice ran;
-    Mesh mesh = lane.run([&] { return extract(view, o, &ran); });
+    Mesh mesh = extract(view, o, &ran);
     if (ran.gpu) accumulate_gpu_report(result.gpu, *ran.gpu);
     std::vector<std::uint64_t> keys = brick_vertex_keys(view, o.iso, reader_.layout(), part);
     if (keys.size() != mesh.positions.size())

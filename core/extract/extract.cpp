@@ -39,7 +39,6 @@ struct BackendEntry {
   ProbeFn probe = nullptr;
   StartFn start = nullptr;  // start_backend()
   StartFailureFn start_failure = nullptr;
-  HoldFn hold = nullptr;  // hold_backend()
 };
 
 // The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
@@ -172,7 +171,7 @@ std::string_view backend_name(Backend b) {
 }
 
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe, StartFn start, StartFailureFn start_failure, HoldFn hold) {
+                      ProbeFn probe, StartFn start, StartFailureFn start_failure) {
   for (auto& e : kBackends)
     if (e.backend == backend) {
       e.run = run;
@@ -180,16 +179,7 @@ void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>
       e.probe = probe;
       e.start = start;
       e.start_failure = start_failure;
-      e.hold = hold;
     }
-}
-
-bool backend_holds(Backend backend) {
-  return backend != Backend::Auto && backend != Backend::Cpu && entry(backend).hold;
-}
-
-std::shared_ptr<void> hold_backend(Backend backend) {
-  return backend_holds(backend) ? entry(backend).hold() : nullptr;
 }
 
 void start_backend(Backend backend) {

@@ -9,7 +9,6 @@
 
 #include <array>
 #include <cstdint>
-#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -159,11 +158,9 @@ using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
 // ("" while it runs, succeeded or was not started).
 using StartFn = void (*)();
 using StartFailureFn = std::string (*)();
-// `hold`, when given, makes what hold_backend() returns.
-using HoldFn = std::shared_ptr<void> (*)();
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
                       ProbeFn probe, StartFn start = nullptr,
-                      StartFailureFn start_failure = nullptr, HoldFn hold = nullptr);
+                      StartFailureFn start_failure = nullptr);
 
 // For a backend asked for by name (not Auto, which must probe first): starts in the background
 // what it needs before its first extract() and takes long, so that it overlaps the caller's
@@ -178,16 +175,5 @@ void start_backend(Backend backend);
 // or "" (not failed, not started, or nothing to start). The pipeline asks it while it reads the
 // volume, so that a run whose context failed ends then and not after the read.
 std::string backend_start_failure(Backend backend);
-
-// Keeps `backend` ready for extractions on the calling thread while the returned handle lives,
-// for callers that extract brick after brick on one thread: the GL backends' context stays
-// current there, where each extraction would otherwise take it and give it back at its end (on
-// the H200 about 0.2 s a time, docs/gl.md). Null for the CPU, Auto and backends with nothing to
-// hold. The handle must be released on the thread that took it, and while it lives other
-// threads' extractions on that backend wait for it: hold it only on the thread that extracts
-// (tiler/backend_lane.h gives a pipeline such a thread). Throws where the backend cannot run.
-std::shared_ptr<void> hold_backend(Backend backend);
-// Whether hold_backend(backend) has something to hold (without holding it).
-bool backend_holds(Backend backend);
 
 }  // namespace isotile

@@ -25,9 +25,9 @@
 // GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h); `--methods none`
 // prints only that table. Before it, what taking and releasing the context costs per call
 // (bench_context_cycles()). --hold-context keeps the context current on the main thread for the
-// whole run (one gl::Scope around it), where each extraction call otherwise takes it and, at its
-// end, releases it and the thread's EGL state (gl_context.h's Scope): run with and without it,
-// the difference is what that costs each call.
+// whole run (one gl::Scope around it, borrowing it from the context's thread), so that the
+// extractions run in place there instead of on the context's thread (gl_context.h): run with and
+// without it, the difference is what handing each call to that thread costs.
 #include <EGL/egl.h>
 #include <tbb/global_control.h>
 
@@ -167,15 +167,16 @@ void bench_read_back(int repeat) {
   gl::use_default_read_back();
 }
 
-// What an extraction call pays to take the context and give it back (gl_context.h's Scope:
-// eglBindAPI and eglMakeCurrent; at the end of the thread's outermost Scope eglMakeCurrent with
-// no context and eglReleaseThread), and which of those calls costs it: the same EGL calls by
-// hand without eglReleaseThread and with it, a Scope taken while the context is current already,
-// and a small extraction (HistoPyramid MC on sphere 32) as an outermost call and inside a held
-// Scope. Each bare cycle ends with a glFinish(), so that work a driver leaves to the first GL call
-// after eglMakeCurrent is counted. Milliseconds per cycle, best of at most 3 rounds (a cycle
-// took about 0.2 s on the H200), on this thread with no other Scope alive. OSMesa contexts: no
-// rows by hand.
+// What taking the context on a thread and giving it back costs (gl_context.h's Scope: eglBindAPI
+// and eglMakeCurrent; at the end of the thread's outermost Scope eglMakeCurrent with no context
+// and eglReleaseThread), and which of those calls costs it: the same EGL calls by hand without
+// eglReleaseThread and with it, a Scope taken while the context is current already; and a small
+// extraction (HistoPyramid MC on sphere 32) as a call from this thread (run on the context's
+// thread, which keeps the context), after a Scope on this thread each time (the context's thread
+// takes it back: what every call paid before that thread existed), and inside a held Scope. Each
+// bare cycle ends with a glFinish(), so that work a driver leaves to the first GL call after
+// eglMakeCurrent is counted. Milliseconds per cycle, best of at most 3 rounds (a cycle took about
+// 0.2 s on the H200), on this thread with no other Scope alive. OSMesa contexts: no rows by hand.
 void bench_context_cycles(int repeat) {
   const int rounds = std::min(repeat, 3);
   auto per_cycle = [&](int cycles, const std::function<void()>& cycle) {
@@ -223,7 +224,11 @@ void bench_context_cycles(int repeat) {
     row("eglMakeCurrent, eglMakeCurrent(no context)", by_hand(false));
     row("eglMakeCurrent, eglMakeCurrent(no context), eglReleaseThread", by_hand(true));
   }
-  row("hp MC sphere 32, an outermost call", per_cycle(5, small_extraction));
+  row("hp MC sphere 32, a call (on the context's thread)", per_cycle(5, small_extraction));
+  row("hp MC sphere 32, each after a gl::Scope on this thread", per_cycle(5, [&] {
+        bare_scope();
+        small_extraction();
+      }));
   {
     gl::Scope outer;
     row("hp MC sphere 32, inside a held gl::Scope", per_cycle(5, small_extraction));

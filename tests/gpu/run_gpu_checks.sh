@@ -156,17 +156,18 @@ if in_part 2; then
 # 6. Every backend's mesh against the CPU's, and their times (16 threads, warm, median of 5), with
 # the GL stages from timer queries, upload GB/s and triangles/s; gyroid 512 unless --quick. "hpe"
 # is the HistoPyramid with per-element output passes: whether it beats "hp" decides the default.
-# The context is held across the calls (--hold-context): on the H200 taking it again cost each
-# call 150-230 ms, which cut the table short at 360 s in Macet's rows (docs/benchmarks.md); that
-# cost has the table printed first (the context per take and release) and the one-shot of step 8.
+# The calls run on the context's thread, which keeps the context current (shaders/gl_context.h):
+# on the H200 taking it again cost each call 150-230 ms when every call took it, which cut the
+# table short at 360 s in Macet's rows (docs/benchmarks.md); the table printed first says what a
+# take costs now and then (the context per take and release), and step 8 the one-shot.
 big=--gyroid512 bench_repeat=5
 # --quick: one run per cell of the table (at five, llvmpipe took more than 600 s on gyroid 256)
 [ "$size" = 192 ] && big= bench_repeat=1
-limit 360 bench_backends --threads 16 --repeat $bench_repeat --hold-context $big \
+limit 360 bench_backends --threads 16 --repeat $bench_repeat $big \
   ${data:+--data "$data"} | tee "$out/bench_backends.txt"
 report bench_backends "${PIPESTATUS[0]}"
 # What taking the context costs, and which EGL call costs it (gl.md, "On the NVIDIA H200").
-grep -A6 '^context per take' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
+grep -A7 '^context per take' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
 # The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
 grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
