@@ -142,6 +142,7 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
     report->programs_loaded = after.loaded - before.loaded;
     report->programs_compiled = after.compiled - before.compiled;
     report->programs_rejected = after.rejected - before.rejected;
+    report->seconds.emplace_back("programs", after.seconds - before.seconds);
     std::string why;
     report->program_cache_off = program_cache_enabled(&why) ? "" : why;
     return mesh;

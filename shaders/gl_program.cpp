@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -178,6 +179,14 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   auto& cache = program_cache();
   const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
+  // The time it takes, for --stats (seconds.gl.programs), on every way out.
+  struct Timed {
+    std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+    ~Timed() {
+      count_program_seconds(
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    }
+  } timed;
   at_shutdown(release_programs);
   // The on-disk cache's key (program_cache.h): every stage's full source and the varyings.
   std::vector<std::string> sources;

@@ -194,4 +194,8 @@ void count_compiled_program() {
   ++counts().compiled;
 }
 
+void count_program_seconds(double seconds) {
+  counts().seconds += seconds;
+}
+
 }  // namespace isotile::gl

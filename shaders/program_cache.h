@@ -28,6 +28,9 @@ struct ProgramCacheCounts {
   int loaded = 0;    // programs taken from the cache
   int compiled = 0;  // programs compiled (cache missing, off, unsupported, or entry rejected)
   int rejected = 0;  // entries found but not used (corrupt, truncated, stale)
+  // Wall seconds program() spent making programs: loading them from the cache, or compiling and
+  // linking (and saving) them; the programs already made in this process cost nothing.
+  double seconds = 0;
 };
 ProgramCacheCounts program_cache_counts();
 
@@ -50,5 +53,7 @@ void store_program(const std::string& key, GLuint prog);
 
 // Counts a program compiled (program() calls it once per compilation).
 void count_compiled_program();
+// Adds the seconds program() spent making one program.
+void count_program_seconds(double seconds);
 
 }  // namespace isotile::gl

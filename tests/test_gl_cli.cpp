@@ -152,7 +152,8 @@ TEST_F(GlCli, MacetGlRunsWriteTheCpuFile) {
 // and writes every program, the second loads every one and compiles none; an entry cut short, one
 // with a flipped byte and one whose binary format the driver does not know are each rejected and
 // compiled again, and the run after that loads everything again. Every run writes the CPU's file
-// byte for byte, and --stats reports the stages, the upload and the context's start-up.
+// byte for byte, and --stats reports the stages, the upload, the programs' making and the
+// context's start-up.
 TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   REQUIRE_GL_CLI();
   const fs::path xdg = dir_ / "xdg";
@@ -184,11 +185,12 @@ TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   ASSERT_EQ(static_cast<int>(entries.size()), programs);  // no temporary file left
   for (const fs::path& e : entries) EXPECT_EQ(e.extension(), ".bin") << e;
   // The stages, the upload (40^3 float32 samples in one slab) and the context.
-  for (const char* stage :
-       {"upload", "prepare", "classify", "scan", "vertices", "faces", "readback", "context"})
+  for (const char* stage : {"upload", "prepare", "classify", "scan", "vertices", "faces",
+                            "readback", "programs", "context"})
     EXPECT_GE(first["seconds"]["gl"][stage].get<double>(), 0.0) << stage;
   EXPECT_GT(first["seconds"]["gl"]["classify"].get<double>(), 0.0);
   EXPECT_GT(first["seconds"]["gl"]["context"].get<double>(), 0.0);
+  EXPECT_GT(first["seconds"]["gl"]["programs"].get<double>(), 0.0);  // compiled
   EXPECT_EQ(first["upload_bytes"], 40 * 40 * 40 * 4);
   EXPECT_GT(first["upload_gbps"].get<double>(), 0.0);
 
@@ -196,6 +198,7 @@ TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   EXPECT_EQ(second["gl_program_cache"]["state"], "hit");
   EXPECT_EQ(second["gl_program_cache"]["loaded"], programs);
   EXPECT_EQ(second["gl_program_cache"]["compiled"], 0);
+  EXPECT_GT(second["seconds"]["gl"]["programs"].get<double>(), 0.0);  // loaded
 
   // Cut short; one byte of the binary flipped; a binary format the driver does not know.
   fs::resize_file(entries[0], fs::file_size(entries[0]) / 2);
@@ -237,8 +240,8 @@ TEST_F(GlCli, OutOfCoreStatsSumTheBricksGlReports) {
     const auto hp = nlohmann::json::parse(slurp(dir_ / "hp.json"));
     EXPECT_EQ(hp["backend"], "hp") << extra;
     EXPECT_GT(hp["bricks"].get<int>(), 1) << extra;
-    for (const char* stage :
-         {"upload", "prepare", "classify", "scan", "vertices", "faces", "readback", "context"})
+    for (const char* stage : {"upload", "prepare", "classify", "scan", "vertices", "faces",
+                              "readback", "programs", "context"})
       EXPECT_GE(hp["seconds"]["gl"][stage].get<double>(), 0.0) << stage << " " << extra;
     EXPECT_GT(hp["seconds"]["gl"]["classify"].get<double>(), 0.0) << extra;
     EXPECT_GT(hp["upload_bytes"].get<std::uint64_t>(), 40u * 40 * 40 * 4) << extra;

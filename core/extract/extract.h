@@ -113,7 +113,8 @@ Backend resolve_backend(const ExtractOptions& options);
 // (the GL backends fill it; `isotile extract --stats` writes it, docs/cli.md).
 struct GpuReport {
   // Seconds per stage, summed over the slabs, in the driver's order ("upload", "prepare",
-  // "classify", "scan", "vertices", "faces", "readback"), from GL timer queries.
+  // "classify", "scan", "vertices", "faces", "readback"), from GL timer queries; then
+  // "programs", the wall seconds spent making the run's programs (loaded or compiled).
   std::vector<std::pair<std::string, double>> seconds;
   std::uint64_t upload_bytes = 0;  // bytes of samples uploaded, as stored
   double upload_seconds = 0;       // from the first byte handed to GL until resident, summed
