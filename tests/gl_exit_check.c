@@ -1,4 +1,4 @@
-/* Preloaded into `isotile` by tests/test_gl_cli.cpp (LD_PRELOAD): counts the EGL contexts and
+/* Preloaded into `isotile` by tests/test_gl_cli.cpp and into python3 by tests/python (LD_PRELOAD): counts the EGL contexts and
  * initialised displays and the GL programs, buffers, vertex arrays and framebuffers the process
  * creates and deletes, and at the very end of the process (this library's destructor runs after
  * the program's and its libraries' exit handlers) reports what is still alive. Exits 3 when
@@ -19,8 +19,15 @@ typedef int GLsizei;
 static atomic_long contexts, contexts_made, displays, programs, programs_made, buffers, arrays,
     framebuffers;
 
+/* The next definition in the global scope; where libEGL is not in it (loaded only as a dependency
+ * of a module opened with RTLD_LOCAL, as Python opens extension modules), from libEGL itself. */
 static void* real(const char* name) {
-  return dlsym(RTLD_NEXT, name);
+  void* f = dlsym(RTLD_NEXT, name);
+  if (!f) {
+    void* egl = dlopen("libEGL.so.1", RTLD_NOW | RTLD_NOLOAD);
+    if (egl) f = dlsym(egl, name);
+  }
+  return f;
 }
 
 EGLContext eglCreateContext(EGLDisplay d, EGLConfig c, EGLContext share, const EGLint* attrs) {

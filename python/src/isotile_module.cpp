@@ -50,6 +50,7 @@
 #include "tiler/stats_json.h"
 #ifdef ISOTILE_PYTHON_GL
 #include "shaders/gl_backends.h"
+#include "shaders/gl_context.h"
 #endif
 
 namespace py = pybind11;
@@ -904,6 +905,13 @@ PYBIND11_MODULE(_isotile, m) {
   m.attr("__version__") = std::string(isotile::version());
 #ifdef ISOTILE_PYTHON_GL
   isotile::gl::register_gl_backends();
+  // A GL context a run made is ended before the interpreter finishes, as the CLI ends its own
+  // (gl::shutdown()): nothing is left to the drivers' exit handlers (docs/gl.md). Without the GIL,
+  // which a run still going on another thread may need to end.
+  py::module_::import("atexit").attr("register")(py::cpp_function([] {
+    py::gil_scoped_release release;
+    isotile::gl::shutdown();
+  }));
 #endif
   static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_Exception);
   // No face at the isovalue: a ValueError as extract's other bad inputs, and the RuntimeError

@@ -575,3 +575,31 @@ def test_gl_runs_report_progress_while_other_threads_ask_for_the_backends(tmp_pa
     r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["True", "True", "True"], r.stdout
+
+
+def test_a_gl_run_leaves_nothing_alive_at_exit():
+    """The module ends the GL context a run made when the interpreter exits (gl::shutdown(), as
+    the CLI does): no EGL context or display, GL program, buffer or framebuffer is left to the
+    drivers' exit handlers, which crashed NVIDIA's libEGL at exit (docs/gl.md).
+    tests/gl_exit_check.c, preloaded, counts them after everything else at exit."""
+    why = isotile.backends().get("hp")
+    if why:
+        skip("gl", f"backend hp unavailable: {why}")
+    check = os.environ.get("ISOTILE_GL_EXIT_CHECK")
+    if not check:
+        skip("gl", "ISOTILE_GL_EXIT_CHECK (tests/gl_exit_check.c, built with the GL tests) unset")
+    script = textwrap.dedent("""
+        import numpy as np
+        import isotile
+        z, y, x = np.indices((20, 22, 24), dtype=np.float64)
+        vol = (8.0 - np.sqrt((z - 9.5) ** 2 + (y - 10.5) ** 2 + (x - 11.5) ** 2)).astype("f4")
+        for backend in ("hp", "gs"):
+            isotile.marching_cubes(vol, 0.0, backend=backend)
+        print("done")
+        """)
+    env = dict(os.environ, LD_PRELOAD=check)
+    r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == "done\n"
+    assert "gl_exit_check: nothing alive at exit: 0 EGL contexts (of 1 made)" in r.stderr, r.stderr
