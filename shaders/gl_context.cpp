@@ -503,6 +503,8 @@ void make_context_there() {
     create();
   } catch (const std::exception& e) {  // nothing may leave the thread
     g_failure = std::string("no usable OpenGL 4.5 context: ") + e.what();
+  } catch (...) {
+    g_failure = "no usable OpenGL 4.5 context: an unknown error";
   }
   if (!g_context) return;
   ++g_takes;
