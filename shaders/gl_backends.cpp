@@ -130,9 +130,11 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
   // before and after it are this run's alone.
   return on_context_thread([&] {
     const ProgramCacheCounts before = program_cache_counts();
+    const double pinned_before = mapped_buffer_seconds();
     McStats stats;
     Mesh mesh = run(&stats);
     const ProgramCacheCounts after = program_cache_counts();
+    const double pinned = mapped_buffer_seconds() - pinned_before;
     report->seconds.clear();
     for (int s = 0; s < kGlStageCount; ++s)
       report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
@@ -143,6 +145,7 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
     report->programs_compiled = after.compiled - before.compiled;
     report->programs_rejected = after.rejected - before.rejected;
     report->seconds.emplace_back("programs", after.seconds - before.seconds);
+    report->seconds.emplace_back("pinned", pinned);
     std::string why;
     report->program_cache_off = program_cache_enabled(&why) ? "" : why;
     return mesh;

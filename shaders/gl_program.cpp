@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -38,6 +39,14 @@ void check(const char* where) {
 }
 
 namespace {
+
+// Hands the wall seconds of its scope to `add` when it ends, on every way out.
+template <class Add>
+struct Timed {
+  Add add;
+  std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+  ~Timed() { add(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()); }
+};
 
 // Programs live until shutdown(); every key built is remembered for the variant check.
 std::map<std::string, GLuint>& program_cache() {
@@ -179,14 +188,7 @@ GLuint program(const std::vector<Stage>& stages, const std::string& defines,
   auto& cache = program_cache();
   const std::string key = program_key(stages, defines);
   if (auto it = cache.find(key); it != cache.end()) return it->second;
-  // The time it takes, for --stats (seconds.gl.programs), on every way out.
-  struct Timed {
-    std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
-    ~Timed() {
-      count_program_seconds(
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-    }
-  } timed;
+  const Timed timed{count_program_seconds};  // for --stats (seconds.gl.programs)
   at_shutdown(release_programs);
   // The on-disk cache's key (program_cache.h): every stage's full source and the varyings.
   std::vector<std::string> sources;
@@ -266,18 +268,40 @@ void Buffer::read(std::size_t offset, std::size_t bytes, void* out) const {
   read_back(id_, offset, bytes, out);
 }
 
-void MappedBuffer::create(std::size_t bytes, GLbitfield access, const char* what) {
+namespace {
+double g_mapped_seconds = 0;  // mapped_buffer_seconds(); with the context current
+}  // namespace
+
+double mapped_buffer_seconds() {
+  return g_mapped_seconds;
+}
+
+void MappedBuffer::create(std::size_t size, GLbitfield access, const char* what) {
+  const Timed timed{[](double seconds) { g_mapped_seconds += seconds; }};
   const GLbitfield map = access | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+  bytes = size;
   glCreateBuffers(1, &id);
-  glNamedBufferStorage(id, static_cast<GLsizeiptr>(bytes), nullptr, map | GL_CLIENT_STORAGE_BIT);
+  glNamedBufferStorage(id, static_cast<GLsizeiptr>(size), nullptr, map | GL_CLIENT_STORAGE_BIT);
   mapped =
-      static_cast<std::byte*>(glMapNamedBufferRange(id, 0, static_cast<GLsizeiptr>(bytes), map));
+      static_cast<std::byte*>(glMapNamedBufferRange(id, 0, static_cast<GLsizeiptr>(size), map));
   if (!mapped) {
     glDeleteBuffers(1, &id);
     *this = {};
     check((std::string("mapping ") + what).c_str());
     throw Error(std::string("OpenGL could not map ") + what);
   }
+}
+
+bool MappedBuffer::ensure(std::size_t at_least, GLbitfield access, const char* what) {
+  if (id && bytes >= at_least) return false;
+  wait();
+  release();
+  create(at_least, access, what);
+  return true;
+}
+
+std::size_t mapped_bytes_for(std::size_t need, std::size_t piece) {
+  return std::min(piece, std::bit_ceil(std::max(need, kMinMappedBytes)));
 }
 
 void MappedBuffer::release() {

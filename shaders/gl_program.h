@@ -86,10 +86,14 @@ struct MappedBuffer {
   GLuint id = 0;
   std::byte* mapped = nullptr;
   GLsync fence = nullptr;
+  std::size_t bytes = 0;
 
-  // Storage of `bytes` mapped with `access` (GL_MAP_WRITE_BIT or GL_MAP_READ_BIT); throws Error
-  // "OpenGL could not map <what>" when the driver cannot.
-  void create(std::size_t bytes, GLbitfield access, const char* what);
+  // Storage of `size` bytes mapped with `access` (GL_MAP_WRITE_BIT or GL_MAP_READ_BIT); throws
+  // Error "OpenGL could not map <what>" when the driver cannot.
+  void create(std::size_t size, GLbitfield access, const char* what);
+  // At least `at_least` bytes: created, or made again larger (after its fence) where smaller.
+  // True when it made one.
+  bool ensure(std::size_t at_least, GLbitfield access, const char* what);
   // Unmaps and deletes it (and its fence); empty again.
   void release();
   // Fences the commands issued so far (the copy that uses the buffer).
@@ -97,6 +101,17 @@ struct MappedBuffer {
   // Waits until the fenced commands have completed (none: returns at once).
   void wait();
 };
+
+// The size of the pinned buffers for a transfer of `need` bytes in pieces of at most `piece`:
+// `need` rounded up to a power of two, at least kMinMappedBytes, at most `piece`. The driver pins
+// (and llvmpipe zeroes) every byte of such a buffer when it is made: 0.18-0.24 s for the 32 MiB
+// of the samples' first staging buffer on this project's 2-core VM, where a 64^3 volume needs 1.
+inline constexpr std::size_t kMinMappedBytes = std::size_t{1} << 20;
+std::size_t mapped_bytes_for(std::size_t need, std::size_t piece);
+
+// Wall seconds create() has taken in this process (the driver pins and maps the memory; once per
+// buffer, as the buffers are kept), for --stats (seconds.gl.pinned).
+double mapped_buffer_seconds();
 
 // Runs the current compute program (local size 256 in x) over n invocations; the shaders compute
 // their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.

@@ -40,13 +40,12 @@ void release_read_back() {
   for (MappedBuffer& b : pinned()) b.release();
 }
 
-MappedBuffer& pinned_buffer(int i) {
+// Buffer `i`, of at least `bytes` (made, or made again larger, when needed).
+MappedBuffer& pinned_buffer(int i, std::size_t bytes) {
   MappedBuffer& b = pinned()[static_cast<std::size_t>(i)];
-  if (b.id) return b;
   at_shutdown(release_read_back);
   // Read access: the device writes it by DMA, the CPU reads it cached.
-  b.create(piece_size(), GL_MAP_READ_BIT, "a buffer to read the mesh back through");
-  ++created_count();
+  if (b.ensure(bytes, GL_MAP_READ_BIT, "a buffer to read the mesh back through")) ++created_count();
   return b;
 }
 
@@ -78,7 +77,8 @@ void use_default_read_back() {
 
 void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out) {
   if (bytes == 0) return;
-  const std::size_t piece = piece_size();
+  // Pieces of at most piece_size(), in buffers no larger than the read needs.
+  const std::size_t piece = piece_size() == 0 ? 0 : mapped_bytes_for(bytes, piece_size());
   if (piece == 0 || bytes < kPinnedReadMinBytes) {
     glGetNamedBufferSubData(id, static_cast<GLintptr>(offset), static_cast<GLsizeiptr>(bytes), out);
     check("reading a buffer back");
@@ -87,7 +87,7 @@ void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out) {
   const std::size_t pieces = (bytes + piece - 1) / piece;
   auto length = [&](std::size_t p) { return std::min(piece, bytes - p * piece); };
   auto issue = [&](std::size_t p) {
-    MappedBuffer& b = pinned_buffer(static_cast<int>(p % kReadBackBuffers));
+    MappedBuffer& b = pinned_buffer(static_cast<int>(p % kReadBackBuffers), piece);
     b.wait();  // only after an earlier read was cut short by an error
     glCopyNamedBufferSubData(id, b.id, static_cast<GLintptr>(offset + p * piece), 0,
                              static_cast<GLsizeiptr>(length(p)));

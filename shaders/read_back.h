@@ -27,16 +27,17 @@ namespace isotile::gl {
 // Reads `bytes` from `offset` of buffer `id` into `out` (gl::Buffer::read() calls it).
 void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out);
 
-// The pinned buffers: kReadBackBuffers of kDefaultReadBackBytes each, created on first use, on a
-// hardware device; reads below kPinnedReadMinBytes do not use them. A software rasteriser
-// (DeviceInfo::software) reads straight through glGetNamedBufferSubData, which is one memcpy
-// there.
+// The pinned buffers: kReadBackBuffers of at most kDefaultReadBackBytes each, no larger than the
+// largest read so far needs (mapped_bytes_for()), created on first use and made again larger
+// when a read needs more, on a hardware device; reads below kPinnedReadMinBytes do not use them. A
+// software rasteriser (DeviceInfo::software) reads straight through glGetNamedBufferSubData, which
+// is one memcpy there.
 inline constexpr std::size_t kDefaultReadBackBytes = std::size_t{8} << 20;
 inline constexpr int kReadBackBuffers = 3;
 inline constexpr std::size_t kPinnedReadMinBytes = std::size_t{64} << 10;
 
-// For tests and benchmarks, on any device: pinned buffers (and pieces) of `bytes` each from the
-// next read on, or with 0 every read straight through glGetNamedBufferSubData; then
+// For tests and benchmarks, on any device: pinned buffers (and pieces) of at most `bytes` each from
+// the next read on, or with 0 every read straight through glGetNamedBufferSubData; then
 // use_default_read_back() returns to the device's choice. Both release the current buffers
 // (inside a gl::Scope).
 void set_read_back_bytes(std::size_t bytes);

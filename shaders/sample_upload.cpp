@@ -33,12 +33,11 @@ void release_staging() {
   for (MappedBuffer& s : staging()) s.release();
 }
 
-MappedBuffer& staging_buffer(int i) {
+// Buffer `i`, of at least `bytes` (made, or made again larger, when needed).
+MappedBuffer& staging_buffer(int i, std::size_t bytes) {
   MappedBuffer& s = staging()[static_cast<std::size_t>(i)];
-  if (s.id) return s;
   at_shutdown(release_staging);
-  s.create(staging_size(), GL_MAP_WRITE_BIT, "a staging buffer for the samples");
-  ++created_count();
+  if (s.ensure(bytes, GL_MAP_WRITE_BIT, "a staging buffer for the samples")) ++created_count();
   return s;
 }
 
@@ -86,7 +85,8 @@ Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* c
   // Whole 32-bit words: the shaders read 8- and 16-bit samples a word at a time.
   out.buffer = Buffer((out.bytes + 3) / 4 * 4);
   if (out.bytes == 0) return out;
-  const std::size_t chunk_bytes = staging_size();
+  // Chunks of at most staging_size(), in buffers no larger than the samples need.
+  const std::size_t chunk_bytes = mapped_bytes_for(out.bytes, staging_size());
   if (row_bytes > chunk_bytes)
     throw CapacityError("one row of " + std::to_string(d[0]) +
                         " samples exceeds the GL staging buffer");
@@ -98,7 +98,7 @@ Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* c
   int next = 0;
   for (std::int64_t first = 0; first < rows; first += rows_per_chunk) {
     const std::int64_t n = std::min(rows_per_chunk, rows - first);
-    MappedBuffer& s = staging_buffer(next);
+    MappedBuffer& s = staging_buffer(next, chunk_bytes);
     next = (next + 1) % kStagingBuffers;
     s.wait();  // until the device no longer reads it
     if (clock && first == 0) handed = StageClock::cpu_mark();

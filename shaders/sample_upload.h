@@ -42,12 +42,13 @@ inline constexpr ScalarType kSampleTypes[] = {
     ScalarType::Int8,  ScalarType::UInt8,  ScalarType::Int16,   ScalarType::UInt16,
     ScalarType::Int32, ScalarType::UInt32, ScalarType::Float32, ScalarType::Float64};
 
-// The staging buffers: kStagingBuffers of kDefaultStagingBytes each (unless a test sets another
-// size), created on first use.
+// The staging buffers: kStagingBuffers of at most kDefaultStagingBytes each (unless a test sets
+// another size), no larger than the largest upload so far needs (mapped_bytes_for()), created on
+// first use and made again larger when an upload needs more.
 inline constexpr std::size_t kDefaultStagingBytes = std::size_t{32} << 20;
 inline constexpr int kStagingBuffers = 3;
-// For tests: staging buffers of `bytes` each (at least one row of a slab must fit) from the next
-// upload on; the current ones are released (inside a gl::Scope).
+// For tests: staging buffers of at most `bytes` each (at least one row of a slab must fit) from the
+// next upload on; the current ones are released (inside a gl::Scope).
 void set_staging_bytes(std::size_t bytes);
 
 // How many staging buffers were created in this process so far (reuse is checked by the tests).

@@ -152,8 +152,8 @@ TEST_F(GlCli, MacetGlRunsWriteTheCpuFile) {
 // and writes every program, the second loads every one and compiles none; an entry cut short, one
 // with a flipped byte and one whose binary format the driver does not know are each rejected and
 // compiled again, and the run after that loads everything again. Every run writes the CPU's file
-// byte for byte, and --stats reports the stages, the upload, the programs' making and the
-// context's start-up.
+// byte for byte, and --stats reports the stages, the upload, the making of the programs and of
+// the pinned buffers, and the context's start-up.
 TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   REQUIRE_GL_CLI();
   const fs::path xdg = dir_ / "xdg";
@@ -186,11 +186,12 @@ TEST_F(GlCli, ProgramCacheMissesHitsAndRecompilesCorruptEntries) {
   for (const fs::path& e : entries) EXPECT_EQ(e.extension(), ".bin") << e;
   // The stages, the upload (40^3 float32 samples in one slab) and the context.
   for (const char* stage : {"upload", "prepare", "classify", "scan", "vertices", "faces",
-                            "readback", "programs", "context"})
+                            "readback", "programs", "pinned", "context"})
     EXPECT_GE(first["seconds"]["gl"][stage].get<double>(), 0.0) << stage;
   EXPECT_GT(first["seconds"]["gl"]["classify"].get<double>(), 0.0);
   EXPECT_GT(first["seconds"]["gl"]["context"].get<double>(), 0.0);
   EXPECT_GT(first["seconds"]["gl"]["programs"].get<double>(), 0.0);  // compiled
+  EXPECT_GT(first["seconds"]["gl"]["pinned"].get<double>(), 0.0);    // the staging made
   EXPECT_EQ(first["upload_bytes"], 40 * 40 * 40 * 4);
   EXPECT_GT(first["upload_gbps"].get<double>(), 0.0);
 
@@ -241,7 +242,7 @@ TEST_F(GlCli, OutOfCoreStatsSumTheBricksGlReports) {
     EXPECT_EQ(hp["backend"], "hp") << extra;
     EXPECT_GT(hp["bricks"].get<int>(), 1) << extra;
     for (const char* stage : {"upload", "prepare", "classify", "scan", "vertices", "faces",
-                              "readback", "programs", "context"})
+                              "readback", "programs", "pinned", "context"})
       EXPECT_GE(hp["seconds"]["gl"][stage].get<double>(), 0.0) << stage << " " << extra;
     EXPECT_GT(hp["seconds"]["gl"]["classify"].get<double>(), 0.0) << extra;
     EXPECT_GT(hp["upload_bytes"].get<std::uint64_t>(), 40u * 40 * 40 * 4) << extra;

@@ -114,7 +114,8 @@ Backend resolve_backend(const ExtractOptions& options);
 struct GpuReport {
   // Seconds per stage, summed over the slabs, in the driver's order ("upload", "prepare",
   // "classify", "scan", "vertices", "faces", "readback"), from GL timer queries; then
-  // "programs", the wall seconds spent making the run's programs (loaded or compiled).
+  // "programs", the wall seconds spent making the run's programs (loaded or compiled), and
+  // "pinned", making the pinned staging and read-back buffers (once per process).
   std::vector<std::pair<std::string, double>> seconds;
   std::uint64_t upload_bytes = 0;  // bytes of samples uploaded, as stored
   double upload_seconds = 0;       // from the first byte handed to GL until resident, summed
