@@ -65,6 +65,12 @@ int read_back_buffers_created() {
   return created_count();
 }
 
+std::size_t read_back_bytes_held() {
+  std::size_t sum = 0;
+  for (const MappedBuffer& b : pinned()) sum += b.bytes;
+  return sum;
+}
+
 void set_read_back_bytes(std::size_t bytes) {
   release_read_back();
   forced_size() = bytes;

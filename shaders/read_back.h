@@ -43,7 +43,9 @@ inline constexpr std::size_t kPinnedReadMinBytes = std::size_t{64} << 10;
 void set_read_back_bytes(std::size_t bytes);
 void use_default_read_back();
 
-// How many pinned read-back buffers were created in this process so far.
+// How many pinned read-back buffers were created in this process so far, and the bytes of those
+// held now.
 int read_back_buffers_created();
+std::size_t read_back_bytes_held();
 
 }  // namespace isotile::gl

@@ -47,6 +47,12 @@ int staging_buffers_created() {
   return created_count();
 }
 
+std::size_t staging_bytes_held() {
+  std::size_t sum = 0;
+  for (const MappedBuffer& s : staging()) sum += s.bytes;
+  return sum;
+}
+
 void set_staging_bytes(std::size_t bytes) {
   release_staging();
   staging_size() = std::max<std::size_t>(bytes, 4);

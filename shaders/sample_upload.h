@@ -51,7 +51,9 @@ inline constexpr int kStagingBuffers = 3;
 // next upload on; the current ones are released (inside a gl::Scope).
 void set_staging_bytes(std::size_t bytes);
 
-// How many staging buffers were created in this process so far (reuse is checked by the tests).
+// How many staging buffers were created in this process so far (reuse is checked by the tests),
+// and the bytes of those held now.
 int staging_buffers_created();
+std::size_t staging_bytes_held();
 
 }  // namespace isotile::gl

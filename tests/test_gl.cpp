@@ -214,6 +214,44 @@ TEST_P(GlPaths, MeshReadBackThroughPinnedBuffers) {
   EXPECT_EQ(gl::read_back_buffers_created() - before, gl::device().software ? 0 : 1);
 }
 
+// The pinned buffers of the upload and of the read-back are no larger than the transfers need
+// (the driver pins, and llvmpipe zeroes, every byte when one is made): 1 MiB for a small volume
+// and mesh, where they were 32 and 8 MiB whatever the volume; a larger transfer makes them again,
+// larger, and a smaller one after it keeps them.
+TEST(GlTransfers, PinnedBuffersAreNoLargerThanTheTransfersNeed) {
+  REQUIRE_GL();
+  gl::Scope scope;
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);     // none held: from nothing
+  gl::set_read_back_bytes(gl::kDefaultReadBackBytes);  // through pinned buffers on any device
+  constexpr std::size_t kMiB = std::size_t{1} << 20;
+  auto largest_array = [](const Mesh& m) {
+    return std::max(m.positions.size() * sizeof(Vec3f), m.triangles.size() * sizeof(Tri));
+  };
+  const double iso = field_default_iso(FieldKind::Gyroid);
+  const Volume small = make_field_volume({FieldKind::Gyroid, 48});  // 432 KiB of samples
+  const Mesh small_cpu = marching_cubes(small.view(), {.iso = iso});
+  ASSERT_GT(largest_array(small_cpu), gl::kPinnedReadMinBytes);
+  ASSERT_LT(largest_array(small_cpu), kMiB);
+  expect_same_mesh(gl::mc_histopyramid(small.view(), {.iso = iso}), small_cpu, small.view(),
+                   "small");
+  EXPECT_EQ(gl::staging_bytes_held(), kMiB);
+  EXPECT_EQ(gl::read_back_bytes_held(), kMiB);
+  const Volume large = make_field_volume({FieldKind::Gyroid, 128});  // 8 MiB of samples
+  const Mesh large_cpu = marching_cubes(large.view(), {.iso = iso});
+  expect_same_mesh(gl::mc_histopyramid(large.view(), {.iso = iso}), large_cpu, large.view(),
+                   "large");
+  EXPECT_EQ(gl::staging_bytes_held(), 8 * kMiB);
+  EXPECT_EQ(gl::read_back_bytes_held(), std::bit_ceil(largest_array(large_cpu)));
+  const int staging_made = gl::staging_buffers_created();
+  const int read_back_made = gl::read_back_buffers_created();
+  expect_same_mesh(gl::mc_histopyramid(small.view(), {.iso = iso}), small_cpu, small.view(),
+                   "small again");
+  EXPECT_EQ(gl::staging_buffers_created(), staging_made);
+  EXPECT_EQ(gl::read_back_buffers_created(), read_back_made);
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);
+  gl::use_default_read_back();
+}
+
 // read_back() itself, on bytes it can check: any offset and length, pieces of any size, a read
 // smaller than kPinnedReadMinBytes straight through GL.
 TEST(GlReadBack, GivesTheBuffersBytes) {
