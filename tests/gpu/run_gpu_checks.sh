@@ -255,7 +255,7 @@ echo "gpu-measure: one-shot $one whole process (median of 5): cpu $(median "${cp
 cmp -s "$out/o-cpu.ply" "$out/o-hp.ply"
 report "one-shot $one hp same file as cpu" $?
 isotile --threads 16 extract $one -q --backend hp -o "$out/o.ply" --stats "$out/o.json"
-echo "gpu-measure: one-shot $one hp: context start-up $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["gl"]["context"]'), extract $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["extract"]'), total $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["total"]'), program cache $(json_get "$out/o.json" 'j["gl_program_cache"]["state"]')"
+echo "gpu-measure: one-shot $one hp: context start-up $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["gl"]["context"]'), extract $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["extract"]'), total $(json_get "$out/o.json" '"%.3f s" % j["seconds"]["total"]'), program cache $(json_get "$out/o.json" 'j["gl_program_cache"]["state"]'); $(gl_stages "$out/o.json")"
 rm -f "$out"/o*.ply
 # The same with the program cache cold: a fresh XDG_CACHE_HOME (Mesa's shader cache follows it
 # too, and so may the NVIDIA driver's own: then the driver's cache is cold as well).
