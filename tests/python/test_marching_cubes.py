@@ -467,21 +467,43 @@ def test_gl_backends_give_the_cpu_mesh(method):
             assert np.array_equal(a, b), (backend, method)
 
 
+def require_hp():
+    why = isotile.backends().get("hp")
+    if why:
+        skip("gl", f"backend hp unavailable: {why}")
+
+
+# The start of the scripts the GL tests run in a process of their own: `ball(shape, radius)`, a
+# ball of float32 samples (positive inside) centred in `shape`.
+SCRIPT_HEAD = """\
+import numpy as np
+import isotile
+def ball(shape, radius):
+    z, y, x = np.indices(shape, dtype=np.float64)
+    c = [(n - 1) / 2 for n in shape]
+    return (radius - np.sqrt((z - c[0]) ** 2 + (y - c[1]) ** 2 + (x - c[2]) ** 2)).astype("f4")
+"""
+
+
+def run_script(path, body, env=None):
+    """Writes SCRIPT_HEAD and `body` to `path` and runs it with this Python, within 120 s."""
+    path.write_text(SCRIPT_HEAD + textwrap.dedent(body))
+    return subprocess.run([sys.executable, str(path)], env=env, capture_output=True, text=True,
+                          timeout=120)
+
+
 def test_a_gl_failure_under_auto_is_a_warning_and_the_cpus_mesh(tmp_path):
     """Under backend="auto" a GL backend that fails is followed by the CPU: one RuntimeWarning at
     the caller's line (one line: the driver's log joined), nothing on stderr, the CPU's mesh.
     Mesa is made to offer OpenGL 4.5 but accept no GLSL newer than 1.40, so the HistoPyramid's
     first program fails; in a process of its own, as the GL context is made once per process."""
-    why = isotile.backends().get("hp")
-    if why:
-        skip("gl", f"backend hp unavailable: {why}")
+    require_hp()
     script = tmp_path / "fallback.py"
-    script.write_text(textwrap.dedent("""
+    env = dict(os.environ, ISOTILE_AUTO_BACKEND="hp", ISOTILE_PROGRAM_CACHE="off",
+               MESA_GL_VERSION_OVERRIDE="4.5", MESA_GLSL_VERSION_OVERRIDE="140")
+    r = run_script(script, """
         import json, warnings
-        import numpy as np
-        import isotile
-        z, y, x = np.indices((20, 22, 24), dtype=np.float64)
-        vol = (8.0 - np.sqrt((z - 9.5) ** 2 + (y - 10.5) ** 2 + (x - 11.5) ** 2)).astype("f4")
+        vol = ball((20, 22, 24), 8.0)
         cpu = isotile.marching_cubes(vol, 0.0)
         with warnings.catch_warnings(record=True) as said:
             warnings.simplefilter("always")
@@ -489,10 +511,7 @@ def test_a_gl_failure_under_auto_is_a_warning_and_the_cpus_mesh(tmp_path):
         print(json.dumps({"same": all(np.array_equal(a, b) for a, b in zip(got, cpu)),
                           "said": [[w.category.__name__, str(w.message), w.filename]
                                    for w in said]}))
-        """))
-    env = dict(os.environ, ISOTILE_AUTO_BACKEND="hp", ISOTILE_PROGRAM_CACHE="off",
-               MESA_GL_VERSION_OVERRIDE="4.5", MESA_GLSL_VERSION_OVERRIDE="140")
-    r = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True)
+        """, env)
     assert r.returncode == 0, r.stderr
     assert "isotile: warning" not in r.stderr, r.stderr
     out = json.loads(r.stdout)
@@ -542,16 +561,10 @@ def test_gl_runs_report_progress_while_other_threads_ask_for_the_backends(tmp_pa
     the GIL there, while the run's caller holds the GL context's lock; a thread that asks for
     isotile.backends() (which needs that lock) must not hold the GIL while it waits, or neither
     goes on. In a process of its own with a time limit, so that a deadlock fails the test."""
-    why = isotile.backends().get("hp")
-    if why:
-        skip("gl", f"backend hp unavailable: {why}")
-    script = tmp_path / "progress_and_backends.py"
-    script.write_text(textwrap.dedent("""
+    require_hp()
+    r = run_script(tmp_path / "progress_and_backends.py", """
         import threading
-        import numpy as np
-        import isotile
-        z, y, x = np.indices((40, 40, 40), dtype=np.float64)
-        vol = (15.0 - np.sqrt((z - 19.5) ** 2 + (y - 19.5) ** 2 + (x - 19.5) ** 2)).astype("f4")
+        vol = ball((40, 40, 40), 15.0)
         cpu = isotile.extract(vol, 0.0, backend="cpu").vertices
         stop = threading.Event()
         asked = [0]
@@ -571,35 +584,25 @@ def test_gl_runs_report_progress_while_other_threads_ask_for_the_backends(tmp_pa
         stop.set()
         t.join()
         print(same, calls[0] > 0, asked[0] > 0)
-        """))
-    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+        """)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["True", "True", "True"], r.stdout
 
 
-def test_a_gl_run_leaves_nothing_alive_at_exit():
+def test_a_gl_run_leaves_nothing_alive_at_exit(tmp_path):
     """The module ends the GL context a run made when the interpreter exits (gl::shutdown(), as
     the CLI does): no EGL context or display, GL program, buffer or framebuffer is left to the
     drivers' exit handlers, which crashed NVIDIA's libEGL at exit (docs/gl.md).
     tests/gl_exit_check.c, preloaded, counts them after everything else at exit."""
-    why = isotile.backends().get("hp")
-    if why:
-        skip("gl", f"backend hp unavailable: {why}")
+    require_hp()
     check = os.environ.get("ISOTILE_GL_EXIT_CHECK")
     if not check:
         skip("gl", "ISOTILE_GL_EXIT_CHECK (tests/gl_exit_check.c, built with the GL tests) unset")
-    script = textwrap.dedent("""
-        import numpy as np
-        import isotile
-        z, y, x = np.indices((20, 22, 24), dtype=np.float64)
-        vol = (8.0 - np.sqrt((z - 9.5) ** 2 + (y - 10.5) ** 2 + (x - 11.5) ** 2)).astype("f4")
+    r = run_script(tmp_path / "exit.py", """
         for backend in ("hp", "gs"):
-            isotile.marching_cubes(vol, 0.0, backend=backend)
+            isotile.marching_cubes(ball((20, 22, 24), 8.0), 0.0, backend=backend)
         print("done")
-        """)
-    env = dict(os.environ, LD_PRELOAD=check)
-    r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
-                       timeout=120)
+        """, dict(os.environ, LD_PRELOAD=check))
     assert r.returncode == 0, r.stderr
     assert r.stdout == "done\n"
     assert "gl_exit_check: nothing alive at exit: 0 EGL contexts (of 1 made)" in r.stderr, r.stderr
