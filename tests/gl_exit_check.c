@@ -1,10 +1,11 @@
-/* Preloaded into `isotile` by tests/test_gl_cli.cpp and into python3 by tests/python (LD_PRELOAD): counts the EGL contexts and
- * initialised displays and the GL programs, buffers, vertex arrays and framebuffers the process
- * creates and deletes, and at the very end of the process (this library's destructor runs after
- * the program's and its libraries' exit handlers) reports what is still alive. Exits 3 when
- * anything is: the program left a GL or EGL object to the drivers' exit handlers, which is what
- * crashed NVIDIA's libEGL at exit (docs/gl.md). The GL functions are counted through
- * eglGetProcAddress, which is how the project's loader (glad) finds them. */
+/* Preloaded into `isotile` by tests/test_gl_cli.cpp and into python3 by tests/python
+ * (LD_PRELOAD): counts the EGL contexts and initialised displays and the GL programs, buffers,
+ * vertex arrays and framebuffers the process creates and deletes, and at the very end of the
+ * process (this library's destructor runs after the program's and its libraries' exit handlers)
+ * reports what is still alive. Exits 3 when anything is: the program left a GL or EGL object to
+ * the drivers' exit handlers, which is what crashed NVIDIA's libEGL at exit (docs/gl.md). The GL
+ * functions are counted through eglGetProcAddress, which is how the project's loader (glad) finds
+ * them. */
 #define _GNU_SOURCE
 #include <EGL/egl.h>
 #include <dlfcn.h>
