@@ -663,6 +663,8 @@ void at_shutdown(void (*release)()) {
 }
 
 void shutdown() {
+  // It would wait for the job it runs in (and then join its own thread).
+  if (t_context_thread) throw Error("gl::shutdown() called from a job on the GL context's thread");
   std::unique_lock lock(g_mutex);
   settle();
   g_started = false;

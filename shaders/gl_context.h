@@ -102,10 +102,10 @@ void at_shutdown(void (*release)());
 // (or destroys the OSMesa context), releases the EGL state of the context's thread and joins that
 // thread. Afterwards no GL or EGL object is left to static destructors or to the drivers' own
 // exit handlers (NVIDIA's libEGL corrupted the heap at exit while TBB's workers were still
-// running: docs/gl.md). Call it once no thread uses GL any more, and not from a job on the
-// context's thread; the CLI calls it after joining TBB's workers, the MeshLab plugin when it is
-// unloaded, and library users before leaving main(). A later GL call creates a new context and
-// thread. Does nothing when no context exists.
+// running: docs/gl.md). Call it once no thread uses GL any more; from a job on the context's
+// thread, where it would wait for itself, it throws Error. The CLI calls it after joining TBB's
+// workers, the MeshLab plugin when it is unloaded, and library users before leaving main(). A later
+// GL call creates a new context and thread. Does nothing when no context exists.
 void shutdown();
 
 // Whether a context exists now (created and not shut down).

@@ -605,6 +605,9 @@ TEST(GlContextThread, RunsJobsWhereTheContextStays) {
   EXPECT_THROW(gl::on_context_thread([]() -> int { throw Cancelled(); }), Cancelled);
   EXPECT_EQ(gl::on_context_thread([] { return 7; }), 7);  // still serving after a job threw
   EXPECT_EQ(gl::on_context_thread([] { return std::this_thread::get_id(); }), there);
+  // There it would wait for itself.
+  EXPECT_THROW(gl::on_context_thread([] { gl::shutdown(); }), Error);
+  EXPECT_TRUE(gl::context_alive());
   tbb::task_arena one(1);
   EXPECT_EQ(one.execute([] {
     return gl::on_context_thread([] { return tbb::this_task_arena::max_concurrency(); });
