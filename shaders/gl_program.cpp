@@ -300,6 +300,12 @@ bool MappedBuffer::ensure(std::size_t at_least, GLbitfield access, const char* w
   return true;
 }
 
+std::size_t bytes_held(std::span<const MappedBuffer> buffers) {
+  std::size_t sum = 0;
+  for (const MappedBuffer& b : buffers) sum += b.bytes;
+  return sum;
+}
+
 std::size_t mapped_bytes_for(std::size_t need, std::size_t piece) {
   return std::min(piece, std::bit_ceil(std::max(need, kMinMappedBytes)));
 }

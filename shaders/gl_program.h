@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -108,6 +109,8 @@ struct MappedBuffer {
 // of the samples' first staging buffer on this project's 2-core VM, where a 64^3 volume needs 1.
 inline constexpr std::size_t kMinMappedBytes = std::size_t{1} << 20;
 std::size_t mapped_bytes_for(std::size_t need, std::size_t piece);
+// The bytes of `buffers` (0 for those not made).
+std::size_t bytes_held(std::span<const MappedBuffer> buffers);
 
 // Wall seconds create() has taken in this process (the driver pins and maps the memory; once per
 // buffer, as the buffers are kept), for --stats (seconds.gl.pinned).

@@ -66,9 +66,7 @@ int read_back_buffers_created() {
 }
 
 std::size_t read_back_bytes_held() {
-  std::size_t sum = 0;
-  for (const MappedBuffer& b : pinned()) sum += b.bytes;
-  return sum;
+  return bytes_held(pinned());
 }
 
 void set_read_back_bytes(std::size_t bytes) {
@@ -84,7 +82,8 @@ void use_default_read_back() {
 void read_back(GLuint id, std::size_t offset, std::size_t bytes, void* out) {
   if (bytes == 0) return;
   // Pieces of at most piece_size(), in buffers no larger than the read needs.
-  const std::size_t piece = piece_size() == 0 ? 0 : mapped_bytes_for(bytes, piece_size());
+  const std::size_t cap = piece_size();
+  const std::size_t piece = cap == 0 ? 0 : mapped_bytes_for(bytes, cap);
   if (piece == 0 || bytes < kPinnedReadMinBytes) {
     glGetNamedBufferSubData(id, static_cast<GLintptr>(offset), static_cast<GLsizeiptr>(bytes), out);
     check("reading a buffer back");

@@ -48,9 +48,7 @@ int staging_buffers_created() {
 }
 
 std::size_t staging_bytes_held() {
-  std::size_t sum = 0;
-  for (const MappedBuffer& s : staging()) sum += s.bytes;
-  return sum;
+  return bytes_held(staging());
 }
 
 void set_staging_bytes(std::size_t bytes) {
