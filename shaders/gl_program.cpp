@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cctype>
 #include <chrono>
@@ -330,6 +331,26 @@ void MappedBuffer::wait() {
   }
   glDeleteSync(fence);
   fence = nullptr;
+}
+
+namespace {
+// Set and read from any thread (benchmarks and tests switch and count between extractions).
+std::atomic<bool> g_submit_early{true};
+std::atomic<int> g_submissions{0};
+}  // namespace
+
+void submit() {
+  if (!g_submit_early) return;
+  glFlush();
+  ++g_submissions;
+}
+
+void set_submit_early(bool on) {
+  g_submit_early = on;
+}
+
+int submissions() {
+  return g_submissions;
 }
 
 void dispatch(std::uint64_t n) {

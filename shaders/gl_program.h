@@ -120,6 +120,16 @@ double mapped_buffer_seconds();
 // their index with invocation() (mc_common.glsl), as a 2D grid of groups past the x limit.
 void dispatch(std::uint64_t n);
 
+// Hands the commands issued so far to the device (glFlush) where the CPU goes on to work of its
+// own: filling the next staging buffer, loading the next programs, sizing the mesh's arrays. A
+// driver may keep commands in its queue until something waits for them, and the device would sit
+// idle meanwhile (llvmpipe does: stage_clock.cpp). Does not wait. set_submit_early(false) leaves
+// the commands to the next wait, as before these calls existed (benchmarks measure the
+// difference); submissions() counts the calls that flushed, for tests.
+void submit();
+void set_submit_early(bool on);
+int submissions();
+
 // After a transform-feedback draw from element `first` captured `written` of the `generated`
 // primitives (each tagged with its element by `element_of`): the primitives to keep and the
 // element to draw from next (`end` when everything fit). On an overflow the last captured

@@ -173,6 +173,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
     // The next slab's upload: its rows are copied into the staging buffers while the device
     // builds this slab's pyramid, before the totals' read-back waits for it.
     if (!slabs.empty()) {
+      submit();  // the pyramid's passes start before the CPU copies rows
       const Box3 next_region = slab_region(view, slabs.front(), method.halo);
       next.emplace(next_region, upload_samples(view, next_region, clock));
     }
@@ -251,10 +252,10 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
       face_buffer.bind(GL_SHADER_STORAGE_BUFFER, 3);
       if (method.positions_on_device) pos.bind(GL_SHADER_STORAGE_BUFFER, 4);
     };
-    // Where each pass fits one chunk (most slabs), both are dispatched before the CPU sizes the
-    // mesh's arrays, so that the device runs them while the CPU zeroes the arrays and takes their
-    // pages' first-touch faults (gyroid 256^3's 23 MB of positions and triangles: 11 ms in a
-    // fresh process on a 2-core VM); the reads follow.
+    // Where each pass fits one chunk (most slabs), both are dispatched and submitted before the
+    // CPU sizes the mesh's arrays, so that the device runs them while the CPU zeroes the arrays and
+    // takes their pages' first-touch faults (gyroid 256^3's 23 MB of positions and triangles: 11 ms
+    // in a fresh process on a 2-core VM); the reads follow.
     const bool ahead = n_vertices <= vcap && n_faces <= fcap && !method.gs_faces;
     const std::uint64_t per_element = scatter ? elements : 0;
     Chunk vertex_chunk, face_chunk;
@@ -266,6 +267,7 @@ Mesh histopyramid_driver(const VolumeView& view, const HpRun& run, const HpMetho
       use_face_pass();
       face_chunk = dispatch_chunk(face_prog, 0, n_faces, per_element, clock, chunks);
     }
+    if (ahead) submit();
     const bool quads = method.faces == HpFaces::Quads;
     const std::size_t v0 = mesh.positions.size();
     const std::size_t f0 = quads ? mesh.quads.size() : mesh.triangles.size();

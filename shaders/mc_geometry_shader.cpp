@@ -151,8 +151,10 @@ Mesh geometry_shader_mesh(const VolumeView& view, const McOptions& o, McStats* s
           glEndQuery(GL_PRIMITIVES_GENERATED);
           // The next slab's rows are copied into the staging buffers while the device draws, before
           // the queries' results wait for it.
-          if (!next && s + 1 < slabs.size())
+          if (!next && s + 1 < slabs.size()) {
+            submit();  // the draw starts before the CPU copies rows
             next = upload_samples(view, slab_region(view, drawn_cells(slabs[s + 1]), halo), clock);
+          }
           GLuint64 generated = 0, written = 0;
           glGetQueryObjectui64v(queries[0], GL_QUERY_RESULT, &generated);
           glGetQueryObjectui64v(queries[1], GL_QUERY_RESULT, &written);

@@ -125,6 +125,7 @@ Samples upload_samples(const VolumeView& view, const Box3& region, StageClock* c
                              static_cast<GLintptr>(static_cast<std::size_t>(first) * row_bytes),
                              static_cast<GLsizeiptr>(static_cast<std::size_t>(n) * row_bytes));
     s.fence_commands();
+    submit();  // the device copies this chunk while the CPU fills the next buffer
   }
   check("uploading the samples");
   if (clock) {

@@ -178,6 +178,43 @@ TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
   gl::set_staging_bytes(gl::kDefaultStagingBytes);
 }
 
+// The commands are handed to the device (gl::submit(): glFlush) wherever the CPU goes on to work
+// of its own: after each chunk of an upload (the CPU fills the next staging buffer), before the
+// next slab's early upload (its rows are copied while the device counts or draws this slab), and,
+// on the HistoPyramid path, before the CPU sizes the mesh's arrays behind the output passes. Off,
+// the commands wait for the next wait, as before; the mesh is the same either way.
+TEST_P(GlPaths, CommandsAreSubmittedBeforeTheCpuWorksAlone) {
+  REQUIRE_GL();
+  const Volume field = make_field_volume({FieldKind::Gyroid, 29});
+  const Volume v = convert(field, ScalarType::Int16, 40.0, 0.0);
+  const Mesh cpu = marching_cubes(v.view(), {.iso = 0.0, .normals = true});
+  gl::Scope scope;
+  // Staging buffers of three planes of 29 x 29 int16 samples and a bit: a chunk per 3 planes.
+  gl::set_staging_bytes(29 * 29 * 2 * 3 + 6);
+  // The slabs' regions (as in StagingBuffersAreReusedAcrossSlabsAndRuns), a chunk per 3 planes.
+  int slabs = 0, chunks = 0;
+  for (std::int64_t z = 0; z < 28; z += 5) {
+    const std::int64_t hi = std::min<std::int64_t>(z + 5, 28);
+    const std::int64_t planes =
+        std::min<std::int64_t>(hi + 3, 29) - std::max<std::int64_t>(z - 1, 0);
+    ++slabs;
+    chunks += static_cast<int>((planes + 2) / 3);
+  }
+  const int per_path = GetParam() == Path::Hp ? 2 * slabs - 1 : slabs - 1;
+  for (const bool early : {true, false}) {
+    gl::set_submit_early(early);
+    const int before = gl::submissions();
+    gl::McStats stats;
+    const Mesh gl =
+        run(GetParam(), v.view(), {.iso = 0.0, .normals = true, .max_brick_cells_z = 5}, &stats);
+    gl::set_submit_early(true);
+    expect_same_mesh(gl, cpu, v.view(), early ? "submitted early" : "not submitted early");
+    ASSERT_EQ(stats.bricks, slabs);
+    EXPECT_EQ(gl::submissions() - before, early ? chunks + per_path : 0);
+  }
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);
+}
+
 // The mesh's arrays come back through the pinned read-back buffers (read_back.h): with pieces far
 // smaller than the arrays (an odd size, so pieces end inside a vertex), every piece passes through
 // the few buffers in turn, the buffers are made once for all slabs and runs, and the mesh is the

@@ -22,12 +22,15 @@
 // stages of one more run of each path from GL timer queries (shaders/stage_clock.h), the upload's
 // GB/s (bytes of samples / seconds from the first byte handed to GL until resident) and
 // triangles/s of the median whole-call times. Before the volumes, a table of the read-back's
-// GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h); `--methods none`
-// prints only that table. Before it, what taking and releasing the context costs per call
-// (bench_context_cycles()). --hold-context keeps the context current on the main thread for the
-// whole run (one gl::Scope around it, borrowing it from the context's thread), so that the
-// extractions run in place there instead of on the context's thread (gl_context.h): run with and
-// without it, the difference is what handing each call to that thread costs.
+// GB/s on its own (device buffers of 16, 64 and 256 MiB; shaders/read_back.h) and one of the
+// upload's (16, 64 and 256 MiB of samples, staging pieces of 2, 8 and 32 MiB, each submitted to
+// the device as it is filled or not; shaders/sample_upload.h); `--methods none` prints only these
+// two. With Marching Cubes, a table of whole HistoPyramid calls with the commands submitted early
+// (gl::submit(), the default) and not follows them. Before it, what taking and releasing the
+// context costs per call (bench_context_cycles()). --hold-context keeps the context current on the
+// main thread for the whole run (one gl::Scope around it, borrowing it from the context's thread),
+// so that the extractions run in place there instead of on the context's thread (gl_context.h): run
+// with and without it, the difference is what handing each call to that thread costs.
 #include <EGL/egl.h>
 #include <tbb/global_control.h>
 
@@ -55,6 +58,7 @@
 #include "shaders/hp_pyramid.h"
 #include "shaders/macet_gl.h"
 #include "shaders/read_back.h"
+#include "shaders/sample_upload.h"
 
 namespace {
 
@@ -165,6 +169,87 @@ void bench_read_back(int repeat) {
     std::printf("  %s\n", all_same ? "yes" : "NO");
   }
   gl::use_default_read_back();
+}
+
+// The way in by itself (shaders/sample_upload.h): uint8 samples of 16, 64 and 256 MiB uploaded
+// through the staging buffers in pieces of a few sizes, each piece handed to the device as it is
+// filled (gl::submit()), and in the largest pieces without that (the copies then start at the
+// next wait: the glFinish here); wall time until resident, best of `repeat`, each upload read back
+// once and checked against the samples.
+void bench_upload(int repeat) {
+  const std::size_t pieces[] = {std::size_t{2} << 20, std::size_t{8} << 20,
+                                gl::kDefaultStagingBytes};
+  std::printf(
+      "\nupload GB/s (best of %d): uint8 samples through %d pinned staging buffers of N MiB, each "
+      "submitted as filled; unsubmitted = the copies left to the next wait\n",
+      repeat, gl::kStagingBuffers);
+  std::printf("%-10s", "MiB");
+  for (std::size_t p : pieces) std::printf("  staging %2zu", p >> 20);
+  std::printf("  %2zu unsubmitted  %s\n", gl::kDefaultStagingBytes >> 20, "same bytes");
+  gl::Scope scope;
+  for (const std::int64_t planes : {256, 1024, 4096}) {
+    Volume v(ScalarType::UInt8, {256, 256, planes});
+    auto* bytes = v.data<std::uint8_t>();
+    const std::size_t n = static_cast<std::size_t>(v.sample_count());
+    for (std::size_t i = 0; i < n; ++i) bytes[i] = static_cast<std::uint8_t>(i * 131 + (i >> 20));
+    const Box3 all{{0, 0, 0}, {256, 256, planes}};
+    bool all_same = true;
+    std::printf("%-10zu", n >> 20);
+    auto row = [&](std::size_t piece, bool submitted) {
+      gl::set_staging_bytes(piece);
+      gl::set_submit_early(submitted);
+      double best = 1e30;
+      for (int r = 0; r < repeat + 1; ++r) {  // the first upload makes the staging buffers
+        const auto t0 = std::chrono::steady_clock::now();
+        const gl::Samples samples = gl::upload_samples(v.view(), all);
+        glFinish();
+        const double t =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (r > 0) best = std::min(best, t);
+        if (r == 0) {
+          std::vector<std::uint8_t> back(n);
+          samples.buffer.read(0, n, back.data());
+          all_same = all_same && std::equal(back.begin(), back.end(), bytes);
+        }
+      }
+      gl::set_submit_early(true);
+      std::printf("  %10.2f", static_cast<double>(n) / best / 1e9);
+    };
+    for (std::size_t piece : pieces) row(piece, true);
+    row(gl::kDefaultStagingBytes, false);
+    std::printf("     %s\n", all_same ? "yes" : "NO");
+  }
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);
+}
+
+// Whole HistoPyramid Marching Cubes calls with the commands handed to the device wherever the CPU
+// goes on alone (gl::submit(): the default) and without (left to the next wait, as before), medians
+// of `repeat` calls each, interleaved, the meshes compared.
+void bench_submission(const std::vector<Case>& cases, int repeat) {
+  std::printf("\nhp MC whole calls, ms: commands submitted early (default) and not\n");
+  std::printf("%-12s %10s %12s %8s  %s\n", "volume", "submitted", "unsubmitted", "ratio",
+              "same mesh");
+  for (const Case& c : cases) {
+    const VolumeView v = c.volume->view();
+    auto call = [&] { return gl::mc_histopyramid(v, {.iso = c.iso}); };
+    Mesh on = call(), off;
+    std::vector<double> t_on, t_off;
+    for (int r = 0; r < repeat; ++r)
+      for (const bool early : {true, false}) {
+        gl::set_submit_early(early);
+        const auto t0 = std::chrono::steady_clock::now();
+        (early ? on : off) = call();
+        (early ? t_on : t_off)
+            .push_back(
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      }
+    gl::set_submit_early(true);
+    std::sort(t_on.begin(), t_on.end());
+    std::sort(t_off.begin(), t_off.end());
+    const double a = t_on[t_on.size() / 2], b = t_off[t_off.size() / 2];
+    std::printf("%-12s %10.1f %12.1f %8.2f  %s\n", c.name.c_str(), 1e3 * a, 1e3 * b, a / b,
+                same(on, off) ? "yes" : "NO");
+  }
 }
 
 // What taking the context on a thread and giving it back costs (gl_context.h's Scope: eglBindAPI
@@ -309,6 +394,8 @@ int main(int argc, char** argv) {
   }
 
   bench_read_back(repeat);
+  bench_upload(repeat);
+  if (run_mc) bench_submission(cases, repeat);
   if (run_dc) bench_dual_contouring(cases, repeat);
   // Each method's rows: the CPU extractor and the two GL paths, same options.
   struct Runner {

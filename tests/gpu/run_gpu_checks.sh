@@ -171,6 +171,11 @@ grep -A7 '^context per take' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /
 if grep -qw NO "$out/bench_backends.txt"; then report "bench_backends: a row says same mesh NO" 1; fi
 # The read-back on its own (shaders/read_back.h): straight through GL against the pinned buffers.
 grep -A4 '^read-back GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
+# The upload on its own (shaders/sample_upload.h): staging pieces of 2, 8 and 32 MiB, each handed
+# to the device as it is filled (gl::submit()), and 32 MiB left to the next wait as before; then
+# whole hp MC calls with and without those submissions: which piece size, and whether they pay.
+grep -A4 '^upload GB/s' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
+grep -A8 '^hp MC whole calls' "$out/bench_backends.txt" | sed 's/^/gpu-measure: /'
 # The pyramid's layouts and the compact output design (docs/gl.md, "A second output design"): it
 # stops with FAILED when a layout's counts or outputs differ from the CPU's or the linear's.
 repeat=5
