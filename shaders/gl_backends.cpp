@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "core/errors.h"
 #include "core/extract/extract.h"
@@ -12,6 +13,7 @@
 #include "gl_program.h"
 #include "macet_gl.h"
 #include "program_cache.h"
+#include "sample_upload.h"
 #include "stage_clock.h"
 
 namespace isotile::gl {
@@ -117,24 +119,38 @@ MacetGlOptions macet_gl_options(const ExtractOptions& o) {
   return m;
 }
 
+// What prepare()'s jobs made ahead of the next extraction (programs loaded or compiled, pinned
+// buffers), which that extraction's report counts as its own. On the context's thread only.
+struct Prepared {
+  ProgramCacheCounts programs;
+  double pinned_seconds = 0;
+};
+Prepared g_prepared;
+
 // Runs `run` (a GL extractor taking McStats*) and, when `report` is given, fills it: the stages'
-// device times, the upload, the program cache over this call, the context's start-up.
+// device times, the upload, the program cache over this call and what prepare() made for it, the
+// context's start-up.
 template <class Run>
 Mesh reported(const char* backend, GpuReport* report, Run run) {
   // The context that start_context() was making when the probe said yes may have failed: the
   // error the probe would have given (resolve_backend()).
   if (std::string why; !available(&why))
     throw InputError("backend '" + std::string(backend) + "': " + why);
-  if (!report) return run(nullptr);
   // The run and its report in one job on the context's thread, where the program cache's counts
   // before and after it are this run's alone.
   return on_context_thread([&] {
+    const Prepared prepared = std::exchange(g_prepared, {});
+    if (!report) return run(nullptr);
     const ProgramCacheCounts before = program_cache_counts();
     const double pinned_before = mapped_buffer_seconds();
     McStats stats;
     Mesh mesh = run(&stats);
-    const ProgramCacheCounts after = program_cache_counts();
-    const double pinned = mapped_buffer_seconds() - pinned_before;
+    ProgramCacheCounts after = program_cache_counts();
+    after.loaded += prepared.programs.loaded;
+    after.compiled += prepared.programs.compiled;
+    after.rejected += prepared.programs.rejected;
+    after.seconds += prepared.programs.seconds;
+    const double pinned = mapped_buffer_seconds() - pinned_before + prepared.pinned_seconds;
     report->seconds.clear();
     for (int s = 0; s < kGlStageCount; ++s)
       report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
@@ -179,6 +195,58 @@ Mesh run_hp_macet(const VolumeView& view, const ExtractOptions& o, GpuReport* r)
                   [&](McStats* s) { return macet_histopyramid(view, macet_gl_options(o), s); });
 }
 
+// prepare_backend() for a GL backend whose extractors are `runs`: on the context's thread while
+// the caller reads its volume, the pinned staging buffers for `sample_bytes`, then the method's
+// programs for samples of `type`, by the same extractor on a volume of 4^3 such samples with a
+// cube of 2^3 inside (every pass runs, so each loads its program; the isovalue is a uniform, not
+// part of a program). A volume that needs several slabs also needs one more program (hp_prefix)
+// and larger read-back buffers, both left to the extraction.
+void prepare(const std::array<ExtractFn, kMethodCount>& runs, const ExtractOptions& options,
+             ScalarType type, std::uint64_t sample_bytes) {
+  ExtractOptions o = options;
+  o.iso = 0.5;
+  o.cells = {};
+  o.progress = nullptr;
+  o.warn = {};
+  const ExtractFn run = runs[static_cast<std::size_t>(options.method)];
+  start_on_context_thread([o, run, type, sample_bytes] {
+    const ProgramCacheCounts before = program_cache_counts();
+    const double pinned_before = mapped_buffer_seconds();
+    reserve_staging(static_cast<std::size_t>(sample_bytes));
+    Volume v(type, {4, 4, 4});
+    visit_scalar(type, [&](auto zero) {
+      using T = decltype(zero);
+      T* samples = v.data<T>();
+      std::fill(samples, samples + v.sample_count(), zero);
+      for (int z = 1; z < 3; ++z)
+        for (int y = 1; y < 3; ++y)
+          for (int x = 1; x < 3; ++x) samples[(z * 4 + y) * 4 + x] = T(1);
+    });
+    try {
+      run(v.view(), o, nullptr);
+    } catch (...) {
+      // What fails here fails again in the extraction, which reports it.
+    }
+    const ProgramCacheCounts after = program_cache_counts();
+    g_prepared.programs.loaded += after.loaded - before.loaded;
+    g_prepared.programs.compiled += after.compiled - before.compiled;
+    g_prepared.programs.rejected += after.rejected - before.rejected;
+    g_prepared.programs.seconds += after.seconds - before.seconds;
+    g_prepared.pinned_seconds += mapped_buffer_seconds() - pinned_before;
+  });
+}
+
+constexpr std::array<ExtractFn, kMethodCount> kGsRuns = {run_gs, run_gs_macet, run_dc_gs};
+constexpr std::array<ExtractFn, kMethodCount> kHpRuns = {run_hp, run_hp_macet, run_dc_hp};
+
+void prepare_gs(const ExtractOptions& o, ScalarType type, std::uint64_t bytes) {
+  prepare(kGsRuns, o, type, bytes);
+}
+
+void prepare_hp(const ExtractOptions& o, ScalarType type, std::uint64_t bytes) {
+  prepare(kHpRuns, o, type, bytes);
+}
+
 // Usable when a context exists; "hardware" unless it is a software rasteriser, so that `auto`
 // only prefers the GPU paths on a real GPU. For `auto` (hardware_only) a machine without a GPU is
 // told apart without making a context (starting llvmpipe costs about 0.3 s).
@@ -205,10 +273,9 @@ ProgramCacheState program_cache_state() {
 }
 
 void register_gl_backends() {
-  register_backend(Backend::GeometryShader, {run_gs, run_gs_macet, run_dc_gs}, probe, start_context,
-                   start_failure);
-  register_backend(Backend::HistoPyramid, {run_hp, run_hp_macet, run_dc_hp}, probe, start_context,
-                   start_failure);
+  register_backend(Backend::GeometryShader, kGsRuns, probe, start_context, start_failure,
+                   prepare_gs);
+  register_backend(Backend::HistoPyramid, kHpRuns, probe, start_context, start_failure, prepare_hp);
 }
 
 }  // namespace isotile::gl

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -117,25 +118,26 @@ std::atomic<bool> g_start_failed{false};
 
 // The context's own thread: it makes the context and keeps it current between the jobs it is
 // handed (on_context_thread()), so that an extraction takes nothing (on NVIDIA's driver taking
-// the context on a thread after it was given back cost about 0.2 s, docs/gl.md). It runs one job
-// at a time, each handed over by a thread that holds g_mutex and waits for it, so a job uses the
-// state below as its caller's deputy, without taking g_mutex itself (StateLock). The one job
-// nobody waits for is start_context()'s making of the context; whoever takes g_mutex next waits
-// for it first (settle()).
+// the context on a thread after it was given back cost about 0.2 s, docs/gl.md). It runs its jobs
+// one at a time in the order handed over, each by a thread that holds g_mutex and waits for it,
+// so a job uses the state below as its caller's deputy, without taking g_mutex itself
+// (StateLock). The jobs nobody waits for are start_context()'s making of the context and
+// start_on_context_thread()'s; whoever takes g_mutex next waits for them first (settle()).
 class ContextThread {
  public:
   ContextThread() : thread_([this] { serve(); }) {}
-  // Hands `job` over (waiting for an unfinished one first) and returns at once.
+  // Queues `job` behind those handed over before, and returns at once.
   void post(std::function<void()> job) {
-    std::unique_lock lock(mutex_);
-    idle_.wait(lock, [&] { return !job_; });
-    job_ = std::move(job);
+    {
+      std::lock_guard lock(mutex_);
+      jobs_.push_back(std::move(job));
+    }
     changed_.notify_all();
   }
-  // Returns once the job handed over has run.
+  // Returns once every job handed over has run.
   void wait() {
     std::unique_lock lock(mutex_);
-    idle_.wait(lock, [&] { return !job_; });
+    idle_.wait(lock, [&] { return jobs_.empty() && !running_; });
   }
   // Runs `job` there and waits for it.
   void run(std::function<void()> job) {
@@ -156,7 +158,8 @@ class ContextThread {
 
   std::mutex mutex_;
   std::condition_variable changed_, idle_;
-  std::function<void()> job_;  // handed over and not yet run
+  std::deque<std::function<void()>> jobs_;  // handed over and not yet begun
+  bool running_ = false;                    // a job has begun and not ended
   bool stop_ = false;
   std::thread thread_;
 };
@@ -172,13 +175,17 @@ void ContextThread::serve() {
   t_context_thread = true;
   std::unique_lock lock(mutex_);
   for (;;) {
-    changed_.wait(lock, [&] { return job_ || stop_; });
-    if (!job_) return;
+    changed_.wait(lock, [&] { return !jobs_.empty() || stop_; });
+    if (jobs_.empty()) return;
+    std::function<void()> job = std::move(jobs_.front());
+    jobs_.pop_front();
+    running_ = true;
     lock.unlock();
-    job_();  // jobs catch what they throw
+    job();  // jobs catch what they throw
+    job = nullptr;
     lock.lock();
-    job_ = nullptr;
-    idle_.notify_all();
+    running_ = false;
+    if (jobs_.empty()) idle_.notify_all();
   }
 }
 
@@ -187,7 +194,8 @@ ContextThread& context_thread() {
   return *g_thread;
 }
 
-// start_context()'s job, if it has not yet run: wait for it. Caller holds g_mutex.
+// The jobs nobody waits for (start_context()'s, start_on_context_thread()'s), if they have not yet
+// run: wait for them. Caller holds g_mutex.
 void settle() {
   if (g_thread) g_thread->wait();
 }
@@ -654,6 +662,31 @@ void run_on_context_thread(const std::function<void()>& job) {
     t_depth = 0;
   });
   if (error) std::rethrow_exception(error);
+}
+
+void start_on_context_thread(std::function<void()> job) {
+  // Where this thread has the context, a job there could not make it current.
+  if (t_depth > 0 || t_context_thread) return;
+  // Not settled: the context may still be in the making, which this job follows.
+  std::lock_guard lock(g_mutex);
+  // Begun by start_context(), or made before (then no job that writes g_context is pending).
+  if (!g_started && !g_context) return;
+  const int concurrency = tbb::this_task_arena::max_concurrency();
+  context_thread().post([job = std::move(job), concurrency] {
+    if (!g_context) return;  // its making failed: the extraction says why
+    try {
+      if (!g_current_there) {
+        ++g_takes;
+        if (!g_context->make_current()) return;
+        g_current_there = true;
+      }
+      t_depth = 1;
+      tbb::task_arena(concurrency).execute(job);
+    } catch (...) {
+      // Dropped: what failed here fails again, and is reported, in the extraction.
+    }
+    t_depth = 0;
+  });
 }
 
 void at_shutdown(void (*release)()) {

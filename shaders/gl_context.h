@@ -134,6 +134,15 @@ auto on_context_thread(Job&& job) -> std::invoke_result_t<Job&> {
   }
 }
 
+// Runs `job` on the context's thread with the context current there, without waiting: after the
+// jobs handed over before it (start_context()'s making of the context), and before any later GL
+// call of another thread, which waits for it. What it throws is dropped. Only once
+// start_context() has begun or the context exists, and not from a thread that has the context
+// (else it does nothing); nothing when the context could not be made. For work an extraction
+// would do first and that can overlap the caller's reading of its volume (the GL backends'
+// prepare_backend()).
+void start_on_context_thread(std::function<void()> job);
+
 // Holds the context current on the calling thread, and every other thread's GL work off it, for
 // its lifetime: the outermost Scope of a thread borrows the context from the context's thread,
 // and at its end releases it and, on EGL, the thread's EGL state (so that worker threads that ran

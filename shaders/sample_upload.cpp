@@ -56,6 +56,14 @@ void set_staging_bytes(std::size_t bytes) {
   staging_size() = std::max<std::size_t>(bytes, 4);
 }
 
+void reserve_staging(std::size_t bytes) {
+  if (bytes == 0) return;
+  const std::size_t chunk = mapped_bytes_for(bytes, staging_size());
+  const std::size_t chunks = (bytes + chunk - 1) / chunk;
+  for (std::size_t i = 0; i < std::min<std::size_t>(chunks, kStagingBuffers); ++i)
+    staging_buffer(static_cast<int>(i), chunk);
+}
+
 std::string sample_defines(ScalarType type) {
   switch (type) {
     case ScalarType::Int8:

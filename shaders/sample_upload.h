@@ -51,6 +51,10 @@ inline constexpr int kStagingBuffers = 3;
 // next upload on; the current ones are released (inside a gl::Scope).
 void set_staging_bytes(std::size_t bytes);
 
+// Makes the staging buffers that an upload of `bytes` fills (as upload_samples() would when it
+// gets there), so that they can be made ahead of it (prepare_backend(), gl_backends.cpp).
+void reserve_staging(std::size_t bytes);
+
 // How many staging buffers were created in this process so far (reuse is checked by the tests),
 // and the bytes of those held now.
 int staging_buffers_created();

@@ -592,6 +592,58 @@ TEST(GlBackends, AnExtractionTakesNothingOnceTheContextIsMade) {
     }
 }
 
+// prepare_backend(), called while the caller reads its volume: the method's programs for the
+// sample type, and the staging buffers for the volume's bytes, are made on the context's thread
+// then, so that the extraction that follows makes none; its report counts them as its own.
+TEST(GlBackends, PreparedWhileTheVolumeIsRead) {
+  REQUIRE_GL();
+  gl::register_gl_backends();
+  gl::device();
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);  // none held
+  const Volume field = make_field_volume({FieldKind::Gyroid, 30});
+  auto keys = [] { return gl::on_context_thread([] { return gl::built_program_keys(); }); };
+  // A sample type per backend and method, so that each starts with none of its programs built.
+  const ScalarType types[] = {ScalarType::Int8,   ScalarType::UInt8, ScalarType::Int16,
+                              ScalarType::UInt16, ScalarType::Int32, ScalarType::UInt32};
+  int next = 0;
+  for (Backend b : {Backend::GeometryShader, Backend::HistoPyramid})
+    for (Method m : {Method::MarchingCubes, Method::Macet, Method::DualContouring}) {
+      const ScalarType t = types[next++];
+      const bool is_unsigned =
+          t == ScalarType::UInt8 || t == ScalarType::UInt16 || t == ScalarType::UInt32;
+      const Volume vol = convert(field, t, 40.0, is_unsigned ? 64.0 : 0.0);
+      ExtractOptions o;
+      o.method = m;
+      o.backend = b;
+      o.iso = is_unsigned ? 64.5 : 0.5;
+      const std::string what = std::string(method_name(m)) + " on " + std::string(backend_name(b)) +
+                               ", " + std::string(scalar_name(t));
+      const std::vector<std::string> before = keys();
+      // The first also makes the staging buffer of a 3 MiB volume: one of 4 MiB.
+      prepare_backend(o, t, next == 1 ? 3u << 20 : vol.byte_size());
+      const std::vector<std::string> prepared = keys();
+      EXPECT_GT(prepared.size(), before.size()) << what;
+      if (next == 1) {
+        EXPECT_EQ(gl::staging_bytes_held(), std::size_t{4} << 20);
+      }
+      BackendChoice ran;
+      const Mesh mesh = extract(vol.view(), o, &ran);
+      EXPECT_FALSE(mesh.triangles.empty()) << what;
+      EXPECT_EQ(keys(), prepared) << what << ": the extraction built programs of its own";
+      ASSERT_TRUE(ran.gpu.has_value()) << what;
+      EXPECT_EQ(ran.gpu->programs_loaded + ran.gpu->programs_compiled,
+                static_cast<int>(prepared.size() - before.size()))
+          << what;
+      if (next == 1) {
+        double pinned = 0;
+        for (const auto& [name, seconds] : ran.gpu->seconds)
+          if (name == "pinned") pinned = seconds;
+        EXPECT_GT(pinned, 0.0) << what << ": the staging buffer made for it";
+      }
+    }
+  gl::set_staging_bytes(gl::kDefaultStagingBytes);
+}
+
 // A tiled run extracts its bricks on whichever threads the pipeline runs them, each through the
 // context's thread: none takes the context, simplified or not, and the file is the CPU's.
 class GlTiled : public testing::TempDirTest {

@@ -165,8 +165,7 @@ std::optional<AvailableMemory> available_memory() {
   return m;
 }
 
-std::optional<std::uint64_t> in_core_bytes(const std::string& input, const RawOptions& raw,
-                                           const ExtractOptions& extract) {
+std::optional<SampleLayout> in_core_layout(const std::string& input, const RawOptions& raw) {
   Index3 dims{0, 0, 0};
   ScalarType type = ScalarType::Float32;
   if (const std::optional<FieldSpec> field = parse_field_spec(input)) {
@@ -194,10 +193,20 @@ std::optional<std::uint64_t> in_core_bytes(const std::string& input, const RawOp
       return std::nullopt;
     }
   }
-  const std::uint64_t samples = checked_volume_bytes(type, dims);
+  return SampleLayout{dims, type, checked_volume_bytes(type, dims)};
+}
+
+std::uint64_t in_core_bytes(const SampleLayout& layout, const ExtractOptions& extract) {
   if (extract.method == Method::Macet && extract.macet_relax > 0)
-    return samples + samples / scalar_size(type) * 8;
-  return samples;
+    return layout.bytes + layout.bytes / scalar_size(layout.type) * 8;
+  return layout.bytes;
+}
+
+std::optional<std::uint64_t> in_core_bytes(const std::string& input, const RawOptions& raw,
+                                           const ExtractOptions& extract) {
+  const std::optional<SampleLayout> layout = in_core_layout(input, raw);
+  if (!layout) return std::nullopt;
+  return in_core_bytes(*layout, extract);
 }
 
 void check_in_core_fits(std::uint64_t need, const AvailableMemory& available,

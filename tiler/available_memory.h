@@ -34,6 +34,15 @@ std::optional<AvailableMemory> available_memory();
 // "15.2 GiB", "640 MiB", "12 KiB", "300 bytes".
 std::string bytes_text(std::uint64_t bytes);
 
+// The samples of `input` as its name, options or header give them, without reading them; nullopt
+// where that would cost a read of its own (in_core_bytes()). `bytes` is their size as stored.
+struct SampleLayout {
+  Index3 dims{0, 0, 0};
+  ScalarType type = ScalarType::Float32;
+  std::uint64_t bytes = 0;
+};
+std::optional<SampleLayout> in_core_layout(const std::string& input, const RawOptions& raw);
+
 // The bytes an in-core run of `input` holds at once whatever the surface: its samples (and
 // Macet's relaxed copy of them, 8 bytes each, where relax > 0). nullopt where finding them would
 // cost a read of its own: a raw volume's size is known from its name or options, a header
@@ -41,6 +50,8 @@ std::string bytes_text(std::uint64_t bytes);
 // DICOM series' only from a scan of every file, and an OpenVDB grid's once it is read.
 std::optional<std::uint64_t> in_core_bytes(const std::string& input, const RawOptions& raw,
                                            const ExtractOptions& extract);
+// The same from the samples' layout.
+std::uint64_t in_core_bytes(const SampleLayout& layout, const ExtractOptions& extract);
 
 // Refuses (CapacityError) an in-core run whose `need` bytes exceed what the process can take at
 // most, naming both and a --memory budget that fits; warns where it would only fit by swapping.

@@ -2,6 +2,7 @@
 
 #include <malloc.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <utility>
@@ -109,6 +110,10 @@ PipelineResult run_tiled(const PipelineInput& input, const PipelineOptions& opti
   warn_coarse_positions(source->dims, source->spacing, source->origin,
                         options.world_frame ? source->world : std::nullopt, options.warn);
   if (options.world_frame) to.frame = mesh_frame(source->origin, source->world);
+  // A GL backend asked for by name loads its programs and makes its pinned buffers (for a brick
+  // of the budget's size at most) while the bricks are counted.
+  prepare_backend(to.extract, source->type,
+                  std::min(to.memory, checked_volume_bytes(source->type, source->dims)));
   StatsJson auto_iso;
   PipelineResult result;
   result.series_uid = source->series_uid;
@@ -313,9 +318,12 @@ PipelineResult run_pipeline_watched(const PipelineInput& input, const PipelineOp
     RawOptions raw = input.raw;
     raw.progress = options.progress;
     // Before the read: a volume that cannot fit is refused at once, not killed part-way through.
-    if (const std::optional<std::uint64_t> need = in_core_bytes(input.path, raw, eo))
+    if (const std::optional<SampleLayout> layout = in_core_layout(input.path, raw)) {
       if (const std::optional<AvailableMemory> available = available_memory())
-        check_in_core_fits(*need, *available, input.path, options.warn);
+        check_in_core_fits(in_core_bytes(*layout, eo), *available, input.path, options.warn);
+      // A GL backend asked for by name loads its programs and makes its pinned buffers meanwhile.
+      prepare_backend(eo, layout->type, layout->bytes);
+    }
     log("reading " + input.path);
     volume = read_volume(input.path, raw);
     t_read = seconds_since(t0);

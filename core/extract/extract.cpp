@@ -39,6 +39,7 @@ struct BackendEntry {
   ProbeFn probe = nullptr;
   StartFn start = nullptr;  // start_backend()
   StartFailureFn start_failure = nullptr;
+  PrepareFn prepare = nullptr;  // prepare_backend()
 };
 
 // The GL entries are filled by register_backend() (isotile_gl's register_gl_backends()); until
@@ -171,7 +172,8 @@ std::string_view backend_name(Backend b) {
 }
 
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
-                      ProbeFn probe, StartFn start, StartFailureFn start_failure) {
+                      ProbeFn probe, StartFn start, StartFailureFn start_failure,
+                      PrepareFn prepare) {
   for (auto& e : kBackends)
     if (e.backend == backend) {
       e.run = run;
@@ -179,7 +181,13 @@ void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>
       e.probe = probe;
       e.start = start;
       e.start_failure = start_failure;
+      e.prepare = prepare;
     }
+}
+
+void prepare_backend(const ExtractOptions& options, ScalarType type, std::uint64_t sample_bytes) {
+  if (options.backend == Backend::Auto) return;
+  if (const auto& e = entry(options.backend); e.prepare) e.prepare(options, type, sample_bytes);
 }
 
 void start_backend(Backend backend) {

@@ -160,9 +160,14 @@ using ProbeFn = std::string (*)(bool* hardware, bool hardware_only);
 // ("" while it runs, succeeded or was not started).
 using StartFn = void (*)();
 using StartFailureFn = std::string (*)();
+// `prepare`, given with `start`, begins in the background what the backend's first extract() with
+// these options on samples of this type and byte size does first and takes long
+// (prepare_backend()).
+using PrepareFn = void (*)(const ExtractOptions& options, ScalarType type,
+                           std::uint64_t sample_bytes);
 void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>& run,
                       ProbeFn probe, StartFn start = nullptr,
-                      StartFailureFn start_failure = nullptr);
+                      StartFailureFn start_failure = nullptr, PrepareFn prepare = nullptr);
 
 // For a backend asked for by name (not Auto, which must probe first): starts in the background
 // what it needs before its first extract() and takes long, so that it overlaps the caller's
@@ -171,6 +176,15 @@ void register_backend(Backend backend, const std::array<ExtractFn, kMethodCount>
 // fails, every extract() on it throws the InputError the probe would have, and
 // backend_start_failure() says so at once. Not for Auto, the CPU, backends without such work.
 void start_backend(Backend backend);
+
+// After start_backend(options.backend), once the samples' type and byte size are known and before
+// they are read: begins on the backend's own thread what its first extract() with `options` on
+// such samples does first and takes long (the GL backends: loading or compiling the method's
+// programs for that sample type, making the pinned staging buffers for that many bytes), so that
+// it too overlaps the read. Never waits and never throws: what fails there fails again in the
+// extraction, which reports it. The extraction's report (GpuReport) counts the programs and
+// buffers so made as its own. Not for Auto, the CPU, backends without such work.
+void prepare_backend(const ExtractOptions& options, ScalarType type, std::uint64_t sample_bytes);
 
 // Without waiting: the error every extract() on `backend` will throw because what
 // start_backend() began for it has failed ("backend 'hp': no usable OpenGL 4.5 context (...)"),
