@@ -210,6 +210,9 @@ void prepare(const std::array<ExtractFn, kMethodCount>& runs, const ExtractOptio
   o.warn = {};
   const ExtractFn run = runs[static_cast<std::size_t>(options.method)];
   start_on_context_thread([o, run, type, sample_bytes] {
+    // The extractor below passes through reported(), which takes the account for its run: kept
+    // aside, for the extraction this prepares.
+    Prepared account = std::exchange(g_prepared, {});
     const ProgramCacheCounts before = program_cache_counts();
     const double pinned_before = mapped_buffer_seconds();
     reserve_staging(static_cast<std::size_t>(sample_bytes));
@@ -228,11 +231,12 @@ void prepare(const std::array<ExtractFn, kMethodCount>& runs, const ExtractOptio
       // What fails here fails again in the extraction, which reports it.
     }
     const ProgramCacheCounts after = program_cache_counts();
-    g_prepared.programs.loaded += after.loaded - before.loaded;
-    g_prepared.programs.compiled += after.compiled - before.compiled;
-    g_prepared.programs.rejected += after.rejected - before.rejected;
-    g_prepared.programs.seconds += after.seconds - before.seconds;
-    g_prepared.pinned_seconds += mapped_buffer_seconds() - pinned_before;
+    account.programs.loaded += after.loaded - before.loaded;
+    account.programs.compiled += after.compiled - before.compiled;
+    account.programs.rejected += after.rejected - before.rejected;
+    account.programs.seconds += after.seconds - before.seconds;
+    account.pinned_seconds += mapped_buffer_seconds() - pinned_before;
+    g_prepared = account;
   });
 }
 

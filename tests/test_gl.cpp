@@ -641,6 +641,20 @@ TEST(GlBackends, PreparedWhileTheVolumeIsRead) {
         EXPECT_GT(pinned, 0.0) << what << ": the staging buffer made for it";
       }
     }
+  // Two preparations before one extraction: its report counts what both made.
+  ExtractOptions o;
+  o.backend = Backend::HistoPyramid;
+  o.iso = 0.5;
+  const std::vector<std::string> before = keys();
+  prepare_backend(o, ScalarType::Float64, 64 * 8);
+  const std::size_t first = keys().size() - before.size();
+  EXPECT_GT(first, 0u);
+  prepare_backend(o, ScalarType::Float32, 64 * 4);
+  BackendChoice ran;
+  extract(field.view(), o, &ran);
+  ASSERT_TRUE(ran.gpu.has_value());
+  EXPECT_EQ(ran.gpu->programs_loaded + ran.gpu->programs_compiled,
+            static_cast<int>(keys().size() - before.size()));
   gl::set_staging_bytes(gl::kDefaultStagingBytes);
 }
 
