@@ -24,7 +24,9 @@
 # ($OUT/gpu-checks-part-P-files.tar.gz: at most 8 files come back from $OUT).
 # Prints one line per check, "gpu-check: NAME: pass|FAIL (...)", and a summary; exit 1 when any
 # check fails. Measurements print as "gpu-measure: ..." lines: the read-back's GB/s straight and
-# through pinned buffers, the pyramid's build at 1, 2 and 3 levels per dispatch and the output
+# through pinned buffers, the upload's by staging piece size with and without each piece handed
+# to the device at once (gl::submit()), whole hp MC calls with and without those hand-offs, the
+# pyramid's build at 1, 2 and 3 levels per dispatch and the output
 # passes per output against per element (bench_backends' "hpe" columns; issue 36),
 # and the data path's targets (issue 35): upload GB/s on gyroid 256/512 and bonsai, out of core
 # on gyroid $size and a 4 GiB uint8 volume made from bonsai, the one-shot whole process of
