@@ -143,17 +143,33 @@ TEST_P(GlPaths, FullRangeOfEveryTypeEqualsCpu) {
   }
 }
 
+// The slabs of the staging tests below: gyroid 29^3 as int16 in slabs of 5 cells, through staging
+// buffers of three 29 x 29 planes and a bit (set_staging_bytes(kSmallStaging)). Each slab's region
+// has its cells' planes plus one more and the normals' halo of one each side, clipped to the
+// volume: the planes of each slab's region, in order.
+constexpr std::size_t kSmallStaging = 29 * 29 * 2 * 3 + 6;
+Volume small_slab_volume() {
+  return convert(make_field_volume({FieldKind::Gyroid, 29}), ScalarType::Int16, 40.0, 0.0);
+}
+std::vector<std::int64_t> small_slab_planes() {
+  std::vector<std::int64_t> planes;
+  for (std::int64_t z = 0; z < 28; z += 5) {
+    const std::int64_t hi = std::min<std::int64_t>(z + 5, 28);
+    planes.push_back(std::min<std::int64_t>(hi + 3, 29) - std::max<std::int64_t>(z - 1, 0));
+  }
+  return planes;
+}
+
 // The staging buffers (pinned, persistently mapped) are made once and reused by every slab and
 // run: with buffers far smaller than a slab, each slab's samples pass through all of them in turn,
 // and the mesh is unchanged. The stats count exactly the samples of the slabs' regions, each
 // uploaded once (the early uploads are used, not repeated).
 TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
   REQUIRE_GL();
-  const Volume field = make_field_volume({FieldKind::Gyroid, 29});
-  const Volume v = convert(field, ScalarType::Int16, 40.0, 0.0);
+  const Volume v = small_slab_volume();
   const Mesh cpu = marching_cubes(v.view(), {.iso = 0.0, .normals = true});
   gl::Scope scope;
-  gl::set_staging_bytes(29 * 29 * 2 * 3 + 6);  // three rows of 29 x 29 samples and a bit
+  gl::set_staging_bytes(kSmallStaging);
   const int before = gl::staging_buffers_created();
   for (int r = 0; r < 3; ++r) {
     gl::McStats stats;
@@ -164,13 +180,8 @@ TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
     // Both paths upload every slab but the first while the one before is counted (HistoPyramid)
     // or drawn (geometry shader).
     EXPECT_EQ(stats.early_uploads, 5);
-    // Each slab's region: its cells' planes plus one more and the normals' halo of one each side,
-    // clipped to the volume.
     std::uint64_t planes = 0;
-    for (std::int64_t z = 0; z < 28; z += 5) {
-      const std::int64_t hi = std::min<std::int64_t>(z + 5, 28);
-      planes += std::min<std::int64_t>(hi + 3, 29) - std::max<std::int64_t>(z - 1, 0);
-    }
+    for (const std::int64_t p : small_slab_planes()) planes += static_cast<std::uint64_t>(p);
     EXPECT_EQ(stats.times.upload_bytes, planes * 29 * 29 * 2);
     EXPECT_GT(stats.times[gl::GlStage::Upload], 0.0);
   }
@@ -185,21 +196,15 @@ TEST_P(GlPaths, StagingBuffersAreReusedAcrossSlabsAndRuns) {
 // the commands wait for the next wait, as before; the mesh is the same either way.
 TEST_P(GlPaths, CommandsAreSubmittedBeforeTheCpuWorksAlone) {
   REQUIRE_GL();
-  const Volume field = make_field_volume({FieldKind::Gyroid, 29});
-  const Volume v = convert(field, ScalarType::Int16, 40.0, 0.0);
+  const Volume v = small_slab_volume();
   const Mesh cpu = marching_cubes(v.view(), {.iso = 0.0, .normals = true});
   gl::Scope scope;
-  // Staging buffers of three planes of 29 x 29 int16 samples and a bit: a chunk per 3 planes.
-  gl::set_staging_bytes(29 * 29 * 2 * 3 + 6);
-  // The slabs' regions (as in StagingBuffersAreReusedAcrossSlabsAndRuns), a chunk per 3 planes.
-  int slabs = 0, chunks = 0;
-  for (std::int64_t z = 0; z < 28; z += 5) {
-    const std::int64_t hi = std::min<std::int64_t>(z + 5, 28);
-    const std::int64_t planes =
-        std::min<std::int64_t>(hi + 3, 29) - std::max<std::int64_t>(z - 1, 0);
-    ++slabs;
-    chunks += static_cast<int>((planes + 2) / 3);
-  }
+  gl::set_staging_bytes(kSmallStaging);
+  // A chunk per 3 planes of each slab's region.
+  const std::vector<std::int64_t> planes = small_slab_planes();
+  const int slabs = static_cast<int>(planes.size());
+  int chunks = 0;
+  for (const std::int64_t p : planes) chunks += static_cast<int>((p + 2) / 3);
   const int per_path = GetParam() == Path::Hp ? 2 * slabs - 1 : slabs - 1;
   for (const bool early : {true, false}) {
     gl::set_submit_early(early);
