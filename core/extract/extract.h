@@ -115,13 +115,15 @@ struct GpuReport {
   // Seconds per stage, summed over the slabs, in the driver's order ("upload", "prepare",
   // "classify", "scan", "vertices", "faces", "readback"), from GL timer queries; then
   // "programs", the wall seconds spent making the run's programs (loaded or compiled), and
-  // "pinned", making the pinned staging and read-back buffers (once per process).
+  // "pinned", making the pinned staging and read-back buffers (once per process); both include
+  // what prepare_backend() made for this run while its volume was read.
   std::vector<std::pair<std::string, double>> seconds;
   std::uint64_t upload_bytes = 0;  // bytes of samples uploaded, as stored
   double upload_seconds = 0;       // from the first byte handed to GL until resident, summed
   double context_seconds = 0;      // the process's GL context start-up (EGL or OSMesa, driver)
-  // The on-disk program cache over this extraction: programs loaded from it, compiled, and
-  // entries rejected (corrupt or stale); `program_cache_off` says why it was not used ("" if used).
+  // The on-disk program cache over this extraction (and its preparation): programs loaded from it,
+  // compiled, and entries rejected (corrupt or stale); `program_cache_off` says why it was not
+  // used ("" if used).
   int programs_loaded = 0, programs_compiled = 0, programs_rejected = 0;
   std::string program_cache_off;
 };
