@@ -449,7 +449,7 @@ DistributedResult extract_distributed(const std::string& input, const RawOptions
   std::string temp;
   mpi.phase([&] {
     if (me != 0) return;
-    file = std::make_unique<AtomicFile>(output);
+    file = std::make_unique<AtomicFile>(output, AtomicFile::Writes::Positioned);
     const std::string header = bricks->header();
     file->write_at(0, header.data(), header.size());
     temp = file->temp_path().string();

@@ -80,7 +80,7 @@ TiledResult run(VolumeSource& source, const TiledOptions& options,
     throw_no_surface(source, options.memory, options.extract.iso);
   }
 
-  AtomicFile file(output);
+  AtomicFile file(output, AtomicFile::Writes::Positioned);
   const std::string header = bricks.header();
   file.write(header.data(), header.size());
 

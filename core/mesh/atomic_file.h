@@ -66,9 +66,13 @@ OutputTarget check_output(const std::filesystem::path& path, bool positioned_wri
 
 class AtomicFile {
  public:
+  // How the writer places its bytes. Streamed: through a large stdio buffer (4 MiB), so that big
+  // blocks pass in few syscalls. Positioned: the records go with write_at(), straight to the
+  // descriptor, and only the header passes through stdio, whose own small buffer serves it.
+  enum class Writes { Streamed, Positioned };
   // Throws IoError when the path cannot be written (resolve_output) or the temporary cannot be
   // created.
-  explicit AtomicFile(const std::filesystem::path& target);
+  explicit AtomicFile(const std::filesystem::path& target, Writes writes = Writes::Streamed);
   ~AtomicFile();
   AtomicFile(const AtomicFile&) = delete;
   AtomicFile& operator=(const AtomicFile&) = delete;
