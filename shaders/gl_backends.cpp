@@ -119,13 +119,32 @@ MacetGlOptions macet_gl_options(const ExtractOptions& o) {
   return m;
 }
 
-// What prepare()'s jobs made ahead of the next extraction (programs loaded or compiled, pinned
-// buffers), which that extraction's report counts as its own. On the context's thread only.
-struct Prepared {
+// What making programs (loaded or compiled) and pinned buffers has cost: the process's totals
+// (now()), or what a span of it made (the difference of two).
+struct Made {
   ProgramCacheCounts programs;
   double pinned_seconds = 0;
+
+  static Made now() { return {program_cache_counts(), mapped_buffer_seconds()}; }
+  Made& operator+=(const Made& o) { return add(o, 1); }
+  Made operator-(const Made& o) const {
+    Made d = *this;
+    return d.add(o, -1);
+  }
+
+ private:
+  Made& add(const Made& o, int sign) {
+    programs.loaded += sign * o.programs.loaded;
+    programs.compiled += sign * o.programs.compiled;
+    programs.rejected += sign * o.programs.rejected;
+    programs.seconds += sign * o.programs.seconds;
+    pinned_seconds += sign * o.pinned_seconds;
+    return *this;
+  }
 };
-Prepared g_prepared;
+// What prepare()'s jobs made ahead of the next extraction, which that extraction's report counts
+// as its own. On the context's thread only.
+Made g_prepared;
 
 // Runs `run` (a GL extractor taking McStats*) and, when `report` is given, fills it: the stages'
 // device times, the upload, the program cache over this call and what prepare() made for it, the
@@ -139,29 +158,24 @@ Mesh reported(const char* backend, GpuReport* report, Run run) {
   // The run and its report in one job on the context's thread, where the program cache's counts
   // before and after it are this run's alone.
   return on_context_thread([&] {
-    const Prepared prepared = std::exchange(g_prepared, {});
+    const Made prepared = std::exchange(g_prepared, {});
     if (!report) return run(nullptr);
-    const ProgramCacheCounts before = program_cache_counts();
-    const double pinned_before = mapped_buffer_seconds();
+    const Made before = Made::now();
     McStats stats;
     Mesh mesh = run(&stats);
-    ProgramCacheCounts after = program_cache_counts();
-    after.loaded += prepared.programs.loaded;
-    after.compiled += prepared.programs.compiled;
-    after.rejected += prepared.programs.rejected;
-    after.seconds += prepared.programs.seconds;
-    const double pinned = mapped_buffer_seconds() - pinned_before + prepared.pinned_seconds;
+    Made made = Made::now() - before;
+    made += prepared;
     report->seconds.clear();
     for (int s = 0; s < kGlStageCount; ++s)
       report->seconds.emplace_back(gl_stage_name(static_cast<GlStage>(s)), stats.times.seconds[s]);
     report->upload_bytes = stats.times.upload_bytes;
     report->upload_seconds = stats.times[GlStage::Upload];
     report->context_seconds = device().startup_seconds;
-    report->programs_loaded = after.loaded - before.loaded;
-    report->programs_compiled = after.compiled - before.compiled;
-    report->programs_rejected = after.rejected - before.rejected;
-    report->seconds.emplace_back("programs", after.seconds - before.seconds);
-    report->seconds.emplace_back("pinned", pinned);
+    report->programs_loaded = made.programs.loaded;
+    report->programs_compiled = made.programs.compiled;
+    report->programs_rejected = made.programs.rejected;
+    report->seconds.emplace_back("programs", made.programs.seconds);
+    report->seconds.emplace_back("pinned", made.pinned_seconds);
     std::string why;
     report->program_cache_off = program_cache_enabled(&why) ? "" : why;
     return mesh;
@@ -212,9 +226,8 @@ void prepare(const std::array<ExtractFn, kMethodCount>& runs, const ExtractOptio
   start_on_context_thread([o, run, type, sample_bytes] {
     // The extractor below passes through reported(), which takes the account for its run: kept
     // aside, for the extraction this prepares.
-    Prepared account = std::exchange(g_prepared, {});
-    const ProgramCacheCounts before = program_cache_counts();
-    const double pinned_before = mapped_buffer_seconds();
+    Made account = std::exchange(g_prepared, {});
+    const Made before = Made::now();
     reserve_staging(static_cast<std::size_t>(sample_bytes));
     Volume v(type, {4, 4, 4});
     visit_scalar(type, [&](auto zero) {
@@ -230,12 +243,7 @@ void prepare(const std::array<ExtractFn, kMethodCount>& runs, const ExtractOptio
     } catch (...) {
       // What fails here fails again in the extraction, which reports it.
     }
-    const ProgramCacheCounts after = program_cache_counts();
-    account.programs.loaded += after.loaded - before.loaded;
-    account.programs.compiled += after.compiled - before.compiled;
-    account.programs.rejected += after.rejected - before.rejected;
-    account.programs.seconds += after.seconds - before.seconds;
-    account.pinned_seconds += mapped_buffer_seconds() - pinned_before;
+    account += Made::now() - before;
     g_prepared = account;
   });
 }
