@@ -639,6 +639,29 @@ Scope::~Scope() {
   if (--t_depth == 0 && !t_context_thread && g_context) g_context->release_thread();
 }
 
+namespace {
+
+// On the context's thread: `job` with the context current (taken back where a Scope on another
+// thread had it) and the caller's thread limit for its parallel loops. Throws what the job
+// throws, or Error where the context cannot be made current.
+void run_there(const std::function<void()>& job, int concurrency) {
+  if (!g_current_there) {  // back from a Scope elsewhere
+    ++g_takes;
+    if (!g_context->make_current()) throw Error("OpenGL: making the context current failed");
+    g_current_there = true;
+  }
+  t_depth = 1;
+  try {
+    tbb::task_arena(concurrency).execute(job);
+  } catch (...) {
+    t_depth = 0;
+    throw;
+  }
+  t_depth = 0;
+}
+
+}  // namespace
+
 void run_on_context_thread(const std::function<void()>& job) {
   if (t_depth > 0) return job();  // the context is current here: a Scope, or a job there
   StateLock lock;
@@ -649,17 +672,10 @@ void run_on_context_thread(const std::function<void()>& job) {
   std::exception_ptr error;
   context_thread().run([&] {
     try {
-      if (!g_current_there) {  // back from a Scope elsewhere
-        ++g_takes;
-        if (!g_context->make_current()) throw Error("OpenGL: making the context current failed");
-        g_current_there = true;
-      }
-      t_depth = 1;
-      tbb::task_arena(concurrency).execute(job);
+      run_there(job, concurrency);
     } catch (...) {
       error = std::current_exception();
     }
-    t_depth = 0;
   });
   if (error) std::rethrow_exception(error);
 }
@@ -675,17 +691,10 @@ void start_on_context_thread(std::function<void()> job) {
   context_thread().post([job = std::move(job), concurrency] {
     if (!g_context) return;  // its making failed: the extraction says why
     try {
-      if (!g_current_there) {
-        ++g_takes;
-        if (!g_context->make_current()) return;
-        g_current_there = true;
-      }
-      t_depth = 1;
-      tbb::task_arena(concurrency).execute(job);
+      run_there(job, concurrency);
     } catch (...) {
       // Dropped: what failed here fails again, and is reported, in the extraction.
     }
-    t_depth = 0;
   });
 }
 
