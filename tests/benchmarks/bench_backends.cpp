@@ -70,6 +70,11 @@ struct Case {
   double iso;
 };
 
+double median(std::vector<double> t) {
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
 double median_seconds(int repeat, const std::function<Mesh()>& run, Mesh& out) {
   std::vector<double> t;
   for (int r = 0; r < repeat; ++r) {
@@ -77,8 +82,7 @@ double median_seconds(int repeat, const std::function<Mesh()>& run, Mesh& out) {
     out = run();
     t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
+  return median(t);
 }
 
 bool same(const Mesh& a, const Mesh& b) {
@@ -244,9 +248,7 @@ void bench_submission(const std::vector<Case>& cases, int repeat) {
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       }
     gl::set_submit_early(true);
-    std::sort(t_on.begin(), t_on.end());
-    std::sort(t_off.begin(), t_off.end());
-    const double a = t_on[t_on.size() / 2], b = t_off[t_off.size() / 2];
+    const double a = median(t_on), b = median(t_off);
     std::printf("%-12s %10.1f %12.1f %8.2f  %s\n", c.name.c_str(), 1e3 * a, 1e3 * b, a / b,
                 same(on, off) ? "yes" : "NO");
   }
